@@ -1,0 +1,44 @@
+# primspace: the two commands a new user runs are `make demo` and `make test`.
+# Each does its own set-up in .venv (torch is pinned to the CPU wheel first: a bare
+# `torch` requirement would pull a multi-GB CUDA build).
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+TORCH  ?= torch==2.13.0
+# gymnasium-robotics is installed without its dependencies: we only read the Franka
+# Panda model files it bundles (it would otherwise pull gymnasium and friends).
+ROBOT_ASSETS := gymnasium-robotics==1.4.2
+
+.PHONY: demo test install install-test bench clean
+
+$(VENV)/bin/activate:
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install --quiet --upgrade pip
+
+$(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
+	$(PIP) install --quiet $(TORCH)
+	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
+	$(PIP) install --quiet -e .
+	touch $@
+
+$(VENV)/.installed-test: $(VENV)/.installed
+	$(PIP) install --quiet -e '.[test]'
+	touch $@
+
+install: $(VENV)/.installed
+install-test: $(VENV)/.installed-test
+
+demo: install
+	$(VENV)/bin/primspace demo
+
+test: install-test
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+bench: install
+	$(PY) benchmarks/bench_generate.py
+	$(PY) benchmarks/bench_cluster.py
+	$(PY) benchmarks/bench_train.py
+
+clean:
+	rm -rf $(VENV) build dist src/*.egg-info .pytest_cache .hypothesis

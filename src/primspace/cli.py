@@ -1,0 +1,154 @@
+"""The ``primspace`` command.
+
+Each command parses its flags and calls the library; the work lives in the modules.
+A :class:`~primspace.errors.UserError` raised anywhere below is printed as one line,
+``primspace: error: ...``, with exit status 2 and no traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from primspace.errors import UserError
+
+app = typer.Typer(
+    name="primspace",
+    help="Latent spaces of robot motion primitives (Nikulin & Tani): data, simulator, "
+    "MTRNN decoder, subspace clustering, experiments.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _echo_json(obj) -> None:
+    typer.echo(json.dumps(obj, indent=2))
+
+
+# ============================================================================ data
+
+
+class ImportFormat(str, Enum):
+    npz = "npz"
+    csv = "csv"
+    lasa = "lasa"
+
+
+@app.command("import")
+def import_command(
+    src: Optional[Path] = typer.Argument(
+        None, help="A .npz file, a folder of CSV files, or nothing / 'lasa' for --format lasa."
+    ),
+    format: Optional[ImportFormat] = typer.Option(
+        None, "--format", "-f", help="Input format; guessed from SRC when omitted."
+    ),
+    length: int = typer.Option(..., "--length", "-T", help="Resample every sequence to T steps."),
+    out: Path = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
+    shapes: Optional[str] = typer.Option(None, help="lasa: comma-separated shape names (default: 26 single-pattern shapes)."),
+    velocities: bool = typer.Option(False, help="lasa: add velocities vx, vy as joints."),
+    overwrite: bool = typer.Option(False, help="Replace OUT if it exists."),
+) -> None:
+    """Import demonstrations (npz, CSV folder, LASA) into a MotionDataset file."""
+    from primspace.data.importers import import_csv_folder, import_lasa, import_npz
+    from primspace.files import check_output
+
+    check_output(out, overwrite)
+    fmt = format.value if format is not None else _guess_format(src)
+    if fmt == "lasa":
+        names = [s.strip() for s in shapes.split(",") if s.strip()] if shapes else None
+        ds = import_lasa(length, shapes=names, velocities=velocities)
+    elif src is None:
+        raise UserError(f"--format {fmt} needs a source path")
+    elif fmt == "npz":
+        ds = import_npz(src, length)
+    else:
+        ds = import_csv_folder(src, length)
+    ds.save(out, overwrite=overwrite)
+    typer.echo(f"wrote {out}: {len(ds)} samples x {ds.length} steps x {ds.n_joints} joints")
+
+
+def _guess_format(src: Optional[Path]) -> str:
+    if src is None or str(src).lower() == "lasa":
+        return "lasa"
+    if src.is_dir():
+        return "csv"
+    if src.suffix.lower() == ".npz":
+        return "npz"
+    raise UserError(f"{src}: cannot tell the format; pass --format npz|csv|lasa")
+
+
+@app.command("info")
+def info_command(
+    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text."),
+) -> None:
+    """Summarise a data set: N, T, J, joint names, label counts, images, joint ranges."""
+    from primspace.data.dataset import MotionDataset
+
+    summary = MotionDataset.load(file).summary()
+    if as_json:
+        _echo_json(summary)
+        return
+    typer.echo(_format_summary(summary))
+
+
+def _format_summary(s: dict) -> str:
+    lines = [
+        f"{s['path'] or '<memory>'}",
+        f"  samples  {s['n_samples']}    steps (T)  {s['length']}    joints (J)  {s['n_joints']}    dt  {s['dt']:.4g} s",
+        f"  source   {s['source'] or '-'}",
+    ]
+    img = s["image_shape"]
+    lines.append(f"  images   {'x'.join(map(str, img)) + ' uint8 per sample' if img else 'none'}")
+    if s["label_counts"] is None:
+        lines.append("  labels   none")
+    else:
+        counts = ", ".join(f"{k} {v}" for k, v in s["label_counts"].items())
+        lines.append(f"  labels   {len(s['label_counts'])} classes: {counts}")
+    lines.append("  joint ranges (physical units):")
+    width = max(len(n) for n in s["joint_ranges"])
+    for name, (lo, hi) in s["joint_ranges"].items():
+        lines.append(f"    {name:<{width}}  [{lo:.5g}, {hi:.5g}]")
+    for name, (lo, hi) in s.get("param_ranges", {}).items():
+        lines.append(f"    param {name}  [{lo:.5g}, {hi:.5g}]")
+    return "\n".join(lines)
+
+
+# ======================================================================= simulator
+
+
+# ====================================================================== clustering
+
+
+# =================================================================== model, train
+
+
+# ============================================================ experiments, report
+
+
+@app.command("demo")
+def demo_command() -> None:
+    """Run the main demo (for now: import LASA and print its summary)."""
+    from primspace.data.importers import import_lasa
+
+    ds = import_lasa(length=100)
+    typer.echo(_format_summary(ds.summary()))
+
+
+# ============================================================================ main
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``primspace`` command (and ``python -m primspace``)."""
+    try:
+        app(args=argv, prog_name="primspace")
+    except UserError as exc:
+        typer.echo(f"primspace: error: {exc}", err=True)
+        sys.exit(2)

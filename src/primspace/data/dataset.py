@@ -1,0 +1,591 @@
+"""`MotionDataset`: demonstrations of fixed length T, and its HDF5 file.
+
+One file holds one data set. Arrays are batch-first, ``(n, T, J)``:
+
+=========  =======================================  ===================  ========
+node       type                                     shape                required
+=========  =======================================  ===================  ========
+motor      float32, joint values in physical units  (N, T, J)           yes
+images     uint8, one compressed chunk per sample   (N, T, H, W, 3)      no
+labels     int32, primitive index, -1 = unknown     (N,)                 no
+params     float32, generative factors              (N, P)               no
+=========  =======================================  ===================  ========
+
+File attributes: ``schema_version``, ``joint_names``, ``label_names``, ``param_names``,
+``dt`` (seconds between steps) and ``source`` (free text: where the data came from).
+
+Images are read lazily: :class:`LazyImages` reads only the samples asked for, so a
+gigabyte image set is never loaded twice, and :meth:`MotionDataset.subset` selects
+train/eval samples without copying images.
+
+Every check names the file, the field and the sample index, e.g.
+``demo.h5, field 'motor', sample 12: contains NaN or inf``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import h5py
+import numpy as np
+
+from primspace.errors import DataError, UserError, first_line
+from primspace.files import atomic_path
+
+__all__ = ["MotionDataset", "LazyImages", "SCHEMA_VERSION"]
+
+#: Version of the HDF5 layout written by :meth:`MotionDataset.save`.
+SCHEMA_VERSION = 1
+
+_IMAGE_WRITE_BLOCK = 32  # samples per write when copying images into a file
+
+
+# ----------------------------------------------------------------------------- images
+
+
+class LazyImages:
+    """A read-only view of ``(N, T, H, W, 3)`` uint8 images, read on demand.
+
+    The images live either in an HDF5 file (``source`` is its path; each access opens
+    the file once per process and reads only the requested samples' chunks) or in a
+    NumPy array. ``index`` selects and orders samples of the source without copying.
+
+    Indexing on the first axis returns NumPy arrays: ``view[i]`` is ``(T, H, W, 3)``,
+    ``view[a:b]`` and ``view[[i, j]]`` are ``(k, T, H, W, 3)``. ``np.asarray(view)``
+    reads everything.
+    """
+
+    def __init__(
+        self,
+        source: str | os.PathLike | np.ndarray,
+        index: np.ndarray | None = None,
+        *,
+        dataset_name: str = "images",
+    ) -> None:
+        self._dataset_name = dataset_name
+        self._handle: h5py.File | None = None
+        self._handle_pid: int | None = None
+        if isinstance(source, np.ndarray):
+            self._array: np.ndarray | None = source
+            self._path: str | None = None
+            base_shape = source.shape
+        else:
+            self._array = None
+            self._path = os.fspath(source)
+            base_shape = tuple(self._h5()[dataset_name].shape)
+        self._base_len = base_shape[0]
+        self._frame_shape = tuple(base_shape[1:])
+        self._index = None if index is None else np.asarray(index, dtype=np.int64)
+
+    # -- what it is
+    @property
+    def path(self) -> str | None:
+        """The HDF5 file the images are read from, or None for in-memory images."""
+        return self._path
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (len(self),) + self._frame_shape
+
+    @property
+    def dtype(self) -> np.dtype:
+        return np.dtype(np.uint8)
+
+    @property
+    def ndim(self) -> int:
+        return 1 + len(self._frame_shape)
+
+    @property
+    def nbytes(self) -> int:
+        return int(np.prod(self.shape))
+
+    def __len__(self) -> int:
+        return self._base_len if self._index is None else len(self._index)
+
+    def __repr__(self) -> str:
+        where = self._path if self._path is not None else "memory"
+        return f"LazyImages(shape={self.shape}, source={where!r})"
+
+    # -- pickling: ship the path and index, never an open HDF5 handle
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_handle"] = None
+        state["_handle_pid"] = None
+        return state
+
+    def _h5(self) -> h5py.File:
+        if self._handle is None or self._handle_pid != os.getpid():
+            self._handle = h5py.File(self._path, "r")
+            self._handle_pid = os.getpid()
+        return self._handle
+
+    def close(self) -> None:
+        """Close the HDF5 handle (it reopens on the next read)."""
+        if self._handle is not None and self._handle_pid == os.getpid():
+            self._handle.close()
+        self._handle = None
+
+    # -- selection
+    def _resolve(self, key) -> tuple[np.ndarray, bool]:
+        """Map a first-axis key to base indices; the flag says whether the result is one sample."""
+        n = len(self)
+        if isinstance(key, (int, np.integer)):
+            k = int(key)
+            if not -n <= k < n:
+                raise IndexError(f"sample index {k} out of range for {n} samples")
+            local = np.array([k % n])
+            single = True
+        elif isinstance(key, slice):
+            local = np.arange(n)[key]
+            single = False
+        else:
+            arr = np.asarray(key)
+            if arr.dtype == bool:
+                if arr.shape != (n,):
+                    raise IndexError(f"boolean mask of shape {arr.shape} for {n} samples")
+                local = np.flatnonzero(arr)
+            else:
+                local = arr.astype(np.int64).reshape(-1)
+                if local.size and (local.min() < -n or local.max() >= n):
+                    raise IndexError(f"sample index out of range for {n} samples")
+                local = local % n if local.size else local
+            single = False
+        base = local if self._index is None else self._index[local]
+        return base, single
+
+    def subset(self, indices) -> "LazyImages":
+        """A view of the selected samples (no image data is read or copied)."""
+        base, _ = self._resolve(indices)
+        view = LazyImages.__new__(LazyImages)
+        view.__dict__.update(self.__getstate__())
+        view._index = base
+        return view
+
+    def _read(self, base: np.ndarray) -> np.ndarray:
+        if base.size == 0:
+            return np.empty((0,) + self._frame_shape, dtype=np.uint8)
+        if self._array is not None:
+            return np.asarray(self._array[base], dtype=np.uint8)
+        dset = self._h5()[self._dataset_name]
+        lo, hi = int(base.min()), int(base.max())
+        if hi - lo + 1 == base.size and np.all(np.diff(base) == 1):
+            return dset[lo : hi + 1]  # one contiguous run: a plain slice read
+        uniq, inverse = np.unique(base, return_inverse=True)
+        return dset[uniq][inverse]  # h5py needs increasing indices
+
+    def __getitem__(self, key):
+        rest = ()
+        if isinstance(key, tuple):
+            key, rest = key[0], key[1:]
+        base, single = self._resolve(key)
+        out = self._read(base)
+        if single:
+            out = out[0]
+        return out[(slice(None),) * (0 if single else 1) + rest] if rest else out
+
+    def __array__(self, dtype=None, copy=None):
+        out = self[:]
+        return out if dtype is None else out.astype(dtype)
+
+    def iter_blocks(self, block: int = _IMAGE_WRITE_BLOCK):
+        """Yield ``(start, images[start:start+block])`` over all samples."""
+        for start in range(0, len(self), block):
+            yield start, self[start : start + block]
+
+
+# ---------------------------------------------------------------------------- dataset
+
+
+@dataclass(eq=False)
+class MotionDataset:
+    """Demonstrations as fixed-length joint sequences, with optional images, labels, params.
+
+    Parameters
+    ----------
+    motor : array-like, shape (N, T, J)
+        Joint values in physical units (stored as float32).
+    images : array-like or LazyImages, shape (N, T, H, W, 3), uint8, optional
+        Camera frames, one per time step.
+    labels : array-like of int, shape (N,), optional
+        Primitive index per sample, ``-1`` for unknown.
+    params : array-like, shape (N, P), optional
+        Generative factors (block x, y, size ...).
+    joint_names, label_names, param_names : list of str, optional
+        Names; defaults are ``j0..``, ``0..`` (one per label value), ``p0..``.
+    dt : float, default 1.0
+        Seconds between time steps.
+    source : str
+        Where the data came from (free text, kept in the file).
+
+    Raises
+    ------
+    DataError
+        If any field is malformed; the message names the field and sample index.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ds = MotionDataset(np.zeros((4, 10, 2)), labels=[0, 0, 1, -1])
+    >>> len(ds), ds.length, ds.n_joints, ds.label_names
+    (4, 10, 2, ['0', '1'])
+    """
+
+    motor: np.ndarray
+    images: Any = None
+    labels: np.ndarray | None = None
+    params: np.ndarray | None = None
+    joint_names: list[str] | None = None
+    label_names: list[str] | None = None
+    param_names: list[str] | None = None
+    dt: float = 1.0
+    source: str = ""
+    path: Path | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self.motor = _as_float_array(self.motor, "motor", self.path)
+        if self.images is not None and not isinstance(self.images, LazyImages):
+            images = np.asarray(self.images)
+            if images.dtype != np.uint8:
+                raise DataError(f"images must be uint8, got {images.dtype}", path=self.path, field="images")
+            self.images = images
+        if self.labels is not None:
+            labels = np.asarray(self.labels)
+            if labels.size and labels.dtype.kind not in "iu":
+                raise DataError(f"labels must be integers, got {labels.dtype}", path=self.path, field="labels")
+            self.labels = labels.astype(np.int32)
+        if self.params is not None:
+            self.params = _as_float_array(self.params, "params", self.path)
+        n_joints = self.motor.shape[-1] if self.motor.ndim == 3 else 0
+        self.joint_names = _names(self.joint_names, n_joints, "j")
+        if self.label_names is None:
+            top = int(self.labels.max()) + 1 if self.labels is not None and self.labels.size else 0
+            self.label_names = [str(i) for i in range(max(top, 0))]
+        else:
+            self.label_names = [str(s) for s in self.label_names]
+        n_params = self.params.shape[-1] if self.params is not None and self.params.ndim == 2 else 0
+        self.param_names = _names(self.param_names, n_params, "p")
+        self.dt = float(self.dt)
+        self.source = str(self.source)
+        self.validate()
+
+    # ----------------------------------------------------------------- shape summary
+    def __len__(self) -> int:
+        return self.motor.shape[0]
+
+    @property
+    def n_samples(self) -> int:
+        return self.motor.shape[0]
+
+    @property
+    def length(self) -> int:
+        """T, the number of time steps."""
+        return self.motor.shape[1]
+
+    @property
+    def n_joints(self) -> int:
+        """J, the number of joint values per step."""
+        return self.motor.shape[2]
+
+    @property
+    def has_images(self) -> bool:
+        return self.images is not None
+
+    @property
+    def image_size(self) -> tuple[int, int] | None:
+        """(H, W) of the frames, or None."""
+        return None if self.images is None else tuple(self.images.shape[2:4])
+
+    @property
+    def has_labels(self) -> bool:
+        return self.labels is not None
+
+    # -------------------------------------------------------------------- validation
+    def validate(self) -> None:
+        """Check every field; raise :class:`DataError` naming file, field and sample."""
+        p = self.path
+        m = self.motor
+        if m.ndim != 3:
+            raise DataError(f"must have shape (N, T, J), got rank {m.ndim} {m.shape}", path=p, field="motor")
+        n, t, j = m.shape
+        if n < 1:
+            raise DataError("holds no samples", path=p, field="motor")
+        if t < 2:
+            raise DataError(f"sequences need at least 2 time steps, got T={t}", path=p, field="motor")
+        if j < 1:
+            raise DataError("has no joints (J=0)", path=p, field="motor")
+        _check_finite(m, "motor", p)
+        if len(self.joint_names) != j:
+            raise DataError(f"{len(self.joint_names)} joint names for J={j} joints", path=p, field="joint_names")
+        if len(set(self.joint_names)) != j:
+            raise DataError("joint names are not unique", path=p, field="joint_names")
+        if self.images is not None:
+            s = tuple(self.images.shape)
+            if len(s) != 5 or s[4] != 3:
+                raise DataError(f"must have shape (N, T, H, W, 3), got {s}", path=p, field="images")
+            if s[0] != n:
+                raise DataError(f"{s[0]} samples but motor has {n}", path=p, field="images")
+            if s[1] != t:
+                raise DataError(f"{s[1]} time steps but motor has T={t}", path=p, field="images")
+            if self.images.dtype != np.uint8:
+                raise DataError(f"must be uint8, got {self.images.dtype}", path=p, field="images")
+        if self.labels is not None:
+            lab = self.labels
+            if lab.shape != (n,):
+                raise DataError(f"must have shape ({n},) to match motor, got {lab.shape}", path=p, field="labels")
+            k = len(self.label_names)
+            bad = np.flatnonzero((lab < -1) | (lab >= k))
+            if bad.size:
+                i = int(bad[0])
+                raise DataError(
+                    f"label {int(lab[i])} out of range [-1, {k - 1}] ({k} label names)",
+                    path=p, field="labels", index=i,
+                )
+        if self.params is not None:
+            pr = self.params
+            if pr.ndim != 2 or pr.shape[0] != n:
+                raise DataError(f"must have shape ({n}, P), got {pr.shape}", path=p, field="params")
+            _check_finite(pr, "params", p)
+            if len(self.param_names) != pr.shape[1]:
+                raise DataError(
+                    f"{len(self.param_names)} names for P={pr.shape[1]} params", path=p, field="param_names"
+                )
+        if not np.isfinite(self.dt) or self.dt <= 0:
+            raise DataError(f"must be a positive number, got {self.dt}", path=p, field="dt")
+
+    # ----------------------------------------------------------------------- subsets
+    def subset(self, indices) -> "MotionDataset":
+        """The samples at ``indices`` (ints or a boolean mask), in that order.
+
+        Motor, labels and params are copied (they are small); images stay a lazy view
+        of the same file or array, so no image data is read or copied.
+        """
+        idx = np.asarray(indices)
+        if idx.dtype == bool:
+            if idx.shape != (len(self),):
+                raise UserError(f"boolean mask of shape {idx.shape} for {len(self)} samples")
+            idx = np.flatnonzero(idx)
+        elif idx.size and idx.dtype.kind not in "iu":
+            raise UserError(f"sample indices must be integers, got {idx.dtype}")
+        idx = idx.astype(np.int64).reshape(-1)
+        if idx.size and (idx.min() < 0 or idx.max() >= len(self)):
+            bad = int(idx[(idx < 0) | (idx >= len(self))][0])
+            raise UserError(f"sample index {bad} out of range for {len(self)} samples")
+        if idx.size == 0:
+            raise UserError("an empty selection of samples")
+        images = None
+        if self.images is not None:
+            base = self.images if isinstance(self.images, LazyImages) else LazyImages(self.images)
+            images = base.subset(idx)
+        return MotionDataset(
+            motor=self.motor[idx],
+            images=images,
+            labels=None if self.labels is None else self.labels[idx],
+            params=None if self.params is None else self.params[idx],
+            joint_names=list(self.joint_names),
+            label_names=list(self.label_names),
+            param_names=list(self.param_names),
+            dt=self.dt,
+            source=self.source,
+            path=self.path,
+        )
+
+    def without_images(self) -> "MotionDataset":
+        """The same samples with the images dropped."""
+        return MotionDataset(
+            motor=self.motor, labels=self.labels, params=self.params,
+            joint_names=list(self.joint_names), label_names=list(self.label_names),
+            param_names=list(self.param_names), dt=self.dt, source=self.source, path=self.path,
+        )
+
+    # ---------------------------------------------------------------------------- io
+    def save(self, path: str | os.PathLike, overwrite: bool = False, compression_level: int = 4) -> Path:
+        """Write the data set to an HDF5 file, atomically.
+
+        Images are written in blocks of samples, one gzip-compressed chunk per sample,
+        so saving a lazily-read image set never holds it all in memory.
+
+        Raises
+        ------
+        OutputExistsError
+            If ``path`` exists and ``overwrite`` is false.
+        """
+        path = Path(path)
+        with atomic_path(path, overwrite=overwrite) as tmp:
+            with h5py.File(tmp, "w") as f:
+                f.attrs["schema_version"] = SCHEMA_VERSION
+                f.attrs["joint_names"] = np.array(self.joint_names, dtype=h5py.string_dtype())
+                f.attrs["label_names"] = np.array(self.label_names, dtype=h5py.string_dtype())
+                f.attrs["param_names"] = np.array(self.param_names, dtype=h5py.string_dtype())
+                f.attrs["dt"] = self.dt
+                f.attrs["source"] = self.source
+                f.create_dataset("motor", data=self.motor.astype(np.float32))
+                if self.labels is not None:
+                    f.create_dataset("labels", data=self.labels.astype(np.int32))
+                if self.params is not None:
+                    f.create_dataset("params", data=self.params.astype(np.float32))
+                if self.images is not None:
+                    shape = tuple(self.images.shape)
+                    dset = f.create_dataset(
+                        "images", shape=shape, dtype=np.uint8, chunks=(1,) + shape[1:],
+                        compression="gzip", compression_opts=compression_level,
+                    )
+                    view = self.images if isinstance(self.images, LazyImages) else LazyImages(self.images)
+                    for start, block in view.iter_blocks():
+                        dset[start : start + len(block)] = block
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "MotionDataset":
+        """Read and validate a data set file; images stay on disk until accessed.
+
+        Raises
+        ------
+        DataError
+            If the file is missing, not HDF5, truncated, or any field is invalid.
+        """
+        path = Path(path)
+        if not path.exists():
+            raise DataError("no such file", path=path)
+        if path.is_dir():
+            raise DataError("is a directory, not an HDF5 data set file", path=path)
+        try:
+            f = h5py.File(path, "r")
+        except OSError as exc:
+            raise DataError(f"not a readable HDF5 file ({first_line(exc)})", path=path) from None
+        try:
+            with f:
+                version = f.attrs.get("schema_version")
+                if version is not None and int(version) > SCHEMA_VERSION:
+                    raise DataError(
+                        f"schema version {int(version)} is newer than this primspace reads ({SCHEMA_VERSION})",
+                        path=path, field="schema_version",
+                    )
+                if "motor" not in f:
+                    raise DataError("missing (every data set needs joint values)", path=path, field="motor")
+                motor = _read_array(f, "motor", path)
+                if motor.dtype.kind != "f":
+                    raise DataError(f"must be floating point, got {motor.dtype}", path=path, field="motor")
+                labels = _read_array(f, "labels", path) if "labels" in f else None
+                params = _read_array(f, "params", path) if "params" in f else None
+                has_images = "images" in f
+                if has_images:
+                    im = f["images"]
+                    if not isinstance(im, h5py.Dataset):
+                        raise DataError("is not an array", path=path, field="images")
+                    if im.dtype != np.uint8:
+                        raise DataError(f"must be uint8, got {im.dtype}", path=path, field="images")
+                attrs = {
+                    "joint_names": _str_list(f.attrs.get("joint_names")),
+                    "label_names": _str_list(f.attrs.get("label_names")),
+                    "param_names": _str_list(f.attrs.get("param_names")),
+                    "dt": float(f.attrs.get("dt", 1.0)),
+                    "source": _as_str(f.attrs.get("source", "")),
+                }
+        except DataError:
+            raise
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise DataError(f"cannot read the file ({first_line(exc)})", path=path) from None
+        images = None
+        if has_images:
+            try:
+                images = LazyImages(path)
+            except OSError as exc:
+                raise DataError(f"cannot read ({first_line(exc)})", path=path, field="images") from None
+        try:
+            return cls(
+                motor=motor, images=images, labels=labels, params=params,
+                joint_names=attrs["joint_names"] or None,
+                label_names=attrs["label_names"] if attrs["label_names"] or labels is None else None,
+                param_names=attrs["param_names"] or None,
+                dt=attrs["dt"], source=attrs["source"], path=path,
+            )
+        except DataError as exc:
+            raise exc.located(path=path) from None
+
+    def load_images(self) -> "MotionDataset":
+        """Return a copy whose images are read into memory once (for fast training)."""
+        if self.images is None or not isinstance(self.images, LazyImages):
+            return self
+        out = self.subset(np.arange(len(self)))
+        out.images = np.asarray(self.images)
+        return out
+
+    def summary(self) -> dict:
+        """What ``primspace info`` prints: sizes, names, label counts, per-joint ranges."""
+        counts = Counter(int(v) for v in self.labels) if self.labels is not None else Counter()
+        label_counts = {name: counts.get(i, 0) for i, name in enumerate(self.label_names)}
+        if counts.get(-1):
+            label_counts["<unknown>"] = counts[-1]
+        lo = self.motor.min(axis=(0, 1))
+        hi = self.motor.max(axis=(0, 1))
+        out = {
+            "path": None if self.path is None else str(self.path),
+            "n_samples": self.n_samples,
+            "length": self.length,
+            "n_joints": self.n_joints,
+            "joint_names": list(self.joint_names),
+            "dt": self.dt,
+            "source": self.source,
+            "label_counts": label_counts if self.labels is not None else None,
+            "image_shape": None if self.images is None else list(self.images.shape[1:]),
+            "joint_ranges": {
+                name: [float(a), float(b)] for name, a, b in zip(self.joint_names, lo, hi)
+            },
+        }
+        if self.params is not None:
+            out["param_ranges"] = {
+                name: [float(a), float(b)]
+                for name, a, b in zip(self.param_names, self.params.min(0), self.params.max(0))
+            }
+        return out
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _as_float_array(x, field_name: str, path) -> np.ndarray:
+    arr = np.asarray(x)
+    if arr.dtype.kind not in "fiu" or arr.dtype == bool:
+        raise DataError(f"must be numbers, got {arr.dtype}", path=path, field=field_name)
+    return arr.astype(np.float32, copy=False)
+
+
+def _check_finite(arr: np.ndarray, field_name: str, path) -> None:
+    finite = np.isfinite(arr)
+    if not finite.all():
+        bad = np.argwhere(~finite)[0]
+        where = f" (step {int(bad[1])}, joint {int(bad[2])})" if arr.ndim == 3 else ""
+        raise DataError(f"contains NaN or inf{where}", path=path, field=field_name, index=int(bad[0]))
+
+
+def _names(names: Sequence[str] | None, n: int, prefix: str) -> list[str]:
+    if names is None or len(names) == 0:
+        return [f"{prefix}{i}" for i in range(n)]
+    return [str(s) for s in names]
+
+
+def _read_array(f: h5py.File, name: str, path) -> np.ndarray:
+    node = f[name]
+    if not isinstance(node, h5py.Dataset):
+        raise DataError("is not an array", path=path, field=name)
+    try:
+        return node[()]
+    except (OSError, ValueError) as exc:
+        raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=name) from None
+
+
+def _as_str(v) -> str:
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _str_list(v) -> list[str]:
+    if v is None:
+        return []
+    if isinstance(v, (str, bytes)):
+        return [_as_str(v)]
+    return [_as_str(s) for s in np.asarray(v).reshape(-1)]
+

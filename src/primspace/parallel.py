@@ -1,0 +1,134 @@
+"""One interface for running independent jobs: in-process, on a local process pool, or on Ray.
+
+A job is ``fn(*args)`` for one item of a list: a shard of data generation, one training
+run of an experiment grid. Results come back tagged with the item's index, so callers
+never depend on completion order, and a job's seed must derive from its item alone
+(never from the worker it lands on): then every backend gives identical results.
+
+A failed job does not stop the others: its :class:`JobOutcome` carries the error text
+and the caller decides (data generation stops; an experiment grid reports and goes on).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import traceback
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Sequence
+
+from primspace.errors import UserError
+from primspace.progress import progress_bar
+
+__all__ = ["JobOutcome", "run_jobs", "BACKENDS", "default_workers"]
+
+BACKENDS = ("local", "ray")
+
+
+@dataclass
+class JobOutcome:
+    """What one job returned, or the error it raised."""
+
+    index: int
+    value: Any = None
+    error: str | None = None  # one line: "ExceptionType: message"
+    traceback: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def default_workers() -> int:
+    """Usable CPU cores of this process."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def run_jobs(
+    fn: Callable[..., Any],
+    items: Sequence[tuple],
+    *,
+    backend: str = "local",
+    workers: int | None = 1,
+    address: str | None = None,
+    description: str = "jobs",
+    progress: bool | None = None,
+    threads_per_job: int = 1,
+) -> Iterator[JobOutcome]:
+    """Run ``fn(*item)`` for every item; yield a :class:`JobOutcome` per item as each ends.
+
+    Parameters
+    ----------
+    fn : callable
+        A module-level function (it is pickled to worker processes).
+    items : sequence of tuples
+        Arguments of each job.
+    backend : {"local", "ray"}
+        ``local``: in this process when ``workers == 1``, else a process pool.
+        ``ray``: tasks on a Ray cluster (``address``), or on a local Ray instance.
+    workers : int, optional
+        Local processes (None: all usable cores). Ignored by ``ray``.
+    address : str, optional
+        Ray cluster address (``ray``: None starts a local instance).
+    description : str
+        Progress-bar text.
+    progress : bool, optional
+        Show a progress bar (default: when stderr is a terminal).
+    threads_per_job : int
+        Math-library threads each worker process may use.
+    """
+    if backend not in BACKENDS:
+        raise UserError(f"unknown backend {backend!r}; choose from {', '.join(BACKENDS)}")
+    items = list(items)
+    with progress_bar(len(items), description, enabled=progress) as advance:
+        if backend == "ray":
+            from primspace._ray_backend import run_ray_jobs  # imported only when asked for
+
+            runner = run_ray_jobs(fn, items, address=address, threads_per_job=threads_per_job)
+        elif workers is not None and workers == 1 or len(items) <= 1:
+            runner = (_call(fn, i, args) for i, args in enumerate(items))
+        else:
+            runner = _run_pool(fn, items, workers or default_workers(), threads_per_job)
+        for outcome in runner:
+            advance()
+            yield outcome
+
+
+def _call(fn: Callable, index: int, args: tuple) -> JobOutcome:
+    try:
+        return JobOutcome(index, fn(*args))
+    except Exception as exc:  # a job's failure is data for the caller, not a crash
+        return JobOutcome(index, None, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+
+
+def _limit_threads(n: int) -> None:
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = str(n)
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(n)
+    except Exception:  # pragma: no cover - threadpoolctl is a dependency
+        pass
+
+
+def _run_pool(fn: Callable, items: list, workers: int, threads: int) -> Iterator[JobOutcome]:
+    # spawn, not fork: forking a process that holds torch/OpenMP threads or a GL context
+    # can deadlock; workers import what they need.
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(items)), mp_context=ctx, initializer=_limit_threads, initargs=(threads,)
+    ) as pool:
+        pending = {pool.submit(_call, fn, i, args): i for i, args in enumerate(items)}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                i = pending.pop(fut)
+                try:
+                    yield fut.result()
+                except Exception as exc:  # the worker process itself died
+                    yield JobOutcome(i, None, f"{type(exc).__name__}: {exc}", traceback.format_exc())
