@@ -1,0 +1,123 @@
+"""Every figure primspace draws (matplotlib, Agg backend, written atomically as PNG).
+
+Functions return a :class:`matplotlib.figure.Figure`; :func:`save_figure` writes it and
+closes it. Figures name the paper's figure they reproduce in their docstring.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: never needs a display
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from primspace.files import atomic_path  # noqa: E402
+
+__all__ = ["save_figure", "plot_motion_sample"]
+
+# One palette for the latent initialisations, so every figure colours them alike.
+INIT_COLORS = {"zero": "tab:blue", "random": "tab:red", "projection": "tab:green", "pca": "tab:purple"}
+
+
+def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 120) -> Path:
+    """Write ``fig`` as PNG to ``path`` atomically (creating the folder) and close it."""
+    path = Path(path)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    return path
+
+
+# ============================================================== samples (data, model)
+
+
+def plot_motion_sample(
+    motor: np.ndarray,
+    images: np.ndarray | None = None,
+    *,
+    joint_names: Sequence[str] | None = None,
+    generated_motor: np.ndarray | None = None,
+    generated_images: np.ndarray | None = None,
+    n_frames: int = 8,
+    dt: float | None = None,
+    title: str = "",
+) -> Figure:
+    """One demonstration: a strip of camera frames above its joint curves.
+
+    With ``generated_motor`` / ``generated_images`` it becomes the paper's Appendix B
+    comparison: generated (dashed) against ground truth (solid), and a second frame
+    strip of generated images under the recorded one.
+
+    Parameters
+    ----------
+    motor : ndarray, shape (T, J)
+        Ground-truth (or the only) joint values.
+    images : ndarray, shape (T, H, W, 3), uint8, optional
+        Ground-truth frames.
+    joint_names : list of str, optional
+    generated_motor : ndarray, shape (T, J), optional
+    generated_images : ndarray, shape (T, H, W, 3), optional
+    n_frames : int
+        Frames shown per strip, evenly spaced in time.
+    dt : float, optional
+        Seconds per step (the time axis is in steps otherwise).
+    title : str
+    """
+    motor = np.asarray(motor)
+    t_len, n_joints = motor.shape
+    names = list(joint_names) if joint_names is not None else [f"j{i}" for i in range(n_joints)]
+    strips = [s for s in (images, generated_images) if s is not None]
+    n_frames = min(n_frames, t_len)
+    n_cols = 3 if n_joints > 4 else min(n_joints, 2)
+    n_rows_j = int(np.ceil(n_joints / n_cols))
+    fig = plt.figure(figsize=(2.0 * max(n_frames, 2 * n_cols), 1.4 * len(strips) + 1.9 * n_rows_j + 0.4))
+    grid = fig.add_gridspec(len(strips) + n_rows_j, max(n_frames, 1), height_ratios=[1.2] * len(strips) + [1.6] * n_rows_j)
+    frame_idx = np.linspace(0, t_len - 1, n_frames).round().astype(int)
+    strip_labels = ["recorded", "generated"] if len(strips) == 2 else [None]
+    for row, (strip, label) in enumerate(zip(strips, strip_labels)):
+        for col, t in enumerate(frame_idx):
+            ax = fig.add_subplot(grid[row, col])
+            ax.imshow(np.asarray(strip[t]))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if row == 0:
+                ax.set_title(f"t={t}", fontsize=8)
+            if col == 0 and label:
+                ax.set_ylabel(label, fontsize=8)
+    time = np.arange(t_len) * (dt if dt else 1.0)
+    sub = grid[len(strips):, :].subgridspec(n_rows_j, n_cols, hspace=0.6, wspace=0.25)
+    for j in range(n_joints):
+        ax = fig.add_subplot(sub[j // n_cols, j % n_cols])
+        ax.plot(time, motor[:, j], color="black", lw=1.4, label="ground truth" if generated_motor is not None else None)
+        if generated_motor is not None:
+            ax.plot(time, np.asarray(generated_motor)[:, j], color="tab:orange", lw=1.4, ls="--", label="generated")
+        ax.set_title(names[j], fontsize=8)
+        ax.tick_params(labelsize=7)
+        if j == 0 and generated_motor is not None:
+            ax.legend(fontsize=7, loc="best")
+        if j // n_cols == n_rows_j - 1:
+            ax.set_xlabel("time [s]" if dt else "step", fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+# ================================================================= simulated data (sim)
+
+
+# ==================================================================== clustering
+
+
+# ========================================================== training, latents (model)
+
+
+# ============================================================= experiments, report
