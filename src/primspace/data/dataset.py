@@ -24,7 +24,9 @@ Every check names the file, the field and the sample index, e.g.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,7 +38,7 @@ import numpy as np
 from primspace.errors import DataError, UserError, first_line
 from primspace.files import atomic_path
 
-__all__ = ["MotionDataset", "LazyImages", "SCHEMA_VERSION"]
+__all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
 
 #: Version of the HDF5 layout written by :meth:`MotionDataset.save`.
 SCHEMA_VERSION = 1
@@ -414,28 +416,33 @@ class MotionDataset:
             If ``path`` exists and ``overwrite`` is false.
         """
         path = Path(path)
-        with atomic_path(path, overwrite=overwrite) as tmp:
-            with h5py.File(tmp, "w") as f:
-                f.attrs["schema_version"] = SCHEMA_VERSION
-                f.attrs["joint_names"] = np.array(self.joint_names, dtype=h5py.string_dtype())
-                f.attrs["label_names"] = np.array(self.label_names, dtype=h5py.string_dtype())
-                f.attrs["param_names"] = np.array(self.param_names, dtype=h5py.string_dtype())
-                f.attrs["dt"] = self.dt
-                f.attrs["source"] = self.source
-                f.create_dataset("motor", data=self.motor.astype(np.float32))
-                if self.labels is not None:
-                    f.create_dataset("labels", data=self.labels.astype(np.int32))
-                if self.params is not None:
-                    f.create_dataset("params", data=self.params.astype(np.float32))
-                if self.images is not None:
-                    shape = tuple(self.images.shape)
-                    dset = f.create_dataset(
-                        "images", shape=shape, dtype=np.uint8, chunks=(1,) + shape[1:],
-                        compression="gzip", compression_opts=compression_level,
-                    )
-                    view = self.images if isinstance(self.images, LazyImages) else LazyImages(self.images)
-                    for start, block in view.iter_blocks():
-                        dset[start : start + len(block)] = block
+        with DatasetWriter(
+            path,
+            n_samples=len(self),
+            length=self.length,
+            joint_names=self.joint_names,
+            image_size=self.image_size,
+            label_names=self.label_names,
+            param_names=self.param_names,
+            with_labels=self.labels is not None,
+            with_params=self.params is not None,
+            dt=self.dt,
+            source=self.source,
+            overwrite=overwrite,
+            compression_level=compression_level,
+        ) as writer:
+            view = None
+            if self.images is not None:
+                view = self.images if isinstance(self.images, LazyImages) else LazyImages(self.images)
+            for start in range(0, len(self), _IMAGE_WRITE_BLOCK):
+                stop = min(start + _IMAGE_WRITE_BLOCK, len(self))
+                writer.write(
+                    start,
+                    motor=self.motor[start:stop],
+                    images=None if view is None else view[start:stop],
+                    labels=None if self.labels is None else self.labels[start:stop],
+                    params=None if self.params is None else self.params[start:stop],
+                )
         return path
 
     @classmethod
@@ -542,6 +549,178 @@ class MotionDataset:
                 for name, a, b in zip(self.param_names, self.params.min(0), self.params.max(0))
             }
         return out
+
+
+# ---------------------------------------------------------------------------- writer
+
+
+class DatasetWriter:
+    """Write a data set into an HDF5 file block by block, then publish it atomically.
+
+    For data too large to hold at once (a simulated image set, shards arriving from
+    workers): the file is created at a temporary path with every array sized for
+    ``n_samples``; :meth:`write` validates and stores a block of samples at any offset;
+    leaving the ``with`` block without an error checks that every sample was written
+    and renames the file into place. On an error the temporary file is removed and
+    nothing is left at ``path``.
+
+    Parameters
+    ----------
+    path : path-like
+        Final file.
+    n_samples, length : int
+        N and T.
+    joint_names : list of str
+        J names.
+    image_size : (H, W), optional
+        Frame size, or None for a data set without images.
+    label_names, param_names : list of str
+    with_labels, with_params : bool, optional
+        Whether the file holds labels / params (default: names were given).
+    dt : float
+    source : str
+    overwrite : bool
+        Replace an existing file (else :class:`~primspace.errors.OutputExistsError`,
+        raised before anything is written).
+    compression_level : int
+        gzip level of the per-sample image chunks.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> path = os.path.join(tempfile.mkdtemp(), "d.h5")
+    >>> with DatasetWriter(path, n_samples=2, length=5, joint_names=["a"]) as w:
+    ...     w.write(0, motor=np.zeros((2, 5, 1)))
+    >>> MotionDataset.load(path).motor.shape
+    (2, 5, 1)
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        n_samples: int,
+        length: int,
+        joint_names: Sequence[str],
+        image_size: tuple[int, int] | None = None,
+        label_names: Sequence[str] = (),
+        param_names: Sequence[str] = (),
+        with_labels: bool | None = None,
+        with_params: bool | None = None,
+        dt: float = 1.0,
+        source: str = "",
+        overwrite: bool = False,
+        compression_level: int = 4,
+    ) -> None:
+        self.path = Path(path)
+        self.n_samples, self.length = int(n_samples), int(length)
+        self.joint_names = [str(s) for s in joint_names]
+        self.image_size = None if image_size is None else (int(image_size[0]), int(image_size[1]))
+        self.label_names = [str(s) for s in label_names]
+        self.param_names = [str(s) for s in param_names]
+        self.with_labels = bool(self.label_names) if with_labels is None else with_labels
+        self.with_params = bool(self.param_names) if with_params is None else with_params
+        self.dt, self.source = float(dt), str(source)
+        self.overwrite = overwrite
+        self.compression_level = compression_level
+        if self.n_samples < 1 or self.length < 2 or not self.joint_names:
+            raise DataError(
+                f"a data set needs N >= 1, T >= 2 and J >= 1, got N={self.n_samples}, T={self.length}, "
+                f"J={len(self.joint_names)}", path=self.path, field="motor",
+            )
+        self._written = np.zeros(self.n_samples, dtype=bool)
+        self._stack: contextlib.ExitStack | None = None
+        self._file: h5py.File | None = None
+
+    def __enter__(self) -> "DatasetWriter":
+        stack = contextlib.ExitStack()
+        tmp = stack.enter_context(atomic_path(self.path, overwrite=self.overwrite))
+        try:
+            f = stack.enter_context(h5py.File(tmp, "w"))
+            f.attrs["schema_version"] = SCHEMA_VERSION
+            f.attrs["joint_names"] = np.array(self.joint_names, dtype=h5py.string_dtype())
+            f.attrs["label_names"] = np.array(self.label_names, dtype=h5py.string_dtype())
+            f.attrs["param_names"] = np.array(self.param_names, dtype=h5py.string_dtype())
+            f.attrs["dt"] = self.dt
+            f.attrs["source"] = self.source
+            n, t = self.n_samples, self.length
+            f.create_dataset("motor", shape=(n, t, len(self.joint_names)), dtype=np.float32)
+            if self.with_labels:
+                f.create_dataset("labels", shape=(n,), dtype=np.int32, fillvalue=-1)
+            if self.with_params:
+                f.create_dataset("params", shape=(n, len(self.param_names)), dtype=np.float32)
+            if self.image_size is not None:
+                shape = (n, t, *self.image_size, 3)
+                f.create_dataset(
+                    "images", shape=shape, dtype=np.uint8, chunks=(1,) + shape[1:],
+                    compression="gzip", compression_opts=self.compression_level,
+                )
+        except BaseException:
+            stack.__exit__(*sys.exc_info())
+            raise
+        self._stack, self._file = stack, f
+        return self
+
+    def write(self, start: int, *, motor, images=None, labels=None, params=None) -> None:
+        """Validate and store samples ``start .. start + len(motor) - 1``."""
+        if self._file is None:
+            raise RuntimeError("DatasetWriter.write outside its with block")
+        motor = _as_float_array(motor, "motor", self.path)
+        k = motor.shape[0] if motor.ndim == 3 else 0
+        block = MotionDataset(
+            motor=motor,
+            images=images,
+            labels=labels,
+            params=params,
+            joint_names=self.joint_names,
+            label_names=(self.label_names or None) if labels is not None else None,
+            param_names=(self.param_names or None) if params is not None else None,
+            dt=self.dt,
+        ) if k else None
+        if block is None or not 0 <= start or start + k > self.n_samples:
+            raise DataError(
+                f"block of {k} samples at {start} does not fit in N={self.n_samples}", path=self.path, field="motor"
+            )
+        checks = [
+            ("motor", block.motor.shape[1:], (self.length, len(self.joint_names))),
+            ("images", None if images is None else block.images.shape[2:4], self.image_size),
+        ]
+        for name, got, want in checks:
+            if got != want:
+                if got is None or want is None:
+                    raise DataError(
+                        "missing from a block" if got is None else "given but the file has none",
+                        path=self.path, field=name, index=start,
+                    )
+                raise DataError(f"block shape {got} does not match the file's {want}", path=self.path, field=name, index=start)
+        for name, given, wanted in (("labels", labels, self.with_labels), ("params", params, self.with_params)):
+            if (given is not None) != wanted:
+                raise DataError(
+                    "given but the file has none" if given is not None else "missing from a block",
+                    path=self.path, field=name, index=start,
+                )
+        f, sl = self._file, slice(start, start + k)
+        f["motor"][sl] = block.motor
+        if images is not None:
+            f["images"][sl] = np.asarray(block.images)
+        if labels is not None:
+            f["labels"][sl] = block.labels
+        if params is not None:
+            f["params"][sl] = block.params
+        self._written[sl] = True
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        stack, self._stack, self._file = self._stack, None, None
+        if exc_type is None and not self._written.all():
+            missing = int(np.flatnonzero(~self._written)[0])
+            try:
+                raise DataError(
+                    f"{int((~self._written).sum())} samples never written", path=self.path, field="motor", index=missing
+                )
+            except DataError:
+                stack.__exit__(*sys.exc_info())
+                raise
+        return bool(stack.__exit__(exc_type, exc, tb))
 
 
 # --------------------------------------------------------------------------- helpers

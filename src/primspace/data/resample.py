@@ -101,8 +101,8 @@ def _resample_list(seqs: Sequence, length: int, periodic: bool) -> np.ndarray:
             )
         try:
             out[i] = _resample_batch(a[None], length, periodic)[0]
-        except DataError as exc:
-            raise exc.located(index=i) from None
+        except DataError as exc:  # the batch of one says sample 0: it is sample i
+            raise DataError(exc.reason, field=exc.field, index=i) from None
     return out
 
 
