@@ -18,8 +18,8 @@ $(VENV)/bin/activate:
 
 $(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
 	$(PIP) install --quiet $(TORCH)
-	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
 	$(PIP) install --quiet -e .
+	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
 	touch $@
 
 $(VENV)/.installed-test: $(VENV)/.installed
