@@ -132,14 +132,146 @@ def _format_summary(s: dict) -> str:
 
 # ============================================================ experiments, report
 
+experiment_app = typer.Typer(
+    help="The paper's experiments (Experimental Results). Re-running with the same --out skips "
+    "finished runs and resumes interrupted ones.",
+    no_args_is_help=True,
+)
+app.add_typer(experiment_app, name="experiment")
+
+
+class Backend(str, Enum):
+    local = "local"
+    ray = "ray"
+
+
+_PRESET = typer.Option("demo", "--preset", help="Experiment preset: demo (CPU, minutes) or paper (GPU recommended).")
+_DATA = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT.")
+_OUT = typer.Option(..., "--out", "-o", help="The experiment directory.")
+_BACKEND = typer.Option(Backend.local, "--backend", help="local (process pool) or ray.")
+_ADDRESS = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray instance).")
+_WORKERS = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores).")
+_SEED = typer.Option(0, "--seed", help="Seed of the generated data.")
+_REPORT = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end.")
+
+
+def _experiment(preset: str, data, out, backend, address, workers, seed):
+    from primspace.experiments.presets import resolve_preset
+    from primspace.experiments.workspace import ExperimentDir
+    from primspace.parallel import default_workers
+
+    return ExperimentDir(
+        out, resolve_preset(preset), data=data, backend=backend.value, address=address,
+        workers=workers or default_workers(), seed=seed,
+    )
+
+
+def _finish(exp, report: bool) -> None:
+    failures = exp.meta.get("failures", {})
+    if report:
+        from primspace.report import build_report
+
+        typer.echo(f"report: {build_report(exp.path)}")
+    if failures:
+        for key, error in failures.items():
+            typer.echo(f"failed: {key}: {error}", err=True)
+        raise UserError(f"{len(failures)} run(s) failed (details in {exp.path}/runs/<key>/error.txt); re-run to retry them")
+
+
+@experiment_app.command("intra")
+def experiment_intra(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
+                     address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
+                     report: bool = _REPORT) -> None:
+    """Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size."""
+    from primspace.experiments.intra import final_loss_table, run_intra
+
+    exp = _experiment(preset, data, out, backend, address, workers, seed)
+    results = run_intra(exp)
+    _echo_table(*final_loss_table(results))
+    _finish(exp, report)
+
+
+@experiment_app.command("clustering")
+def experiment_clustering(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
+                          address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
+                          report: bool = _REPORT) -> None:
+    """Subspace clustering of learned latents (runs intra if needed) and of raw trajectories (data, LASA)."""
+    from primspace.experiments.clustering import latent_table, run_clustering
+
+    exp = _experiment(preset, data, out, backend, address, workers, seed)
+    results = run_clustering(exp)
+    _echo_table(*latent_table(results))
+    _finish(exp, report)
+
+
+@experiment_app.command("success")
+def experiment_success(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
+                       address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
+                       report: bool = _REPORT) -> None:
+    """Success rates of generated eval motions, judged by the simulator (runs intra if needed)."""
+    from primspace.experiments.success import run_success, success_table
+
+    exp = _experiment(preset, data, out, backend, address, workers, seed)
+    _echo_table(*success_table(run_success(exp)))
+    _finish(exp, report)
+
+
+@experiment_app.command("inter")
+def experiment_inter(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
+                     address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
+                     report: bool = _REPORT) -> None:
+    """Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay."""
+    from primspace.experiments.inter import inter_table, run_inter
+
+    exp = _experiment(preset, data, out, backend, address, workers, seed)
+    _echo_table(*inter_table(run_inter(exp)))
+    _finish(exp, report)
+
+
+@experiment_app.command("all")
+def experiment_all(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
+                   address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED) -> None:
+    """Every experiment in turn (intra, clustering, success, inter), then the report."""
+    from primspace.experiments.clustering import run_clustering
+    from primspace.experiments.inter import run_inter
+    from primspace.experiments.intra import run_intra
+    from primspace.experiments.success import run_success
+
+    exp = _experiment(preset, data, out, backend, address, workers, seed)
+    for step in (run_intra, run_clustering, run_success, run_inter):
+        step(exp)
+    _finish(exp, True)
+
+
+@app.command("report")
+def report_command(directory: Path = typer.Argument(..., help="An experiment directory.")) -> None:
+    """Write DIR/report.html from the results the directory holds."""
+    from primspace.report import build_report
+
+    typer.echo(f"report: {build_report(directory)}")
+
 
 @app.command("demo")
-def demo_command() -> None:
-    """Run the main demo (for now: import LASA and print its summary)."""
-    from primspace.data.importers import import_lasa
+def demo_command(
+    out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Where the demo writes its data, runs and report."),
+    workers: Optional[int] = _WORKERS,
+) -> None:
+    """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
+    from primspace.experiments.demo import run_demo
+    from primspace.parallel import default_workers
 
-    ds = import_lasa(length=100)
-    typer.echo(_format_summary(ds.summary()))
+    summary = run_demo(out, workers=workers or default_workers())
+    typer.echo(summary)
+
+
+def _echo_table(columns, rows) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(*[str(c) for c in columns])
+    for row in rows:
+        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
+    Console().print(table)
 
 
 # ============================================================================ main
