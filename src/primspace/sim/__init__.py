@@ -1,0 +1,47 @@
+"""The simulated robot-arm data set (the paper's "Artificial Data" experiment) in MuJoCo.
+
+A Franka Emika Panda (7 arm joints + 2 finger joints), a table, a red block and a fixed
+RGB camera. Seven motion primitives are scripted relative to the block, turned into joint
+trajectories by inverse kinematics and rendered headless on the CPU:
+
+- :mod:`primspace.sim.scene`      the MuJoCo model (robot files from gymnasium-robotics)
+- :mod:`primspace.sim.primitives` the scripted end-effector paths of the seven primitives
+- :mod:`primspace.sim.ik`         damped-least-squares inverse kinematics along a path
+- :mod:`primspace.sim.contact`    finger/block geometry and the kinematic block model
+- :mod:`primspace.sim.render`     the offscreen camera
+- :mod:`primspace.sim.generate`   presets, sharded parallel generation into HDF5
+- :mod:`primspace.sim.success`    the objective success judge of a joint trajectory
+
+Importing this package chooses the OpenGL platform before anything imports ``mujoco``:
+``MUJOCO_GL`` keeps a value the user set; otherwise it is ``egl`` when libEGL can be
+found, else ``osmesa`` when libOSMesa can be found, else ``egl`` (rendering then fails
+with a message that says what to install). No other primspace package imports mujoco.
+"""
+
+from __future__ import annotations
+
+import ctypes.util
+import os
+
+__all__ = ["choose_gl_platform"]
+
+
+def choose_gl_platform(environ=os.environ) -> str:
+    """Set ``MUJOCO_GL`` (and a single llvmpipe thread) unless already set; return it.
+
+    llvmpipe, the software OpenGL of Mesa, renders a 64 x 48 frame faster on one thread
+    than on several (its threads only add synchronisation), and data generation already
+    runs one process per core, so ``LP_NUM_THREADS`` defaults to 1.
+    """
+    if "MUJOCO_GL" not in environ:
+        if ctypes.util.find_library("EGL"):
+            environ["MUJOCO_GL"] = "egl"
+        elif ctypes.util.find_library("OSMesa"):
+            environ["MUJOCO_GL"] = "osmesa"
+        else:
+            environ["MUJOCO_GL"] = "egl"
+    environ.setdefault("LP_NUM_THREADS", "1")
+    return environ["MUJOCO_GL"]
+
+
+choose_gl_platform()
