@@ -133,6 +133,10 @@ def generate_command(
     height: Optional[int] = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
     width: Optional[int] = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
     no_images: bool = typer.Option(False, "--no-images", help="Joint values only (no rendering)."),
+    config_file: Optional[Path] = typer.Option(
+        None, "--config", help="JSON object of generation settings over the preset's (block_x, block_y, "
+        "block_size, primitives, length, jitter ...; see docs/simulator.md).",
+    ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
 ) -> None:
     """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file."""
@@ -140,15 +144,28 @@ def generate_command(
     import time
 
     from primspace.files import check_output
-    from primspace.sim.generate import generate_dataset, resolve_config
+    from primspace.sim.generate import GenerationConfig, generate_dataset, resolve_config
 
     config = resolve_config(preset)
+    if config_file is not None:
+        try:
+            settings = json.loads(config_file.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise UserError(f"{config_file}: cannot read a JSON object of settings ({exc})") from None
+        try:
+            config = GenerationConfig.from_dict(settings, base=config)
+        except UserError as exc:
+            raise UserError(f"{config_file}: {exc}") from None
     changes = {"images": not no_images}
     if height is not None:
         changes["height"] = height
     if width is not None:
         changes["width"] = width
-    config = resolve_config(dataclasses.replace(config, **changes))
+    config = dataclasses.replace(config, **changes)
+    try:
+        config = resolve_config(config)
+    except UserError as exc:
+        raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
     if workers is not None and workers < 1:
         raise UserError(f"--workers {workers}: must be at least 1")
     check_output(out, overwrite)

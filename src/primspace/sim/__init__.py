@@ -22,8 +22,14 @@ from __future__ import annotations
 
 import ctypes.util
 import os
+import sys
 
-__all__ = ["choose_gl_platform"]
+__all__ = ["choose_gl_platform", "MUJOCO_IMPORTED_TOO_EARLY"]
+
+#: True when ``mujoco`` was imported before this package with ``MUJOCO_GL`` unset: its
+#: OpenGL platform is then already chosen (GLFW, which needs a display) and headless
+#: rendering fails; the renderer's error message says so.
+MUJOCO_IMPORTED_TOO_EARLY = "mujoco" in sys.modules and "MUJOCO_GL" not in os.environ
 
 
 def choose_gl_platform(environ=os.environ) -> str:

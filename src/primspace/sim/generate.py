@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -175,12 +175,53 @@ class GenerationConfig:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "GenerationConfig":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
+    def from_dict(cls, d: dict[str, Any], base: "GenerationConfig | None" = None) -> "GenerationConfig":
+        """A configuration from JSON-like values (over ``base``'s, default: the defaults).
+
+        Raises
+        ------
+        UserError
+            For an unknown setting or a value of the wrong kind, naming the setting.
+        """
+        if not isinstance(d, dict):
+            raise UserError(f"generation settings must be a JSON object, got {type(d).__name__}")
+        kinds = {f.name: f.type for f in fields(cls)}
+        unknown = sorted(set(d) - set(kinds))
         if unknown:
-            raise UserError(f"unknown generation setting(s): {', '.join(unknown)}")
-        return cls(**d)
+            raise UserError(f"unknown generation setting(s): {', '.join(unknown)}; known: {', '.join(kinds)}")
+        values = {}
+        for name, value in d.items():
+            kind = kinds[name]
+            try:
+                if name == "primitives":
+                    ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
+                    values[name] = tuple(value) if ok else _bad()
+                elif kind.startswith("tuple"):
+                    ok = isinstance(value, (list, tuple)) and all(_is_number(v) for v in value)
+                    values[name] = tuple(float(v) for v in value) if ok else _bad()
+                elif kind == "bool":
+                    values[name] = value if isinstance(value, bool) else _bad()
+                elif kind == "int":
+                    values[name] = int(value) if _is_number(value) and float(value).is_integer() else _bad()
+                else:
+                    values[name] = float(value) if _is_number(value) else _bad()
+            except ValueError:
+                raise UserError(f"generation setting {name}: {value!r} is not {_KIND_WORDS[kind]}") from None
+        return replace(base if base is not None else cls(), **values)
+
+
+_KIND_WORDS = {
+    "tuple[float, ...]": "a list of numbers", "tuple[str, ...]": "a list of primitive names",
+    "int": "an integer", "float": "a number", "bool": "true or false",
+}
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _bad():
+    raise ValueError
 
 
 #: Named configurations. ``paper``: 7 x 7 positions x 5 sizes x 7 primitives = 1715

@@ -174,6 +174,32 @@ class FingerGeometry:
             self._cache[key] = sign * (front - p[axis])
         return self._cache[key]
 
+    def touch_reach(self, axis: int, sign: int, size: float, tcp_height: float) -> float:
+        """How far the TCP stops from a block face when the closed fingers touch it (m).
+
+        Measured with the true signed distance (:func:`mujoco.mj_geomDistance`): a block
+        of edge ``size`` on the table, TCP at ``tcp_height``, the face ``sign * axis``
+        ahead of the TCP.
+        """
+        key = ("touch", axis, sign, round(size, 9), round(tcp_height, 9))
+        if key not in self._cache:
+            import mujoco
+
+            s = self.scene
+            p = self._probe(0.0)
+            centre = p.copy()
+            centre[2] = p[2] - tcp_height + 0.5 * size
+            ahead = 0.05 + 0.5 * size  # TCP to block centre: 5 cm to the face
+            centre[axis] += sign * ahead
+            s.set_block(centre[0], centre[1], size, z=centre[2])
+            mujoco.mj_kinematics(s.model, s.data)
+            gap = min(
+                mujoco.mj_geomDistance(s.model, s.data, g, s.block_geom, 0.1, None)
+                for g in s.left_finger_geoms + s.right_finger_geoms
+            )
+            self._cache[key] = 0.05 - gap
+        return self._cache[key]
+
     def grip_opening(self, size: float, tcp_height: float) -> float:
         """Finger joint value at which both pads touch a block of edge ``size`` centred between them."""
         key = ("grip", round(size, 9), round(tcp_height, 9))
@@ -352,7 +378,7 @@ def script_motion(scene: Scene, primitive, block_x: float, block_y: float, size:
         path.move(c.push_end, (end_x, y, z_grip)).move(1.0)
         contact_start = c.push_start
     elif name == "touch_right":
-        reach = geo.reach(1, 1, s, z_grip)  # the fingers move +y towards the block's right face
+        reach = geo.touch_reach(1, 1, s, z_grip)  # the fingers move +y towards the block's right face
         y_touch = y - 0.5 * s - reach
         y_out = y_touch - c.standoff
         path.move(c.approach_end, (x, y_out, z_hover)).move(c.touches_start, (x, y_out, z_grip))

@@ -48,11 +48,12 @@ class Camera:
         try:
             self._renderer = mujoco.Renderer(scene.model, height=height, width=width)
         except Exception as exc:  # no display library, no EGL device ...
+            if primspace.sim.MUJOCO_IMPORTED_TOO_EARLY:
+                hint = "mujoco was imported before primspace.sim; set MUJOCO_GL=egl in the environment"
+            else:
+                hint = "try MUJOCO_GL=osmesa (apt-get install libosmesa6) or generate with --no-images"
             gl = os.environ.get("MUJOCO_GL", "")
-            raise UserError(
-                f"cannot render offscreen with MUJOCO_GL={gl} ({first_line(exc)}); "
-                "try MUJOCO_GL=osmesa (apt-get install libosmesa6) or generate with --no-images"
-            ) from None
+            raise UserError(f"cannot render offscreen with MUJOCO_GL={gl} ({first_line(exc)}); {hint}") from None
         flags = self._renderer.scene.flags
         flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
         flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
