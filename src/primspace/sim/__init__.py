@@ -7,7 +7,7 @@ trajectories by inverse kinematics and rendered headless on the CPU:
 - :mod:`primspace.sim.scene`      the MuJoCo model (robot files from gymnasium-robotics)
 - :mod:`primspace.sim.primitives` the scripted end-effector paths of the seven primitives
 - :mod:`primspace.sim.ik`         damped-least-squares inverse kinematics along a path
-- :mod:`primspace.sim.contact`    finger/block geometry and the kinematic block model
+- :mod:`primspace.sim.rollout`    replay through the kinematics: block motion, contacts
 - :mod:`primspace.sim.render`     the offscreen camera
 - :mod:`primspace.sim.generate`   presets, sharded parallel generation into HDF5
 - :mod:`primspace.sim.success`    the objective success judge of a joint trajectory
@@ -33,11 +33,12 @@ MUJOCO_IMPORTED_TOO_EARLY = "mujoco" in sys.modules and "MUJOCO_GL" not in os.en
 
 
 def choose_gl_platform(environ=os.environ) -> str:
-    """Set ``MUJOCO_GL`` (and a single llvmpipe thread) unless already set; return it.
+    """Set ``MUJOCO_GL`` (and ``LP_NUM_THREADS``) unless already set; return ``MUJOCO_GL``.
 
-    llvmpipe, the software OpenGL of Mesa, renders a 64 x 48 frame faster on one thread
-    than on several (its threads only add synchronisation), and data generation already
-    runs one process per core, so ``LP_NUM_THREADS`` defaults to 1.
+    Data generation runs one rendering process per core, so llvmpipe (Mesa's software
+    OpenGL) is kept to one thread per process (``LP_NUM_THREADS=1``) rather than starting
+    a thread per core in every process; a 64 x 48 frame renders no slower that way
+    (measured, within the noise of a shared machine).
     """
     if "MUJOCO_GL" not in environ:
         if ctypes.util.find_library("EGL"):

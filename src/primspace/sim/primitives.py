@@ -41,6 +41,8 @@ __all__ = [
     "SCRIPT",
     "R_DOWN",
     "FingerGeometry",
+    "finger_geometry",
+    "PUSH_AXIS",
     "Script",
     "script_motion",
     "home_posture",

@@ -1,7 +1,8 @@
 """The fixed RGB camera: offscreen rendering on the CPU (EGL or OSMesa, Mesa llvmpipe).
 
 Cost (measured, see docs/simulator.md): with the collision meshes drawn, no shadows,
-no reflections and 4x multisampling a 64 x 48 frame takes about 2 ms in software.
+no reflections and 4x multisampling a 64 x 48 frame takes about 1.2-1.4 ms in software
+(0.5 ms without multisampling, at the price of jagged edges).
 """
 
 from __future__ import annotations
