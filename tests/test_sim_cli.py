@@ -85,11 +85,14 @@ def test_show_missing_file(run_cli, tmp_path):
 
 def test_generate_with_a_config_file(run_cli, tiny_preset, tmp_path):
     settings = tmp_path / "grid.json"
-    settings.write_text('{"block_x": [0.44, 0.56], "block_y": [0.0], "primitives": ["push", "pull"], "jitter": 0}')
+    settings.write_text(
+        '{"block_x": [0.44, 0.56], "block_y": [0.0], "primitives": ["push", "pull"], "jitter": 0, "images": false}'
+    )
     out = tmp_path / "d.h5"
-    res = run_cli("generate", "--preset", tiny_preset, "--config", settings, "--out", out, "--workers", 1, "--no-images")
+    res = run_cli("generate", "--preset", tiny_preset, "--config", settings, "--out", out, "--workers", 1)
     assert res.code == 0, res.err
     ds = MotionDataset.load(out)
+    assert ds.images is None
     np.testing.assert_array_equal(ds.labels, [2, 2, 3, 3])
     np.testing.assert_allclose(ds.params[:, 0], [0.44, 0.56, 0.44, 0.56], atol=1e-6)
 

@@ -52,6 +52,13 @@ def test_shapes_labels_and_params(tiny):
     assert tiny.dt == 1.0 and '"seed": 3' in tiny.source
 
 
+def test_every_generated_sample_passes_the_success_judge(tiny):
+    from primspace.sim.success import evaluate_dataset
+
+    results = evaluate_dataset(tiny)  # the stored float32 joints, replayed
+    assert all(r.success for r in results), [r.reason for r in results if not r.success]
+
+
 def test_every_motion_starts_at_the_same_home_pose(tiny):
     start = tiny.motor[:, 0]
     np.testing.assert_allclose(start, np.broadcast_to(start[0], start.shape), atol=1e-6)

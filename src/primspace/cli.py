@@ -156,7 +156,7 @@ def generate_command(
             config = GenerationConfig.from_dict(settings, base=config)
         except UserError as exc:
             raise UserError(f"{config_file}: {exc}") from None
-    changes = {"images": not no_images}
+    changes = {"images": False} if no_images else {}
     if height is not None:
         changes["height"] = height
     if width is not None:
