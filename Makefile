@@ -18,12 +18,12 @@ $(VENV)/bin/activate:
 
 $(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
 	$(PIP) install --quiet $(TORCH)
-	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
 	$(PIP) install --quiet -e .
+	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
 	touch $@
 
 $(VENV)/.installed-test: $(VENV)/.installed
-	$(PIP) install --quiet -e '.[test]'
+	$(PIP) install --quiet -e '.[test,ray]'
 	touch $@
 
 install: $(VENV)/.installed

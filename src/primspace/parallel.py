@@ -18,7 +18,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
-from primspace.errors import UserError
+from primspace.errors import UserError, first_line
 from primspace.progress import progress_bar
 
 __all__ = ["JobOutcome", "run_jobs", "BACKENDS", "default_workers"]
@@ -86,9 +86,7 @@ def run_jobs(
     items = list(items)
     with progress_bar(len(items), description, enabled=progress) as advance:
         if backend == "ray":
-            from primspace._ray_backend import run_ray_jobs  # imported only when asked for
-
-            runner = run_ray_jobs(fn, items, address=address, threads_per_job=threads_per_job)
+            runner = _run_ray(fn, items, address, workers, threads_per_job)
         elif workers is not None and workers == 1 or len(items) <= 1:
             runner = (_call(fn, i, args) for i, args in enumerate(items))
         else:
@@ -137,3 +135,46 @@ def _run_pool(fn: Callable, items: list, workers: int, threads: int) -> Iterator
             # a caller that stops early (closes this generator, e.g. on a failed job)
             # must not wait for every queued job: drop those not started yet
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_ray(fn: Callable, items: list, address: str | None, workers: int | None, threads: int) -> Iterator[JobOutcome]:
+    """Run the jobs as Ray tasks, one CPU each; ray is imported only here.
+
+    With ``address`` the driver joins a running cluster (``"auto"``, ``"HOST:PORT"`` or
+    ``"ray://HOST:10001"``); without it a local Ray instance is started with ``workers``
+    CPUs (all cores by default) and stopped at the end. primspace must be importable on
+    every node (install it there, or pass a ``runtime_env`` through ``RAY_RUNTIME_ENV``).
+    """
+    try:
+        import ray
+    except ImportError:
+        raise UserError("--backend ray needs Ray: pip install 'primspace[ray]'") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        kwargs = dict(include_dashboard=False, logging_level="ERROR", log_to_driver=False)
+        try:
+            if address:
+                ray.init(address=address, **kwargs)
+            else:
+                ray.init(num_cpus=workers or default_workers(), **kwargs)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise UserError(f"cannot start or reach Ray at {address or 'a local instance'}: {first_line(exc)}") from None
+    try:
+        remote_call = ray.remote(num_cpus=threads, max_retries=0)(_call_with_threads)
+        pending = {remote_call.remote(fn, i, args, threads): i for i, args in enumerate(items)}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                i = pending.pop(ref)
+                try:
+                    yield ray.get(ref)
+                except Exception as exc:  # the task's worker died (OOM, node lost)
+                    yield JobOutcome(i, None, f"{type(exc).__name__}: {first_line(exc)}", traceback.format_exc())
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def _call_with_threads(fn: Callable, index: int, args: tuple, threads: int) -> JobOutcome:
+    _limit_threads(threads)
+    return _call(fn, index, args)

@@ -1,0 +1,163 @@
+"""An experiment directory: its preset, its data, its runs, results, figures and timings.
+
+Layout of ``OUT``::
+
+    experiment.json        preset, data file, backend, timings per stage, versions
+    data.h5                the simulated data (when no --data was given)
+    runs/<key>/            one directory per grid run (fit/, infer/, result.json)
+    results/<name>.json    each experiment's numbers
+    figures/<name>.png     each experiment's figures
+    report.html            the report (primspace.report)
+
+Re-running a command with the same ``OUT`` reuses what is there: the data file, finished
+runs (skipped), interrupted runs (resumed from their checkpoints). A different preset or
+data file for an existing ``OUT`` is refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+from primspace import __version__
+from primspace.data import MotionDataset
+from primspace.errors import UserError
+from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.sweep import GridPoint, GridResult, run_grid
+from primspace.files import atomic_write_json
+
+__all__ = ["ExperimentDir"]
+
+META_FILE = "experiment.json"
+
+
+class ExperimentDir:
+    """Open (or create) an experiment directory.
+
+    Parameters
+    ----------
+    path : path-like
+    preset : ExperimentPreset
+    data : path-like, optional
+        An existing data set; default: generate the preset's simulated data into
+        ``path/data.h5`` on first use.
+    backend, workers, address : see :func:`primspace.parallel.run_jobs`.
+    progress : bool, optional
+    seed : int
+        Seed of the generated data.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        preset: ExperimentPreset,
+        *,
+        data: str | Path | None = None,
+        backend: str = "local",
+        workers: int | None = 1,
+        address: str | None = None,
+        progress: bool | None = None,
+        seed: int = 0,
+    ) -> None:
+        self.path = Path(path)
+        self.preset = preset
+        self.backend, self.workers, self.address = backend, workers, address
+        self.progress = progress
+        self.seed = seed
+        if self.path.exists() and not self.path.is_dir():
+            raise UserError(f"{self.path}: exists and is not a directory")
+        data_path = Path(data).resolve() if data is not None else (self.path / "data.h5").resolve()
+        if data is not None and not data_path.exists():
+            raise UserError(f"{data}: no such data file")
+        meta_file = self.path / META_FILE
+        if meta_file.exists():
+            self.meta = json.loads(meta_file.read_text())
+            if self.meta.get("preset") != preset.name:
+                raise UserError(
+                    f"{self.path}: made with preset {self.meta.get('preset')!r}, not {preset.name!r}; use another --out"
+                )
+            if data is not None and self.meta.get("data") != str(data_path):
+                raise UserError(f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out")
+            data_path = Path(self.meta["data"])
+        else:
+            self.meta = {
+                "preset": preset.name,
+                "preset_config": preset.to_dict(),
+                "data": str(data_path),
+                "data_generated": data is None,
+                "seed": seed,
+                "created": _dt.datetime.now().isoformat(timespec="seconds"),
+                "primspace": __version__,
+                "timings": {},
+            }
+        self.data_path = data_path
+        self._dataset: MotionDataset | None = None
+
+    # ----------------------------------------------------------------------- files
+    def save_meta(self) -> None:
+        self.path.mkdir(parents=True, exist_ok=True)
+        atomic_write_json(self.path / META_FILE, self.meta)
+
+    def results_file(self, name: str) -> Path:
+        return self.path / "results" / f"{name}.json"
+
+    def write_results(self, name: str, obj: Any) -> Path:
+        path = self.results_file(name)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_json(path, obj)
+        return path
+
+    def read_results(self, name: str) -> Any | None:
+        path = self.results_file(name)
+        return json.loads(path.read_text()) if path.exists() else None
+
+    def figure(self, name: str) -> Path:
+        return self.path / "figures" / f"{name}.png"
+
+    # ------------------------------------------------------------------------ data
+    def dataset(self) -> MotionDataset:
+        """The experiment's data (generated on first use when no --data was given)."""
+        if self._dataset is None:
+            if not self.data_path.exists():
+                if not self.meta.get("data_generated"):
+                    raise UserError(f"{self.data_path}: the experiment's data file is gone")
+                from primspace.sim.generate import generate_dataset
+
+                with self.stage("generate data"):
+                    generate_dataset(
+                        self.preset.data_preset, seed=self.seed, workers=self.workers, backend=self.backend,
+                        address=self.address, out=self.data_path, progress=self.progress,
+                    )
+            self._dataset = MotionDataset.load(self.data_path)
+            if self._dataset.labels is None or (self._dataset.labels < 0).any():
+                raise UserError(f"{self.data_path}: experiments need a primitive label for every sample")
+        return self._dataset
+
+    # ---------------------------------------------------------------------- stages
+    @contextlib.contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        """Time a stage; its wall-clock seconds go into experiment.json."""
+        self.save_meta()
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.meta.setdefault("timings", {})[name] = round(time.perf_counter() - start, 2)
+            self.save_meta()
+
+    def grid(self, fn: Callable[..., Any], points: Sequence[GridPoint], description: str) -> GridResult:
+        """Run grid points with this directory's backend; failures are recorded, not raised."""
+        result = run_grid(
+            fn, points, self.path, backend=self.backend, workers=self.workers, address=self.address,
+            description=description, progress=self.progress,
+        )
+        failures = self.meta.setdefault("failures", {})
+        for key in result.results:
+            failures.pop(key, None)
+        failures.update(result.failures)
+        self.save_meta()
+        return result

@@ -1,0 +1,191 @@
+"""The HTML report of an experiment directory: one self-contained file, figures embedded.
+
+``primspace report DIR`` (and every experiment, when it ends) writes ``DIR/report.html``:
+a summary of the findings, then one section per experiment that has results in ``DIR``
+(intra-primitive generalisation, clustering, success rates, inter-primitive
+generalisation, latent-space figures, reconstructions, the Appendix A check), then the
+configuration, software versions and timings. PNG figures are embedded as base64, so the
+file can be mailed or attached to a paper's supplementary material as it is.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import json
+import platform
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from primspace.errors import UserError
+from primspace.files import atomic_write_text
+
+__all__ = ["HtmlReport", "build_report", "REPORT_FILE"]
+
+REPORT_FILE = "report.html"
+
+_CSS = """
+body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 0 auto;
+       max-width: 1100px; padding: 1.5em 2em 4em; color: #222; line-height: 1.45; }
+h1 { font-size: 1.7em; margin-bottom: 0.1em; } h2 { border-bottom: 1px solid #ddd; padding-bottom: .2em;
+     margin-top: 2em; } h3 { margin-top: 1.4em; }
+.sub { color: #666; margin-top: 0; }
+table { border-collapse: collapse; margin: .8em 0 1.2em; font-size: .92em; }
+th, td { border: 1px solid #ddd; padding: .3em .7em; text-align: right; }
+th { background: #f4f4f4; } td:first-child, th:first-child { text-align: left; }
+caption { caption-side: bottom; color: #555; font-size: .9em; padding-top: .3em; text-align: left; }
+figure { margin: 1em 0 1.6em; } figure img { max-width: 100%; border: 1px solid #eee; }
+figcaption { color: #555; font-size: .9em; }
+pre { background: #f7f7f7; padding: .8em; overflow-x: auto; font-size: .85em; }
+.note { padding: .6em 1em; border-left: 4px solid #3b82f6; background: #eff6ff; margin: 1em 0; }
+.warn { border-left-color: #d97706; background: #fffbeb; }
+.good { border-left-color: #16a34a; background: #f0fdf4; }
+nav a { margin-right: 1em; }
+"""
+
+
+class HtmlReport:
+    """Build an HTML page from headings, text, tables and PNG figures.
+
+    Examples
+    --------
+    >>> r = HtmlReport("Title")
+    >>> r.section("Results")
+    >>> r.table(["init", "loss"], [["zero", 0.5]])
+    >>> "<table>" in r.render()
+    True
+    """
+
+    def __init__(self, title: str, subtitle: str = "") -> None:
+        self.title = title
+        self.subtitle = subtitle
+        self._parts: list[str] = []
+        self._toc: list[tuple[str, str]] = []
+
+    def section(self, title: str) -> None:
+        anchor = "s" + str(len(self._toc))
+        self._toc.append((anchor, title))
+        self._parts.append(f'<h2 id="{anchor}">{html.escape(title)}</h2>')
+
+    def subsection(self, title: str) -> None:
+        self._parts.append(f"<h3>{html.escape(title)}</h3>")
+
+    def paragraph(self, text: str) -> None:
+        self._parts.append(f"<p>{html.escape(text)}</p>")
+
+    def note(self, text: str, kind: str = "note") -> None:
+        """A highlighted box; ``kind`` is ``note``, ``warn`` or ``good``."""
+        cls = {"warn": "note warn", "good": "note good"}.get(kind, "note")
+        self._parts.append(f'<div class="{cls}">{html.escape(text)}</div>')
+
+    def table(self, columns: Sequence[str], rows: Sequence[Sequence[Any]], caption: str = "") -> None:
+        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(v))}</td>" for v in row) + "</tr>" for row in rows)
+        cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+        self._parts.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+
+    def figure(self, png: str | Path, caption: str = "") -> None:
+        """Embed a PNG file (skipped with a note if it does not exist)."""
+        png = Path(png)
+        if not png.exists():
+            self.note(f"figure missing: {png.name}", "warn")
+            return
+        data = base64.b64encode(png.read_bytes()).decode("ascii")
+        cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+        self._parts.append(f'<figure><img alt="{html.escape(png.stem)}" src="data:image/png;base64,{data}">{cap}</figure>')
+
+    def code(self, text: str) -> None:
+        self._parts.append(f"<pre>{html.escape(text)}</pre>")
+
+    def render(self) -> str:
+        nav = " ".join(f'<a href="#{a}">{html.escape(t)}</a>' for a, t in self._toc)
+        sub = f'<p class="sub">{html.escape(self.subtitle)}</p>' if self.subtitle else ""
+        return (
+            "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>"
+            f"<h1>{html.escape(self.title)}</h1>{sub}<nav>{nav}</nav>" + "\n".join(self._parts) + "</body></html>\n"
+        )
+
+    def write(self, path: str | Path) -> Path:
+        path = Path(path)
+        atomic_write_text(path, self.render())
+        return path
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        if v != v:  # NaN
+            return "–"
+        return f"{v:.4g}"
+    return str(v)
+
+
+# ----------------------------------------------------------------------------- build
+
+
+def _sections() -> list[Callable[[Path, HtmlReport], None]]:
+    """The report's sections in order; each adds itself only if its results exist."""
+    from primspace.experiments import clustering, inter, intra, success
+
+    return [
+        intra.report_summary,
+        intra.report_data,
+        intra.report_section,
+        clustering.report_section,
+        success.report_section,
+        inter.report_section,
+        intra.report_latent_figures,
+        intra.report_appendix_a,
+    ]
+
+
+def build_report(out_dir: str | Path) -> Path:
+    """Write ``out_dir/report.html`` from whatever results the directory holds.
+
+    Raises
+    ------
+    UserError
+        If ``out_dir`` is not an experiment directory (no ``experiment.json``).
+    """
+    out_dir = Path(out_dir)
+    meta_path = out_dir / "experiment.json"
+    if not meta_path.exists():
+        raise UserError(f"{out_dir}: not an experiment directory (no experiment.json)")
+    meta = json.loads(meta_path.read_text())
+    report = HtmlReport(
+        "primspace report",
+        f"{out_dir.resolve().name} — preset {meta.get('preset', '?')} — "
+        f"written {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}",
+    )
+    for add_section in _sections():
+        add_section(out_dir, report)
+    _environment_section(out_dir, meta, report)
+    return report.write(out_dir / REPORT_FILE)
+
+
+def _environment_section(out_dir: Path, meta: dict, report: HtmlReport) -> None:
+    import numpy
+    import torch
+
+    from primspace import __version__
+
+    report.section("Configuration, versions, timings")
+    versions = [
+        ["primspace", __version__],
+        ["python", platform.python_version()],
+        ["numpy", numpy.__version__],
+        ["torch", torch.__version__],
+        ["machine", f"{platform.machine()} {platform.system()}"],
+    ]
+    try:
+        import mujoco
+
+        versions.append(["mujoco", mujoco.__version__])
+    except ImportError:  # pragma: no cover - a dependency
+        pass
+    report.table(["software", "version"], versions)
+    timings = meta.get("timings", {})
+    if timings:
+        report.table(["stage", "seconds"], [[k, float(v)] for k, v in timings.items()], "Wall-clock time per stage.")
+    report.code(json.dumps(meta, indent=2))
