@@ -124,6 +124,85 @@ def _format_summary(s: dict) -> str:
 # ======================================================================= simulator
 
 
+@app.command("generate")
+def generate_command(
+    out: Path = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
+    preset: str = typer.Option("demo", "--preset", "-p", help="demo (126 motions) or paper (1715 motions, as in the paper)."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
+    seed: int = typer.Option(0, "--seed", help="Moves each block within its grid cell; same seed, same data."),
+    height: Optional[int] = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
+    width: Optional[int] = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
+    no_images: bool = typer.Option(False, "--no-images", help="Joint values only (no rendering)."),
+    config_file: Optional[Path] = typer.Option(
+        None, "--config", help="JSON object of generation settings over the preset's (block_x, block_y, "
+        "block_size, primitives, length, jitter ...; see docs/simulator.md).",
+    ),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
+) -> None:
+    """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file."""
+    import dataclasses
+    import time
+
+    from primspace.files import check_output
+    from primspace.sim.generate import GenerationConfig, generate_dataset, resolve_config
+
+    config = resolve_config(preset)
+    if config_file is not None:
+        try:
+            settings = json.loads(config_file.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise UserError(f"{config_file}: cannot read a JSON object of settings ({exc})") from None
+        try:
+            config = GenerationConfig.from_dict(settings, base=config)
+        except UserError as exc:
+            raise UserError(f"{config_file}: {exc}") from None
+    changes = {"images": False} if no_images else {}
+    if height is not None:
+        changes["height"] = height
+    if width is not None:
+        changes["width"] = width
+    config = dataclasses.replace(config, **changes)
+    try:
+        config = resolve_config(config)
+    except UserError as exc:
+        raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers {workers}: must be at least 1")
+    check_output(out, overwrite)
+    start = time.perf_counter()
+    ds = generate_dataset(config, seed=seed, workers=workers, out=out, overwrite=overwrite)
+    took = time.perf_counter() - start
+    frames = f"images {config.height}x{config.width}" if config.images else "no images"
+    typer.echo(
+        f"wrote {out}: {len(ds)} motions x {ds.length} steps x {ds.n_joints} joints, {frames} "
+        f"({took:.1f} s, {len(ds) / took:.1f} motions/s)"
+    )
+
+
+@app.command("show")
+def show_command(
+    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file (e.g. from primspace generate)."),
+    sample: int = typer.Option(0, "--sample", "-i", help="Sample index."),
+    out: Path = typer.Option(..., "--out", "-o", help="PNG file to write."),
+    frames: int = typer.Option(8, "--frames", help="Camera frames in the strip."),
+    overwrite: bool = typer.Option(True, "--overwrite/--no-overwrite", help="Replace OUT if it exists."),
+) -> None:
+    """Draw one sample: a strip of camera frames and its joint curves."""
+    from primspace.data.dataset import MotionDataset
+    from primspace.files import check_output
+    from primspace.plots import plot_sim_sample, save_figure
+
+    check_output(out, overwrite)
+    if frames < 1:
+        raise UserError(f"--frames {frames}: must be at least 1")
+    ds = MotionDataset.load(file)
+    if not 0 <= sample < len(ds):
+        raise UserError(f"{file}: sample {sample} out of range 0..{len(ds) - 1}")
+    save_figure(plot_sim_sample(ds, sample, n_frames=frames), out)
+    typer.echo(f"wrote {out}")
+
+
+
 # ====================================================================== clustering
 
 

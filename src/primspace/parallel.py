@@ -122,14 +122,19 @@ def _run_pool(fn: Callable, items: list, workers: int, threads: int) -> Iterator
         max_workers=min(workers, len(items)), mp_context=ctx, initializer=_limit_threads, initargs=(threads,)
     ) as pool:
         pending = {pool.submit(_call, fn, i, args): i for i, args in enumerate(items)}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                i = pending.pop(fut)
-                try:
-                    yield fut.result()
-                except Exception as exc:  # the worker process itself died
-                    yield JobOutcome(i, None, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    i = pending.pop(fut)
+                    try:
+                        yield fut.result()
+                    except Exception as exc:  # the worker process itself died
+                        yield JobOutcome(i, None, f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        finally:
+            # a caller that stops early (closes this generator, e.g. on a failed job)
+            # must not wait for every queued job: drop those not started yet
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _run_ray(fn: Callable, items: list, address: str | None, workers: int | None, threads: int) -> Iterator[JobOutcome]:

@@ -114,6 +114,38 @@ def plot_motion_sample(
 # ================================================================= simulated data (sim)
 
 
+def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
+    """One sample of a data set (simulated or not): frame strip and joint curves.
+
+    The title names the sample, its primitive and, for simulated data, the block
+    (``block_x``, ``block_y``, ``block_size`` in cm). What ``primspace show`` draws.
+
+    Parameters
+    ----------
+    dataset : MotionDataset
+    index : int
+        Sample index.
+    n_frames : int
+        Frames in the strip, evenly spaced in time.
+    """
+    i = int(index)
+    parts = [f"sample {i}"]
+    if dataset.labels is not None and 0 <= int(dataset.labels[i]) < len(dataset.label_names):
+        parts.append(dataset.label_names[int(dataset.labels[i])])
+    if dataset.params is not None:
+        values = dataset.params[i]
+        cm = {"block_x", "block_y", "block_size"}
+        parts.append(", ".join(
+            f"{n} {v * 100:.1f} cm" if n in cm else f"{n} {v:.4g}" for n, v in zip(dataset.param_names, values)
+        ))
+    images = None if dataset.images is None else np.asarray(dataset.images[i])
+    return plot_motion_sample(
+        dataset.motor[i], images, joint_names=[n.removeprefix("robot:panda0_") for n in dataset.joint_names],
+        n_frames=n_frames, dt=dataset.dt, title=" | ".join(parts),
+    )
+
+
+
 # ==================================================================== clustering
 
 
