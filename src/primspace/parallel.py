@@ -171,6 +171,8 @@ def _run_ray(fn: Callable, items: list, address: str | None, workers: int | None
                 except Exception as exc:  # the task's worker died (OOM, node lost)
                     yield JobOutcome(i, None, f"{type(exc).__name__}: {first_line(exc)}", traceback.format_exc())
     finally:
+        for ref in pending:  # a caller that stopped early: drop the jobs still queued
+            ray.cancel(ref)
         if started_here:
             ray.shutdown()
 
