@@ -219,7 +219,7 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
 #: Up to this many points the fit runs on one BLAS/OpenMP thread: threads cost more than they
 #: give on small problems, and far more on a busy machine (measured on 2 cores under load:
 #: 182 LASA points took 1.2-3.2 s with 2 threads, 0.17 s with 1).
-SINGLE_THREAD_MAX_SAMPLES = 5_000
+SINGLE_THREAD_MAX_SAMPLES = 20_000
 
 
 def small_problem_threads(n_samples: int):

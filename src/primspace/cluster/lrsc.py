@@ -285,9 +285,11 @@ def self_representation_svd(X, affine: bool = True, ones_weight: float = 1.0) ->
     n, d = X.shape
     p = d + 1 if affine else d
     w = float(ones_weight)
-    centred = X - X.mean(axis=0)
-    total = float(np.einsum("ij,ij->", centred, centred))
-    del centred
+    mean = X.mean(axis=0)
+    total = 0.0
+    for start in range(0, n, _GRAM_SVD_ROW_BLOCK):  # blockwise: no n x d temporary
+        centred = X[start:start + _GRAM_SVD_ROW_BLOCK] - mean
+        total += float(np.einsum("ij,ij->", centred, centred))
     if n >= 10 * p and n * p >= _GRAM_SVD_MIN_ENTRIES:
         lam, u, v = _svd_by_gram(X, affine, w)
         method = "gram"
