@@ -150,3 +150,23 @@ def test_bad_data_is_one_line_naming_the_file(run_cli, tmp_path):
     (tmp_path / "z.txt").write_text("1 2")
     assert_user_error(run_cli("cluster", tmp_path / "z.txt", "--k", 3, "--out", tmp_path / "o"), "z.txt", ".npy")
     assert not (tmp_path / "o").exists()
+
+
+def test_figures_handle_unknown_labels_extra_clusters_and_empty_sweeps(tmp_path):
+    from primspace.plots import plot_clustering, plot_tau_sweep, save_figure
+
+    rng = np.random.default_rng(2)
+    w = rng.random((12, 12))
+    w = w + w.T
+    true = np.array([0, 0, 0, 1, 1, 1, 2, 2, -1, -1, 2, 1])
+    pred = np.array([3, 3, 3, 0, 0, 1, 2, 2, 2, 0, 4, 0])  # 5 predicted clusters for 3 true ones
+    fig = plot_clustering(w, pred, true, label_names=["a", "b", "c"], title="t")
+    left, right = fig.axes[0], fig.axes[1]
+    assert left.images[0].get_array().shape == (12, 12)
+    shown = np.concatenate([c.get_offsets()[:, 1] for c in right.collections])
+    assert sorted(set(shown)) == [0, 1, 2, 3, 4]  # matched ids 0-2, unmatched ones above
+    save_figure(fig, tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 0
+    fig = plot_tau_sweep([{"tau": None, "rank": 0}, {"tau": 0.1, "r2": 0.9, "rank": 3, "accuracy": 0.8}])
+    assert len(fig.axes) == 2 and len(fig.axes[0].lines) == 1
+    save_figure(plot_tau_sweep([]), tmp_path / "empty.png")

@@ -196,21 +196,27 @@ def plot_clustering(
     if true is not None:
         wrong = (true >= 0) & (shown != true)
         unknown = true < 0
+        from matplotlib.lines import Line2D
+
+        handles = []
         for name, mask, marker in (("correct", ~wrong & ~unknown, "o"), ("wrong", wrong, "x")):
             if mask.any():
-                ax_l.scatter(x[mask], shown[mask], c=[point_colors[i] for i in np.flatnonzero(mask)], s=10, marker=marker, label=name)
+                ax_l.scatter(x[mask], shown[mask], c=[point_colors[i] for i in np.flatnonzero(mask)], s=10, marker=marker)
+                handles.append(Line2D([], [], marker=marker, ls="", color="0.3", label=name))
         if unknown.any():
-            ax_l.scatter(x[unknown], shown[unknown], c="0.6", s=10, marker="o", label="true label unknown")
+            ax_l.scatter(x[unknown], shown[unknown], c="0.6", s=10, marker="o")
+            handles.append(Line2D([], [], marker="o", ls="", color="0.6", label="true label unknown"))
         bounds = np.flatnonzero(np.diff(true)) + 0.5
         for b in bounds:
             ax_w.axhline(b, color="white", lw=0.4, alpha=0.7)
             ax_w.axvline(b, color="white", lw=0.4, alpha=0.7)
             ax_l.axvline(b, color="0.85", lw=0.6, zorder=0)
-        ax_l.legend(fontsize=7, loc="upper left", markerscale=1.5)
-        if label_names is not None and len(label_names) <= 30:
-            ticks = np.arange(len(label_names))
-            ax_l.set_yticks(ticks)
-            ax_l.set_yticklabels([str(s) for s in label_names], fontsize=6 if len(label_names) > 10 else 8)
+        ax_l.legend(handles=handles, fontsize=7, loc="upper left")
+        if label_names is not None and n_colors <= 30:
+            names = [str(s) for s in label_names][:n_colors]
+            names += [f"extra {i - len(names) + 1}" for i in range(len(names), n_colors)]
+            ax_l.set_yticks(np.arange(n_colors))
+            ax_l.set_yticklabels(names, fontsize=6 if n_colors > 10 else 8)
     else:
         ax_l.scatter(x, shown, c=point_colors, s=10)
     ax_l.set_xlabel("sample (ordered as left)")
