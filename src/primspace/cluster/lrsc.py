@@ -59,7 +59,7 @@ __all__ = [
 ]
 
 # Above this many matrix entries, a tall Z~ (n >= 10 p) is decomposed through its p x p Gram
-# matrix: ~6x faster and ~4x less memory than LAPACK's SVD at n = 1e6, p = 41.
+# matrix, without copying Z~: 0.75 s against 4.7 s for LAPACK's SVD at n = 1e6, p = 41.
 _GRAM_SVD_MIN_ENTRIES = 2_000_000
 _GRAM_SVD_ROW_BLOCK = 65_536
 

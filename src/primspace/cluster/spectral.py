@@ -319,6 +319,8 @@ def _gram_embedding(f: np.ndarray, n_components: int) -> SpectralEmbedding:
 
 
 def _lobpcg_embedding(f: np.ndarray, n_components: int, random_state) -> SpectralEmbedding:
+    # For n < 5 k scipy's lobpcg applies the operator to the identity and solves densely
+    # (at most 25 k^2 entries): the only case in which this route holds an n x n matrix.
     op = NormalizedAffinityOperator(f)
     n = op.shape[0]
     k = min(n_components, n)
