@@ -1,0 +1,52 @@
+"""Affine low-rank subspace clustering (paper, Background: Linear / Affine Subspace Clustering).
+
+Modules
+-------
+:mod:`~primspace.cluster.lrsc`
+    The closed form ``Q* = V P(Lambda) V^T`` from one SVD; R^2 and the choice of tau.
+:mod:`~primspace.cluster.spectral`
+    The Ng-Jordan-Weiss spectral step, dense or implicit (no n x n matrix).
+:mod:`~primspace.cluster.estimator`
+    :class:`LowRankSubspaceClustering`, the scikit-learn estimator.
+:mod:`~primspace.cluster.sweep`
+    R^2, rank and scores over a tau grid from one SVD.
+:mod:`~primspace.cluster.metrics`
+    Accuracy (Hungarian matching), NMI, ARI.
+"""
+
+from primspace.cluster.estimator import DEFAULT_R2_TARGET, LowRankSubspaceClustering
+from primspace.cluster.lrsc import (
+    SelfRepresentationSVD,
+    r2_from_singular_values,
+    self_representation_svd,
+    shrinkage,
+    tau_for_r2,
+)
+from primspace.cluster.metrics import clustering_accuracy, clustering_scores
+from primspace.cluster.spectral import (
+    NormalizedAffinityOperator,
+    affinity_from_factor,
+    degrees_from_factor,
+    njw_labels,
+    spectral_embedding,
+)
+from primspace.cluster.sweep import DEFAULT_R2_GRID, sweep
+
+__all__ = [
+    "LowRankSubspaceClustering",
+    "DEFAULT_R2_TARGET",
+    "SelfRepresentationSVD",
+    "self_representation_svd",
+    "shrinkage",
+    "r2_from_singular_values",
+    "tau_for_r2",
+    "NormalizedAffinityOperator",
+    "affinity_from_factor",
+    "degrees_from_factor",
+    "spectral_embedding",
+    "njw_labels",
+    "clustering_accuracy",
+    "clustering_scores",
+    "sweep",
+    "DEFAULT_R2_GRID",
+]

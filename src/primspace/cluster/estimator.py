@@ -1,0 +1,315 @@
+"""`LowRankSubspaceClustering`: the paper's affine low-rank subspace clustering as an estimator.
+
+Paper, Background (Linear Subspace Clustering; Affine Subspace Clustering): the closed form
+``Q* = V P(Lambda) V^T`` of the relaxed low-rank representation (Vidal & Favaro 2014), then
+spectral clustering of ``Q*``. See :mod:`primspace.cluster.lrsc` for the algebra and the
+definition of R^2, :mod:`primspace.cluster.spectral` for the spectral step and its implicit
+route that scales to millions of points.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClusterMixin
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import validate_data
+from threadpoolctl import threadpool_limits
+
+from primspace.cluster.lrsc import SelfRepresentationSVD, self_representation_svd
+from primspace.cluster.spectral import (
+    choose_spectral_method,
+    njw_labels,
+    spectral_embedding,
+    spectral_embedding_dense,
+)
+from primspace.errors import UserError
+
+__all__ = ["LowRankSubspaceClustering", "DEFAULT_R2_TARGET"]
+
+#: R^2 target used when none of tau, tau_relative, r2_target is given. On LASA (26 shapes)
+#: any target in [0.97, 0.999] clusters with accuracy >= 0.95; 0.9999 over-fits the noise.
+DEFAULT_R2_TARGET = 0.99
+
+
+class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
+    """Affine (or linear) low-rank subspace clustering with an NJW spectral step.
+
+    Rows of ``X`` are the points (scikit-learn convention); the paper's data matrix ``Z`` has
+    them as columns, ``Z = X^T``. The estimator computes the closed-form self-representation
+    ``Q* = V P(Lambda) V^T`` of ``Z~ = [Z; ones_weight 1^T]`` (affine) or ``Z`` (linear),
+    ``P(x) = 1 - 1/(tau x^2)`` for ``x > 1/sqrt(tau)`` else 0 (paper, eq. ``self_expression``),
+    and clusters its affinity ``Q* o Q*`` (or ``|Q*|``) with Ng-Jordan-Weiss spectral
+    clustering: normalised affinity ``D^-1/2 W D^-1/2``, its top k eigenvectors, rows scaled
+    to unit length, k-means with ``n_init`` restarts.
+
+    Parameters
+    ----------
+    n_clusters : int
+        K, the number of subspaces (>= 1).
+    affine : bool, default True
+        Affine subspaces (append the ones row, paper: Affine Subspace Clustering); False:
+        linear subspaces through the origin.
+    tau : float, optional
+        The paper's tau (> 0), absolute: it depends on the data's scale.
+    tau_relative : float, optional
+        Scale-free tau: ``tau = tau_relative / sigma_1^2`` (``sigma_1`` the top singular value
+        of ``Z~``). ``P`` depends on ``tau sigma^2`` only, so a component is kept iff
+        ``sigma_k / sigma_1 > 1 / sqrt(tau_relative)``. In the affine case scaling the data by
+        c keeps the result only if ``ones_weight`` is scaled by c too.
+    r2_target : float, optional
+        Choose tau as the smallest one whose R^2 of ``Z ~ Z Q*`` reaches this value, in (0, 1)
+        (how the paper chose tau). R^2 = 1 - ||Z - Z Q*||_F^2 / ||Z - mean||_F^2 over the data
+        rows (the ones row does not count); see :mod:`primspace.cluster.lrsc`. Give at most
+        one of tau, tau_relative, r2_target; with none, ``r2_target = 0.99``.
+    affinity : {"squared", "abs"}, default "squared"
+        ``W = Q* o Q*`` (low rank: scales to millions of points) or ``|Q*|`` (dense only).
+    ones_weight : float, default 1.0
+        Value of the appended ones row (affine only); the paper's homogeneous coordinates use
+        1. Larger values enforce the affine constraint more strongly relative to the data.
+    spectral : {"auto", "dense", "implicit"}, default "auto"
+        "dense" forms ``Q*`` and ``W`` (n x n, at most 10 000 points; ``Q*`` is then kept in
+        ``self_representation_``). "implicit" never forms an n x n matrix (affinity "squared"
+        only): degrees and products come from the low-rank factor of ``Q*``. "auto" is dense
+        up to 2000 points or for affinity "abs", implicit above.
+    n_init : int, default 20
+        k-means restarts.
+    random_state : int, RandomState or None
+        Seeds k-means (and ARPACK's start vector where ARPACK is used).
+
+    Attributes
+    ----------
+    labels_ : ndarray of shape (n_samples,), int64
+        Cluster of each point, in ``0..n_clusters-1``.
+    singular_values_ : ndarray of shape (s,)
+        Singular values of ``Z~`` (descending; rounding-level values are 0).
+    tau_ : float
+        The absolute tau used.
+    tau_relative_ : float
+        ``tau_ * singular_values_[0]^2``.
+    rank_ : int
+        Rank of ``Q*``: the number of singular values above ``1/sqrt(tau_)``.
+    r2_ : float
+        R^2 of ``Z ~ Z Q*`` (NaN if all points are identical).
+    representation_factor_ : ndarray of shape (n_samples, rank_)
+        ``F = V_r sqrt(P_r)`` with ``Q* = F F^T``: any block of ``Q*`` or of the affinity
+        follows from it (:func:`primspace.cluster.affinity_from_factor`).
+    self_representation_ : ndarray of shape (n_samples, n_samples) or None
+        ``Q*`` when the dense route formed it, else None.
+    eigenvalues_ : ndarray of shape (k,)
+        Top eigenvalues of ``D^-1/2 W D^-1/2`` (k <= n_clusters; see
+        :mod:`primspace.cluster.spectral`).
+    spectral_method_ : str
+        "dense", "gram" or "lobpcg" (the last two implicit: see :mod:`primspace.cluster.spectral`).
+    n_features_in_ : int
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> lines = [c + t[:, None] * v for c, v, t in
+    ...          [(rng.normal(size=3), rng.normal(size=3), rng.normal(size=20)) for _ in range(2)]]
+    >>> X = np.vstack(lines)
+    >>> model = LowRankSubspaceClustering(2, tau_relative=1e6, random_state=0).fit(X)
+    >>> bool(np.all(model.labels_[:20] == model.labels_[0]) and model.labels_[0] != model.labels_[20])
+    True
+
+    References
+    ----------
+    Nikulin & Tani, *Initialization of Latent Space Coordinates via Random Linear Projections
+    for Learning Robotic Sensory-Motor Sequences*, Background. Vidal & Favaro, *Low rank
+    subspace clustering (LRSC)*, Pattern Recognition Letters 43, 2014. Ng, Jordan & Weiss,
+    *On spectral clustering: analysis and an algorithm*, NIPS 2001.
+    """
+
+    _parameter_constraints: dict = {
+        "n_clusters": [Interval(Integral, 1, None, closed="left")],
+        "affine": ["boolean"],
+        "tau": [Interval(Real, 0, None, closed="neither"), None],
+        "tau_relative": [Interval(Real, 0, None, closed="neither"), None],
+        "r2_target": [Interval(Real, 0, 1, closed="neither"), None],
+        "affinity": [StrOptions({"squared", "abs"})],
+        "ones_weight": [Interval(Real, 0, None, closed="neither")],
+        "spectral": [StrOptions({"auto", "dense", "implicit"})],
+        "n_init": [Interval(Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(
+        self,
+        n_clusters,
+        *,
+        affine=True,
+        tau=None,
+        tau_relative=None,
+        r2_target=None,
+        affinity="squared",
+        ones_weight=1.0,
+        spectral="auto",
+        n_init=20,
+        random_state=None,
+    ):
+        self.n_clusters = n_clusters
+        self.affine = affine
+        self.tau = tau
+        self.tau_relative = tau_relative
+        self.r2_target = r2_target
+        self.affinity = affinity
+        self.ones_weight = ones_weight
+        self.spectral = spectral
+        self.n_init = n_init
+        self.random_state = random_state
+
+    def fit(self, X, y=None):
+        """Cluster the rows of ``X``.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+            Points as rows; finite.
+        y : ignored
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        ValueError
+            Invalid parameters, NaN/inf, 1-D input, fewer than 2 points or fewer points than
+            clusters, two tau options at once, or a tau that keeps no component.
+        """
+        self._validate_params()
+        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=2)
+        n_samples = X.shape[0]
+        if n_samples < self.n_clusters:
+            raise UserError(f"n_samples={n_samples} should be >= n_clusters={self.n_clusters}")
+        tau_option = tau_option_from(self.tau, self.tau_relative, self.r2_target)
+        with small_problem_threads(n_samples):
+            svd = self_representation_svd(X, affine=self.affine, ones_weight=self.ones_weight)
+            del X
+            result = cluster_at_tau(
+                svd,
+                resolve_tau(svd, *tau_option),
+                n_clusters=self.n_clusters,
+                affinity=self.affinity,
+                spectral=self.spectral,
+                n_init=self.n_init,
+                random_state=self.random_state,
+            )
+        self.labels_ = result.labels
+        self.singular_values_ = svd.singular_values
+        self.tau_ = result.tau
+        self.tau_relative_ = result.tau * svd.top_singular_value**2
+        self.rank_ = result.rank
+        self.r2_ = result.r2
+        self.representation_factor_ = result.factor
+        self.self_representation_ = result.self_representation
+        self.eigenvalues_ = result.eigenvalues
+        self.spectral_method_ = result.method
+        return self
+
+
+# ----------------------------------------------------------- shared with sweep()
+
+#: Up to this many points the fit runs on one BLAS/OpenMP thread: threads cost more than they
+#: give on small problems, and far more on a busy machine (measured on 2 cores under load:
+#: 182 LASA points took 1.2-3.2 s with 2 threads, 0.17 s with 1).
+SINGLE_THREAD_MAX_SAMPLES = 20_000
+
+
+def small_problem_threads(n_samples: int):
+    """A context that limits BLAS and OpenMP to one thread for small problems (else no-op)."""
+    if n_samples <= SINGLE_THREAD_MAX_SAMPLES:
+        return threadpool_limits(limits=1)
+    return contextlib.nullcontext()
+
+
+
+def tau_option_from(tau, tau_relative, r2_target) -> tuple[str, float]:
+    """The one tau option given, as ``(kind, value)``; ``("r2_target", 0.99)`` if none."""
+    given = [(k, v) for k, v in (("tau", tau), ("tau_relative", tau_relative), ("r2_target", r2_target)) if v is not None]
+    if len(given) > 1:
+        raise UserError(f"give at most one of tau, tau_relative, r2_target; got {', '.join(k for k, _ in given)}")
+    kind, value = given[0] if given else ("r2_target", DEFAULT_R2_TARGET)
+    if kind == "r2_target":
+        if not 0 < value < 1:
+            raise UserError(f"r2_target must lie in (0, 1), got {value}")
+    elif not (np.isfinite(value) and value > 0):
+        raise UserError(f"{kind} must be a positive number, got {value}")
+    return kind, float(value)
+
+
+def resolve_tau(svd: SelfRepresentationSVD, kind: str, value: float) -> float:
+    """Absolute tau from ``("tau" | "tau_relative" | "r2_target", value)``."""
+    if kind == "tau":
+        return value
+    if kind == "tau_relative":
+        return svd.tau_from_relative(value)
+    return svd.tau_for_r2(value)
+
+
+@dataclass(frozen=True, eq=False)
+class ClusteringResult:
+    """What one tau gives: labels, rank, R^2, the factor of Q*, and the spectral details."""
+
+    tau: float
+    rank: int
+    r2: float
+    factor: np.ndarray
+    self_representation: np.ndarray | None
+    eigenvalues: np.ndarray
+    method: str
+    labels: np.ndarray
+
+
+def cluster_at_tau(
+    svd: SelfRepresentationSVD,
+    tau: float,
+    *,
+    n_clusters: int,
+    affinity: str = "squared",
+    spectral: str = "auto",
+    n_init: int = 20,
+    random_state=None,
+) -> ClusteringResult:
+    """Closed form at ``tau``, then the NJW spectral step.
+
+    Raises
+    ------
+    UserError
+        If tau keeps no component (``Q* = 0``).
+    """
+    rank = svd.rank(tau)
+    if rank == 0:
+        top = svd.top_singular_value
+        need = f"tau > 1/sigma_1^2 = {1 / top**2:.4g}" if top > 0 else "nonzero data"
+        raise UserError(f"tau={tau:.4g} keeps no component of Q* (every singular value <= 1/sqrt(tau)); need {need}")
+    rng = check_random_state(random_state)
+    kmeans_seed, arpack_seed = (int(s) for s in rng.randint(np.iinfo(np.int32).max, size=2))
+    factor = svd.factor(tau)
+    n = factor.shape[0]
+    method = choose_spectral_method(n, rank, affinity, spectral)
+    q = None
+    if method == "dense":
+        q = factor @ factor.T
+        w = np.square(q) if affinity == "squared" else np.abs(q)
+        embedding = spectral_embedding_dense(w, n_clusters, random_state=arpack_seed)
+        del w
+    else:
+        embedding = spectral_embedding(factor, n_clusters, affinity=affinity, method=method, random_state=arpack_seed)
+    labels = njw_labels(embedding.vectors, n_clusters, n_init=n_init, random_state=kmeans_seed)
+    return ClusteringResult(
+        tau=float(tau),
+        rank=rank,
+        r2=svd.r2(tau),
+        factor=factor,
+        self_representation=q,
+        eigenvalues=embedding.eigenvalues,
+        method=embedding.method,
+        labels=labels,
+    )

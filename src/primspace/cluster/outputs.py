@@ -1,0 +1,134 @@
+"""The output directory of ``primspace cluster``: labels, result JSON, figures, written atomically.
+
+Layout of ``DIR``::
+
+    labels.csv        sample, predicted[, true]   (true: -1 = unknown)
+    result.json       input, options, tau / tau_relative / R^2 / rank, singular values,
+                      eigenvalues, spectral method, scores (or null), seconds
+    clustering.png    the paper-style figure (affinity ordered by true label; predicted
+                      label per sample); at most FIGURE_MAX_POINTS samples, drawn at random
+    sweep.csv, sweep.json, sweep.png    with --sweep: tau, R^2, rank and scores per grid value
+
+The directory is built beside ``DIR`` under a temporary name and renamed into place, so a
+failure leaves nothing half-written. An existing empty ``DIR`` is used; a non-empty one is
+refused unless ``overwrite``, which replaces it as a whole.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from primspace.errors import OutputExistsError, UserError
+from primspace.files import atomic_write_json, atomic_write_text
+
+__all__ = [
+    "atomic_directory",
+    "check_output_directory",
+    "figure_indices",
+    "write_labels_csv",
+    "write_sweep_csv",
+    "write_json",
+    "to_jsonable",
+    "FIGURE_MAX_POINTS",
+]
+
+FIGURE_MAX_POINTS = 2000
+SWEEP_COLUMNS = ("grid", "value", "tau", "tau_relative", "r2", "rank", "accuracy", "nmi", "ari", "note")
+
+
+def check_output_directory(path: str | os.PathLike, overwrite: bool = False) -> Path:
+    """Refuse a file, or a non-empty directory unless ``overwrite``; return the path."""
+    path = Path(path)
+    if path.exists():
+        if not path.is_dir():
+            raise UserError(f"{path}: exists and is not a directory")
+        if not overwrite and any(path.iterdir()):
+            raise OutputExistsError(path)
+    return path
+
+
+@contextlib.contextmanager
+def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary directory beside ``path``; on success it replaces ``path``.
+
+    On failure the temporary directory is removed and ``path`` is untouched.
+    """
+    path = check_output_directory(path, overwrite)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)
+    try:
+        yield tmp
+        if path.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+            os.replace(path, old / "replaced")
+            os.replace(tmp, path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def figure_indices(n: int, max_points: int = FIGURE_MAX_POINTS, seed: int = 0) -> np.ndarray:
+    """All samples, or ``max_points`` of them drawn without replacement (sorted)."""
+    if n <= max_points:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, size=max_points, replace=False))
+
+
+def write_labels_csv(path: str | os.PathLike, labels_pred, labels_true=None) -> None:
+    """``sample,predicted[,true]`` per point, atomically."""
+    pred = np.asarray(labels_pred)
+    buf = io.StringIO()
+    if labels_true is None:
+        buf.write("sample,predicted\n")
+        np.savetxt(buf, np.column_stack([np.arange(pred.size), pred]), fmt="%d", delimiter=",")
+    else:
+        buf.write("sample,predicted,true\n")
+        np.savetxt(buf, np.column_stack([np.arange(pred.size), pred, np.asarray(labels_true)]), fmt="%d", delimiter=",")
+    atomic_write_text(path, buf.getvalue())
+
+
+def write_sweep_csv(path: str | os.PathLike, rows) -> None:
+    """The sweep table as CSV (one row per grid value), atomically."""
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=SWEEP_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: ("" if row.get(k) is None else row.get(k)) for k in SWEEP_COLUMNS})
+    atomic_write_text(path, buf.getvalue())
+
+
+def write_json(path: str | os.PathLike, obj) -> None:
+    """JSON with numpy scalars and arrays converted, atomically."""
+    atomic_write_json(path, to_jsonable(obj))
+
+
+def to_jsonable(obj):
+    """Numpy scalars/arrays to Python; NaN to None (JSON has no NaN)."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
