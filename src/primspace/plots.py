@@ -20,7 +20,15 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from primspace.files import atomic_path  # noqa: E402
 
-__all__ = ["save_figure", "plot_motion_sample", "plot_sim_sample", "plot_intra_losses", "plot_latent_pca"]
+__all__ = [
+    "save_figure",
+    "plot_motion_sample",
+    "plot_sim_sample",
+    "plot_clustering",
+    "plot_tau_sweep",
+    "plot_intra_losses",
+    "plot_latent_pca",
+]
 
 # One palette for the latent initialisations, so every figure colours them alike.
 INIT_COLORS = {"zero": "tab:blue", "random": "tab:red", "projection": "tab:green", "pca": "tab:purple"}

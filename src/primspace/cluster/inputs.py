@@ -48,6 +48,19 @@ class ClusterPoints:
     description: str
 
 
+def trajectory_matrix(motor) -> np.ndarray:
+    """Trajectories as points: each joint scaled to [-1, 1] over the data, each sample flattened.
+
+    The paper's motion-capture experiment (and its latent initialisation) treats a motion
+    ``m_{1:T}`` as one point of R^{T J}. Returns ``(N, T * J)`` float64.
+    """
+    from primspace.data import JointScaler
+
+    motor = np.asarray(motor, dtype=np.float64)
+    n, t, j = motor.shape
+    return JointScaler().fit_transform(motor).reshape(n, t * j)
+
+
 def load_points(path: str | os.PathLike, labels: str | os.PathLike | None = None) -> ClusterPoints:
     """Read points (and true labels) from a MotionDataset ``.h5`` or an ``(N, q)`` ``.npy``.
 
@@ -68,12 +81,11 @@ def load_points(path: str | os.PathLike, labels: str | os.PathLike | None = None
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in H5_SUFFIXES:
-        from primspace.data import JointScaler, MotionDataset
+        from primspace.data import MotionDataset
 
         ds = MotionDataset.load(path).without_images()
         n, t, j = ds.motor.shape
-        scaled = JointScaler().fit_transform(ds.motor.astype(np.float64))
-        X = scaled.reshape(n, t * j)
+        X = trajectory_matrix(ds.motor)
         true = None if ds.labels is None else ds.labels.astype(np.int64)
         names = list(ds.label_names) if true is not None else None
         description = f"motion data set {n} x {t} steps x {j} joints, joints scaled to [-1, 1], flattened to {t * j}"
