@@ -190,7 +190,8 @@ def train_command(
     device: str = typer.Option("auto", "--device", help="auto, cpu, cuda or cuda:N."),
     amp: bool = typer.Option(False, "--amp", help="bfloat16 mixed precision (CUDA only)."),
     threads: Optional[int] = typer.Option(None, "--threads", help="Torch CPU threads."),
-    checkpoint_every: int = typer.Option(1, "--checkpoint-every", help="Epochs between checkpoints."),
+    checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Also checkpoint every N epochs."),
+    checkpoint_seconds: float = typer.Option(60.0, "--checkpoint-seconds", help="Checkpoint at least this often."),
     weights_from: Optional[Path] = typer.Option(None, "--weights-from", help="Start from this run's weights."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
@@ -207,7 +208,7 @@ def train_command(
     tc = TrainConfig(
         epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, motor_weight=motor_weight,
         vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
-        checkpoint_every=checkpoint_every,
+        checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
     )
     idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)

@@ -23,8 +23,8 @@ A run directory holds::
     metrics.jsonl   one line per epoch: epoch, loss, motor, vision, seconds, samples_per_s
                     (epoch 0 = the codes as initialised, before any update)
     checkpoint.pt   model, optimiser, codes and their optimiser, scaler, initialiser
-                    (P), RNG states, epoch; written atomically every ``checkpoint_every``
-                    epochs and at the end
+                    (P), RNG states, epoch; written atomically after epoch 0, every
+                    ``checkpoint_seconds`` (or ``checkpoint_every`` epochs) and at the end
     latents.npy     the codes (N, q) float32 at the last checkpoint (atomically)
     latents_init.npy  the codes as initialised
 
@@ -77,7 +77,7 @@ LATENTS_NAME, LATENTS_INIT_NAME = "latents.npy", "latents_init.npy"
 _RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_INIT_NAME)
 
 # Train-config fields that may change when a run is resumed (they do not change the numbers).
-_RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "threads", "tune_malloc"}
+_RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc"}
 
 
 # ----------------------------------------------------------------------------- config
@@ -106,8 +106,12 @@ class TrainConfig:
         ``auto`` (CUDA when present, else CPU), ``cpu``, ``cuda`` or ``cuda:N``.
     amp : bool
         bfloat16 autocast on CUDA (LayerNorm and the loss stay float32).
-    checkpoint_every : int
-        Write the checkpoint every this many epochs (and always after the last).
+    checkpoint_every : int, optional
+        Also write the checkpoint every this many epochs.
+    checkpoint_seconds : float
+        Write the checkpoint when this long has passed since the last one. It is always
+        written after epoch 0 (the initial state) and after the last epoch; a checkpoint
+        costs ~10 ms for a small model, so tiny runs are not slowed by one per epoch.
     log_initial : bool
         Log epoch 0: the loss of the initial codes, before any update.
     threads : int, optional
@@ -127,7 +131,8 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     amp: bool = False
-    checkpoint_every: int = 1
+    checkpoint_every: int | None = None
+    checkpoint_seconds: float = 60.0
     log_initial: bool = True
     threads: int | None = None
     tune_malloc: bool = True
@@ -147,8 +152,10 @@ class TrainConfig:
                 raise UserError(f"{name} must be a finite number >= 0, got {v}")
         if self.motor_weight == 0 and self.vision_weight == 0:
             raise UserError("motor_weight and vision_weight are both 0: nothing to train")
-        if not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1:
+        if self.checkpoint_every is not None and (not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1):
             raise UserError(f"checkpoint_every must be at least 1, got {self.checkpoint_every}")
+        if not (isinstance(self.checkpoint_seconds, (int, float)) and self.checkpoint_seconds >= 0):
+            raise UserError(f"checkpoint_seconds must be a number >= 0, got {self.checkpoint_seconds}")
         if self.threads is not None and (not isinstance(self.threads, int) or self.threads < 1):
             raise UserError(f"threads must be at least 1, got {self.threads}")
         resolve_device(self.device, self.amp)
@@ -367,7 +374,9 @@ def fit(
             model = _new_model(mc, seeds["model"])
             model.load_state_dict(parent.model.state_dict())
         else:
-            scaler = JointScaler().fit(data.motor)
+            # round-tripped, so a resumed or loaded run scales with bit-identical parameters
+            # (fit keeps the data's float32 extremes, from_dict restores float64)
+            scaler = JointScaler.from_dict(JointScaler().fit(data.motor).to_dict())
             model = _new_model(mc, seeds["model"])
         scaled = scaler.transform(data.motor)
         if parent is not None and init == parent.init:
@@ -440,7 +449,7 @@ def infer(
     """
     parent = load_run(run_dir)
     out_dir = Path(out_dir)
-    base = train_config or replace(parent.train_config, checkpoint_every=1, threads=None)
+    base = train_config or replace(parent.train_config, threads=None)
     try:
         tc = replace(base, epochs=epochs, **overrides).validate()
     except TypeError as exc:
@@ -747,7 +756,8 @@ class _Session:
                     )
                 self.epoch += 1
                 self._log(self.epoch, values, seconds)
-                if self.epoch % tc.checkpoint_every == 0 or self.epoch == tc.epochs:
+                due = tc.checkpoint_every is not None and self.epoch % tc.checkpoint_every == 0
+                if due or self.epoch == tc.epochs or time.monotonic() - self._checkpoint_time >= tc.checkpoint_seconds:
                     self._checkpoint()
                 advance(loss=values["loss"], sps=self.n / max(seconds, 1e-9))
 
@@ -800,10 +810,12 @@ class _Session:
             torch.save(state, tmp)
         _save_npy(self.out_dir / LATENTS_NAME, self.table.numpy())
         self._last_checkpoint = self.epoch
+        self._checkpoint_time = time.monotonic()
 
     def _restore(self, ckpt: dict) -> None:
         self.epoch = int(ckpt["epoch"])
         self._last_checkpoint = self.epoch
+        self._checkpoint_time = time.monotonic()
         self.initial_codes = ckpt["initial_codes"]
         rng = ckpt["rng"]
         self.generator.set_state(rng["shuffle"])
