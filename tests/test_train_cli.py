@@ -132,3 +132,18 @@ def test_bad_indices_and_runs_are_refused(run_cli, data_file, tmp_path):
     assert_user_error(res, "nothing", "no such run directory")
     res = run_cli("reconstruct", tmp_path / "nothing", "--sample", "0", "--out", tmp_path / "x.png")
     assert_user_error(res, "no such run directory")
+
+
+def test_loss_curve_figure(tmp_path):
+    from primspace.plots import plot_loss_curves, save_figure
+
+    def history(scale):
+        return [{"epoch": e, "loss": scale / (e + 1), "motor": scale / (e + 1), "vision": None} for e in range(5)]
+
+    fig = plot_loss_curves({"zero q=20": history(1.0), "projection q=20": [history(0.5), history(0.7)]})
+    ax = fig.axes[0]
+    assert [line.get_label() for line in ax.get_lines()] == ["zero q=20", "projection q=20"]
+    np.testing.assert_allclose(ax.get_lines()[1].get_ydata(), 0.6 / np.arange(1, 6))  # mean of the two runs
+    assert ax.get_lines()[1].get_color() == "tab:green"
+    save_figure(fig, tmp_path / "curves.png")
+    assert (tmp_path / "curves.png").stat().st_size > 0

@@ -192,7 +192,10 @@ def train_command(
     threads: Optional[int] = typer.Option(None, "--threads", help="Torch CPU threads."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Also checkpoint every N epochs."),
     checkpoint_seconds: float = typer.Option(60.0, "--checkpoint-seconds", help="Checkpoint at least this often."),
-    weights_from: Optional[Path] = typer.Option(None, "--weights-from", help="Start from this run's weights."),
+    weights_from: Optional[Path] = typer.Option(
+        None, "--weights-from",
+        help="Start from this run's weights, scaler and initialiser (its model config: model flags are ignored).",
+    ),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
 ) -> None:

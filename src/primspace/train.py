@@ -713,6 +713,8 @@ class _Session:
     ) -> None:
         self.out_dir, self.config, self.model, self.theta_opt = out_dir, config, model, theta_opt
         self.table, self.scaler, self.initializer, self.tc, self.device = table, scaler, initializer, tc, device
+        if device.type == "cuda":
+            torch.backends.cudnn.benchmark = True  # fixed shapes: let cuDNN pick the fastest kernels
         self.tensors = _DataTensors.build(data, scaler, use_images, device)
         self.use_images = use_images
         self.generator = torch.Generator().manual_seed(shuffle_seed)
@@ -749,8 +751,9 @@ class _Session:
                 seconds = time.perf_counter() - t0
                 bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
                 if bad:
+                    what = "loss" if bad[0] == "loss" else f"{bad[0]} loss"
                     raise TrainingDivergedError(
-                        f"{self.out_dir}: the {bad[0]} loss became {values[bad[0]]} in epoch {self.epoch + 1}; "
+                        f"{self.out_dir}: the {what} became {values[bad[0]]} in epoch {self.epoch + 1}; "
                         f"stopped, the last good checkpoint (epoch {self._last_checkpoint}) is kept "
                         f"(lower the learning rates, then resume)"
                     )
