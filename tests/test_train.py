@@ -302,3 +302,11 @@ def test_read_indices(tmp_path):
     (tmp_path / "d.txt").write_text("1 2 1")
     with pytest.raises(UserError, match="more than once"):
         read_indices(tmp_path / "d.txt")
+
+
+def test_initial_latents_with_inf_are_refused(eval_set, tmp_path):
+    bad = np.zeros((len(eval_set), SMALL.latent_dim))
+    bad[3, 1] = np.inf
+    with pytest.raises(UserError, match="row 3 contains inf"):
+        fit(eval_set, tmp_path / "bad", model_config=SMALL, initial_latents=bad, progress=False)
+    assert not (tmp_path / "bad").exists()

@@ -33,7 +33,7 @@ Choices the paper leaves open (documented in ``docs/model.md``):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from typing import NamedTuple
 
 import torch

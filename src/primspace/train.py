@@ -45,7 +45,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import torch
@@ -307,8 +307,8 @@ def fit(
         used; a fresh optimiser). For incremental learning (the paper's inter-primitive
         experiment).
     initial_latents : ndarray (N, q), optional
-        Starting codes for the rows given (rows of the selected samples); NaN rows use
-        ``init``. E.g. replayed samples keep the codes they learned.
+        Starting codes, one row per selected sample; rows containing NaN use ``init``
+        instead. E.g. replayed samples keep the codes they learned.
     images : bool, optional
         Give the model an image head and train it on the data's images. Default: when
         the data has images. (A ``model_config.image_size`` must match the data's.)
@@ -354,6 +354,9 @@ def fit(
             raise UserError(
                 f"initial_latents must have shape ({len(data)}, {mc.latent_dim}), got {initial_latents.shape}"
             )
+        if np.isinf(initial_latents).any():
+            row = int(np.argwhere(np.isinf(initial_latents))[0, 0])
+            raise UserError(f"initial_latents row {row} contains inf (use NaN rows for 'no initial code')")
     config = _run_config(
         "fit", init, mc, tc, data, idx, use_images,
         parent=None if parent is None else str(parent.run_dir.resolve()),
@@ -613,7 +616,7 @@ def evaluate(
     dev = resolve_device(device)
     model = run.model.to(dev).eval()
     tensors = _DataTensors.build(data, run.scaler, use_images, dev)
-    table = LatentTable(torch.from_numpy(z).to(dev), 0.0)
+    table = LatentTable(torch.from_numpy(np.ascontiguousarray(z)).to(dev), 0.0)
     sums = _evaluate_loop(model, table, tensors, tc, dev)
     model.to("cpu")
     return _epoch_values(sums, len(data), use_images)
