@@ -313,6 +313,98 @@ def plot_tau_sweep(rows: Sequence[dict], *, title: str = "") -> Figure:
 # ========================================================== training, latents (model)
 
 
+def plot_loss_curves(
+    histories,
+    *,
+    key: str = "loss",
+    colors=None,
+    title: str = "",
+    log_scale: bool = True,
+    ax=None,
+) -> Figure:
+    """Loss per epoch of several runs (paper Figs. ``loss_train``, ``loss_test``).
+
+    Parameters
+    ----------
+    histories : mapping of label -> list of dict, or of label -> list of lists
+        Each run's ``metrics.jsonl`` (:attr:`primspace.train.TrainedRun.history`). A list
+        of histories under one label is drawn as mean ± std over them (paper Fig.
+        ``loss_inter``).
+    key : {"loss", "motor", "vision"}
+    colors : mapping of label -> colour, optional
+        Default: :data:`INIT_COLORS` when a label starts with an init name.
+    title : str
+    log_scale : bool
+    ax : matplotlib Axes, optional
+    """
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    else:
+        fig = ax.figure
+    for label, runs in histories.items():
+        runs = [runs] if runs and isinstance(runs[0], dict) else list(runs)
+        curves = [
+            (np.array([h["epoch"] for h in r]), np.array([np.nan if h.get(key) is None else h[key] for h in r], float))
+            for r in runs
+        ]
+        if not curves:
+            continue
+        color = (colors or {}).get(label) or next(
+            (c for name, c in INIT_COLORS.items() if str(label).startswith(name)), None
+        )
+        n = min(len(e) for e, _ in curves)
+        epochs = curves[0][0][:n]
+        values = np.stack([v[:n] for _, v in curves])
+        mean = values.mean(axis=0)
+        ax.plot(epochs, mean, color=color, lw=1.5, label=str(label))
+        if len(curves) > 1:
+            std = values.std(axis=0)
+            ax.fill_between(epochs, mean - std, mean + std, color=color, alpha=0.2, lw=0)
+    if log_scale:
+        ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel(f"{key} (mean squared error)" if key != "loss" else "loss")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_reconstruction(run, dataset, sample: int, *, n_frames: int = 8) -> Figure:
+    """Generated against ground-truth joints and frames for one sample (paper Appendix B).
+
+    Parameters
+    ----------
+    run : primspace.train.TrainedRun
+    dataset : primspace.data.MotionDataset
+        The data file the run used (``run.indices`` index it).
+    sample : int
+        Index of the sample in ``dataset``; it must be one of the run's samples.
+    n_frames : int
+    """
+    from primspace.errors import UserError
+    from primspace.train import reconstruct
+
+    rows = np.flatnonzero(run.indices == int(sample))
+    if rows.size == 0:
+        shown = ", ".join(map(str, run.indices[:5])) + (" ..." if len(run.indices) > 5 else "")
+        raise UserError(f"sample {sample} is not one of the run's {len(run.indices)} samples ({shown})")
+    if not 0 <= int(sample) < len(dataset):
+        raise UserError(f"sample {sample} out of range for {len(dataset)} samples")
+    row = int(rows[0])
+    motor, frames = reconstruct(run, run.latents[row : row + 1])
+    truth = dataset.subset([int(sample)])
+    images = None if truth.images is None else np.asarray(truth.images)[0]
+    label = "" if truth.labels is None or truth.labels[0] < 0 else f" (primitive {truth.label_names[truth.labels[0]]})"
+    return plot_motion_sample(
+        truth.motor[0], images, joint_names=truth.joint_names, generated_motor=motor[0],
+        generated_images=None if frames is None or images is None else frames[0], n_frames=n_frames,
+        dt=truth.dt, title=f"sample {sample}{label}: {run.kind} run, init {run.init}, q={run.model_config.latent_dim}",
+    )
+
+
+
 # ============================================================= experiments, report
 
 

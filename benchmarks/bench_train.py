@@ -1,0 +1,182 @@
+"""Training speed of the MTRNN decoder (not a test): samples/s and FLOP rate vs dense matmul.
+
+Measures, on the CPU and (when present) on a CUDA GPU, in one process:
+
+1. the rate of a dense float32 matmul (2048 x 2048, the reference);
+2. one epoch (after a warm-up epoch) of ``fit`` and of ``infer`` on the paper's
+   configuration: 1715 samples, T = 61, 9 joints, 48 x 64 images, q = 40, layers 32/12
+   (synthetic data of that shape, in memory); FLOPs per sample counted with
+   ``torch.utils.flop_counter.FlopCounterMode`` over a real forward + backward step
+   (matmuls, batched matmuls, convolutions; elementwise work is not counted);
+3. the paper's schedule (800 epochs fit on 20 % = 343 samples, 600 epochs infer on the
+   other 1372) extrapolated from the measured epoch times;
+4. ``--demo``: epoch times for demo-sized runs (126 samples; 48x64, 24x32 and no images;
+   1 and 2 threads).
+
+Usage::
+
+    flock /tmp/primspace-bench.lock python benchmarks/bench_train.py [--samples 1715] [--demo] [--no-cpu]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.flop_counter import FlopCounterMode
+
+from primspace.data import MotionDataset
+from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.train import TrainConfig, fit, infer
+
+T, J, H, W, Q = 61, 9, 48, 64, 40
+PAPER_FIT_SAMPLES, PAPER_INFER_SAMPLES, PAPER_FIT_EPOCHS, PAPER_INFER_EPOCHS = 343, 1372, 800, 600
+
+
+def synthetic(n: int, image_size: tuple[int, int] | None, seed: int = 0) -> MotionDataset:
+    """Smooth random joint curves and random frames of the paper's shape (speed does not
+    depend on the content)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 1, T)[None, :, None]
+    motor = rng.normal(size=(n, 1, J)) * np.sin(np.pi * t * rng.uniform(0.5, 2, (n, 1, J))) + rng.normal(size=(n, 1, J))
+    images = None
+    if image_size is not None:
+        images = rng.integers(0, 256, (n, T, *image_size, 3), dtype=np.uint8)
+    return MotionDataset(motor.astype(np.float32), images=images)
+
+
+def matmul_rate(device: torch.device, dtype=torch.float32, n: int = 2048, reps: int = 20) -> float:
+    """FLOP/s of an n x n x n matmul on ``device`` (best of three timed groups)."""
+    a = torch.randn(n, n, device=device, dtype=dtype)
+    b = torch.randn(n, n, device=device, dtype=dtype)
+    for _ in range(3):
+        a @ b
+    _sync(device)
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            a @ b
+        _sync(device)
+        best = min(best, (time.perf_counter() - t0) / reps)
+    return 2 * n**3 / best
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def train_flops_per_sample(cfg: ModelConfig, *, frozen: bool, batch: int = 8) -> float:
+    """Counted FLOPs of one training step (forward + backward) per sample."""
+    model = MTRNNDecoder(cfg)
+    model.requires_grad_(not frozen)
+    z = torch.randn(batch, cfg.latent_dim, requires_grad=True)
+    with FlopCounterMode(display=False) as counter:
+        out = model(z)
+        loss = out.motor.square().mean() + (out.images.square().mean() if out.images is not None else 0)
+        loss.backward()
+    return counter.get_total_flops() / batch
+
+
+def timed_epochs(dataset, cfg: ModelConfig, tc: TrainConfig, workdir: Path, *, epochs: int = 2) -> dict:
+    """Run fit then infer for ``epochs`` each; return the last epoch's seconds of each."""
+    run = fit(dataset, workdir / "fit", model_config=cfg, train_config=tc, overwrite=True, progress=False)
+    ev = infer(workdir / "fit", dataset, workdir / "infer", epochs=epochs, overwrite=True, progress=False)
+    return {"fit_s": run.history[-1]["seconds"], "infer_s": ev.history[-1]["seconds"]}
+
+
+def bench_device(device: torch.device, args, workdir: Path) -> dict:
+    print(f"\n=== {device} " + ("(%d threads)" % torch.get_num_threads() if device.type == "cpu" else torch.cuda.get_device_name(device)))
+    rate = matmul_rate(device)
+    print(f"dense fp32 matmul 2048^3: {rate / 1e9:.1f} GFLOP/s")
+    if device.type == "cuda":
+        bf16 = matmul_rate(device, torch.bfloat16, n=4096)
+        print(f"dense bf16 matmul 4096^3: {bf16 / 1e12:.1f} TFLOP/s")
+    n = args.samples
+    data = synthetic(n, (H, W))
+    cfg = ModelConfig(latent_dim=Q, image_size=(H, W), n_joints=J, length=T)
+    fit_flops = train_flops_per_sample(cfg, frozen=False)
+    infer_flops = train_flops_per_sample(cfg, frozen=True)
+    print(f"counted FLOPs per sample: fit step {fit_flops / 1e9:.3f} GFLOP, infer step {infer_flops / 1e9:.3f} GFLOP "
+          f"(analytic forward {2 * MTRNNDecoder(cfg).macs_per_sample() / 1e9:.3f} GFLOP)")
+    results = {}
+    variants = [("fp32", False, args.batch_size)]
+    if device.type == "cuda":  # the recurrent loop is launch-bound on a GPU: larger batches amortise it
+        variants += [("amp bf16", True, args.batch_size), ("amp bf16, batch 128", True, 128)]
+    for name, amp, batch_size in variants:
+        tc = TrainConfig(epochs=args.epochs, batch_size=batch_size, device=str(device), amp=amp, log_initial=False,
+                         threads=args.threads if device.type == "cpu" else None)
+        t = timed_epochs(data, cfg, tc, workdir, epochs=args.epochs)
+        fit_sps, infer_sps = n / t["fit_s"], n / t["infer_s"]
+        fit_rate, infer_rate = fit_flops * fit_sps, infer_flops * infer_sps
+        print(f"[{name}] fit epoch ({n} samples, batch {batch_size}): {t['fit_s']:.2f} s = {fit_sps:.1f} samples/s, "
+              f"{fit_rate / 1e9:.1f} GFLOP/s = {fit_rate / rate:.1%} of the fp32 matmul rate")
+        print(f"[{name}] infer epoch: {t['infer_s']:.2f} s = {infer_sps:.1f} samples/s, "
+              f"{infer_rate / 1e9:.1f} GFLOP/s = {infer_rate / rate:.1%} of the fp32 matmul rate")
+        schedule = PAPER_FIT_EPOCHS * PAPER_FIT_SAMPLES / fit_sps + PAPER_INFER_EPOCHS * PAPER_INFER_SAMPLES / infer_sps
+        print(f"[{name}] paper schedule (800 epochs fit x 343 + 600 epochs infer x 1372 samples), extrapolated: "
+              f"{schedule / 60:.1f} min (target on one H100: <= 5 min)")
+        results[name] = {"fit_samples_per_s": fit_sps, "infer_samples_per_s": infer_sps,
+                         "fit_fraction_of_matmul": fit_rate / rate, "infer_fraction_of_matmul": infer_rate / rate,
+                         "schedule_min": schedule / 60}
+    return {"matmul_flops": rate, "fit_flops_per_sample": fit_flops, "infer_flops_per_sample": infer_flops, **results}
+
+
+def bench_demo(workdir: Path) -> None:
+    print("\n=== demo sizing: fit / infer epoch seconds, 126 samples, T=61, J=9, q=20, batch 32, CPU")
+    cases = [((48, 64), (64, 32, 16)), ((48, 64), (32, 16, 8)), ((24, 32), (64, 32, 16)), ((24, 32), (32, 16, 8)),
+             (None, (64, 32, 16))]
+    for threads in (1, 2):
+        for size, channels in cases:
+            data = synthetic(126, size, seed=1)
+            cfg = ModelConfig(latent_dim=20, image_channels=channels)
+            tc = TrainConfig(epochs=3, batch_size=32, device="cpu", threads=threads, log_initial=False)
+            run = fit(data, workdir / "demo", model_config=cfg, train_config=tc, overwrite=True, progress=False,
+                      images=size is not None)
+            ev = infer(workdir / "demo", data, workdir / "demo_e", epochs=3, overwrite=True, progress=False)
+            fit_s = statistics.median(h["seconds"] for h in run.history[1:])
+            infer_s = statistics.median(h["seconds"] for h in ev.history[1:])
+            label = "no images" if size is None else f"{size[0]}x{size[1]} images, channels {','.join(map(str, channels))}"
+            print(f"  threads {threads}, {label:>36}: fit {fit_s:.3f} s/epoch, infer {infer_s:.3f} s/epoch")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=1715)
+    parser.add_argument("--epochs", type=int, default=2, help="epochs per measurement; the last one is timed")
+    parser.add_argument("--batch-size", type=int, default=32)
+    parser.add_argument("--threads", type=int, default=None, help="CPU threads (default: torch's)")
+    parser.add_argument("--demo", action="store_true", help="also time demo-sized runs")
+    parser.add_argument("--no-cpu", action="store_true", help="skip the CPU paper-configuration epoch")
+    parser.add_argument("--demo-only", action="store_true", help="only the demo sizing")
+    parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    print(f"torch {torch.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+    figures = {}
+    with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
+        work = Path(tmp)
+        if not (args.no_cpu or args.demo_only):
+            figures["cpu"] = bench_device(torch.device("cpu"), args, work)
+        if torch.cuda.is_available() and not args.demo_only:
+            figures["cuda"] = bench_device(torch.device("cuda"), args, work)
+        elif not args.demo_only:
+            print("\nno GPU: CUDA is not available on this machine, GPU figures not measured")
+        if args.demo or args.demo_only:
+            bench_demo(work)
+    print(f"\nload average at the end: {os.getloadavg()[0]:.2f}")
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2))
+
+
+if __name__ == "__main__":
+    main()

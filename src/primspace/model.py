@@ -1,0 +1,469 @@
+"""The generative model: an MTRNN decoder d(θ, z) with a motor head and an image head.
+
+Paper, *Main Results: RNN Architecture*. Layers ``i = 1..L`` (1 = fastest, nearest the
+outputs). With ``u`` the state of layer ``i+1`` (and ``u = p(z)`` for the top layer, an
+"infinitely slow layer"), every step updates
+
+.. math::
+
+    h_t^{(i)} = (1 - 1/τ_i)\\, d_{t-1}^{(i)}
+        + (1/τ_i) \\left(W^{(i)} d_{t-1}^{(i)} + U^{(i)} u + A^{(i)}(d_{t-1}^{(i)}, u) + b^{(i)}\\right),
+    \\qquad d_t^{(i)} = \\mathrm{LN}(h_t^{(i)}),
+
+where ``A(d, u)_k = Σ_jl A_kjl d_j u_l`` is the multiplicative (second-order) connection
+and ``LN`` is layer normalisation. The initial state is ``d_0 = g(z)`` (eq. 1a). The motor
+command ``m_t`` is an MLP of the fastest layer ``d_t^(1)``; the image ``s_t`` is a
+deconvolution stack of ``d_t^(1)`` (eq. 1c-1d). All ``T`` steps' outputs are decoded in
+one batched call of each head.
+
+Choices the paper leaves open (documented in ``docs/model.md``):
+
+* layers update top-down within a step, so ``u`` for layer ``i`` is ``d_t^(i+1)``, the
+  higher layer's state at the same step (the paper: "u is equal to vector from higher
+  layer d_t^(i+1)");
+* ``τ`` defaults to 2 (fast) and 8 (slow);
+* ``g`` is a linear map of ``z`` followed by each layer's LayerNorm, so ``d_0`` lives on the
+  same scale as every later state; ``p`` is a two-layer tanh MLP;
+* the image head ends in a sigmoid: frames are predicted in [0, 1] (targets are
+  ``uint8 / 255``); every deconvolution is ``ConvTranspose2d(kernel 4, stride 2,
+  padding 1)``, so each doubles the resolution and ``H`` and ``W`` must be multiples of
+  ``2 ** len(image_channels)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import NamedTuple
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from primspace.errors import UserError
+
+__all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput"]
+
+
+# ----------------------------------------------------------------------------- config
+
+
+@dataclass
+class ModelConfig:
+    """Sizes of the decoder (saved as JSON in a run's ``config.json``).
+
+    Parameters
+    ----------
+    latent_dim : int
+        q, the size of each latent code ``z``.
+    layer_sizes : tuple of int
+        Units per MTRNN layer, fastest first (paper: 32 fast, 12 slow).
+    taus : tuple of float
+        Time constant τ per layer, fastest first (each ≥ 1; the paper gives no values).
+    top_input_size : int, optional
+        Size of ``u = p(z)`` fed to the top layer (default: the top layer's size).
+    p_hidden : int
+        Hidden width of the MLP ``p``.
+    motor_hidden : int
+        Hidden width of the motor head.
+    image_size : (int, int) or None
+        ``(H, W)`` of the predicted frames; None: no image head (motor only).
+    image_channels : tuple of int
+        Channels entering each deconvolution of the image head, widest first; the head
+        doubles the resolution ``len(image_channels)`` times and ends in 3 channels.
+    n_joints : int
+        J, joint values per step (filled in from the data set).
+    length : int
+        T, steps per sequence (filled in from the data set).
+    """
+
+    latent_dim: int = 20
+    layer_sizes: tuple[int, ...] = (32, 12)
+    taus: tuple[float, ...] = (2.0, 8.0)
+    top_input_size: int | None = None
+    p_hidden: int = 64
+    motor_hidden: int = 64
+    image_size: tuple[int, int] | None = None
+    image_channels: tuple[int, ...] = (64, 32, 16)
+    n_joints: int = 0
+    length: int = 0
+
+    def __post_init__(self) -> None:
+        self.layer_sizes = tuple(int(s) for s in self.layer_sizes)
+        self.taus = tuple(float(t) for t in self.taus)
+        self.image_channels = tuple(int(c) for c in self.image_channels)
+        if self.image_size is not None:
+            self.image_size = tuple(int(s) for s in self.image_size)
+
+    @property
+    def has_images(self) -> bool:
+        return self.image_size is not None
+
+    @property
+    def u_size(self) -> int:
+        """Size of ``p(z)``, the top layer's input."""
+        return self.top_input_size if self.top_input_size is not None else self.layer_sizes[-1]
+
+    def validate(self) -> "ModelConfig":
+        """Check every field; raise :class:`UserError` naming the field."""
+        if not isinstance(self.latent_dim, int) or self.latent_dim < 1:
+            raise UserError(f"latent size (latent_dim, --latent-dim) must be at least 1, got {self.latent_dim}")
+        if len(self.layer_sizes) < 1 or any(s < 1 for s in self.layer_sizes):
+            raise UserError(f"layer_sizes must be one or more positive sizes, got {list(self.layer_sizes)}")
+        if len(self.taus) != len(self.layer_sizes):
+            raise UserError(f"taus has {len(self.taus)} values for {len(self.layer_sizes)} layers")
+        if any(not math.isfinite(t) or t < 1.0 for t in self.taus):
+            raise UserError(f"every tau must be a finite number >= 1, got {list(self.taus)}")
+        for name in ("p_hidden", "motor_hidden"):
+            if getattr(self, name) < 1:
+                raise UserError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.top_input_size is not None and self.top_input_size < 1:
+            raise UserError(f"top_input_size must be at least 1, got {self.top_input_size}")
+        if self.n_joints < 1:
+            raise UserError(f"n_joints must be at least 1, got {self.n_joints}")
+        if self.length < 1:
+            raise UserError(f"length (T) must be at least 1, got {self.length}")
+        if self.image_size is not None:
+            _check_image_size(self.image_size, self.image_channels)
+        return self
+
+    # ------------------------------------------------------------------------- json
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        for k, v in out.items():
+            if isinstance(v, tuple):
+                out[k] = list(v)
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ModelConfig":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise UserError(f"unknown model config field(s): {', '.join(unknown)}")
+        return cls(**d)
+
+    @classmethod
+    def for_dataset(cls, dataset, *, images: bool = True, **overrides) -> "ModelConfig":
+        """A config sized for ``dataset`` (J, T, and its image size unless ``images=False``)."""
+        cfg = cls(**overrides)
+        return cfg.fitted_to(dataset, images=images)
+
+    def fitted_to(self, dataset, *, images: bool | None = None) -> "ModelConfig":
+        """A copy with ``n_joints``, ``length`` (and ``image_size``) taken from ``dataset``.
+
+        ``images=None`` keeps this config's choice (image head or not); ``True`` / ``False``
+        force it. Raises :class:`UserError` if images are asked for and the data has none,
+        or if a set ``image_size`` disagrees with the data.
+        """
+        want_images = self.image_size is not None if images is None else images
+        d = self.to_dict()
+        d["n_joints"] = int(dataset.n_joints)
+        d["length"] = int(dataset.length)
+        if want_images:
+            if not dataset.has_images:
+                raise UserError("the model has an image head but the data set has no images (use --no-images)")
+            size = tuple(int(s) for s in dataset.image_size)
+            if self.image_size is not None and tuple(self.image_size) != size:
+                raise UserError(
+                    f"the model predicts {self.image_size[0]}x{self.image_size[1]} images, "
+                    f"the data set has {size[0]}x{size[1]}"
+                )
+            d["image_size"] = list(size)
+        else:
+            d["image_size"] = None
+        return ModelConfig.from_dict(d).validate()
+
+
+def _check_image_size(size, channels) -> None:
+    n_up = len(channels)
+    factor = 2**n_up
+    h, w = size
+    if n_up < 1 or any(c < 1 for c in channels):
+        raise UserError(f"image_channels must be one or more positive widths, got {list(channels)}")
+    if h < factor or w < factor or h % factor or w % factor:
+        raise UserError(
+            f"image size {h}x{w} cannot be produced by the image head: its {n_up} deconvolutions "
+            f"each double the resolution, so height and width must be multiples of {factor}"
+        )
+
+
+# ----------------------------------------------------------------------------- layers
+
+
+class MTRNNLayer(nn.Module):
+    """One MTRNN layer with a multiplicative connection to its input ``u``.
+
+    Implements the paper's layer update (RNN Architecture)::
+
+        h = (1 - 1/τ) d + (1/τ) (W d + U u + A(d, u) + b),   d' = LN(h)
+
+    Parameters
+    ----------
+    size : int
+        k, units of this layer.
+    input_size : int
+        l, size of ``u`` (the higher layer, or ``p(z)`` for the top layer).
+    tau : float
+        Time constant τ ≥ 1.
+
+    Attributes
+    ----------
+    W : Parameter (k, k)
+    U : Parameter (k, l)
+    A : Parameter (k, k, l)
+        ``A(d, u)_i = Σ_jl A[i, j, l] d_j u_l``.
+    b : Parameter (k,)
+    norm : LayerNorm(k)
+    """
+
+    def __init__(self, size: int, input_size: int, tau: float) -> None:
+        super().__init__()
+        self.size = int(size)
+        self.input_size = int(input_size)
+        self.tau = float(tau)
+        self.W = nn.Parameter(torch.empty(size, size))
+        self.U = nn.Parameter(torch.empty(size, input_size))
+        self.A = nn.Parameter(torch.empty(size, size, input_size))
+        self.b = nn.Parameter(torch.zeros(size))
+        self.norm = nn.LayerNorm(size)
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """Fan-in uniform init: each of ``W d``, ``U u``, ``A(d, u)`` has O(1) variance."""
+        k, l_ = self.size, self.input_size
+        nn.init.uniform_(self.W, -1 / math.sqrt(k), 1 / math.sqrt(k))
+        nn.init.uniform_(self.U, -1 / math.sqrt(l_), 1 / math.sqrt(l_))
+        nn.init.uniform_(self.A, -1 / math.sqrt(k * l_), 1 / math.sqrt(k * l_))
+        nn.init.zeros_(self.b)
+        self.norm.reset_parameters()
+
+    def step(self, d: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """One update ``d_{t-1} -> d_t``, written as the paper's formula (reference path).
+
+        Parameters
+        ----------
+        d : Tensor (B, k)
+            ``d_{t-1}`` of this layer.
+        u : Tensor (B, l)
+            The input: ``d_t`` of the layer above, or ``p(z)`` for the top layer.
+        """
+        bilinear = torch.einsum("kjl,bj,bl->bk", self.A, d, u)
+        pre = d @ self.W.T + u @ self.U.T + bilinear + self.b
+        return self.norm((1 - 1 / self.tau) * d + pre / self.tau)
+
+    def run(self, d0: torch.Tensor, u: torch.Tensor, length: int) -> torch.Tensor:
+        """Iterate :meth:`step` ``length`` times from ``d0``; return ``d_1..d_T`` (B, T, k).
+
+        Equal to calling :meth:`step` in a loop, arranged for speed (few, batched
+        operations per step; the recurrent loop is latency-bound on CPU and GPU alike).
+
+        Parameters
+        ----------
+        d0 : Tensor (B, k)
+            The initial state ``d_0``.
+        u : Tensor (B, l) or (B, T, l)
+            A constant input (the top layer's ``p(z)``) or one per step (the layer above's
+            ``d_1..d_T``; layers only feed downwards, so it is known before this layer runs).
+        length : int
+            T.
+        """
+        if u.dim() == 2:
+            return self._run_constant(d0, u, length)
+        if u.shape[1] != length:
+            raise ValueError(f"input sequence has {u.shape[1]} steps, expected {length}")
+        return self._run_sequence(d0, u)
+
+    def _norm(self, h: torch.Tensor) -> torch.Tensor:
+        return F.layer_norm(h, (self.size,), self.norm.weight, self.norm.bias, self.norm.eps)
+
+    def _run_constant(self, d0: torch.Tensor, u: torch.Tensor, length: int) -> torch.Tensor:
+        # W d + U u + A(d, u) + b = d M + c (d a row vector), M = (W + Σ_l u_l A[:, :, l])ᵀ,
+        # c = U u + b: fixed over time, so one batched vector-matrix product per step.
+        k = self.size
+        a_t = self.A.permute(2, 1, 0).reshape(self.input_size, k * k)  # [l, (j, i)] = A[i, j, l]
+        M = (u @ a_t).view(-1, k, k) + self.W.T
+        c = F.linear(u, self.U, self.b).unsqueeze(1)
+        rate = 1.0 / self.tau
+        d = d0.unsqueeze(1)  # (B, 1, k)
+        out = []
+        for _ in range(length):
+            d = self._norm(torch.lerp(d, torch.baddbmm(c, d, M), rate))
+            out.append(d)
+        return torch.cat(out, dim=1)
+
+    def _run_sequence(self, d0: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        # With u' = [u, 1] and A' = [A | W] (k, k, l+1): W d + A(d, u) = A'(d, u'), one
+        # matrix product of the outer product d ⊗ u' per step; U u_t + b for all steps at once.
+        b, length, l_ = u.shape
+        k = self.size
+        c = F.linear(u, self.U, self.b).unbind(1)
+        u1 = torch.cat([u, u.new_ones(b, length, 1)], dim=2).unbind(1)
+        packed = torch.cat([self.A, self.W.unsqueeze(2)], dim=2).reshape(k, k * (l_ + 1)).T
+        rate = 1.0 / self.tau
+        d = d0
+        out = []
+        for u_t, c_t in zip(u1, c):
+            outer = (d.unsqueeze(2) * u_t.unsqueeze(1)).view(b, -1)  # d_j u'_l
+            d = self._norm(torch.lerp(d, torch.addmm(c_t, outer, packed), rate))
+            out.append(d)
+        return torch.stack(out, dim=1)
+
+
+class ImageDecoder(nn.Module):
+    """The sensory head ``s_t = s(d_t^(1))``: a linear map to a small feature map, then
+    deconvolutions (kernel 4, stride 2, padding 1, ReLU between) up to ``H x W x 3``, and a
+    sigmoid (pixels in [0, 1]).
+
+    Parameters
+    ----------
+    in_features : int
+        Size of the fastest layer.
+    image_size : (H, W)
+        Multiples of ``2 ** len(channels)``.
+    channels : tuple of int
+        Input channels of each deconvolution (the last one outputs 3).
+    """
+
+    def __init__(self, in_features: int, image_size: tuple[int, int], channels: tuple[int, ...]) -> None:
+        super().__init__()
+        _check_image_size(image_size, channels)
+        self.image_size = tuple(image_size)
+        self.channels = tuple(channels)
+        factor = 2 ** len(channels)
+        self.base = (image_size[0] // factor, image_size[1] // factor)
+        self.fc = nn.Linear(in_features, channels[0] * self.base[0] * self.base[1])
+        outs = list(channels[1:]) + [3]
+        self.deconvs = nn.ModuleList(
+            nn.ConvTranspose2d(c_in, c_out, kernel_size=4, stride=2, padding=1) for c_in, c_out in zip(channels, outs)
+        )
+        # NHWC is 1.6-2x faster for these layers on the CPU (oneDNN) and suits cuDNN too.
+        self.deconvs.to(memory_format=torch.channels_last)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(N, in_features)`` -> ``(N, H, W, 3)`` in [0, 1]."""
+        y = F.relu(self.fc(x)).view(-1, self.channels[0], *self.base)
+        y = y.contiguous(memory_format=torch.channels_last)
+        last = len(self.deconvs) - 1
+        for i, deconv in enumerate(self.deconvs):
+            y = deconv(y)
+            if i < last:
+                y = F.relu(y)
+        return torch.sigmoid(y).permute(0, 2, 3, 1)
+
+    def macs_per_frame(self) -> int:
+        """Multiply-accumulates of one frame's forward pass (linear + deconvolutions)."""
+        total = self.fc.in_features * self.fc.out_features
+        h, w = self.base
+        for deconv in self.deconvs:
+            h, w = 2 * h, 2 * w
+            # each output pixel of a stride-2, kernel-4 deconvolution receives 2x2 taps per input channel
+            total += h * w * deconv.out_channels * deconv.in_channels * 4
+        return total
+
+
+class DecoderOutput(NamedTuple):
+    """What :class:`MTRNNDecoder` produces for a batch of codes."""
+
+    motor: torch.Tensor  # (B, T, J), scaled joint values
+    images: torch.Tensor | None  # (B, T, H, W, 3) in [0, 1], or None
+    fast_states: torch.Tensor  # (B, T, k_1), d_1..d_T of the fastest layer
+
+
+# ---------------------------------------------------------------------------- decoder
+
+
+class MTRNNDecoder(nn.Module):
+    """The decoder ``d(θ, z) = (m_{1:T}, s_{1:T})`` of the paper (eq. 1a-1d).
+
+    Parameters
+    ----------
+    config : ModelConfig
+        Validated sizes; ``n_joints`` and ``length`` must be set.
+
+    Examples
+    --------
+    >>> cfg = ModelConfig(latent_dim=4, n_joints=3, length=10)
+    >>> out = MTRNNDecoder(cfg)(torch.zeros(2, 4))
+    >>> tuple(out.motor.shape), out.images
+    ((2, 10, 3), None)
+    """
+
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__()
+        config.validate()
+        self.config = config
+        sizes = config.layer_sizes
+        inputs = list(sizes[1:]) + [config.u_size]
+        self.p = nn.Sequential(
+            nn.Linear(config.latent_dim, config.p_hidden), nn.Tanh(),
+            nn.Linear(config.p_hidden, config.u_size), nn.Tanh(),
+        )
+        self.g = nn.Linear(config.latent_dim, sum(sizes))
+        self.layers = nn.ModuleList(MTRNNLayer(k, l_, tau) for k, l_, tau in zip(sizes, inputs, config.taus))
+        self.motor_head = nn.Sequential(
+            nn.Linear(sizes[0], config.motor_hidden), nn.Tanh(), nn.Linear(config.motor_hidden, config.n_joints)
+        )
+        self.image_head = (
+            ImageDecoder(sizes[0], config.image_size, config.image_channels) if config.has_images else None
+        )
+
+    def initial_states(self, z: torch.Tensor) -> list[torch.Tensor]:
+        """``d_0 = g(z)``: one state per layer, each layer-normalised."""
+        parts = self.g(z).split(list(self.config.layer_sizes), dim=1)
+        return [layer.norm(part) for layer, part in zip(self.layers, parts)]
+
+    def dynamics(self, z: torch.Tensor) -> torch.Tensor:
+        """Run the layers for T steps; return the fastest layer's states ``(B, T, k_1)``.
+
+        Information flows only downwards (layer ``i`` reads layer ``i+1`` at the same
+        step), so the layers run one after the other, top first, each over all T steps
+        (:meth:`MTRNNLayer.run`).
+        """
+        states0 = self.initial_states(z)
+        u = self.p(z)
+        for i in range(len(self.layers) - 1, -1, -1):
+            u = self.layers[i].run(states0[i], u, self.config.length)
+        return u
+
+    def forward(self, z: torch.Tensor, *, images: bool = True) -> DecoderOutput:
+        """Decode codes ``z`` (B, q) into motor (and image) sequences.
+
+        Parameters
+        ----------
+        z : Tensor (B, q)
+        images : bool
+            Run the image head (if the model has one). False skips it (motor only).
+        """
+        fast = self.dynamics(z)
+        b, t, k = fast.shape
+        flat = fast.reshape(b * t, k)
+        motor = self.motor_head(flat).view(b, t, -1)
+        frames = None
+        if images and self.image_head is not None:
+            h, w = self.config.image_size
+            frames = self.image_head(flat).view(b, t, h, w, 3)
+        return DecoderOutput(motor, frames, fast)
+
+    # ------------------------------------------------------------------ accounting
+    def macs_per_sample(self, *, images: bool = True) -> int:
+        """Multiply-accumulates of one sequence's forward pass (matmuls and convolutions).
+
+        Counted analytically as executed: ``p``, ``g``, the top layer's ``M = W + A u``
+        and ``c = U u + b`` once; per step ``k²`` for the top layer and ``k² (l + 1) + k l``
+        for every other layer (``A'(d, u')`` and ``U u_t``), the motor head and, if
+        present, the image head. Elementwise work (LayerNorm, activations, outer
+        products, the loss) is not counted.
+        """
+        cfg = self.config
+        q, sizes = cfg.latent_dim, cfg.layer_sizes
+        macs = q * cfg.p_hidden + cfg.p_hidden * cfg.u_size + q * sum(sizes)
+        k_top = sizes[-1]
+        macs += k_top * k_top * cfg.u_size + k_top * cfg.u_size  # the top layer's M and c
+        per_step = k_top * k_top
+        for k, l_ in zip(sizes[:-1], sizes[1:]):
+            per_step += k * k * (l_ + 1) + k * l_
+        per_step += sizes[0] * cfg.motor_hidden + cfg.motor_hidden * cfg.n_joints
+        if images and self.image_head is not None:
+            per_step += self.image_head.macs_per_frame()
+        return macs + cfg.length * per_step
