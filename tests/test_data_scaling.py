@@ -61,3 +61,11 @@ def test_errors():
         JointScaler().fit(np.array([[np.nan, 1.0]]))
     with pytest.raises(UserError):
         JointScaler.from_dict({"data_min": [1.0], "data_max": [0.0]})
+
+
+def test_restored_scaler_is_bit_identical_for_float32_data():
+    x = np.random.default_rng(3).normal(size=(4, 7, 3)).astype(np.float32)
+    scaler = JointScaler().fit(x)
+    restored = JointScaler.from_dict(scaler.to_dict())
+    np.testing.assert_array_equal(restored.transform(x), scaler.transform(x))
+    assert scaler.data_min_.dtype == np.float64

@@ -377,9 +377,7 @@ def fit(
             model = _new_model(mc, seeds["model"])
             model.load_state_dict(parent.model.state_dict())
         else:
-            # round-tripped, so a resumed or loaded run scales with bit-identical parameters
-            # (fit keeps the data's float32 extremes, from_dict restores float64)
-            scaler = JointScaler.from_dict(JointScaler().fit(data.motor).to_dict())
+            scaler = JointScaler().fit(data.motor)  # float64 extremes: restores bit-identically
             model = _new_model(mc, seeds["model"])
         scaled = scaler.transform(data.motor)
         if parent is not None and init == parent.init:

@@ -67,8 +67,9 @@ class JointScaler:
             raise DataError("cannot fit a scaler on no data", field="motor")
         if not np.isfinite(flat).all():
             raise DataError("contains NaN or inf", field="motor")
-        self.data_min_ = flat.min(axis=0)
-        self.data_max_ = flat.max(axis=0)
+        # float64 whatever the input, so a scaler restored from to_dict() is the same map
+        self.data_min_ = flat.min(axis=0).astype(np.float64)
+        self.data_max_ = flat.max(axis=0).astype(np.float64)
         return self
 
     def transform(self, x) -> np.ndarray:

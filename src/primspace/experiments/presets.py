@@ -109,6 +109,7 @@ PRESETS: dict[str, ExperimentPreset] = {
         name="demo",
         data_preset="demo",
         latent_dims=(8, 40),
+        images=False,
         fit_epochs=150,
         infer_epochs=100,
         batch_size=16,
