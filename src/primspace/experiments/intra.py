@@ -310,6 +310,15 @@ def report_section(out_dir: Path, report) -> None:
         "Loss: mean squared error of the motor sequence scaled to [-1, 1], plus the vision weight times "
         "the mean squared error of the frames in [0, 1]. Epoch 0 is the loss of the initial codes."
     )
+    import json
+
+    preset = json.loads((out_dir / "experiment.json").read_text())["preset_config"]
+    if not preset["images"]:
+        report.note(
+            f"The '{preset['name']}' preset trains on joint angles only (no vision loss), to fit its CPU time "
+            "budget; the camera images are generated and shown, but not learned. The paper preset learns both.",
+            "warn",
+        )
     report.figure(out_dir / "figures/intra_loss_fit.png", "Loss while fitting θ and Z (the paper's first convergence figure).")
     report.figure(out_dir / "figures/intra_loss_infer.png", "Loss while inferring Z with θ frozen (the paper's second convergence figure).")
     columns, rows = final_loss_table(results)

@@ -43,8 +43,8 @@ def run_success_point(run_dir: Path, data_path: str, infer_dir: str | None) -> d
         "rates": {p: float(np.mean([r.success for r in rs])) for p, rs in by_primitive.items()},
         "counts": {p: len(rs) for p, rs in by_primitive.items()},
         "overall": float(np.mean([r.success for r in results])),
-        "failure_reasons": {
-            p: dict(Counter(r.reason.split(":")[0] for r in rs if not r.success).most_common(3))
+        "failed_criteria": {  # how often each criterion failed, per primitive
+            p: dict(Counter(c for r in rs for c, ok in r.criteria.items() if not ok).most_common())
             for p, rs in by_primitive.items()
         },
     }
@@ -105,8 +105,9 @@ def report_section(out_dir: Path, report) -> None:
     report.table(columns, rows, "Fraction of successful motions per primitive.")
     reasons = []
     for init, res in results["generated"].items():
-        for prim, counts in res["failure_reasons"].items():
+        for prim, counts in res["failed_criteria"].items():
             if counts:
-                reasons.append([init, prim, "; ".join(f"{k} ({v})" for k, v in counts.items())])
+                reasons.append([init, prim, f"{res['counts'][prim]}", "; ".join(f"{k} ({v})" for k, v in counts.items())])
     if reasons:
-        report.table(["init", "primitive", "most common failed criteria (count)"], reasons)
+        report.table(["init", "primitive", "judged", "failed criteria (samples)"], reasons,
+                     "Criteria are defined in docs/simulator.md; a sample can fail several.")
