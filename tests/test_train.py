@@ -310,3 +310,37 @@ def test_initial_latents_with_inf_are_refused(eval_set, tmp_path):
     with pytest.raises(UserError, match="row 3 contains inf"):
         fit(eval_set, tmp_path / "bad", model_config=SMALL, initial_latents=bad, progress=False)
     assert not (tmp_path / "bad").exists()
+
+
+def test_cosine_learning_rate_schedule_ends_at_its_fraction():
+    from primspace.train import lr_factor
+
+    assert lr_factor(0, 10, 0.1) == 1.0
+    assert abs(lr_factor(9, 10, 0.1) - 0.1) < 1e-12
+    values = [lr_factor(e, 10, 0.1) for e in range(10)]
+    assert all(a > b for a, b in zip(values, values[1:]))
+    assert lr_factor(5, 10, 1.0) == 1.0
+
+
+def test_resume_after_a_kill_continues_the_schedule_exactly(train_set, tmp_path, monkeypatch):
+    """Interrupted mid-run (KeyboardInterrupt after the epoch-2 checkpoint), then resumed."""
+    import primspace.train as train_module
+
+    tc = _tc(epochs=4, batch_size=5, final_lr_fraction=0.1, checkpoint_every=1)
+    straight = fit(train_set, tmp_path / "straight", model_config=SMALL, train_config=tc, progress=False)
+    original = train_module._Session._checkpoint
+
+    def checkpoint_then_die(self):
+        original(self)
+        if self.epoch == 2:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(train_module._Session, "_checkpoint", checkpoint_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        fit(train_set, tmp_path / "killed", model_config=SMALL, train_config=tc, progress=False)
+    monkeypatch.undo()
+    resumed = fit(train_set, tmp_path / "killed", model_config=SMALL, train_config=tc, resume=True, progress=False)
+    assert [h["loss"] for h in resumed.history] == [h["loss"] for h in straight.history]
+    np.testing.assert_array_equal(resumed.latents, straight.latents)
+    constant = fit(train_set, tmp_path / "constant", model_config=SMALL, train_config=_tc(epochs=4, batch_size=5), progress=False)
+    assert constant.history[-1]["loss"] != straight.history[-1]["loss"]  # the schedule does something

@@ -461,6 +461,9 @@ def train_command(
     batch_size: int = typer.Option(32, "--batch-size"),
     lr: float = typer.Option(1e-3, "--lr", help="Learning rate of the weights."),
     latent_lr: float = typer.Option(1e-2, "--latent-lr", help="Learning rate of the latent codes."),
+    final_lr_fraction: float = typer.Option(
+        1.0, "--final-lr-fraction", help="Cosine decay of both learning rates to this fraction by the last epoch (1: constant)."
+    ),
     motor_weight: float = typer.Option(1.0, "--motor-weight"),
     vision_weight: float = typer.Option(1.0, "--vision-weight"),
     layers: str = typer.Option("32,12", "--layers", help="Units per MTRNN layer, fastest first."),
@@ -489,7 +492,8 @@ def train_command(
         image_channels=_int_list(image_channels, "--image-channels"),
     )
     tc = TrainConfig(
-        epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, motor_weight=motor_weight,
+        epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
+        motor_weight=motor_weight,
         vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
         checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
     )
@@ -607,9 +611,12 @@ def _finish(exp, report: bool) -> None:
 
         typer.echo(f"report: {build_report(exp.path)}")
     if failures:
-        for key, error in failures.items():
-            typer.echo(f"failed: {key}: {error}", err=True)
-        raise UserError(f"{len(failures)} run(s) failed (details in {exp.path}/runs/<key>/error.txt); re-run to retry them")
+        key, error = next(iter(failures.items()))
+        more = f" and {len(failures) - 1} more" if len(failures) > 1 else ""
+        raise UserError(
+            f"{len(failures)} run(s) failed, the others finished: {key} ({error}){more}; "
+            f"tracebacks in {exp.path}/runs/<run>/error.txt; re-run the same command to retry them"
+        )
 
 
 @experiment_app.command("intra")

@@ -28,6 +28,7 @@ __all__ = [
     "plot_tau_sweep",
     "plot_intra_losses",
     "plot_latent_pca",
+    "plot_accuracy_vs_r2",
 ]
 
 # One palette for the latent initialisations, so every figure colours them alike.
@@ -483,6 +484,7 @@ def plot_latent_pca(
         zz = zz - zz.mean(0)
         _, _, vt = np.linalg.svd(zz, full_matrices=False)
         pcs = zz @ vt[:n_components].T
+        pcs = np.pad(pcs, ((0, 0), (0, n_components - pcs.shape[1])))  # fewer samples than components
         if n_components == 3:
             ax = fig.add_subplot(1, n, k, projection="3d")
             ax.scatter(pcs[:, 0], pcs[:, 1], pcs[:, 2], c=colors, s=sizes, edgecolors="none", depthshade=False)
@@ -495,5 +497,34 @@ def plot_latent_pca(
         ax.tick_params(labelsize=7)
         ax.set_title(f"({chr(ord('a') + k - 1)}) {init} init", fontsize=9)
     fig.suptitle(f"Codes of primitive '{primitive_name}' (train and eval), first {n_components} principal components", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_accuracy_vs_r2(sweeps: dict, *, title: str = "", colors: dict | None = None) -> Figure:
+    """Clustering accuracy against the R² target that picks τ, one line per set of codes.
+
+    Shows how the paper's single setting (R² = 0.9999 for latents) sits among the others.
+
+    Parameters
+    ----------
+    sweeps : dict of name -> list of dict
+        :func:`primspace.cluster.sweep` rows over ``r2_targets`` (``value``, ``accuracy``, ``rank``).
+    """
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    for name, rows in sweeps.items():
+        rows = [r for r in rows if r.get("accuracy") is not None]
+        xs = np.arange(len(rows))
+        color = (colors or {}).get(name) or next((c for k, c in INIT_COLORS.items() if str(name).startswith(k)), None)
+        ls = "--" if "initial" in str(name) else "-"
+        ax.plot(xs, [r["accuracy"] for r in rows], marker="o", ms=3, lw=1.4, ls=ls, color=color, label=str(name))
+        ax.set_xticks(xs, [f"{r['value']:g}" for r in rows], fontsize=7)
+    ax.set_xlabel("R² target (chooses τ)")
+    ax.set_ylabel("accuracy")
+    ax.set_ylim(0, 1.02)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title, fontsize=10)
     fig.tight_layout()
     return fig

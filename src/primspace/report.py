@@ -32,8 +32,8 @@ h1 { font-size: 1.7em; margin-bottom: 0.1em; } h2 { border-bottom: 1px solid #dd
      margin-top: 2em; } h3 { margin-top: 1.4em; }
 .sub { color: #666; margin-top: 0; }
 table { border-collapse: collapse; margin: .8em 0 1.2em; font-size: .92em; }
-th, td { border: 1px solid #ddd; padding: .3em .7em; text-align: right; }
-th { background: #f4f4f4; } td:first-child, th:first-child { text-align: left; }
+th, td { border: 1px solid #ddd; padding: .3em .7em; text-align: left; }
+th { background: #f4f4f4; } td.num { text-align: right; font-variant-numeric: tabular-nums; }
 caption { caption-side: bottom; color: #555; font-size: .9em; padding-top: .3em; text-align: left; }
 figure { margin: 1em 0 1.6em; } figure img { max-width: 100%; border: 1px solid #eee; }
 figcaption { color: #555; font-size: .9em; }
@@ -81,7 +81,7 @@ class HtmlReport:
 
     def table(self, columns: Sequence[str], rows: Sequence[Sequence[Any]], caption: str = "") -> None:
         head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
-        body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(v))}</td>" for v in row) + "</tr>" for row in rows)
+        body = "".join("<tr>" + "".join(_cell(v) for v in row) + "</tr>" for row in rows)
         cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
         self._parts.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
 
@@ -111,6 +111,11 @@ class HtmlReport:
         path = Path(path)
         atomic_write_text(path, self.render())
         return path
+
+
+def _cell(v: Any) -> str:
+    numeric = isinstance(v, (int, float)) and not isinstance(v, bool)
+    return f'<td class="num">{html.escape(_fmt(v))}</td>' if numeric else f"<td>{html.escape(_fmt(v))}</td>"
 
 
 def _fmt(v: Any) -> str:

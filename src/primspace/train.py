@@ -97,6 +97,11 @@ class TrainConfig:
         Adam learning rate of the model weights θ.
     latent_lr : float
         Learning rate of the codes (row-wise Adam, :class:`primspace.latent.LatentTable`).
+    final_lr_fraction : float
+        Both learning rates follow a cosine from their value in the first epoch to this
+        fraction of it in the last (1.0: constant). The factor depends only on the epoch
+        index and ``epochs``, so a resumed run continues the same schedule (unless
+        ``epochs`` is changed on resume, which stretches the rest of it).
     motor_weight, vision_weight : float
         ``w_m``, ``w_v`` of the loss (module docstring). ``vision_weight = 0`` skips the
         image head.
@@ -126,6 +131,7 @@ class TrainConfig:
     batch_size: int = 32
     lr: float = 1e-3
     latent_lr: float = 1e-2
+    final_lr_fraction: float = 1.0
     motor_weight: float = 1.0
     vision_weight: float = 1.0
     seed: int = 0
@@ -146,6 +152,9 @@ class TrainConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise UserError(f"{name} must be a finite number >= 0, got {v}")
+        f = self.final_lr_fraction
+        if not (isinstance(f, (int, float)) and 0 < f <= 1):
+            raise UserError(f"final_lr_fraction must be in (0, 1], got {f}")
         for name in ("motor_weight", "vision_weight"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
@@ -171,6 +180,14 @@ class TrainConfig:
         if unknown:
             raise UserError(f"unknown train config field(s): {', '.join(unknown)}")
         return cls(**d)
+
+
+def lr_factor(epoch: int, epochs: int, final_fraction: float) -> float:
+    """Cosine factor of the learning rates in epoch ``epoch`` (0-based) of ``epochs``: 1 → ``final_fraction``."""
+    if final_fraction >= 1.0 or epochs <= 1:
+        return 1.0
+    progress = min(epoch, epochs - 1) / (epochs - 1)
+    return final_fraction + (1.0 - final_fraction) * 0.5 * (1.0 + math.cos(math.pi * progress))
 
 
 def resolve_device(device: str = "auto", amp: bool = False) -> torch.device:
@@ -768,6 +785,11 @@ class _Session:
     def _train_epoch(self) -> torch.Tensor:
         model, table, tc = self.model, self.table, self.tc
         train_theta = self.theta_opt is not None
+        factor = lr_factor(self.epoch, tc.epochs, tc.final_lr_fraction)
+        table.lr = tc.latent_lr * factor
+        if train_theta:
+            for group in self.theta_opt.param_groups:
+                group["lr"] = tc.lr * factor
         model.train(train_theta)
         order = torch.randperm(self.n, generator=self.generator).to(self.device)
         sums = torch.zeros(3, dtype=torch.float64, device=self.device)

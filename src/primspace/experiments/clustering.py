@@ -29,6 +29,14 @@ __all__ = ["run_clustering", "latent_table", "report_section"]
 _R2_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.999, 0.9999)
 
 
+def _latent_sweep(X: np.ndarray, labels: np.ndarray) -> list[dict]:
+    from primspace.cluster import sweep
+    from primspace.cluster.outputs import to_jsonable
+
+    k = len(np.unique(labels))
+    return to_jsonable(sweep(X, k, r2_targets=_R2_GRID, labels_true=labels, random_state=0))
+
+
 def _cluster(X: np.ndarray, labels: np.ndarray, r2_target: float) -> tuple[dict, object]:
     from primspace.cluster import LowRankSubspaceClustering, clustering_scores
 
@@ -77,10 +85,11 @@ def run_clustering(exp: ExperimentDir) -> dict:
     intra = exp.read_results("intra") or run_intra(exp)
     data = exp.dataset()
     q, seed, inits = _focus_runs(exp, intra)
-    results: dict = {"latent_dim": q, "seed": seed, "r2_target": preset.cluster_r2, "latent": [], "trajectory": {}}
+    results: dict = {"latent_dim": q, "seed": seed, "r2_target": preset.cluster_r2, "latent": [], "trajectory": {}, "latent_sweep": {}}
     with exp.stage("clustering"):
         for init in inits:
             z, _ = load_codes(exp, init, q, seed)
+            results["latent_sweep"][init] = _latent_sweep(z.astype(np.float64), data.labels)
             row, est = _cluster(z.astype(np.float64), data.labels, preset.cluster_r2)
             results["latent"].append({"init": init, "codes": "learned"} | row)
             _figure(exp, f"latent_clustering_{init}", est, data.labels, data.label_names,
@@ -92,8 +101,14 @@ def run_clustering(exp: ExperimentDir) -> dict:
             z0[fitted.indices], z0[inferred.indices] = fitted.initial_latents, inferred.initial_latents
             row, est = _cluster(z0, data.labels, preset.cluster_r2)
             results["latent"].append({"init": "projection", "codes": "initial (P m, untrained)"} | row)
+            results["latent_sweep"]["projection, initial P m"] = _latent_sweep(z0, data.labels)
             _figure(exp, "latent_clustering_projection_initial", est, data.labels, data.label_names,
                     f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}")
+        if results["latent_sweep"]:
+            from primspace import plots
+
+            fig = plots.plot_accuracy_vs_r2(results["latent_sweep"], title=f"Clustering the codes (q = {q}): accuracy per R² target")
+            plots.save_figure(fig, exp.figure("latent_accuracy_vs_r2"))
         results["trajectory"]["data"] = _trajectories(
             exp, "data", data.motor, data.labels, data.label_names, preset.trajectory_r2
         )
@@ -128,6 +143,10 @@ def report_section(out_dir: Path, report) -> None:
     columns, rows = latent_table(results)
     report.table(columns, rows)
     figures = out_dir / "figures"
+    report.figure(figures / "latent_accuracy_vs_r2.png",
+                  "Accuracy of clustering the codes when τ is chosen for other R² targets (dashed: the projection "
+                  "before training). With few points per primitive in q dimensions, high targets keep every component "
+                  "and the affinity degenerates towards the identity.")
     for r in results["latent"]:
         name = "latent_clustering_projection_initial" if r["codes"].startswith("initial") else f"latent_clustering_{r['init']}"
         report.figure(figures / f"{name}.png", f"{r['init']} ({r['codes']}): affinity ordered by primitive, and the predicted cluster of each sample.")

@@ -67,7 +67,9 @@ def _configs(preset: ExperimentPreset, latent_dim: int, seed: int, epochs: int):
     model_config = ModelConfig(latent_dim=latent_dim, layer_sizes=preset.layer_sizes, taus=preset.taus)
     train_config = TrainConfig(
         epochs=epochs, batch_size=preset.batch_size, lr=preset.lr, latent_lr=preset.latent_lr,
+        final_lr_fraction=preset.final_lr_fraction,
         vision_weight=preset.vision_weight, seed=seed, checkpoint_every=max(1, epochs // 10),
+        threads=1,  # runs are parallel across processes; one thread each keeps every backend bit-identical
     )
     return model_config, train_config
 
@@ -292,8 +294,9 @@ def report_data(out_dir: Path, report) -> None:
     report.paragraph(
         f"{s['n_samples']} samples, T = {s['length']} steps, J = {s['n_joints']} joints "
         f"({', '.join(s['joint_names'])}), images {('x'.join(map(str, s['image_shape'])) if s['image_shape'] else 'none')}; "
-        f"source: {s['source']}."
+        f"file {path}."
     )
+    report.code(s["source"])
     if s["label_counts"]:
         report.table(["primitive", "samples"], list(s["label_counts"].items()))
 

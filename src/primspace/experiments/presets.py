@@ -41,6 +41,9 @@ class ExperimentPreset:
     batch_size : int
     lr, latent_lr : float
         Adam learning rates of θ and of the codes.
+    final_lr_fraction : float
+        Both rates decay along a cosine to this fraction by the last epoch (ours; the
+        paper does not say).
     images : bool
         Train with the vision loss (when the data has images).
     vision_weight : float
@@ -75,6 +78,7 @@ class ExperimentPreset:
     batch_size: int = 32
     lr: float = 1e-3
     latent_lr: float = 1e-2
+    final_lr_fraction: float = 0.1
     images: bool = True
     vision_weight: float = 1.0
     layer_sizes: tuple[int, ...] = (32, 12)

@@ -105,7 +105,7 @@ def report_section(out_dir: Path, report) -> None:
     report.table(columns, rows, "Fraction of successful motions per primitive.")
     reasons = []
     for init, res in results["generated"].items():
-        for prim, counts in res["failed_criteria"].items():
+        for prim, counts in res.get("failed_criteria", {}).items():
             if counts:
                 reasons.append([init, prim, f"{res['counts'][prim]}", "; ".join(f"{k} ({v})" for k, v in counts.items())])
     if reasons:
