@@ -177,3 +177,19 @@ def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_pa
     assert f"report: {out / 'report.html'}" in summary
     assert "paper's qualitative result" in summary and ("HOLDS" in summary)
     assert (out / "report.html").stat().st_size > 10_000
+
+
+def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, monkeypatch):
+    monkeypatch.setitem(experiment_presets.PRESETS, "tiny", TINY)
+    out = tmp_path / "exp"
+    bad = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero,projektion")
+    assert_user_error(bad, "unknown initialisation(s) projektion")
+    assert not out.exists()
+    ok = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero",
+                 "--epochs", "2,1", "--workers", "1", "--no-report")
+    assert ok.code == 0, ok.err
+    meta = json.loads((out / "experiment.json").read_text())
+    assert meta["preset_config"]["inits"] == ["zero"] and meta["preset_config"]["fit_epochs"] == 2
+    assert not (out / "report.html").exists()
+    again = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero", "--epochs", "3,1")
+    assert_user_error(again, "made with other settings", "fit_epochs=2")

@@ -583,24 +583,14 @@ class Backend(str, Enum):
     ray = "ray"
 
 
-_PRESET = typer.Option("demo", "--preset", help="Experiment preset: demo (CPU, minutes) or paper (GPU recommended).")
-_DATA = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT.")
-_OUT = typer.Option(..., "--out", "-o", help="The experiment directory.")
-_BACKEND = typer.Option(Backend.local, "--backend", help="local (process pool) or ray.")
-_ADDRESS = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray instance).")
-_WORKERS = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores).")
-_SEED = typer.Option(0, "--seed", help="Seed of the generated data.")
-_REPORT = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end.")
-
-
-def _experiment(preset: str, data, out, backend, address, workers, seed):
+def _experiment(preset: str, data, out, backend, address, workers, seed, overrides: dict):
     from primspace.experiments.presets import resolve_preset
     from primspace.experiments.workspace import ExperimentDir
     from primspace.parallel import default_workers
 
     return ExperimentDir(
-        out, resolve_preset(preset), data=data, backend=backend.value, address=address,
-        workers=workers or default_workers(), seed=seed,
+        out, resolve_preset(preset).with_overrides(**overrides), data=data, backend=backend.value,
+        address=address, workers=workers or default_workers(), seed=seed,
     )
 
 
@@ -619,69 +609,69 @@ def _finish(exp, report: bool) -> None:
         )
 
 
-@experiment_app.command("intra")
-def experiment_intra(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
-                     address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
-                     report: bool = _REPORT) -> None:
-    """Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size."""
-    from primspace.experiments.intra import final_loss_table, run_intra
+def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None) -> None:
+    """Register ``primspace experiment NAME``: run ``steps`` (``module:function``), print ``table``."""
 
-    exp = _experiment(preset, data, out, backend, address, workers, seed)
-    results = run_intra(exp)
-    _echo_table(*final_loss_table(results))
-    _finish(exp, report)
+    def command(
+        preset: str = typer.Option("demo", "--preset", help="Experiment preset: demo (CPU, minutes) or paper (GPU recommended)."),
+        data: Optional[Path] = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."),
+        out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
+        backend: Backend = typer.Option(Backend.local, "--backend", help="local (process pool) or ray."),
+        address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray instance)."),
+        workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the generated data."),
+        latent_dims: Optional[str] = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."),
+        inits: Optional[str] = typer.Option(None, "--inits", help="Override the initialisations, e.g. zero,projection."),
+        seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
+        epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
+        images: Optional[bool] = typer.Option(None, "--images/--no-images", help="Override whether the vision loss is trained."),
+        report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
+    ) -> None:
+        import importlib
 
+        overrides = {
+            "latent_dims": _int_list(latent_dims, "--latent-dims") if latent_dims else None,
+            "inits": tuple(s.strip() for s in inits.split(",") if s.strip()) if inits else None,
+            "seeds": _int_list(seeds, "--seeds") if seeds else None,
+            "images": images,
+        }
+        if epochs:
+            fit_epochs, infer_epochs = (_int_list(epochs, "--epochs") + (None,))[:2]
+            overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
+        exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
+        result = None
+        for step in steps:
+            module, function = step.split(":")
+            result = getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp)
+        if table is not None:
+            module, function = table.split(":")
+            _echo_table(*getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(result))
+        _finish(exp, report or name == "all")
 
-@experiment_app.command("clustering")
-def experiment_clustering(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
-                          address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
-                          report: bool = _REPORT) -> None:
-    """Subspace clustering of learned latents (runs intra if needed) and of raw trajectories (data, LASA)."""
-    from primspace.experiments.clustering import latent_table, run_clustering
-
-    exp = _experiment(preset, data, out, backend, address, workers, seed)
-    results = run_clustering(exp)
-    _echo_table(*latent_table(results))
-    _finish(exp, report)
-
-
-@experiment_app.command("success")
-def experiment_success(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
-                       address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
-                       report: bool = _REPORT) -> None:
-    """Success rates of generated eval motions, judged by the simulator (runs intra if needed)."""
-    from primspace.experiments.success import run_success, success_table
-
-    exp = _experiment(preset, data, out, backend, address, workers, seed)
-    _echo_table(*success_table(run_success(exp)))
-    _finish(exp, report)
-
-
-@experiment_app.command("inter")
-def experiment_inter(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
-                     address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED,
-                     report: bool = _REPORT) -> None:
-    """Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay."""
-    from primspace.experiments.inter import inter_table, run_inter
-
-    exp = _experiment(preset, data, out, backend, address, workers, seed)
-    _echo_table(*inter_table(run_inter(exp)))
-    _finish(exp, report)
+    command.__doc__ = doc
+    experiment_app.command(name)(command)
 
 
-@experiment_app.command("all")
-def experiment_all(preset: str = _PRESET, data: Optional[Path] = _DATA, out: Path = _OUT, backend: Backend = _BACKEND,
-                   address: Optional[str] = _ADDRESS, workers: Optional[int] = _WORKERS, seed: int = _SEED) -> None:
-    """Every experiment in turn (intra, clustering, success, inter), then the report."""
-    from primspace.experiments.clustering import run_clustering
-    from primspace.experiments.inter import run_inter
-    from primspace.experiments.intra import run_intra
-    from primspace.experiments.success import run_success
-
-    exp = _experiment(preset, data, out, backend, address, workers, seed)
-    for step in (run_intra, run_clustering, run_success, run_inter):
-        step(exp)
-    _finish(exp, True)
+_experiment_command(
+    "intra", "Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size.",
+    ("intra:run_intra",), "intra:final_loss_table",
+)
+_experiment_command(
+    "clustering", "Subspace clustering of learned codes (runs intra if needed) and of raw trajectories (data, LASA).",
+    ("clustering:run_clustering",), "clustering:latent_table",
+)
+_experiment_command(
+    "success", "Success rates of generated eval motions, judged by the simulator (runs intra if needed).",
+    ("success:run_success",), "success:success_table",
+)
+_experiment_command(
+    "inter", "Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay.",
+    ("inter:run_inter",), "inter:inter_table",
+)
+_experiment_command(
+    "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
+    ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"), None,
+)
 
 
 @app.command("report")
@@ -695,7 +685,7 @@ def report_command(directory: Path = typer.Argument(..., help="An experiment dir
 @app.command("demo")
 def demo_command(
     out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Where the demo writes its data, runs and report."),
-    workers: Optional[int] = _WORKERS,
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
 ) -> None:
     """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
     from primspace.experiments.demo import run_demo

@@ -102,8 +102,27 @@ class ExperimentPreset:
         return cls(**{k: tuple(v) if k in tuples else v for k, v in d.items()})
 
     def with_overrides(self, **changes) -> "ExperimentPreset":
-        """A copy with some fields changed (``None`` values are ignored)."""
-        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+        """A copy with some fields changed (``None`` values are ignored), checked.
+
+        Raises
+        ------
+        UserError
+            An unknown initialisation, a latent size < 1, negative epochs, no seeds.
+        """
+        from primspace.latent import INIT_METHODS
+
+        changes = {k: v for k, v in changes.items() if v is not None}
+        unknown = [i for i in changes.get("inits", ()) if i not in INIT_METHODS]
+        if unknown:
+            raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(INIT_METHODS)}")
+        if any(q < 1 for q in changes.get("latent_dims", ())):
+            raise UserError("latent sizes must be at least 1")
+        if any(changes.get(k, 0) < 0 for k in ("fit_epochs", "infer_epochs")):
+            raise UserError("epochs must be >= 0")
+        for key in ("inits", "latent_dims", "seeds"):
+            if key in changes and not changes[key]:
+                raise UserError(f"--{key.replace('_', '-')} is empty")
+        return replace(self, **changes)
 
 
 PRESETS: dict[str, ExperimentPreset] = {

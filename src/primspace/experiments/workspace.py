@@ -80,6 +80,13 @@ class ExperimentDir:
                 raise UserError(
                     f"{self.path}: made with preset {self.meta.get('preset')!r}, not {preset.name!r}; use another --out"
                 )
+            saved = self.meta.get("preset_config", {})
+            changed = sorted(k for k, v in preset.to_dict().items() if k in saved and _jsonable(v) != saved[k])
+            if changed:
+                raise UserError(
+                    f"{self.path}: made with other settings ({', '.join(f'{k}={saved[k]}' for k in changed)}); "
+                    "use another --out to run with these"
+                )
             if data is not None and self.meta.get("data") != str(data_path):
                 raise UserError(f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out")
             data_path = Path(self.meta["data"])
@@ -161,3 +168,8 @@ class ExperimentDir:
         failures.update(result.failures)
         self.save_meta()
         return result
+
+
+def _jsonable(value: Any) -> Any:
+    """A value as it reads back from JSON (tuples become lists)."""
+    return json.loads(json.dumps(value))
