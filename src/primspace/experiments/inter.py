@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.data import MotionDataset
-from primspace.experiments.intra import _configs, _curves
+from primspace.experiments.intra import _configs, _curves, load_run_data
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
@@ -35,10 +34,7 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     from primspace.train import fit
 
     p = ExperimentPreset.from_dict(preset)
-    data = MotionDataset.load(data_path)
-    use_images = p.images and data.has_images
-    if use_images:
-        data = data.load_images()
+    data, use_images = load_run_data(data_path, p)
     start = time.perf_counter()
     first = np.flatnonzero(data.labels != fold)
     new = np.flatnonzero(data.labels == fold)

@@ -74,6 +74,13 @@ def _configs(preset: ExperimentPreset, latent_dim: int, seed: int, epochs: int):
     return model_config, train_config
 
 
+def load_run_data(data_path: str, preset: ExperimentPreset) -> tuple[MotionDataset, bool]:
+    """The data set of a grid run, and whether it trains the vision loss (images then in memory)."""
+    data = MotionDataset.load(data_path)
+    use_images = preset.images and data.has_images
+    return (data.load_images() if use_images else data), use_images
+
+
 def _curves(history: list[dict]) -> list[dict]:
     """The per-epoch losses of a run (its metrics.jsonl without timings)."""
     return [{k: h.get(k) for k in ("epoch", "loss", "motor", "vision")} for h in history]
@@ -89,10 +96,7 @@ def run_intra_point(
     from primspace.train import fit, infer
 
     preset_obj = ExperimentPreset.from_dict(preset)
-    data = MotionDataset.load(data_path)
-    use_images = preset_obj.images and data.has_images
-    if use_images:
-        data = data.load_images()
+    data, use_images = load_run_data(data_path, preset_obj)
     start = time.perf_counter()
     model_config, train_config = _configs(preset_obj, latent_dim, seed, preset_obj.fit_epochs)
     fitted = fit(
