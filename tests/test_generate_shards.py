@@ -286,6 +286,7 @@ def test_cli_reports_failed_samples_in_one_line_and_resumes(run_cli, tmp_path, m
     assert res.code == 0, res.err
     assert "14 motions" in res.out and "3 of 4 shards from an earlier run" in res.out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.h5", "tiny.json"]
+    assert_user_error(run_cli(*args, "--overwrite", "--backend", "dask"), "unknown backend 'dask'")
 
 
 def _ray_or_skip():

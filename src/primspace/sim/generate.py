@@ -489,7 +489,8 @@ def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bo
     _prepare_shard_dir(directory, shard_manifest(config, seed), overwrite)
     ranges = shard_ranges(config.n_samples)
     paths = [_shard_path(directory, a, b) for a, b in ranges]
-    todo = [i for i, path in enumerate(paths) if not path.exists()]
+    done = [path.exists() for path in paths]  # by an earlier run of this generation
+    todo = [i for i, finished in enumerate(done) if not finished]
     failures = []
     published = False
     try:
@@ -500,7 +501,7 @@ def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bo
                 if on_shard is not None:
                     on_shard(info)
 
-            for i in sorted(set(range(len(ranges))) - set(todo)):
+            for i in (i for i, finished in enumerate(done) if finished):
                 merge(i, {"start": ranges[i][0], "stop": ranges[i][1], "path": str(paths[i]), "ik_error": None, "reused": True})
             if todo:
                 items = [(config, seed, *ranges[i], paths[i]) for i in todo]
