@@ -146,8 +146,8 @@ def generate_command(
     """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file.
 
     Workers write shards beside OUT (.OUT.shards/), merged into OUT as they finish (OUT
-    appears, atomically, when complete); a
-    re-run after a failure or an interruption generates only the missing shards.
+    appears, atomically, when complete); a re-run after a failure or an interruption
+    generates only the missing shards.
     """
     import dataclasses
     import time
