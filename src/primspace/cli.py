@@ -129,6 +129,8 @@ def generate_command(
     out: Path = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
     preset: str = typer.Option("demo", "--preset", "-p", help="demo (126 motions) or paper (1715 motions, as in the paper)."),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
+    backend: str = typer.Option("local", "--backend", help="local (process pool) or ray (identical data)."),
+    address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray instance)."),
     seed: int = typer.Option(0, "--seed", help="Moves each block within its grid cell; same seed, same data."),
     height: Optional[int] = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
     width: Optional[int] = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
@@ -137,9 +139,16 @@ def generate_command(
         None, "--config", help="JSON object of generation settings over the preset's (block_x, block_y, "
         "block_size, primitives, length, jitter ...; see docs/simulator.md).",
     ),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace OUT if it exists (and discard shards left by a run with other settings)."
+    ),
 ) -> None:
-    """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file."""
+    """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file.
+
+    Workers write shards beside OUT (.OUT.shards/), merged into OUT as they finish (OUT
+    appears, atomically, when complete); a re-run after a failure or an interruption
+    generates only the missing shards.
+    """
     import dataclasses
     import time
 
@@ -170,12 +179,16 @@ def generate_command(
         raise UserError(f"--workers {workers}: must be at least 1")
     check_output(out, overwrite)
     start = time.perf_counter()
-    ds = generate_dataset(config, seed=seed, workers=workers, out=out, overwrite=overwrite)
+    shards = []
+    ds = generate_dataset(config, seed=seed, workers=workers, backend=backend, address=address, out=out,
+                          overwrite=overwrite, on_shard=shards.append)
     took = time.perf_counter() - start
     frames = f"images {config.height}x{config.width}" if config.images else "no images"
+    reused = sum(shard["reused"] for shard in shards)
+    resumed = f"; {reused} of {len(shards)} shards from an earlier run" if reused else ""
     typer.echo(
         f"wrote {out}: {len(ds)} motions x {ds.length} steps x {ds.n_joints} joints, {frames} "
-        f"({took:.1f} s, {len(ds) / took:.1f} motions/s)"
+        f"({took:.1f} s, {len(ds) / took:.1f} motions/s{resumed})"
     )
 
 

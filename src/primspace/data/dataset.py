@@ -663,6 +663,59 @@ class DatasetWriter:
 
     def write(self, start: int, *, motor, images=None, labels=None, params=None) -> None:
         """Validate and store samples ``start .. start + len(motor) - 1``."""
+        block, sl = self._check_block(start, motor, images, labels, params)
+        if images is not None:
+            self._file["images"][sl] = np.asarray(block.images)
+        self._store(block, sl)
+
+    def copy_from(self, start: int, path: str | os.PathLike) -> int:
+        """Copy every sample of the data set file ``path`` into samples ``start ..``.
+
+        For merging shards written by workers into one file. The source is loaded and
+        validated as :meth:`MotionDataset.load` does; its names, T, J, image size and
+        fields must match this file's. Motor, labels and params are copied as arrays.
+        Image chunks are copied as stored (``read_direct_chunk`` /
+        ``write_direct_chunk``: no decompression, no recompression) when the source's
+        chunk shape and filter pipeline equal this file's; otherwise the images are
+        decoded and re-encoded block by block.
+
+        Returns
+        -------
+        int
+            The number of samples copied.
+
+        Raises
+        ------
+        DataError
+            If the source is not a valid data set file or does not match this file
+            (naming the source file and the field), or does not fit at ``start``.
+        """
+        if self._file is None:
+            raise RuntimeError("DatasetWriter.copy_from outside its with block")
+        source = MotionDataset.load(path)
+        try:
+            try:
+                block, sl = self._check_block(start, source.motor, source.images, source.labels, source.params)
+            except DataError as exc:
+                raise DataError(f"cannot be copied into {self.path}: {exc.reason}", path=path, field=exc.field) from None
+            wanted = [("joint_names", self.joint_names), ("dt", self.dt)]
+            if self.with_labels and self.label_names:
+                wanted.append(("label_names", self.label_names))
+            if self.with_params and self.param_names:
+                wanted.append(("param_names", self.param_names))
+            for name, value in wanted:
+                if getattr(source, name) != value:
+                    raise DataError(f"{getattr(source, name)} does not match the file's {value}", path=path, field=name)
+            if source.images is not None:
+                self._copy_image_chunks(source.path, sl)
+            self._store(block, sl)
+        finally:
+            if source.images is not None:
+                source.images.close()
+        return sl.stop - sl.start
+
+    def _check_block(self, start: int, motor, images, labels, params) -> tuple["MotionDataset", slice]:
+        """Validate a block of samples against this file; return it and its slice."""
         if self._file is None:
             raise RuntimeError("DatasetWriter.write outside its with block")
         motor = _as_float_array(motor, "motor", self.path)
@@ -699,15 +752,35 @@ class DatasetWriter:
                     "given but the file has none" if given is not None else "missing from a block",
                     path=self.path, field=name, index=start,
                 )
-        f, sl = self._file, slice(start, start + k)
+        return block, slice(start, start + k)
+
+    def _store(self, block: "MotionDataset", sl: slice) -> None:
+        """Store a checked block's motor, labels and params; mark its samples written."""
+        f = self._file
         f["motor"][sl] = block.motor
-        if images is not None:
-            f["images"][sl] = np.asarray(block.images)
-        if labels is not None:
+        if block.labels is not None:
             f["labels"][sl] = block.labels
-        if params is not None:
+        if block.params is not None:
             f["params"][sl] = block.params
         self._written[sl] = True
+
+    def _copy_image_chunks(self, path: Path, sl: slice) -> None:
+        """Images of the file ``path`` into ``sl``: raw chunks when the storage matches."""
+        target = self._file["images"]
+        try:
+            with h5py.File(path, "r") as f:
+                source = f["images"]
+                if source.chunks == target.chunks and _filters(source) == _filters(target):
+                    rest = (0,) * (source.ndim - 1)
+                    for i in range(sl.stop - sl.start):
+                        mask, chunk = source.id.read_direct_chunk((i, *rest))
+                        target.id.write_direct_chunk((sl.start + i, *rest), chunk, mask)
+                else:
+                    for a in range(0, sl.stop - sl.start, _IMAGE_WRITE_BLOCK):
+                        b = min(a + _IMAGE_WRITE_BLOCK, sl.stop - sl.start)
+                        target[sl.start + a : sl.start + b] = source[a:b]
+        except (OSError, KeyError) as exc:
+            raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field="images") from None
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         stack, self._stack, self._file = self._stack, None, None
@@ -745,6 +818,12 @@ def _names(names: Sequence[str] | None, n: int, prefix: str) -> list[str]:
     if names is None or len(names) == 0:
         return [f"{prefix}{i}" for i in range(n)]
     return [str(s) for s in names]
+
+
+def _filters(dataset: h5py.Dataset) -> list[tuple]:
+    """The filter pipeline of a dataset: (filter id, client values) per filter, in order."""
+    plist = dataset.id.get_create_plist()
+    return [tuple(plist.get_filter(i)[::2]) for i in range(plist.get_nfilters())]
 
 
 def _read_array(f: h5py.File, name: str, path) -> np.ndarray:

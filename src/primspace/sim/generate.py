@@ -17,18 +17,27 @@ render the frames (:mod:`~primspace.sim.render`).
 draws from ``np.random.SeedSequence([seed, i])``, so the arrays do not depend on how
 the samples are split into shards or on the number of workers (or the backend).
 
-**Parallelism.** Samples are split into shards of consecutive indices, run through
-:func:`primspace.parallel.run_jobs` (``generate_shard`` is the job); with ``out`` the
-shards are written into the HDF5 file as they arrive (:class:`~primspace.data.DatasetWriter`,
-published atomically when complete), so the image set is never held in memory whole.
+**Parallelism.** Samples are split into shards of consecutive indices whose size
+depends on N alone (:func:`shard_ranges`), run through :func:`primspace.parallel.run_jobs`.
+In memory, ``generate_shard`` is the job and returns arrays. With ``out``,
+``write_shard`` is the job: it writes its shard as a complete data set file (atomic)
+into ``.<out name>.shards/`` beside ``out``, with a ``manifest.json`` naming the
+generation (settings, seed, layout, versions); this process merges the shards into
+``out`` as they finish, copying the compressed image chunks as they are
+(:meth:`~primspace.data.DatasetWriter.copy_from`), publishes it atomically when complete
+and removes the shard directory. A failed job stops no other; the failures are reported
+together and a re-run with the same settings and seed generates only the missing shards.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import shutil
 from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -43,7 +52,12 @@ __all__ = [
     "resolve_config",
     "sample_params",
     "generate_shard",
+    "write_shard",
     "generate_dataset",
+    "shard_size",
+    "shard_ranges",
+    "shard_dir",
+    "shard_manifest",
     "simulate_sample",
 ]
 
@@ -361,14 +375,175 @@ def generate_shard(config: GenerationConfig, seed: int, sample_indices) -> dict[
     return out
 
 
-def _shards(n: int, workers: int) -> list[list[int]]:
-    """Consecutive index ranges: about 4 shards per worker, 4..32 samples each."""
-    size = max(4, min(32, math.ceil(n / (4 * max(1, workers)))))
-    return [list(range(a, min(n, a + size))) for a in range(0, n, size)]
+def write_shard(config: GenerationConfig, seed: int, start: int, stop: int, path: str | os.PathLike) -> dict:
+    """Generate samples ``start .. stop - 1`` into their own data set file (a job of
+    :func:`generate_dataset` with ``out``).
+
+    The file is a complete :class:`~primspace.data.MotionDataset`, written atomically
+    (:class:`~primspace.data.DatasetWriter`): it exists only once every sample is in it.
+
+    Returns
+    -------
+    dict
+        ``start``, ``stop``, ``path``, ``ik_error`` (k,) and ``reused`` (False).
+    """
+    from primspace.data import DatasetWriter
+
+    shard = generate_shard(config, seed, range(start, stop))
+    with DatasetWriter(path, overwrite=True, **_file_settings(config, seed, stop - start)) as writer:
+        writer.write(0, motor=shard["motor"], images=shard["images"], labels=shard["labels"], params=shard["params"])
+    return {"start": start, "stop": stop, "path": str(path), "ik_error": shard["ik_error"], "reused": False}
 
 
-def _source(config: GenerationConfig, seed: int, preset: str | None) -> str:
+# ------------------------------------------------------------------------- shards
+
+#: The file in a shard directory that says which generation its shards belong to.
+MANIFEST_NAME = "manifest.json"
+
+
+def shard_size(n_samples: int) -> int:
+    """Samples per shard, from N alone (about N / 8, within 4..32).
+
+    The layout never depends on the worker count or the backend, so the shard files of
+    an interrupted run fit a re-run with any ``workers`` or ``backend``.
+    """
+    return max(4, min(32, math.ceil(n_samples / 8)))
+
+
+def shard_ranges(n_samples: int) -> list[tuple[int, int]]:
+    """``(start, stop)`` of every shard: consecutive sample indices of :func:`shard_size`."""
+    size = shard_size(n_samples)
+    return [(a, min(n_samples, a + size)) for a in range(0, n_samples, size)]
+
+
+def shard_dir(out: str | os.PathLike) -> Path:
+    """Where the shards of ``out`` are written: ``.<out name>.shards`` beside it."""
+    out = Path(os.path.abspath(out))
+    return out.parent / f".{out.name}.shards"
+
+
+def shard_manifest(config: GenerationConfig, seed: int) -> dict[str, Any]:
+    """What identifies a generation's shards: settings, seed, layout and versions (JSON)."""
+    from primspace import __version__
+    from primspace.data.dataset import SCHEMA_VERSION
+
+    manifest = {
+        "format": "primspace generation shards", "primspace_version": __version__,
+        "schema_version": SCHEMA_VERSION, "seed": int(seed), "config": config.to_dict(),
+        "n_samples": config.n_samples, "shard_size": shard_size(config.n_samples),
+    }
+    return json.loads(json.dumps(manifest))  # as it reads back from the file
+
+
+def _prepare_shard_dir(directory: Path, manifest: dict, overwrite: bool) -> None:
+    """Make ``directory`` ready for this generation's shards, keeping those it already holds.
+
+    Shards of another generation (another seed, setting, layout or primspace version)
+    are never reused: with ``overwrite`` they are removed, else :class:`UserError`.
+    """
+    from primspace.files import atomic_write_json
+
+    file = directory / MANIFEST_NAME
+    try:
+        found = json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        found = None
+    if found == manifest:
+        return
+    if any(directory.glob("shard-*.h5")):
+        if not overwrite:
+            raise UserError(
+                f"{directory}: holds shards of another generation ({_differences(found, manifest)}); "
+                "re-run with their settings to resume, or pass --overwrite to discard them"
+            )
+        shutil.rmtree(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(file, manifest)
+
+
+def _differences(found, manifest: dict) -> str:
+    if not isinstance(found, dict):
+        return "no readable manifest"
+    keys = [k for k in manifest if k != "config" and found.get(k) != manifest[k]]
+    old = found.get("config") if isinstance(found.get("config"), dict) else {}
+    keys += [k for k in manifest["config"] if old.get(k) != manifest["config"][k]]
+    return "different " + ", ".join(keys)
+
+
+def _shard_path(directory: Path, start: int, stop: int) -> Path:
+    return directory / f"shard-{start:06d}-{stop:06d}.h5"
+
+
+def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bool, on_shard, run_options: dict) -> None:
+    """Generate into ``out``: shard files by the jobs, merged by this process as they finish.
+
+    Shards already in the shard directory (same manifest) are merged, not generated. A
+    failed job does not stop the others; after the last one the failures are raised as
+    one error and the finished shards stay for a re-run. ``out`` is published atomically
+    when complete, then the shard directory is removed.
+    """
+    from primspace.data import DatasetWriter
+    from primspace.parallel import run_jobs
+
+    directory = shard_dir(out)
+    _prepare_shard_dir(directory, shard_manifest(config, seed), overwrite)
+    ranges = shard_ranges(config.n_samples)
+    paths = [_shard_path(directory, a, b) for a, b in ranges]
+    done = [path.exists() for path in paths]  # by an earlier run of this generation
+    todo = [i for i, finished in enumerate(done) if not finished]
+    failures = []
+    published = False
+    try:
+        with DatasetWriter(out, overwrite=overwrite, **_file_settings(config, seed, config.n_samples)) as writer:
+
+            def merge(i: int, info: dict) -> None:
+                writer.copy_from(ranges[i][0], paths[i])
+                if on_shard is not None:
+                    on_shard(info)
+
+            for i in (i for i, finished in enumerate(done) if finished):
+                merge(i, {"start": ranges[i][0], "stop": ranges[i][1], "path": str(paths[i]), "ik_error": None, "reused": True})
+            if todo:
+                items = [(config, seed, *ranges[i], paths[i]) for i in todo]
+                with contextlib.closing(run_jobs(write_shard, items, **run_options)) as jobs:
+                    for outcome in jobs:
+                        if outcome.ok:
+                            merge(todo[outcome.index], outcome.value)
+                        else:
+                            failures.append((ranges[todo[outcome.index]], outcome))
+            if failures:
+                raise _failed_shards(failures, out, directory, len(ranges))
+        published = True
+    finally:
+        if published or not any(directory.glob("shard-*.h5")):
+            shutil.rmtree(directory, ignore_errors=True)
+
+
+def _failed_shards(failures: list, out, directory: Path, n_shards: int) -> Exception:
+    """One error for every failed shard: a :class:`DataError` line, or (a bug) a RuntimeError."""
+    failures = sorted(failures, key=lambda f: f[0])
+    kept = n_shards - len(failures)
+    resume = f"the other {kept} are kept in {directory} and a re-run skips them" if kept else "none finished"
+    unexpected = [o for _, o in failures if o.error.partition(": ")[0] not in ("DataError", "UserError")]
+    if unexpected:
+        return RuntimeError(f"a generation job failed ({resume}): {unexpected[0].error}\n{unexpected[0].traceback}")
+    reasons = [o.error.partition(": ")[2] for _, o in failures]
+    listed = "; ".join(reasons[:3]) + (f"; and {len(reasons) - 3} more" if len(reasons) > 3 else "")
+    return DataError(f"{listed} ({len(failures)} of {n_shards} shards failed; {resume})", path=out)
+
+
+def _source(config: GenerationConfig, seed: int) -> str:
+    preset = next((name for name, cfg in PRESETS.items() if cfg == config), None)
     return "primspace.sim " + json.dumps({"preset": preset, "seed": seed, "config": config.to_dict()})
+
+
+def _file_settings(config: GenerationConfig, seed: int, n_samples: int) -> dict[str, Any]:
+    """:class:`~primspace.data.DatasetWriter` settings of a generated file of ``n_samples``."""
+    return {
+        "n_samples": n_samples, "length": config.length, "joint_names": _joint_names(),
+        "image_size": config.image_size, "label_names": list(PRIMITIVES), "param_names": list(PARAM_NAMES),
+        "dt": config.dt, "source": _source(config, seed),
+    }
 
 
 def generate_dataset(
@@ -397,14 +572,20 @@ def generate_dataset(
     address : str, optional
         Ray cluster address.
     out : path-like, optional
-        HDF5 file to write shard by shard (published atomically when complete; nothing
-        is left behind on an error). Without it the data set is built in memory.
+        HDF5 file to write. Each job writes its shard as a data set file into
+        :func:`shard_dir` (``.<name>.shards`` beside ``out``, which must be shared by
+        every node); this process merges them as they finish and publishes ``out``
+        atomically when complete, then removes the shard directory. A re-run after a
+        failure or a kill skips the shards already written (same settings and seed
+        only). Without ``out`` the data set is built in memory.
     overwrite : bool
-        Replace an existing ``out``.
+        Replace an existing ``out``, and discard shards of another generation.
     progress : bool, optional
         Progress bar (default: when stderr is a terminal).
     on_shard : callable, optional
-        Called with each finished shard's dict (e.g. to collect IK errors).
+        Called with each finished shard's dict (e.g. to collect IK errors). In memory:
+        :func:`generate_shard`'s dict. With ``out``: :func:`write_shard`'s dict (for a
+        shard reused from an earlier run, ``reused`` is True and ``ik_error`` None).
 
     Returns
     -------
@@ -414,50 +595,44 @@ def generate_dataset(
     Raises
     ------
     UserError
-        Unknown preset, settings out of range, an existing ``out`` without ``overwrite``.
+        Unknown preset or backend, settings out of range, an existing ``out`` without
+        ``overwrite``, shards of another generation without ``overwrite``.
     DataError
         A sample whose inverse kinematics misses its path (named with its index and the
-        error in mm); nothing is written.
+        error in mm). With ``out``: raised after every other job has finished, naming
+        each failed sample; ``out`` is not written, finished shards are kept. In memory:
+        the first failure stops the run.
     """
-    from primspace.data import DatasetWriter, MotionDataset
+    from primspace.data import MotionDataset
     from primspace.files import check_output
-    from primspace.parallel import default_workers, run_jobs
+    from primspace.parallel import BACKENDS, default_workers, run_jobs
 
     config = resolve_config(config_or_preset)
-    preset = next((name for name, cfg in PRESETS.items() if cfg == config), None)
     seed = int(seed)
+    if backend not in BACKENDS:
+        raise UserError(f"unknown backend {backend!r}; choose from {', '.join(BACKENDS)}")
     if out is not None:
         check_output(out, overwrite)
-    n_workers = default_workers() if workers is None else max(1, int(workers))
-    shards = _shards(config.n_samples, n_workers if backend == "local" else 8)
-    meta = {
-        "n_samples": config.n_samples, "length": config.length, "joint_names": _joint_names(),
-        "image_size": config.image_size, "label_names": list(PRIMITIVES), "param_names": list(PARAM_NAMES),
-        "dt": config.dt, "source": _source(config, seed, preset),
-    }
-    jobs = run_jobs(
-        generate_shard, [(config, seed, idx) for idx in shards], backend=backend, workers=n_workers,
-        address=address, description=f"generating {config.n_samples} motions", progress=progress,
+    run_options = dict(
+        backend=backend, workers=default_workers() if workers is None else max(1, int(workers)), address=address,
+        description=f"generating {config.n_samples} motions", progress=progress,
     )
     if out is not None:
-        with DatasetWriter(out, overwrite=overwrite, **meta) as writer:
-            for shard in _finished(jobs, out):
-                writer.write(shard["start"], motor=shard["motor"], images=shard["images"],
-                             labels=shard["labels"], params=shard["params"])
-                if on_shard is not None:
-                    on_shard(shard)
+        _generate_file(config, seed, Path(out), overwrite, on_shard, run_options)
         return MotionDataset.load(out)
+    jobs = run_jobs(generate_shard, [(config, seed, range(a, b)) for a, b in shard_ranges(config.n_samples)], **run_options)
     n, t_len = config.n_samples, config.length
     motor = np.empty((n, t_len, 9), dtype=np.float32)
     images = np.empty((n, t_len, config.height, config.width, 3), dtype=np.uint8) if config.images else None
     labels, params = np.empty(n, dtype=np.int32), np.empty((n, 3), dtype=np.float32)
-    for shard in _finished(jobs, None):
+    for shard in _finished(jobs):
         sl = slice(shard["start"], shard["start"] + len(shard["motor"]))
         motor[sl], labels[sl], params[sl] = shard["motor"], shard["labels"], shard["params"]
         if images is not None:
             images[sl] = shard["images"]
         if on_shard is not None:
             on_shard(shard)
+    meta = _file_settings(config, seed, n)
     return MotionDataset(
         motor=motor, images=images, labels=labels, params=params, joint_names=meta["joint_names"],
         label_names=meta["label_names"], param_names=meta["param_names"], dt=config.dt, source=meta["source"],
@@ -470,8 +645,8 @@ def _joint_names() -> list[str]:
     return list(JOINT_NAMES)
 
 
-def _finished(jobs, out):
-    """Shard dicts as jobs finish; the first failure becomes an error (closing the jobs)."""
+def _finished(jobs):
+    """Shard dicts as jobs finish (in memory); the first failure becomes an error (closing the jobs)."""
     try:
         for outcome in jobs:
             if outcome.ok:
@@ -479,7 +654,7 @@ def _finished(jobs, out):
                 continue
             kind, _, message = outcome.error.partition(": ")
             if kind in ("DataError", "UserError"):
-                raise DataError(message, path=out) if kind == "DataError" else UserError(message)
+                raise DataError(message) if kind == "DataError" else UserError(message)
             raise RuntimeError(f"a generation job failed: {outcome.error}\n{outcome.traceback}")
     finally:
         jobs.close()
