@@ -29,7 +29,6 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import resample as _fourier_resample
 
 from primspace.errors import DataError
 
@@ -108,6 +107,10 @@ def _resample_list(seqs: Sequence, length: int, periodic: bool) -> np.ndarray:
 
 def _resample_batch(x: np.ndarray, length: int, periodic: bool) -> np.ndarray:
     """Resample a ``(n, T0, J)`` batch along axis 1."""
+    # imported here: scipy.signal costs ~0.9 s per process, and every data-layer user
+    # (simulation workers among them) would pay it
+    from scipy.signal import resample as _fourier_resample
+
     if x.dtype.kind not in "fiu":
         raise DataError(f"must be numbers, got {x.dtype}", field="motor")
     x = np.asarray(x, dtype=np.float64)
