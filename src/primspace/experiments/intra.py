@@ -106,7 +106,7 @@ def run_intra_point(
     fit_seconds = time.perf_counter() - start
     inferred = infer(
         run_dir / "fit", data, run_dir / "infer", epochs=preset_obj.infer_epochs, init=init,
-        indices=np.asarray(eval_idx), resume=True, progress=False,
+        indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset_obj.infer_batch_size,
     )
     return {
         "init": init,

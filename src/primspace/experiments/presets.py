@@ -39,6 +39,11 @@ class ExperimentPreset:
     fit_epochs, infer_epochs : int
         Epochs of the two phases (the paper: 800, 600).
     batch_size : int
+        Samples per step while fitting θ and Z.
+    infer_batch_size : int
+        Samples per step while inferring Z with θ frozen. Every code then takes exactly
+        one Adam step per epoch whatever the batch (and Adam cancels the 1/B scale of
+        the mean loss), so a large batch computes the same updates, only faster.
     lr, latent_lr : float
         Adam learning rates of θ and of the codes.
     final_lr_fraction : float
@@ -76,6 +81,7 @@ class ExperimentPreset:
     fit_epochs: int = 800
     infer_epochs: int = 600
     batch_size: int = 32
+    infer_batch_size: int = 256
     lr: float = 1e-3
     latent_lr: float = 1e-2
     final_lr_fraction: float = 0.1
