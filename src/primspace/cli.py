@@ -28,6 +28,22 @@ app = typer.Typer(
 )
 
 
+def _version(value: bool) -> None:
+    if value:
+        from primspace import __version__
+
+        typer.echo(f"primspace {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main_options(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+) -> None:
+    """Latent spaces of robot motion primitives (Nikulin & Tani): data, simulator, MTRNN
+    decoder, subspace clustering, experiments."""
+
+
 def _echo_json(obj) -> None:
     typer.echo(json.dumps(obj, indent=2))
 
