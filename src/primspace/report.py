@@ -153,11 +153,12 @@ def build_report(out_dir: str | Path) -> Path:
     UserError
         If ``out_dir`` is not an experiment directory (no ``experiment.json``).
     """
+    from primspace.experiments.workspace import META_FILE, read_meta
+
     out_dir = Path(out_dir)
-    meta_path = out_dir / "experiment.json"
-    if not meta_path.exists():
-        raise UserError(f"{out_dir}: not an experiment directory (no experiment.json)")
-    meta = json.loads(meta_path.read_text())
+    if not (out_dir / META_FILE).exists():
+        raise UserError(f"{out_dir}: not an experiment directory (no {META_FILE})")
+    meta = read_meta(out_dir)
     report = HtmlReport(
         "primspace report",
         f"{out_dir.resolve().name} — preset {meta.get('preset', '?')} — "

@@ -15,14 +15,13 @@ Two experiments of the paper:
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from primspace.experiments.intra import _focus_runs, intra_key, load_codes, run_intra
 from primspace.experiments.sweep import run_dir_of
-from primspace.experiments.workspace import ExperimentDir
+from primspace.experiments.workspace import ExperimentDir, read_results
 
 __all__ = ["run_clustering", "latent_table", "report_section"]
 
@@ -129,10 +128,9 @@ def latent_table(results: dict) -> tuple[list[str], list[list]]:
 
 
 def report_section(out_dir: Path, report) -> None:
-    path = out_dir / "results" / "clustering.json"
-    if not path.exists():
+    results = read_results(out_dir, "clustering")
+    if results is None:
         return
-    results = json.loads(path.read_text())
     report.section("Subspace clustering")
     report.paragraph(
         f"Affine low-rank subspace clustering (Q* = V P(Λ) Vᵀ, Ng–Jordan–Weiss spectral step on Q*∘Q*) of the "

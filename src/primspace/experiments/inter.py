@@ -17,7 +17,7 @@ import numpy as np
 from primspace.experiments.intra import _configs, _curves, load_run_data
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint
-from primspace.experiments.workspace import ExperimentDir
+from primspace.experiments.workspace import ExperimentDir, read_results
 
 __all__ = ["run_inter", "run_inter_point", "replay_indices", "report_section"]
 
@@ -108,12 +108,9 @@ def inter_table(results: dict) -> tuple[list[str], list[list]]:
 
 
 def report_section(out_dir: Path, report) -> None:
-    import json
-
-    path = out_dir / "results" / "inter.json"
-    if not path.exists():
+    results = read_results(out_dir, "inter")
+    if results is None:
         return
-    results = json.loads(path.read_text())
     report.section("Inter-primitive generalisation")
     report.paragraph(
         "Seven folds: θ and Z fitted on six primitives (phase 1), then on the seventh plus "

@@ -21,7 +21,7 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint, run_dir_of
-from primspace.experiments.workspace import ExperimentDir
+from primspace.experiments.workspace import ExperimentDir, read_meta, read_results
 
 __all__ = [
     "split_indices",
@@ -225,13 +225,6 @@ def _final(curve: list) -> float:
     return float(vals[-1]) if vals else float("nan")
 
 
-def _load(out_dir: Path, name: str):
-    import json
-
-    path = out_dir / "results" / f"{name}.json"
-    return json.loads(path.read_text()) if path.exists() else None
-
-
 def final_loss_table(results: dict) -> tuple[list[str], list[list]]:
     """Rows ``init, q, seed, fit loss, eval loss at epoch 0, eval loss at the end``."""
     rows = []
@@ -263,7 +256,7 @@ def qualitative_check(results: dict) -> tuple[bool | None, str]:
 
 
 def report_summary(out_dir: Path, report) -> None:
-    results = _load(out_dir, "intra")
+    results = read_results(out_dir, "intra")
     report.section("Summary")
     if results is None:
         report.paragraph("No intra-primitive results yet.")
@@ -287,9 +280,7 @@ def report_summary(out_dir: Path, report) -> None:
 
 
 def report_data(out_dir: Path, report) -> None:
-    import json
-
-    meta = json.loads((out_dir / "experiment.json").read_text())
+    meta = read_meta(out_dir)
     path = Path(meta["data"])
     if not path.exists():
         return
@@ -306,7 +297,7 @@ def report_data(out_dir: Path, report) -> None:
 
 
 def report_section(out_dir: Path, report) -> None:
-    results = _load(out_dir, "intra")
+    results = read_results(out_dir, "intra")
     if results is None:
         return
     report.section("Intra-primitive generalisation")
@@ -317,9 +308,7 @@ def report_section(out_dir: Path, report) -> None:
         "Loss: mean squared error of the motor sequence scaled to [-1, 1], plus the vision weight times "
         "the mean squared error of the frames in [0, 1]. Epoch 0 is the loss of the initial codes."
     )
-    import json
-
-    preset = json.loads((out_dir / "experiment.json").read_text())["preset_config"]
+    preset = read_meta(out_dir)["preset_config"]
     if not preset["images"]:
         report.note(
             f"The '{preset['name']}' preset trains on joint angles only (no vision loss), to fit its CPU time "
@@ -349,12 +338,10 @@ def report_latent_figures(out_dir: Path, report) -> None:
 
 
 def report_appendix_a(out_dir: Path, report) -> None:
-    import json
-
     from primspace.data import JointScaler
     from primspace.latent import appendix_a_check
 
-    meta = json.loads((out_dir / "experiment.json").read_text())
+    meta = read_meta(out_dir)
     if not Path(meta["data"]).exists():
         return
     data = MotionDataset.load(meta["data"])

@@ -17,7 +17,7 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.experiments.intra import _focus_runs, intra_key, run_intra
 from primspace.experiments.sweep import GridPoint, run_dir_of
-from primspace.experiments.workspace import ExperimentDir
+from primspace.experiments.workspace import ExperimentDir, read_results
 
 __all__ = ["run_success", "run_success_point", "report_section"]
 
@@ -84,12 +84,9 @@ def success_table(results: dict) -> tuple[list[str], list[list]]:
 
 
 def report_section(out_dir: Path, report) -> None:
-    import json
-
-    path = out_dir / "results" / "success.json"
-    if not path.exists():
+    results = read_results(out_dir, "success")
+    if results is None:
         return
-    results = json.loads(path.read_text())
     report.section("Success rates of generated motions")
     report.paragraph(
         f"Eval-part codes (q = {results['latent_dim']}) decoded to joint trajectories and judged by the simulator "

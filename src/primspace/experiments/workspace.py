@@ -30,9 +30,25 @@ from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
 from primspace.files import atomic_write_json
 
-__all__ = ["ExperimentDir"]
+__all__ = ["ExperimentDir", "results_file", "read_results", "read_meta"]
 
 META_FILE = "experiment.json"
+
+
+def results_file(out_dir: str | Path, name: str) -> Path:
+    """Where experiment ``name`` keeps its numbers: ``OUT/results/<name>.json``."""
+    return Path(out_dir) / "results" / f"{name}.json"
+
+
+def read_results(out_dir: str | Path, name: str) -> Any | None:
+    """The results of experiment ``name`` in ``out_dir``, or None if it has not run."""
+    path = results_file(out_dir, name)
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def read_meta(out_dir: str | Path) -> dict:
+    """``OUT/experiment.json``: preset, settings, data file, timings, failures."""
+    return json.loads((Path(out_dir) / META_FILE).read_text())
 
 
 class ExperimentDir:
@@ -110,7 +126,7 @@ class ExperimentDir:
         atomic_write_json(self.path / META_FILE, self.meta)
 
     def results_file(self, name: str) -> Path:
-        return self.path / "results" / f"{name}.json"
+        return results_file(self.path, name)
 
     def write_results(self, name: str, obj: Any) -> Path:
         path = self.results_file(name)
@@ -119,8 +135,7 @@ class ExperimentDir:
         return path
 
     def read_results(self, name: str) -> Any | None:
-        path = self.results_file(name)
-        return json.loads(path.read_text()) if path.exists() else None
+        return read_results(self.path, name)
 
     def figure(self, name: str) -> Path:
         return self.path / "figures" / f"{name}.png"
