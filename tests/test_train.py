@@ -344,3 +344,10 @@ def test_resume_after_a_kill_continues_the_schedule_exactly(train_set, tmp_path,
     np.testing.assert_array_equal(resumed.latents, straight.latents)
     constant = fit(train_set, tmp_path / "constant", model_config=SMALL, train_config=_tc(epochs=4, batch_size=5), progress=False)
     assert constant.history[-1]["loss"] != straight.history[-1]["loss"]  # the schedule does something
+
+
+def test_train_config_json_roundtrip_and_unknown_field():
+    cfg = TrainConfig(epochs=3, batch_size=5, lr=2e-3)
+    assert TrainConfig.from_dict(json.loads(json.dumps(cfg.to_dict()))) == cfg
+    with pytest.raises(UserError, match="unknown train config field.*: momentum"):
+        TrainConfig.from_dict({**cfg.to_dict(), "momentum": 0.9})

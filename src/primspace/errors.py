@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["UserError", "DataError", "OutputExistsError", "first_line"]
+__all__ = ["UserError", "DataError", "OutputExistsError", "first_line", "config_from_dict"]
 
 
 class UserError(ValueError):
@@ -86,3 +86,17 @@ def first_line(exc: BaseException) -> str:
     """The first line of an exception's message (library errors can run to many lines)."""
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
+
+
+def config_from_dict(cls, d: dict, what: str):
+    """Build the dataclass ``cls`` from a JSON dict, refusing fields it does not know.
+
+    A checkpoint or preset written by another version fails with one line that names
+    the fields (``what``: "model config", "train config") instead of a TypeError.
+    """
+    from dataclasses import fields
+
+    unknown = sorted(set(d) - {f.name for f in fields(cls)})
+    if unknown:
+        raise UserError(f"unknown {what} field(s): {', '.join(unknown)}")
+    return cls(**d)

@@ -33,14 +33,14 @@ Choices the paper leaves open (documented in ``docs/model.md``):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import NamedTuple
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from primspace.errors import UserError
+from primspace.errors import UserError, config_from_dict
 
 __all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput"]
 
@@ -137,11 +137,7 @@ class ModelConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "ModelConfig":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise UserError(f"unknown model config field(s): {', '.join(unknown)}")
-        return cls(**d)
+        return config_from_dict(cls, d, "model config")
 
     @classmethod
     def for_dataset(cls, dataset, *, images: bool = True, **overrides) -> "ModelConfig":

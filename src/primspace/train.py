@@ -43,7 +43,7 @@ import random
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,7 @@ import torch
 import torch.nn.functional as F
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.errors import DataError, OutputExistsError, UserError
+from primspace.errors import DataError, OutputExistsError, UserError, config_from_dict
 from primspace.files import atomic_path, atomic_write_json, atomic_write_text
 from primspace.latent import INIT_METHODS, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
@@ -175,11 +175,7 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrainConfig":
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise UserError(f"unknown train config field(s): {', '.join(unknown)}")
-        return cls(**d)
+        return config_from_dict(cls, d, "train config")
 
 
 def lr_factor(epoch: int, epochs: int, final_fraction: float) -> float:
