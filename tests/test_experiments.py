@@ -177,6 +177,13 @@ def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_pa
     assert f"report: {out / 'report.html'}" in summary
     assert "paper's qualitative result" in summary and ("HOLDS" in summary)
     assert (out / "report.html").stat().st_size > 10_000
+    # the table's cluster accuracy is that of the learned codes; the untrained P m codes get their own line
+    latent = json.loads((out / "results" / "clustering.json").read_text())["latent"]
+    learned = next(r["accuracy"] for r in latent if r["init"] == "projection" and r["codes"] == "learned")
+    initial = next(r["accuracy"] for r in latent if r["init"] == "projection" and r["codes"] != "learned")
+    row = next(line for line in summary.splitlines() if line.startswith("projection"))
+    assert float(row.split()[-2]) == pytest.approx(learned, abs=5e-4)
+    assert f"projection codes before training (initial (P m, untrained)): {initial:.3f}" in summary
 
 
 def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, monkeypatch):

@@ -42,13 +42,17 @@ def _summary(exp, intra, clustering, success, report, seconds) -> str:
         finals[(r["init"], r["latent_dim"])] = _final([h["loss"] for h in r["infer"]])
     dims = sorted({q for _, q in finals})
     inits = [i for i in exp.preset.inits if any((i, q) in finals for q in dims)]
-    acc = {row["init"]: row["accuracy"] for row in clustering.get("latent", [])}
+    latent_rows = clustering.get("latent", [])
+    acc = {row["init"]: row["accuracy"] for row in latent_rows if row["codes"] == "learned"}
+    initial = [row for row in latent_rows if row["codes"] != "learned"]
     succ = {i: r["overall"] for i, r in success.get("generated", {}).items()}
     header = f"{'init':<11}" + "".join(f"{'eval loss q=' + str(q):>16}" for q in dims) + f"{'cluster acc':>13}{'success':>9}"
     lines = [header, "-" * len(header)]
     for init in inits:
         cells = "".join(f"{finals.get((init, q), float('nan')):>16.4g}" for q in dims)
         lines.append(f"{init:<11}{cells}{acc.get(init, float('nan')):>13.3f}{succ.get(init, float('nan')):>9.2f}")
+    for row in initial:
+        lines.append(f"  cluster acc of the {row['init']} codes before training ({row['codes']}): {row['accuracy']:.3f}")
     ok, text = qualitative_check(intra)
     verdict = {True: "HOLDS", False: "DOES NOT HOLD", None: "cannot be checked"}[ok]
     return "\n".join(
