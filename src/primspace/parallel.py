@@ -103,6 +103,29 @@ def _call(fn: Callable, index: int, args: tuple) -> JobOutcome:
         return JobOutcome(index, None, f"{type(exc).__name__}: {exc}", traceback.format_exc())
 
 
+def _init_worker(threads: int, parent_pid: int) -> None:
+    _limit_threads(threads)
+    _exit_with_parent(parent_pid)
+
+
+def _exit_with_parent(parent_pid: int, interval: float = 1.0) -> None:
+    """Exit this worker when the driver that started it is gone (killed with SIGKILL, say).
+
+    A pool worker otherwise finishes its job and then waits forever on the queue of a
+    dead driver, holding cores and memory. Its unfinished run resumes from its
+    checkpoint when the driver is started again.
+    """
+    import threading
+    import time
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(interval)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="primspace-parent-watch", daemon=True).start()
+
+
 def _limit_threads(n: int) -> None:
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = str(n)
@@ -119,7 +142,7 @@ def _run_pool(fn: Callable, items: list, workers: int, threads: int) -> Iterator
     # can deadlock; workers import what they need.
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(
-        max_workers=min(workers, len(items)), mp_context=ctx, initializer=_limit_threads, initargs=(threads,)
+        max_workers=min(workers, len(items)), mp_context=ctx, initializer=_init_worker, initargs=(threads, os.getpid())
     ) as pool:
         pending = {pool.submit(_call, fn, i, args): i for i, args in enumerate(items)}
         try:
