@@ -197,6 +197,7 @@ def plot_clustering(
         Exponent of the colour scale (affinities span orders of magnitude).
     """
     from matplotlib.colors import PowerNorm
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
     from scipy.optimize import linear_sum_assignment
 
     w = np.asarray(affinity, dtype=np.float64)
@@ -223,9 +224,18 @@ def plot_clustering(
         shown = np.array([mapping[p] for p in pred])
 
     fig, (ax_w, ax_l) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [1, 1.3]})
-    vmax = float(w.max()) if w.size and w.max() > 0 else 1.0
-    image = ax_w.imshow(w, cmap="magma", norm=PowerNorm(gamma, vmin=0.0, vmax=vmax), interpolation="nearest")
-    fig.colorbar(image, ax=ax_w, fraction=0.046, pad=0.04, label="affinity")
+    # the colour scale ends at a high quantile of the off-diagonal entries: the diagonal
+    # (a point's affinity with itself) and a few outliers would otherwise leave all dark
+    off = w[~np.eye(m, dtype=bool)] if m > 1 else w.ravel()
+    vmax = float(np.quantile(off, 0.995)) if off.size else 0.0
+    if vmax <= 0:
+        vmax = float(w.max()) if w.size and w.max() > 0 else 1.0
+    image = ax_w.imshow(w, cmap="magma", norm=PowerNorm(gamma, vmin=0.0, vmax=vmax, clip=True), interpolation="nearest")
+    colorbar = fig.colorbar(image, ax=ax_w, fraction=0.046, pad=0.04, label="affinity (clipped at the 99.5th percentile)")
+    colorbar.locator = MaxNLocator(4)
+    colorbar.formatter = ScalarFormatter(useMathText=True)
+    colorbar.formatter.set_powerlimits((-2, 3))
+    colorbar.update_ticks()
     ax_w.set_title("affinity W (ordered by true label)" if true is not None else "affinity W (ordered by cluster)", fontsize=9)
     ax_w.set_xlabel("sample")
     ax_w.set_ylabel("sample")
