@@ -147,3 +147,18 @@ def test_loss_curve_figure(tmp_path):
     assert ax.get_lines()[1].get_color() == "tab:green"
     save_figure(fig, tmp_path / "curves.png")
     assert (tmp_path / "curves.png").stat().st_size > 0
+
+
+def test_loss_band_stays_positive_on_a_log_axis():
+    from primspace.plots import plot_loss_curves
+
+    def history(values):
+        return [{"epoch": e, "loss": v} for e, v in enumerate(values)]
+
+    # mean - std < 0 at epoch 1 (one fold spikes): the band must stop at the lowest fold, not cross zero
+    runs = [history([1.0, 1e-4, 1e-4]), history([1.0, 1e-4, 1e-4]), history([1.0, 1.0, 1e-4])]
+    fig = plot_loss_curves({"projection": runs}, log_scale=True)
+    band = fig.axes[0].collections[0].get_paths()[0].vertices
+    assert band[:, 1].min() == pytest.approx(1e-4)
+    fig = plot_loss_curves({"projection": runs}, log_scale=False)
+    assert fig.axes[0].collections[0].get_paths()[0].vertices[:, 1].min() < 0  # linear axis: plain mean - std

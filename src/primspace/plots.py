@@ -340,7 +340,7 @@ def plot_loss_curves(
     histories : mapping of label -> list of dict, or of label -> list of lists
         Each run's ``metrics.jsonl`` (:attr:`primspace.train.TrainedRun.history`). A list
         of histories under one label is drawn as mean ± std over them (paper Fig.
-        ``loss_inter``).
+        ``loss_inter``); on a log axis the band's lower edge stops at the lowest run.
     key : {"loss", "motor", "vision"}
     colors : mapping of label -> colour, optional
         Default: :data:`INIT_COLORS` when a label starts with an init name.
@@ -370,7 +370,10 @@ def plot_loss_curves(
         ax.plot(epochs, mean, color=color, lw=1.5, label=str(label))
         if len(curves) > 1:
             std = values.std(axis=0)
-            ax.fill_between(epochs, mean - std, mean + std, color=color, alpha=0.2, lw=0)
+            lower = mean - std
+            if log_scale:  # a band below zero has no place on a log axis: stop it at the lowest run
+                lower = np.maximum(lower, values.min(axis=0))
+            ax.fill_between(epochs, lower, mean + std, color=color, alpha=0.2, lw=0)
     if log_scale:
         ax.set_yscale("log")
     ax.set_xlabel("epoch")
