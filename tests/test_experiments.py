@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_user_error
+from primspace.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.clustering import run_clustering
 from primspace.experiments.inter import run_inter
@@ -200,3 +201,10 @@ def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, mo
     assert not (out / "report.html").exists()
     again = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero", "--epochs", "3,1")
     assert_user_error(again, "made with other settings", "fit_epochs=2")
+
+
+def test_preset_json_roundtrip_and_unknown_field():
+    again = ExperimentPreset.from_dict(json.loads(json.dumps(TINY.to_dict())))
+    assert again == TINY
+    with pytest.raises(UserError, match="unknown experiment preset field.*: warmup"):
+        ExperimentPreset.from_dict({**TINY.to_dict(), "warmup": 3})

@@ -23,7 +23,11 @@ from primspace.experiments.intra import _focus_runs, intra_key, load_codes, run_
 from primspace.experiments.sweep import run_dir_of
 from primspace.experiments.workspace import ExperimentDir, read_results
 
-__all__ = ["run_clustering", "latent_table", "report_section"]
+__all__ = ["run_clustering", "latent_table", "report_section", "LEARNED_CODES", "INITIAL_CODES"]
+
+# the "codes" of a latent clustering row: codes after training, or the projection before it
+LEARNED_CODES = "learned"
+INITIAL_CODES = "initial (P m, untrained)"
 
 _R2_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.999, 0.9999)
 
@@ -90,7 +94,7 @@ def run_clustering(exp: ExperimentDir) -> dict:
             z, _ = load_codes(exp, init, q, seed)
             results["latent_sweep"][init] = _latent_sweep(z.astype(np.float64), data.labels)
             row, est = _cluster(z.astype(np.float64), data.labels, preset.cluster_r2)
-            results["latent"].append({"init": init, "codes": "learned"} | row)
+            results["latent"].append({"init": init, "codes": LEARNED_CODES} | row)
             _figure(exp, f"latent_clustering_{init}", est, data.labels, data.label_names,
                     f"learned codes, {init} init, q = {q}: τ = {row['tau']:.3g} for R² = {row['r2']:.4f}")
         if "projection" in inits:  # the projection before any training: P m for every sample
@@ -99,7 +103,7 @@ def run_clustering(exp: ExperimentDir) -> dict:
             z0 = np.empty((len(data), q))
             z0[fitted.indices], z0[inferred.indices] = fitted.initial_latents, inferred.initial_latents
             row, est = _cluster(z0, data.labels, preset.cluster_r2)
-            results["latent"].append({"init": "projection", "codes": "initial (P m, untrained)"} | row)
+            results["latent"].append({"init": "projection", "codes": INITIAL_CODES} | row)
             results["latent_sweep"]["projection, initial P m"] = _latent_sweep(z0, data.labels)
             _figure(exp, "latent_clustering_projection_initial", est, data.labels, data.label_names,
                     f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}")
@@ -146,7 +150,7 @@ def report_section(out_dir: Path, report) -> None:
                   "before training). With few points per primitive in q dimensions, high targets keep every component "
                   "and the affinity degenerates towards the identity.")
     for r in results["latent"]:
-        name = "latent_clustering_projection_initial" if r["codes"].startswith("initial") else f"latent_clustering_{r['init']}"
+        name = "latent_clustering_projection_initial" if r["codes"] == INITIAL_CODES else f"latent_clustering_{r['init']}"
         report.figure(figures / f"{name}.png", f"{r['init']} ({r['codes']}): affinity ordered by primitive, and the predicted cluster of each sample.")
     for name in results["trajectory"]:
         report.figure(figures / f"trajectory_sweep_{name}.png", f"τ sweep on raw trajectories ({name}): R², rank and scores per τ.")

@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from primspace.experiments.clustering import run_clustering
+from primspace.experiments.clustering import LEARNED_CODES, run_clustering
 from primspace.experiments.intra import _final, qualitative_check, run_intra
 from primspace.experiments.presets import PRESETS
 from primspace.experiments.success import run_success
@@ -43,8 +43,8 @@ def _summary(exp, intra, clustering, success, report, seconds) -> str:
     dims = sorted({q for _, q in finals})
     inits = [i for i in exp.preset.inits if any((i, q) in finals for q in dims)]
     latent_rows = clustering.get("latent", [])
-    acc = {row["init"]: row["accuracy"] for row in latent_rows if row["codes"] == "learned"}
-    initial = [row for row in latent_rows if row["codes"] != "learned"]
+    acc = {row["init"]: row["accuracy"] for row in latent_rows if row["codes"] == LEARNED_CODES}
+    initial = [row for row in latent_rows if row["codes"] != LEARNED_CODES]
     succ = {i: r["overall"] for i, r in success.get("generated", {}).items()}
     header = f"{'init':<11}" + "".join(f"{'eval loss q=' + str(q):>16}" for q in dims) + f"{'cluster acc':>13}{'success':>9}"
     lines = [header, "-" * len(header)]

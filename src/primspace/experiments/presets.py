@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
 
-from primspace.errors import UserError
+from primspace.errors import UserError, config_from_dict
 
 __all__ = ["ExperimentPreset", "PRESETS", "resolve_preset"]
 
@@ -105,7 +105,7 @@ class ExperimentPreset:
     @classmethod
     def from_dict(cls, d: dict) -> "ExperimentPreset":
         tuples = {"inits", "latent_dims", "seeds", "layer_sizes", "taus", "inter_inits", "inter_epochs"}
-        return cls(**{k: tuple(v) if k in tuples else v for k, v in d.items()})
+        return config_from_dict(cls, {k: tuple(v) if k in tuples else v for k, v in d.items()}, "experiment preset")
 
     def with_overrides(self, **changes) -> "ExperimentPreset":
         """A copy with some fields changed (``None`` values are ignored), checked.
