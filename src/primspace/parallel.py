@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
+import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -115,9 +117,6 @@ def _exit_with_parent(parent_pid: int, interval: float = 1.0) -> None:
     dead driver, holding cores and memory. Its unfinished run resumes from its
     checkpoint when the driver is started again.
     """
-    import threading
-    import time
-
     def watch() -> None:
         while os.getppid() == parent_pid:
             time.sleep(interval)
