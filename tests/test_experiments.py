@@ -153,6 +153,46 @@ def test_inter_primitive_folds(tiny_data, tmp_path):
     assert exp.figure("inter_loss").exists()
 
 
+def _scaled_targets(run_dir, data):
+    from primspace.train import load_run
+
+    run = load_run(run_dir)
+    return run.scaler.transform(data.motor[run.indices])
+
+
+def test_every_fold_scales_its_targets_into_the_unit_range(tiny_data, tmp_path):
+    """The paper scales each joint "over all motions": a phase-2 primitive whose joints did
+    not move in phase 1 (grasp's fingers) must not keep its targets in physical units."""
+    from primspace.data import MotionDataset
+
+    data = MotionDataset.load(tiny_data)
+    exp = ExperimentDir(tmp_path / "inter", TINY, data=tiny_data, workers=1, progress=False)
+    results = run_inter(exp)
+    grasp = data.label_names.index("grasp")
+    fingers = [j for j, name in enumerate(data.joint_names) if "finger" in name]
+    assert fingers, data.joint_names
+    for r in results["runs"]:
+        for phase in ("phase1", "phase2"):
+            y = _scaled_targets(exp.path / "runs" / r["key"] / phase, data)
+            assert np.abs(y).max() <= 1 + 1e-6, (r["key"], phase, np.abs(y).max())
+        if r["fold"] == grasp:  # the held-out grasp's fingers span the whole range
+            y = _scaled_targets(exp.path / "runs" / r["key"] / "phase2", data)
+            assert np.ptp(y[..., fingers]) > 1.0
+
+
+def test_intra_fit_and_infer_targets_lie_in_the_unit_range(finished, tiny_data):
+    from primspace.data import MotionDataset
+
+    exp, intra, _, _ = finished
+    data = MotionDataset.load(tiny_data)
+    for r in intra["runs"]:
+        fit_y = _scaled_targets(exp.path / "runs" / r["key"] / "fit", data)
+        infer_y = _scaled_targets(exp.path / "runs" / r["key"] / "infer", data)
+        assert np.abs(fit_y).max() <= 1 + 1e-6 and np.abs(infer_y).max() <= 1 + 1e-6
+        both = np.concatenate([fit_y, infer_y])  # the extremes are reached over all motions
+        assert np.allclose(both.reshape(-1, both.shape[-1]).max(0)[np.ptp(data.motor, axis=(0, 1)) > 0], 1.0)
+
+
 @pytest.mark.ray
 def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path):
     from test_parallel import _ray_or_skip

@@ -12,9 +12,17 @@ for new samples ("evaluation"). Here the loss is a weighted sum of per-element m
 
 with ``m`` the motor sequence scaled per joint to [-1, 1] and ``s`` the frames in [0, 1]
 (``uint8 / 255``). Means rather than the paper's sum, so that motor and vision weigh
-equally at ``w_m = w_v = 1`` (a frame has ~2000x more values than a joint vector) and
-numbers do not depend on the batch size; with Adam the overall scale does not change
-the optimisation. ``fit`` and ``infer`` use the same definition, so their curves compare.
+equally at ``w_m = w_v = 1`` (a 48x64x3 frame has 1024 times as many values as a 9-joint
+vector) and numbers do not depend on the batch size. ``fit`` and ``infer`` use the same
+definition, so their curves compare.
+
+Each code's gradient is that of its own sample's loss, whatever the batch: the batch
+mean divides it by the batch size ``B``, so the table steps with ``B`` times the code
+gradient of the batch loss. With θ frozen (``infer``) every code therefore receives
+exactly the same updates for any batch size (up to floating-point summation order): a
+large inference batch is only faster. (Before 0.2 the codes stepped on the batch-mean
+gradient, so a code that fell in the short last batch of an epoch got a differently
+scaled gradient; at 300 samples and batch 256 the final codes differed by 19-24%.)
 
 A run directory holds::
 
@@ -291,6 +299,7 @@ def fit(
     weights_from: str | os.PathLike | None = None,
     initial_latents: np.ndarray | None = None,
     images: bool | None = None,
+    scaler: JointScaler | None = None,
     progress: bool | None = None,
 ) -> TrainedRun:
     """Train the decoder's weights θ and one code per sample jointly (the paper's training).
@@ -325,6 +334,12 @@ def fit(
     images : bool, optional
         Give the model an image head and train it on the data's images. Default: when
         the data has images. (A ``model_config.image_size`` must match the data's.)
+    scaler : JointScaler, optional
+        A fitted joint scaler to use instead of one fitted on the training samples. The
+        paper scales each joint to [-1, 1] "over all motions": an experiment that fits
+        on a part of its data passes a scaler fitted on every motion it uses, so the
+        targets of every part lie in [-1, 1]. Not with ``weights_from`` (the parent's
+        scaler is used). Recorded in config.json.
     progress : bool, optional
         Progress bar (default: when stderr is a terminal); False is silent.
 
@@ -346,6 +361,13 @@ def fit(
         raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(INIT_METHODS)}")
     data, idx = _select(dataset, indices)
     parent = load_run(weights_from) if weights_from is not None else None
+    if scaler is not None:
+        if parent is not None:
+            raise UserError("give either weights_from (its scaler is used) or scaler, not both")
+        if not isinstance(scaler, JointScaler) or scaler.data_min_ is None:
+            raise UserError("scaler must be a fitted primspace.data.JointScaler")
+        if scaler.n_joints != data.n_joints:
+            raise UserError(f"scaler was fitted on {scaler.n_joints} joints, the data has {data.n_joints}")
     if parent is not None:
         mc = parent.model_config
         if model_config is not None:
@@ -374,6 +396,7 @@ def fit(
         "fit", init, mc, tc, data, idx, use_images,
         parent=None if parent is None else str(parent.run_dir.resolve()),
     )
+    config["scaler"] = None if scaler is None else scaler.to_dict()
     ckpt = _prepare_run_dir(out_dir, config, resume, overwrite)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
@@ -390,7 +413,8 @@ def fit(
             model = _new_model(mc, seeds["model"])
             model.load_state_dict(parent.model.state_dict())
         else:
-            scaler = JointScaler().fit(data.motor)  # float64 extremes: restores bit-identically
+            if scaler is None:
+                scaler = JointScaler().fit(data.motor)  # float64 extremes: restores bit-identically
             model = _new_model(mc, seeds["model"])
         scaled = scaler.transform(data.motor)
         if parent is not None and init == parent.init:
@@ -799,7 +823,9 @@ class _Session:
             loss.backward()
             if train_theta:
                 self.theta_opt.step()
-            table.step(idx, z.grad)
+            # the batch mean scaled z.grad by 1/B: undo it, so each code steps on the
+            # gradient of its own sample's loss whatever the batch (module docstring)
+            table.step(idx, z.grad.mul_(idx.numel()))
             sums += parts.double() * idx.numel()
         return sums
 
@@ -936,7 +962,7 @@ def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
     def fail(what: str, a, b) -> None:
         raise UserError(f"{out_dir}: cannot resume: {what} differs (saved {a}, given {b})")
 
-    for key in ("kind", "init", "parent"):
+    for key in ("kind", "init", "parent", "scaler"):
         if saved.get(key) != given.get(key):
             fail(key, saved.get(key), given.get(key))
     for key, value in given["model"].items():

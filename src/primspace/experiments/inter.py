@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.experiments.intra import _configs, _curves, load_run_data
+from primspace.experiments.intra import _configs, _curves, experiment_scaler, load_run_data
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir, read_results
@@ -40,7 +40,7 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     new = np.flatnonzero(data.labels == fold)
     model_config, tc1 = _configs(p, latent_dim, seed, p.inter_epochs[0])
     phase1 = fit(data, run_dir / "phase1", model_config=model_config, train_config=tc1, init=init,
-                 indices=first, resume=True, images=use_images, progress=False)
+                 indices=first, resume=True, images=use_images, scaler=experiment_scaler(data), progress=False)
     replay = replay_indices(first, p.inter_replay, seed, fold)
     second = np.concatenate([new, replay])
     initial = np.full((len(second), latent_dim), np.nan, dtype=np.float32)
