@@ -224,3 +224,110 @@ def test_summary_counts_labels_and_ranges():
     assert s["label_counts"] == {"a": 2, "b": 0, "<unknown>": 1}
     assert s["joint_ranges"]["j0"] == [0.0, 22.0]
     assert s["n_samples"] == 3 and s["length"] == 4 and s["image_shape"] is None
+
+
+# ------------------------------------------------------- values too large for float32
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.longdouble])
+def test_file_motor_too_large_for_float32_is_named_not_called_inf(tmp_path, dtype):
+    motor = np.zeros((4, 3, 2), dtype)
+    motor[2, 1, 0] = 1e39
+    with pytest.raises(DataError) as info:
+        MotionDataset.load(_write_raw(tmp_path / "big.h5", motor=motor))
+    assert str(info.value) == (
+        f"{tmp_path / 'big.h5'}, field 'motor', sample 2: value 1e+39 exceeds the float32 range "
+        "(magnitude at most 3.40282e+38) (step 1, joint 0)"
+    )
+    params = np.zeros((4, 2))
+    params[3, 1] = -1e300
+    with pytest.raises(DataError, match=r"p\.h5, field 'params', sample 3: value -1e\+300 exceeds the float32 range .*\(column 1\)"):
+        MotionDataset.load(_write_raw(tmp_path / "p.h5", motor=np.zeros((4, 3, 2), np.float32), params=params))
+
+
+def test_constructor_and_writer_refuse_values_too_large_for_float32(tmp_path):
+    motor = np.zeros((2, 3, 1))
+    motor[1, 2, 0] = 3.5e38
+    with pytest.raises(DataError, match=r"field 'motor', sample 1: value 3\.5e\+38 exceeds the float32 range"):
+        MotionDataset(motor)
+    with pytest.raises(DataError, match=r"w\.h5, field 'motor', sample 1: value 3\.5e\+38 exceeds"):
+        with DatasetWriter(tmp_path / "w.h5", n_samples=2, length=3, joint_names=["a"]) as w:
+            w.write(0, motor=motor)
+    assert list(tmp_path.iterdir()) == []
+    edge = np.full((1, 3, 1), float(np.finfo(np.float32).max))  # the largest float32 itself is fine
+    assert np.isfinite(MotionDataset(edge).motor).all()
+
+
+def test_labels_that_do_not_fit_int32_are_refused_not_wrapped(tmp_path):
+    # 2**32 would wrap to label 0, a valid label: silently wrong without the check
+    with pytest.raises(DataError, match=r"lab\.h5, field 'labels', sample 1: label 4294967296 is not a primitive index"):
+        MotionDataset.load(_write_raw(tmp_path / "lab.h5", motor=np.zeros((2, 3, 1), np.float32),
+                                      labels=np.array([0, 2**32], np.int64)))
+
+
+# ------------------------------------------------------------ corrupted image chunks
+
+
+def _corrupt_chunk(path, sample):
+    """Overwrite the stored (compressed) chunk of one sample's images with garbage."""
+    with h5py.File(path, "r") as f:
+        dset = f["images"]
+        info = dset.id.get_chunk_info_by_coord((sample, 0, 0, 0, 0))
+        assert info.chunk_offset == (sample, 0, 0, 0, 0)
+        offset, size = info.byte_offset, info.size
+    with open(path, "r+b") as fh:
+        fh.seek(offset)
+        fh.write(bytes(range(256)) * (size // 256) + b"\xff" * (size % 256))
+
+
+def test_corrupted_image_chunk_is_a_data_error_on_every_read_path(tmp_path):
+    ds = make_dataset(n=6)
+    path = ds.save(tmp_path / "d.h5")
+    _corrupt_chunk(path, 3)
+    back = MotionDataset.load(path)  # lazy: loading reads no image chunk
+    where = rf"d\.h5, field 'images', sample 3: cannot be read, its stored data is corrupted or truncated"
+    with pytest.raises(DataError, match=where):
+        back.load_images()
+    with pytest.raises(DataError, match=where):
+        back.images[3]
+    with pytest.raises(DataError, match=where):
+        back.images[1:5]
+    with pytest.raises(DataError, match=where):
+        back.images[[5, 3, 0]]
+    with pytest.raises(DataError, match=where):  # a view reports the file's sample index
+        back.subset([4, 3]).images[1]
+    with pytest.raises(DataError, match=where):
+        list(back.images.iter_blocks(2))
+    # the other samples still read, lazily
+    for i in (0, 1, 2, 4, 5):
+        np.testing.assert_array_equal(back.images[i], ds.images[i])
+    np.testing.assert_array_equal(back.images[4:6], ds.images[4:6])
+    np.testing.assert_array_equal(back.subset([5, 0]).images[:], ds.images[[5, 0]])
+    # copying it, by save or by merging, refuses it and leaves nothing behind
+    with pytest.raises(DataError, match=where):
+        back.save(tmp_path / "copy.h5")
+    for level in (4, 1):  # raw chunk copy (same compression) and decode/re-encode
+        with pytest.raises(DataError, match=where):
+            with DatasetWriter(tmp_path / "merged.h5", n_samples=6, length=6, joint_names=ds.joint_names,
+                               image_size=(4, 5), label_names=["a", "b"], param_names=["x", "y"], dt=0.5,
+                               compression_level=level) as w:
+                w.copy_from(0, path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.h5"]
+
+
+@pytest.mark.parametrize(
+    "attrs, match",
+    [
+        ({"dt": "fast"}, r"field 'dt': must be one number"),
+        ({"dt": [0.1, 0.2]}, r"field 'dt': must be one number, got 2 value"),
+        ({"schema_version": "one"}, r"field 'schema_version': must be one number"),
+        ({"schema_version": 0.5}, r"field 'schema_version': must be a positive integer, got 0\.5"),
+        ({"schema_version": np.inf}, r"field 'schema_version': must be a positive integer, got inf"),
+    ],
+)
+def test_file_attributes_that_are_not_one_number_name_the_attribute(tmp_path, attrs, match):
+    path = _write_raw(tmp_path / "a.h5", motor=np.zeros((2, 3, 1), np.float32))
+    with h5py.File(path, "a") as f:
+        f.attrs.update(attrs)
+    with pytest.raises(DataError, match=r"a\.h5, " + match):
+        MotionDataset.load(path)

@@ -126,3 +126,84 @@ def test_lasa_shapes_labels_and_velocities():
     np.testing.assert_allclose(ds.motor[:, -1, :2], 0.0, atol=1e-3)
     with pytest.raises(UserError, match="unknown LASA shape"):
         import_lasa(length=50, shapes=["Circle"])
+
+
+# ----------------------------------------------------------- values too large, time column
+
+
+@pytest.mark.parametrize(
+    "arrays, match",
+    [
+        # a float64 list of sequences: named as too large, at its step and joint, before resampling
+        (dict(arr_0=np.zeros((5, 2)), arr_1=np.array([[0.0, 0.0], [0.0, 1e39], [0.0, 0.0]])),
+         r"field 'motor', sample 1: value 1e\+39 exceeds the float32 range \(magnitude at most 3\.40282e\+38\) \(step 1, joint 1\)"),
+        (dict(motor=np.concatenate([np.zeros((3, 4, 2)), np.full((1, 4, 2), -4e38)])),
+         r"field 'motor', sample 3: value -4e\+38 exceeds the float32 range .*\(step 0, joint 0\)"),
+        (dict(motor=np.r_[np.zeros((4, 2)), [[5e40, 0.0]]], lengths=[2, 3]), r"field 'motor', sample 1: value 5e\+40 exceeds"),
+        (dict(arr_0=np.array([[0.0], [np.longdouble("1e400")]], dtype=np.longdouble)), r"field 'motor', sample 0: value 1e\+400 exceeds the float32 range"),
+        (dict(arr_0=np.zeros((5, 2)), arr_1=np.zeros((5, 2)), params=np.array([[1.0, 0.0], [0.0, 1e39]])),
+         r"field 'params', sample 1: value 1e\+39 exceeds the float32 range .*\(column 1\)"),
+        (dict(arr_0=np.zeros((5, 2)), labels=np.array([2**32], dtype=np.int64)), r"field 'labels', sample 0: label 4294967296 is not a primitive index"),
+        (dict(arr_0=np.zeros((5, 2)), dt=np.array("fast")), r"field 'dt': must be one positive number"),
+        (dict(arr_0=np.zeros((5, 2)), dt=np.array([0.1, 0.2])), r"field 'dt': must be one positive number, got 2 value"),
+    ],
+)
+def test_npz_values_too_large_for_float32_are_named_not_called_inf(tmp_path, arrays, match):
+    path = tmp_path / "big.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(DataError, match=r"big\.npz, " + match) as info:
+        import_npz(path, 10)
+    assert "NaN or inf" not in str(info.value)
+
+
+def test_npz_int64_values_always_fit_float32(tmp_path):
+    # |int64| < 9.3e18, far below float32's 3.4e38: extreme integers import (rounded), finite
+    motor = np.array([[[np.iinfo(np.int64).max], [np.iinfo(np.int64).min]]] * 2, dtype=np.int64)
+    np.savez(tmp_path / "i.npz", motor=motor)
+    ds = import_npz(tmp_path / "i.npz", 2)
+    assert ds.motor.dtype == np.float32 and np.isfinite(ds.motor).all()
+    np.testing.assert_allclose(ds.motor[0, :, 0], [9.223372e18, -9.223372e18], rtol=1e-6)
+
+
+def test_csv_value_too_large_names_file_line_and_column(tmp_path):
+    _write_csv(tmp_path / "a.csv", ["time", "q1", "q2"], [[0, 1, 2], [1, 3, 4]])
+    (tmp_path / "b.csv").write_text("time,q1,q2\n0,1,2\n\n1,3,1e39\n")  # a blank line: line numbers stay the file's
+    with pytest.raises(DataError) as info:
+        import_csv_folder(tmp_path, 5)
+    assert str(info.value) == (
+        f"{tmp_path / 'b.csv'}, field 'motor', sample 1: line 4, column 'q2': "
+        "value 1e+39 exceeds the float32 range (magnitude at most 3.40282e+38)"
+    )
+    (tmp_path / "b.csv").write_text("time,q1,q2\n0,1,2\n1,-1e400,4\n")  # overflows even float64
+    with pytest.raises(DataError, match=r"b\.csv, field 'motor', sample 1: line 3, column 'q1': value -1e400 exceeds the float32 range"):
+        import_csv_folder(tmp_path, 5)
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("time,q1\n0,1\n0.5,2\n0.5,3\n", r"field 'time', sample 0: line 4: time 0\.5 does not come after 0\.5 on line 3 \(time stamps must strictly increase\)"),
+        ("t,q1\n0,1\n2,2\n1,3\n", r"field 't', sample 0: line 4: time 1 does not come after 2 on line 3"),
+        ("Time,q1\n0,1\nnan,2\n1,3\n", r"field 'Time', sample 0: line 3: time stamp 'nan' is not a finite number"),
+        ("time,q1\n0,1\n1e400,2\n", r"field 'time', sample 0: line 3, column 'time': value 1e400 exceeds the float64 range"),
+        ("t,time,q1\n0,0,1\n1,1,2\n", r"field 'header', sample 0: has 2 time columns \(t, time\); keep one"),
+        ("q1,q1\n0,1\n1,2\n", r"field 'header', sample 0: column 'q1' appears twice"),
+    ],
+)
+def test_csv_time_column_must_be_finite_and_strictly_increasing(tmp_path, text, match):
+    (tmp_path / "demo.csv").write_text(text)
+    with pytest.raises(DataError, match=r"demo\.csv, " + match):
+        import_csv_folder(tmp_path, 5)
+
+
+def test_csv_time_column_increasing_is_accepted_and_sets_dt(tmp_path):
+    (tmp_path / "demo.csv").write_text("time,q1\n-1,1\n0,2\n\n3,3\n")
+    ds = import_csv_folder(tmp_path, 5)
+    assert ds.dt == pytest.approx(4 / 4)
+
+
+def test_resample_names_a_long_double_value_float64_cannot_hold():
+    seq = np.zeros((4, 2), dtype=np.longdouble)
+    seq[2, 1] = np.longdouble("1e400")
+    with pytest.raises(DataError, match=r"field 'motor', sample 1: value 1e\+400 exceeds the float64 range \(step 2, joint 1\)"):
+        resample([np.zeros((3, 2)), seq], 5)

@@ -19,7 +19,12 @@ gigabyte image set is never loaded twice, and :meth:`MotionDataset.subset` selec
 train/eval samples without copying images.
 
 Every check names the file, the field and the sample index, e.g.
-``demo.h5, field 'motor', sample 12: contains NaN or inf``.
+``demo.h5, field 'motor', sample 12: contains NaN or inf``. Values too large for
+float32 are refused before the cast (named as too large, not as the inf the cast would
+make), and an image chunk that cannot be decoded (a corrupted or truncated file) is a
+:class:`~primspace.errors.DataError` naming the file, field ``images`` and the sample,
+on every read path: :class:`LazyImages` indexing, :meth:`MotionDataset.load_images`,
+:meth:`MotionDataset.save` and :meth:`DatasetWriter.copy_from`.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ __all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
 SCHEMA_VERSION = 1
 
 _IMAGE_WRITE_BLOCK = 32  # samples per write when copying images into a file
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 # ----------------------------------------------------------------------------- images
@@ -59,6 +65,13 @@ class LazyImages:
     Indexing on the first axis returns NumPy arrays: ``view[i]`` is ``(T, H, W, 3)``,
     ``view[a:b]`` and ``view[[i, j]]`` are ``(k, T, H, W, 3)``. ``np.asarray(view)``
     reads everything.
+
+    Raises
+    ------
+    DataError
+        When the file cannot be opened or a sample's stored chunk cannot be decoded
+        (corrupted or truncated): the message names the file, the field and the sample
+        index in the file (for a :meth:`subset` view, the file's index, not the view's).
     """
 
     def __init__(
@@ -78,7 +91,7 @@ class LazyImages:
         else:
             self._array = None
             self._path = os.fspath(source)
-            base_shape = tuple(self._h5()[dataset_name].shape)
+            base_shape = tuple(self._dataset().shape)
         self._base_len = base_shape[0]
         self._frame_shape = tuple(base_shape[1:])
         self._index = None if index is None else np.asarray(index, dtype=np.int64)
@@ -124,6 +137,14 @@ class LazyImages:
             self._handle = h5py.File(self._path, "r")
             self._handle_pid = os.getpid()
         return self._handle
+
+    def _dataset(self) -> h5py.Dataset:
+        try:
+            return self._h5()[self._dataset_name]
+        except (OSError, KeyError) as exc:
+            raise DataError(
+                f"cannot be opened ({first_line(exc)})", path=self._path, field=self._dataset_name
+            ) from None
 
     def close(self) -> None:
         """Close the HDF5 handle (it reopens on the next read)."""
@@ -172,12 +193,12 @@ class LazyImages:
             return np.empty((0,) + self._frame_shape, dtype=np.uint8)
         if self._array is not None:
             return np.asarray(self._array[base], dtype=np.uint8)
-        dset = self._h5()[self._dataset_name]
+        dset = self._dataset()
         lo, hi = int(base.min()), int(base.max())
         if hi - lo + 1 == base.size and np.all(np.diff(base) == 1):
-            return dset[lo : hi + 1]  # one contiguous run: a plain slice read
+            return _read_samples(dset, slice(lo, hi + 1), self._path)  # one contiguous run
         uniq, inverse = np.unique(base, return_inverse=True)
-        return dset[uniq][inverse]  # h5py needs increasing indices
+        return _read_samples(dset, uniq, self._path)[inverse]  # h5py needs increasing indices
 
     def __getitem__(self, key):
         rest = ()
@@ -258,6 +279,7 @@ class MotionDataset:
             labels = np.asarray(self.labels)
             if labels.size and labels.dtype.kind not in "iu":
                 raise DataError(f"labels must be integers, got {labels.dtype}", path=self.path, field="labels")
+            _check_int32_labels(labels, self.path)
             self.labels = labels.astype(np.int32)
         if self.params is not None:
             self.params = _as_float_array(self.params, "params", self.path)
@@ -465,7 +487,9 @@ class MotionDataset:
             raise DataError(f"not a readable HDF5 file ({first_line(exc)})", path=path) from None
         try:
             with f:
-                version = f.attrs.get("schema_version")
+                version = _attr_number(f, "schema_version", None, path)
+                if version is not None and not (np.isfinite(version) and version == int(version) and version >= 1):
+                    raise DataError(f"must be a positive integer, got {version:g}", path=path, field="schema_version")
                 if version is not None and int(version) > SCHEMA_VERSION:
                     raise DataError(
                         f"schema version {int(version)} is newer than this primspace reads ({SCHEMA_VERSION})",
@@ -489,7 +513,7 @@ class MotionDataset:
                     "joint_names": _str_list(f.attrs.get("joint_names")),
                     "label_names": _str_list(f.attrs.get("label_names")),
                     "param_names": _str_list(f.attrs.get("param_names")),
-                    "dt": float(f.attrs.get("dt", 1.0)),
+                    "dt": _attr_number(f, "dt", 1.0, path),
                     "source": _as_str(f.attrs.get("source", "")),
                 }
         except DataError:
@@ -675,8 +699,9 @@ class DatasetWriter:
         validated as :meth:`MotionDataset.load` does; its names, T, J, image size and
         fields must match this file's. Motor, labels and params are copied as arrays.
         Image chunks are copied as stored (``read_direct_chunk`` /
-        ``write_direct_chunk``: no decompression, no recompression) when the source's
-        chunk shape and filter pipeline equal this file's; otherwise the images are
+        ``write_direct_chunk``: no recompression) when the source's chunk shape and
+        filter pipeline equal this file's, each decoded once on the way to check that it
+        is intact (a corrupted chunk is refused, never copied); otherwise the images are
         decoded and re-encoded block by block.
 
         Returns
@@ -688,7 +713,8 @@ class DatasetWriter:
         ------
         DataError
             If the source is not a valid data set file or does not match this file
-            (naming the source file and the field), or does not fit at ``start``.
+            (naming the source file and the field), or does not fit at ``start``, or
+            one of its image chunks cannot be decoded (naming the source sample).
         """
         if self._file is None:
             raise RuntimeError("DatasetWriter.copy_from outside its with block")
@@ -773,12 +799,14 @@ class DatasetWriter:
                 if source.chunks == target.chunks and _filters(source) == _filters(target):
                     rest = (0,) * (source.ndim - 1)
                     for i in range(sl.stop - sl.start):
+                        # decode once (no recompression): a corrupted chunk is refused, not copied
+                        _read_samples(source, slice(i, i + 1), path)
                         mask, chunk = source.id.read_direct_chunk((i, *rest))
                         target.id.write_direct_chunk((sl.start + i, *rest), chunk, mask)
                 else:
                     for a in range(0, sl.stop - sl.start, _IMAGE_WRITE_BLOCK):
                         b = min(a + _IMAGE_WRITE_BLOCK, sl.stop - sl.start)
-                        target[sl.start + a : sl.start + b] = source[a:b]
+                        target[sl.start + a : sl.start + b] = _read_samples(source, slice(a, b), path)
         except (OSError, KeyError) as exc:
             raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field="images") from None
 
@@ -803,7 +831,75 @@ def _as_float_array(x, field_name: str, path) -> np.ndarray:
     arr = np.asarray(x)
     if arr.dtype.kind not in "fiu" or arr.dtype == bool:
         raise DataError(f"must be numbers, got {arr.dtype}", path=path, field=field_name)
+    hit = _float32_overflow(arr)
+    if hit is not None:  # checked before the cast, which would make it inf
+        pos, value = hit
+        where = ""
+        if arr.ndim == 3:
+            where = f" (step {pos[1]}, joint {pos[2]})"
+        elif arr.ndim == 2:
+            where = f" (column {pos[1]})"
+        raise DataError(
+            _too_large(value) + where, path=path, field=field_name, index=pos[0] if arr.ndim else None
+        )
     return arr.astype(np.float32, copy=False)
+
+
+def _float32_overflow(arr: np.ndarray) -> tuple[tuple[int, ...], Any] | None:
+    """The position and value of the first finite value that float32 cannot hold, or None.
+
+    Float16/32 always fit, and so does every integer up to 64 bits (|x| < 2e19, far
+    below float32's 3.4e38); NaN and inf are left to the finiteness checks.
+    """
+    if arr.dtype.kind != "f" or arr.dtype.itemsize <= 4:
+        return None
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = np.isfinite(arr) & (np.abs(arr) > _FLOAT32_MAX)
+    if not bad.any():
+        return None
+    pos = tuple(int(k) for k in np.argwhere(bad)[0])
+    return pos, arr[pos]
+
+
+def _too_large(value) -> str:
+    text = np.format_float_scientific(value, precision=6, trim="-")
+    return f"value {text} exceeds the float32 range (magnitude at most {_FLOAT32_MAX:.6g})"
+
+
+def _check_int32_labels(labels: np.ndarray, path) -> None:
+    """Refuse labels that a cast to int32 would wrap around (onto valid labels, silently)."""
+    if labels.dtype.kind not in "iu" or np.can_cast(labels.dtype, np.int32):
+        return
+    info = np.iinfo(np.int32)
+    bad = np.argwhere((labels < info.min) | (labels > info.max))
+    if bad.size:
+        pos = tuple(int(k) for k in bad[0])
+        raise DataError(
+            f"label {int(labels[pos])} is not a primitive index (it does not fit in int32)",
+            path=path, field="labels", index=pos[0] if labels.ndim == 1 else None,
+        )
+
+
+def _read_samples(dset: h5py.Dataset, rows, path, field_name: str = "images") -> np.ndarray:
+    """``dset[rows]`` for a slice or increasing indices; an undecodable sample is a DataError.
+
+    On a read failure (a corrupted chunk, a truncated file) the samples are read one by
+    one to name the first that fails, so the message says which sample to look at.
+    """
+    try:
+        return dset[rows]
+    except OSError as exc:
+        cause = first_line(exc)
+    candidates = range(*rows.indices(dset.shape[0])) if isinstance(rows, slice) else rows
+    for k in candidates:
+        try:
+            dset[int(k)]
+        except OSError as exc:
+            raise DataError(
+                f"cannot be read, its stored data is corrupted or truncated ({first_line(exc)})",
+                path=path, field=field_name, index=int(k),
+            ) from None
+    raise DataError(f"cannot be read, the file may be corrupted ({cause})", path=path, field=field_name) from None
 
 
 def _check_finite(arr: np.ndarray, field_name: str, path) -> None:
@@ -834,6 +930,19 @@ def _read_array(f: h5py.File, name: str, path) -> np.ndarray:
         return node[()]
     except (OSError, ValueError) as exc:
         raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=name) from None
+
+
+def _attr_number(f: h5py.File, name: str, default, path):
+    """A file attribute holding one number, as float; anything else names the attribute."""
+    if name not in f.attrs:
+        return default
+    try:
+        value = np.asarray(f.attrs[name])
+    except (OSError, TypeError, ValueError) as exc:
+        raise DataError(f"cannot be read ({first_line(exc)})", path=path, field=name) from None
+    if value.size != 1 or value.dtype.kind not in "fiu":
+        raise DataError(f"must be one number, got {value.size} value(s) of type {value.dtype}", path=path, field=name)
+    return float(value.reshape(-1)[0])
 
 
 def _as_str(v) -> str:

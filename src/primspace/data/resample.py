@@ -113,6 +113,16 @@ def _resample_batch(x: np.ndarray, length: int, periodic: bool) -> np.ndarray:
 
     if x.dtype.kind not in "fiu":
         raise DataError(f"must be numbers, got {x.dtype}", field="motor")
+    if x.dtype.kind == "f" and x.dtype.itemsize > 8:  # long double: name a value float64 cannot hold
+        with np.errstate(invalid="ignore", over="ignore"):
+            big = np.isfinite(x) & (np.abs(x) > np.finfo(np.float64).max)
+        if big.any():
+            bad = np.argwhere(big)[0]
+            value = np.format_float_scientific(x[tuple(bad)], precision=6, trim="-")
+            raise DataError(
+                f"value {value} exceeds the float64 range (step {int(bad[1])}, joint {int(bad[2])})",
+                field="motor", index=int(bad[0]),
+            )
     x = np.asarray(x, dtype=np.float64)
     n, t0, _ = x.shape
     if t0 < 2:
