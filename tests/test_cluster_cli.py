@@ -103,9 +103,36 @@ def test_existing_output_is_refused_unless_overwrite(run_cli, latents, tmp_path)
     (out / "keep.txt").write_text("x")
     assert_user_error(run_cli("cluster", z, "--k", 3, "--out", out), "out", "--overwrite")
     assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
-    res = run_cli("cluster", z, "--k", 3, "--out", out, "--overwrite")
-    assert res.code == 0 and not (out / "keep.txt").exists() and (out / "labels.csv").exists()
+    # --overwrite replaces only an earlier cluster output: a folder of other files is refused
+    assert_user_error(run_cli("cluster", z, "--k", 3, "--out", out, "--overwrite"), "not a primspace cluster output")
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    fresh = tmp_path / "fresh"
+    assert run_cli("cluster", z, "--k", 3, "--out", fresh, "--sweep").code == 0
+    (fresh / "notes.txt").write_text("mine")
+    res = run_cli("cluster", z, "--k", 2, "--out", fresh, "--overwrite")
+    assert res.code == 0, res.err
+    assert json.loads((fresh / "result.json").read_text())["n_clusters"] == 2
+    # the earlier run's sweep is gone (not asked for now), the user's file stays
+    assert sorted(p.name for p in fresh.iterdir()) == ["clustering.png", "labels.csv", "notes.txt", "result.json"]
+    assert (fresh / "notes.txt").read_text() == "mine"
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temp left
+
+
+def test_cluster_never_deletes_its_input(run_cli, latents, tmp_path):
+    """Found: `cluster d/lat.npy --out d --overwrite` deleted lat.npy and every file in d."""
+    z, _ = latents
+    d = tmp_path / "d"
+    d.mkdir()
+    lat = d / "lat.npy"
+    lat.write_bytes(z.read_bytes())
+    (d / "other.txt").write_text("x")
+    for out in (d, lat, tmp_path):  # is the input's folder / the input / contains it
+        assert_user_error(run_cli("cluster", lat, "--k", 3, "--out", out, "--overwrite"), "input")
+    link = tmp_path / "link"
+    link.symlink_to(d, target_is_directory=True)
+    assert_user_error(run_cli("cluster", lat, "--k", 3, "--out", link, "--overwrite"), "input")
+    assert sorted(p.name for p in d.iterdir()) == ["lat.npy", "other.txt"]
+    assert lat.read_bytes() == z.read_bytes()
 
 
 @pytest.mark.parametrize(

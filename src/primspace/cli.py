@@ -289,8 +289,10 @@ def cluster_command(
         write_sweep_csv,
     )
     from primspace.errors import first_line
+    from primspace.files import check_outside_inputs
     from primspace.plots import plot_clustering, plot_tau_sweep, save_figure
 
+    check_outside_inputs(out, (src, labels))
     check_output_directory(out, overwrite)
     _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None

@@ -48,7 +48,6 @@ import json
 import math
 import os
 import random
-import shutil
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -61,7 +60,7 @@ import torch.nn.functional as F
 
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import DataError, OutputExistsError, UserError, config_from_dict
-from primspace.files import atomic_path, atomic_write_json, atomic_write_text
+from primspace.files import atomic_path, atomic_write_json, atomic_write_text, check_outside_inputs, os_error
 from primspace.latent import INIT_METHODS, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.progress import progress_bar
@@ -322,8 +321,13 @@ def fit(
         Continue the run in ``out_dir`` from its checkpoint (up to ``train_config.epochs``
         in total); starts afresh if there is no checkpoint yet. The configs must match
         the saved ones (only ``epochs``, ``checkpoint_every``, ``threads`` may change).
+        ``epochs`` below the checkpoint's is refused; above it extends the run (with a
+        cosine schedule, ``final_lr_fraction < 1``, the rest of the decay is stretched
+        to the new length: not the numbers of a run started with that many epochs).
     overwrite : bool
-        Replace an existing run directory.
+        Replace an earlier run of the same kind in ``out_dir``: only the files a run
+        writes are replaced, anything else in the directory stays. Not with ``resume``.
+        ``out_dir`` may not be, contain or lie inside the data file or ``weights_from``.
     weights_from : path-like, optional
         A run directory: start from its θ, scaler and initialiser (its model config is
         used; a fresh optimiser). For incremental learning (the paper's inter-primitive
@@ -397,7 +401,7 @@ def fit(
         parent=None if parent is None else str(parent.run_dir.resolve()),
     )
     config["scaler"] = None if scaler is None else scaler.to_dict()
-    ckpt = _prepare_run_dir(out_dir, config, resume, overwrite)
+    ckpt = _prepare_run_dir(out_dir, config, resume, overwrite, inputs=(dataset.path, weights_from), epochs=tc.epochs)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
     _set_threads(tc, device)
@@ -500,7 +504,7 @@ def infer(
     use_images = mc.has_images and data.has_images and tc.vision_weight > 0
     _check_data_fits(data, mc, use_images)
     config = _run_config("infer", init, mc, tc, data, idx, use_images, parent=str(parent.run_dir.resolve()))
-    ckpt = _prepare_run_dir(out_dir, config, resume, overwrite)
+    ckpt = _prepare_run_dir(out_dir, config, resume, overwrite, inputs=(dataset.path, run_dir), epochs=tc.epochs)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
     _set_threads(tc, device)
@@ -766,6 +770,7 @@ class _Session:
         if ckpt is not None:
             self._restore(ckpt)
         else:
+            _start_run_dir(self.out_dir)
             atomic_write_json(self.out_dir / CONFIG_NAME, self.config)
             _save_npy(self.out_dir / LATENTS_INIT_NAME, self.initial_codes.numpy())
             atomic_write_text(self.out_dir / METRICS_NAME, "")
@@ -933,29 +938,60 @@ def _run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
     }
 
 
-def _prepare_run_dir(out_dir: Path, config: dict, resume: bool, overwrite: bool) -> dict | None:
-    """Check the run directory; return the checkpoint to resume from (or None). Writes nothing
-    except, for ``overwrite``, removing the old run."""
+def _prepare_run_dir(
+    out_dir: Path, config: dict, resume: bool, overwrite: bool, inputs: tuple = (), epochs: int | None = None
+) -> dict | None:
+    """Check the run directory; return the checkpoint to resume from (or None).
+
+    Writes nothing: an ``overwrite`` only takes effect when the new run starts writing
+    (:func:`_start_run_dir`), so a run that fails while loading its data loses nothing.
+    Refused: ``resume`` with ``overwrite``; an ``out_dir`` that is, contains or lies inside
+    one of ``inputs``; a non-empty directory that is not a run of the same kind
+    (``fit`` / ``infer``); a resume past ``epochs``.
+    """
+    if resume and overwrite:
+        raise UserError(f"{out_dir}: --resume continues the run and --overwrite replaces it; give one of them")
+    check_outside_inputs(out_dir, inputs)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"{out_dir}: exists and is not a directory")
     existing = out_dir.is_dir() and any(out_dir.iterdir())
     is_run = (out_dir / CONFIG_NAME).is_file() or (out_dir / CHECKPOINT_NAME).is_file()
     if existing and not is_run:
         raise UserError(f"{out_dir}: exists and is not a primspace run directory; choose another --out")
+    if is_run and (out_dir / CONFIG_NAME).is_file():
+        kind = _read_config(out_dir).get("kind")
+        if kind != config["kind"]:
+            verb = "train" if config["kind"] == "fit" else "infer"
+            raise UserError(
+                f"{out_dir}: is a{'n' if kind == 'infer' else ''} {kind} run; {verb} only resumes or replaces "
+                f"its own ({config['kind']}) runs: choose another --out"
+            )
     if resume and (out_dir / CHECKPOINT_NAME).is_file():
         ckpt = _read_checkpoint(out_dir / CHECKPOINT_NAME, "cpu")
         _check_compatible(out_dir, ckpt["config"], config)
+        done = int(ckpt["epoch"])
+        if epochs is not None and done > epochs:
+            raise UserError(
+                f"{out_dir}: has trained {done} epochs, more than the {epochs} asked for; resume with "
+                f"--epochs {done} or more (more extends the run)"
+            )
         return ckpt
-    if existing and not resume:
-        if not overwrite:
-            raise OutputExistsError(out_dir, hint="--resume or --overwrite")
-        shutil.rmtree(out_dir)
-    if out_dir.is_dir():  # a run that died before its first checkpoint, or an empty folder
-        for name in _RUN_FILES:
-            with contextlib.suppress(FileNotFoundError):
-                (out_dir / name).unlink()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if existing and not resume and not overwrite:
+        raise OutputExistsError(out_dir, hint="--resume or --overwrite")
     return None
+
+
+def _start_run_dir(out_dir: Path) -> None:
+    """Make ``out_dir`` ready for a new run: remove an earlier run's files (only those a
+    run writes: anything else in the directory stays) and create it."""
+    try:
+        if out_dir.is_dir():
+            for name in _RUN_FILES:
+                with contextlib.suppress(FileNotFoundError):
+                    (out_dir / name).unlink()
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise os_error(exc, out_dir) from None
 
 
 def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:

@@ -11,7 +11,8 @@ Layout of ``DIR``::
 
 The directory is built beside ``DIR`` under a temporary name and renamed into place, so a
 failure leaves nothing half-written. An existing empty ``DIR`` is used; a non-empty one is
-refused unless ``overwrite``, which replaces it as a whole.
+refused unless ``overwrite``, and even then unless it is an earlier cluster output: then
+only the files above are replaced, and any other file in ``DIR`` is left alone.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
+import json
 import os
 import shutil
 import tempfile
@@ -28,11 +30,13 @@ from typing import Iterator
 import numpy as np
 
 from primspace.errors import OutputExistsError, UserError
-from primspace.files import atomic_write_json, atomic_write_text
+from primspace.files import atomic_write_json, atomic_write_text, os_error, remove_stale_temporaries, temp_prefix, umask_mode
 
 __all__ = [
     "atomic_directory",
     "check_output_directory",
+    "is_cluster_output",
+    "OUTPUT_FILES",
     "figure_indices",
     "write_labels_csv",
     "write_sweep_csv",
@@ -42,39 +46,68 @@ __all__ = [
 ]
 
 FIGURE_MAX_POINTS = 2000
+#: Every file ``primspace cluster`` writes into its output directory.
+OUTPUT_FILES = ("labels.csv", "result.json", "clustering.png", "sweep.csv", "sweep.json", "sweep.png")
 SWEEP_COLUMNS = ("grid", "value", "tau", "tau_relative", "r2", "rank", "accuracy", "nmi", "ari", "note")
 
 
 def check_output_directory(path: str | os.PathLike, overwrite: bool = False) -> Path:
-    """Refuse a file, or a non-empty directory unless ``overwrite``; return the path."""
+    """Refuse a file, a non-empty directory unless ``overwrite``, and (even with
+    ``overwrite``) a non-empty directory that is not the output of ``primspace cluster``;
+    return the path."""
     path = Path(path)
     if path.exists():
         if not path.is_dir():
             raise UserError(f"{path}: exists and is not a directory")
-        if not overwrite and any(path.iterdir()):
-            raise OutputExistsError(path)
+        if any(path.iterdir()):
+            if not overwrite:
+                raise OutputExistsError(path)
+            if not is_cluster_output(path):
+                raise UserError(
+                    f"{path}: exists and is not a primspace cluster output (no cluster result.json); "
+                    "--overwrite only replaces an earlier cluster output: choose another --out"
+                )
     return path
+
+
+def is_cluster_output(path: Path) -> bool:
+    """Whether ``path`` holds a ``result.json`` written by ``primspace cluster``."""
+    try:
+        result = json.loads((Path(path) / "result.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+    return isinstance(result, dict) and {"n_clusters", "tau_option", "rank"} <= set(result)
 
 
 @contextlib.contextmanager
 def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
-    """Yield a temporary directory beside ``path``; on success it replaces ``path``.
+    """Yield a temporary directory beside ``path``; on success its files land in ``path``.
 
-    On failure the temporary directory is removed and ``path`` is untouched.
+    A new (or empty) ``path`` is the temporary directory renamed. An earlier cluster
+    output (``overwrite``) gets each new file renamed over the old one and the earlier
+    run's other outputs (:data:`OUTPUT_FILES`, e.g. a sweep not asked for this time)
+    removed; any other file in it is left alone. On failure the temporary directory is
+    removed and ``path`` is untouched.
     """
     path = check_output_directory(path, overwrite)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(path)
+        tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(path.name), suffix=".tmp", dir=path.parent))
+        os.chmod(tmp, umask_mode(0o777))
+    except OSError as exc:
+        raise os_error(exc, path) from None
     try:
         yield tmp
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
-            os.replace(path, old / "replaced")
-            os.replace(tmp, path)
-            shutil.rmtree(old, ignore_errors=True)
+        if path.is_dir() and any(path.iterdir()):
+            written = {p.name for p in tmp.iterdir()}
+            for name in OUTPUT_FILES:
+                if name not in written:
+                    with contextlib.suppress(FileNotFoundError):
+                        (path / name).unlink()
+            for name in sorted(written, key=lambda n: n == "result.json"):  # result.json last
+                os.replace(tmp / name, path / name)
+            tmp.rmdir()
         else:
             os.replace(tmp, path)
     except BaseException:
