@@ -1,4 +1,5 @@
-"""The success judge: ground truth passes, a contact phase displaced by >= 2 cm fails."""
+"""The success judge: ground truth passes, a contact phase displaced by >= 2 cm fails, each
+primitive's motion fails the other six primitives' criteria, time-reversed motions fail."""
 
 from __future__ import annotations
 
@@ -55,11 +56,74 @@ def test_contact_phase_displaced_by_2cm_fails(scene, primitive):
 @pytest.mark.parametrize("primitive", PRIMITIVES)
 def test_small_errors_of_a_reconstruction_still_succeed(scene, primitive):
     # a model's reconstruction is never exact: 2 mm off in any axis must still pass
-    x, y, size = BLOCKS[0]
-    script = script_motion(scene, primitive, x, y, size, 61)
-    for d in list(np.eye(3)) + list(-np.eye(3)):
-        result = evaluate(primitive, joints_of(scene, script.displaced(0.002 * d)), (x, y, size))
-        assert result.success, (primitive, d, result.reason)
+    for x, y, size in BLOCKS:
+        script = script_motion(scene, primitive, x, y, size, 61)
+        for d in list(np.eye(3)) + list(-np.eye(3)):
+            result = evaluate(primitive, joints_of(scene, script.displaced(0.002 * d)), (x, y, size))
+            assert result.success, (primitive, (x, y, size), d, result.reason)
+
+
+@pytest.fixture(scope="module")
+def recorded(scene):
+    """The ground-truth joints of every primitive at every block (solved once)."""
+    return {
+        block: {p: joints_of(scene, script_motion(scene, p, *block, 61)) for p in PRIMITIVES}
+        for block in BLOCKS
+    }
+
+
+@pytest.mark.parametrize("block", BLOCKS)
+def test_confusion_matrix_is_diagonal(recorded, block):
+    # row: the criteria judged; column: the primitive whose recorded motion is judged
+    verdicts = {(judge, shown): evaluate(judge, recorded[block][shown], block) for judge in PRIMITIVES for shown in PRIMITIVES}
+    matrix = np.array([[verdicts[judge, shown].success for shown in PRIMITIVES] for judge in PRIMITIVES])
+    wrong = {f"{shown} judged as {judge}": verdicts[judge, shown].reason
+             for judge in PRIMITIVES for shown in PRIMITIVES if matrix[PRIMITIVES.index(judge), PRIMITIVES.index(shown)] != (judge == shown)}
+    assert (matrix == np.eye(len(PRIMITIVES), dtype=bool)).all(), wrong
+
+
+def test_the_confusions_the_review_found_are_caught_by_the_new_criteria(recorded):
+    for block in BLOCKS:
+        q = recorded[block]
+        # a grasp is no touch: its TCP ends at the grip height, beside the block, not on top
+        as_touch = evaluate("touch", q["grasp"], block)
+        assert not as_touch.criteria["height"] and not as_touch.criteria["from_above"], (block, as_touch.measures)
+        assert as_touch.criteria["touching"] and as_touch.criteria["on_top"]  # what used to let it pass
+        # a touch is no grasp: its closed fingers rest on the top face
+        as_grasp = evaluate("grasp", q["touch"], block)
+        assert not as_grasp.criteria["around"] and not as_grasp.criteria["height"], (block, as_grasp.measures)
+
+
+def test_time_reversed_motions_fail(recorded):
+    for block in BLOCKS:
+        q = {p: joints[::-1] for p, joints in recorded[block].items()}
+        # touch and grasp end at home, away from the block
+        touch = evaluate("touch", q["touch"], block)
+        assert not touch.success and not touch.criteria["touching"], (block, touch.measures)
+        grasp = evaluate("grasp", q["grasp"], block)
+        assert not grasp.success and not grasp.criteria["closed"], (block, grasp.measures)
+        # push and pull fail their own names and each other's: the hand leaves the block
+        for name, other in (("push", "pull"), ("pull", "push")):
+            own = evaluate(name, q[name], block)
+            assert not own.success and not own.criteria["on_target"], (block, name, own.measures)
+            swapped = evaluate(other, q[name], block)
+            assert not swapped.success and not swapped.criteria["held"], (block, name, other, swapped.measures)
+        # circles turn the other way; neither name accepts them
+        for name, other in (("circle_cw", "circle_ccw"), ("circle_ccw", "circle_cw")):
+            own = evaluate(name, q[name], block)
+            assert not own.success and not own.criteria["turn"], (block, name, own.measures)
+            swapped = evaluate(other, q[name], block)
+            assert not swapped.success, (block, name, other, swapped.measures)
+        # documented choice: three touches from the right played backwards are three touches
+        # from the right (the return home of the reversed motion is asked by no criterion)
+        touch_right = evaluate("touch_right", q["touch_right"], block)
+        assert touch_right.success, (block, touch_right.reason)
+    # the block model does let a reversed push pull the block onto the pull target: only
+    # "held" (the hand stays at the block it delivered) tells it from a pull
+    block = BLOCKS[0]
+    reversed_push = evaluate("pull", recorded[block]["push"][::-1], block)
+    assert reversed_push.criteria["on_target"] and not reversed_push.criteria["held"], reversed_push.measures
+    assert [k for k, ok in reversed_push.criteria.items() if not ok] == ["held"]
 
 
 def test_touch_right_counts_touches_and_circles_know_their_direction(scene):
