@@ -43,3 +43,67 @@ def assert_user_error(result: CliResult, *fragments: str) -> None:
     assert "Traceback" not in result.err
     for fragment in fragments:
         assert fragment in lines[0], (fragment, lines[0])
+
+
+# ------------------------------------------------------------------ figures (PNG files)
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def read_png(path) -> "np.ndarray":
+    """The PNG at ``path`` as an (H, W, 3) uint8 RGB array, transparency composited on white."""
+    import matplotlib.image as mpimg
+    import numpy as np
+
+    with open(path, "rb") as fh:
+        assert fh.read(8) == PNG_SIGNATURE, f"{path} is not a PNG file"
+    a = np.asarray(mpimg.imread(path), dtype=np.float64)  # floats in [0, 1]
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.shape[-1] in (2, 4):  # grey or RGB with alpha
+        a = a[..., :-1] * a[..., -1:] + (1.0 - a[..., -1:])
+    if a.shape[-1] == 1:
+        a = np.repeat(a, 3, axis=-1)
+    return np.round(a * 255).astype(np.uint8)
+
+
+def colour_pixels(rgb, colour, tol: int = 40) -> int:
+    """How many pixels lie within ``tol`` (every channel, 0-255) of ``colour`` (a matplotlib colour)."""
+    import numpy as np
+    from matplotlib.colors import to_rgb
+
+    target = np.round(np.array(to_rgb(colour)) * 255)
+    return int((np.abs(rgb.astype(np.int16) - target) <= tol).all(axis=-1).sum())
+
+
+def figure_stats(rgb) -> dict:
+    """``ink``: fraction of non-white pixels; ``coloured``: pixels of a clearly chromatic colour
+    (axes, ticks and text are black or grey, so these are the data); ``colours``: distinct colours."""
+    import numpy as np
+
+    px = rgb.reshape(-1, 3).astype(np.int16)
+    return {
+        "ink": float((px < 245).any(axis=1).mean()),
+        "coloured": int(((px.max(axis=1) - px.min(axis=1)) > 60).sum()),
+        "colours": len(np.unique(px, axis=0)),
+    }
+
+
+def assert_figure(path, *, height=(200, 1500), width=(300, 2500), min_ink: float = 0.04, min_coloured: int = 500,
+                  min_colours: int = 300, colours=(), min_colour_pixels: int = 100) -> "np.ndarray":
+    """The PNG at ``path`` is a drawn figure, not a blank or empty one: its pixel size lies in the
+    given ranges, at least ``min_ink`` of it is not white (a matplotlib figure with empty, labelled
+    axes measured 0.03), at least ``min_coloured`` pixels are chromatic (an empty one has none) and
+    it has ``min_colours`` distinct colours (an empty one has ~255 greys of anti-aliased text);
+    every colour in ``colours`` covers at least ``min_colour_pixels`` pixels. Returns the RGB array."""
+    rgb = read_png(path)
+    h, w = rgb.shape[:2]
+    assert height[0] <= h <= height[1] and width[0] <= w <= width[1], (str(path), rgb.shape)
+    stats = figure_stats(rgb)
+    assert stats["ink"] >= min_ink, (str(path), stats)
+    assert stats["coloured"] >= min_coloured, (str(path), stats)
+    assert stats["colours"] >= min_colours, (str(path), stats)
+    for colour in colours:
+        n = colour_pixels(rgb, colour)
+        assert n >= min_colour_pixels, (str(path), colour, n)
+    return rgb

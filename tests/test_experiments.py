@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import assert_user_error
+from conftest import assert_figure, assert_user_error
 from primspace.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.clustering import run_clustering
@@ -75,8 +75,14 @@ def test_intra_grid_results_and_figures(finished):
         assert [h["epoch"] for h in run["fit"]] == [0, 1, 2, 3]
         assert [h["epoch"] for h in run["infer"]] == [0, 1, 2]
         assert run["n_train"] == 7 and run["n_eval"] == 7
-    for name in ("intra_loss_fit", "intra_loss_infer", "latent_pca2d", "latent_pca3d", "reconstruction_grasp"):
-        assert exp.figure(name).stat().st_size > 1000, name
+    # drawn figures, not blank ones (the thresholds: measured values over ~2, and an empty figure
+    # measured ink 0.03 and no chromatic pixel), with the data in their colours
+    for phase in ("fit", "infer"):  # a curve per init: zero in tab:blue, projection in tab:green (~700-900 px each)
+        assert_figure(exp.figure(f"intra_loss_{phase}"), colours=("tab:blue", "tab:green"), min_colour_pixels=300)
+    for name in ("latent_pca2d", "latent_pca3d"):  # 3 panels of 2 dots coloured by block position (~90 px)
+        assert_figure(exp.figure(name), width=(900, 2500), min_ink=0.035, min_coloured=40)
+    # the generated joint curves (tab:orange, dashed, ~4300 px) over the black ground truth
+    assert_figure(exp.figure("reconstruction_grasp"), width=(900, 2500), colours=("tab:orange", "black"), min_colour_pixels=1500)
     ok, text = qualitative_check(intra)
     assert ok is None and "not enough runs" in text  # no random init in this grid
     assert json.loads((exp.path / "experiment.json").read_text())["timings"]["intra"] > 0
@@ -150,7 +156,8 @@ def test_inter_primitive_folds(tiny_data, tmp_path):
     for r in results["runs"]:
         assert r["n_new"] == 2 and r["n_phase1"] == 12 and r["n_replay"] == 1
         assert len(r["phase2"]) == 3
-    assert exp.figure("inter_loss").exists()
+    # the projection init's mean curve and its std band, in tab:green (~1100 px)
+    assert_figure(exp.figure("inter_loss"), colours=("tab:green",), min_colour_pixels=400)
 
 
 def _scaled_targets(run_dir, data):

@@ -15,7 +15,7 @@ from typing import Optional
 
 import typer
 
-from primspace.errors import UserError
+from primspace.errors import UserError, first_line
 
 app = typer.Typer(
     name="primspace",
@@ -66,15 +66,17 @@ def import_command(
         None, "--format", "-f", help="Input format; guessed from SRC when omitted."
     ),
     length: int = typer.Option(..., "--length", "-T", help="Resample every sequence to T steps."),
-    out: Path = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
+    out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
     shapes: Optional[str] = typer.Option(None, help="lasa: comma-separated shape names (default: 26 single-pattern shapes)."),
     velocities: bool = typer.Option(False, help="lasa: add velocities vx, vy as joints."),
     overwrite: bool = typer.Option(False, help="Replace OUT if it exists."),
 ) -> None:
     """Import demonstrations (npz, CSV folder, LASA) into a MotionDataset file."""
     from primspace.data.importers import import_csv_folder, import_lasa, import_npz
-    from primspace.files import check_output
+    from primspace.files import check_output, check_outside_inputs, output_file
 
+    out = output_file(out)
+    check_outside_inputs(out, (None if src is None or str(src).lower() == "lasa" else src,))
     check_output(out, overwrite)
     fmt = format.value if format is not None else _guess_format(src)
     if fmt == "lasa":
@@ -142,7 +144,7 @@ def _format_summary(s: dict) -> str:
 
 @app.command("generate")
 def generate_command(
-    out: Path = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
+    out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
     preset: str = typer.Option("demo", "--preset", "-p", help="demo (126 motions) or paper (1715 motions, as in the paper)."),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray (identical data)."),
@@ -168,9 +170,11 @@ def generate_command(
     import dataclasses
     import time
 
-    from primspace.files import check_output
+    from primspace.files import check_output, check_outside_inputs, output_file
     from primspace.sim.generate import GenerationConfig, generate_dataset, resolve_config
 
+    out = output_file(out)
+    check_outside_inputs(out, (config_file,))
     config = resolve_config(preset)
     if config_file is not None:
         try:
@@ -191,8 +195,7 @@ def generate_command(
         config = resolve_config(config)
     except UserError as exc:
         raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
-    if workers is not None and workers < 1:
-        raise UserError(f"--workers {workers}: must be at least 1")
+    _check_workers(workers)
     check_output(out, overwrite)
     start = time.perf_counter()
     shards = []
@@ -212,15 +215,17 @@ def generate_command(
 def show_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file (e.g. from primspace generate)."),
     sample: int = typer.Option(0, "--sample", "-i", help="Sample index."),
-    out: Path = typer.Option(..., "--out", "-o", help="PNG file to write."),
+    out: str = typer.Option(..., "--out", "-o", help="PNG file to write."),
     frames: int = typer.Option(8, "--frames", help="Camera frames in the strip."),
     overwrite: bool = typer.Option(True, "--overwrite/--no-overwrite", help="Replace OUT if it exists."),
 ) -> None:
     """Draw one sample: a strip of camera frames and its joint curves."""
     from primspace.data.dataset import MotionDataset
-    from primspace.files import check_output
+    from primspace.files import check_output, check_outside_inputs, output_file
     from primspace.plots import plot_sim_sample, save_figure
 
+    out = output_file(out)
+    check_outside_inputs(out, (file,))
     check_output(out, overwrite)
     if frames < 1:
         raise UserError(f"--frames {frames}: must be at least 1")
@@ -458,6 +463,19 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
     return values
 
 
+def _name_list(text: str, option: str) -> tuple[str, ...]:
+    values = tuple(v.strip() for v in text.split(",") if v.strip())
+    if not values:
+        raise UserError(f"{option} is empty")
+    return values
+
+
+def _check_workers(workers: Optional[int]) -> None:
+    """The same rule for every command's --workers: absent means every core, else >= 1."""
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers {workers}: must be at least 1")
+
+
 def _float_list(text: str, option: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.replace(" ", "").split(",") if v)
@@ -528,6 +546,9 @@ def train_command(
         vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
         checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
     )
+    from primspace.files import check_outside_inputs
+
+    check_outside_inputs(out, (file, indices, weights_from))
     idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)
     run = fit(
@@ -563,6 +584,9 @@ def infer_command(
     for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed)):
         if value is not None:
             overrides[name] = value
+    from primspace.files import check_outside_inputs
+
+    check_outside_inputs(out, (run, file, indices))
     idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)
     result = infer(
@@ -576,23 +600,28 @@ def infer_command(
 def reconstruct_command(
     run: Path = typer.Argument(..., help="A run directory (fit or infer)."),
     sample: int = typer.Option(..., "--sample", help="Sample index in the data file (one the run used)."),
-    out: Path = typer.Option(..., "--out", "-o", help="The PNG to write."),
+    out: str = typer.Option(..., "--out", "-o", help="The PNG to write."),
     data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
     frames: int = typer.Option(8, "--frames", help="Frames shown per strip."),
     overwrite: bool = typer.Option(False, "--overwrite"),
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
     from primspace.data.dataset import MotionDataset
-    from primspace.files import check_output
+    from primspace.files import check_output, check_outside_inputs, output_file
     from primspace.plots import plot_reconstruction, save_figure
-    from primspace.train import load_run
+    from primspace.train import check_run_data, load_run
 
+    out = output_file(out)
+    check_outside_inputs(out, (run, data))
     check_output(out, overwrite)
+    if frames < 1:
+        raise UserError(f"--frames {frames}: must be at least 1")
     trained = load_run(run)
     path = data if data is not None else trained.data_path
     if path is None:
         raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
     ds = MotionDataset.load(path)
+    check_run_data(trained, ds)
     fig = plot_reconstruction(trained, ds, sample, n_frames=frames)
     save_figure(fig, out)
     typer.echo(f"wrote {out}")
@@ -619,6 +648,7 @@ def _experiment(preset: str, data, out, backend, address, workers, seed, overrid
     from primspace.experiments.workspace import ExperimentDir
     from primspace.parallel import default_workers
 
+    _check_workers(workers)
     return ExperimentDir(
         out, resolve_preset(preset).with_overrides(**overrides), data=data, backend=backend.value,
         address=address, workers=workers or default_workers(), seed=seed,
@@ -661,15 +691,19 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         import importlib
 
         overrides = {
-            "latent_dims": _int_list(latent_dims, "--latent-dims") if latent_dims else None,
-            "inits": tuple(s.strip() for s in inits.split(",") if s.strip()) if inits else None,
-            "seeds": _int_list(seeds, "--seeds") if seeds else None,
+            "latent_dims": _int_list(latent_dims, "--latent-dims") if latent_dims is not None else None,
+            "inits": _name_list(inits, "--inits") if inits is not None else None,
+            "seeds": _int_list(seeds, "--seeds") if seeds is not None else None,
             "images": images,
         }
-        if epochs:
+        if epochs is not None:
             fit_epochs, infer_epochs = (_int_list(epochs, "--epochs") + (None,))[:2]
             overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
         exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
+        if "success:run_success" in steps and data is not None:
+            from primspace.sim.success import check_judgeable
+
+            check_judgeable(exp.dataset())  # up front: before hours of training, not after
         result = None
         for step in steps:
             module, function = step.split(":")
@@ -722,6 +756,7 @@ def demo_command(
     from primspace.experiments.demo import run_demo
     from primspace.parallel import default_workers
 
+    _check_workers(workers)
     summary = run_demo(out, workers=workers or default_workers())
     typer.echo(summary)
 
@@ -745,4 +780,8 @@ def main(argv: list[str] | None = None) -> None:
         app(args=argv, prog_name="primspace")
     except UserError as exc:
         typer.echo(f"primspace: error: {exc}", err=True)
+        sys.exit(2)
+    except OSError as exc:  # the file system said no (permissions, disk full, read-only): one line
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        typer.echo(f"primspace: error: {where}{exc.strerror or first_line(exc)}", err=True)
         sys.exit(2)

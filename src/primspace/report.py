@@ -18,7 +18,7 @@ import platform
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from primspace.errors import UserError
+from primspace.errors import UserError, first_line
 from primspace.files import atomic_write_text
 
 __all__ = ["HtmlReport", "build_report", "REPORT_FILE"]
@@ -164,8 +164,20 @@ def build_report(out_dir: str | Path) -> Path:
         f"{out_dir.resolve().name} — preset {meta.get('preset', '?')} — "
         f"written {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}",
     )
+    if not isinstance(meta, dict):
+        raise UserError(f"{out_dir / META_FILE}: not an experiment description (a JSON object was expected)")
     for add_section in _sections():
-        add_section(out_dir, report)
+        name = add_section.__module__.rsplit(".", 1)[-1]
+        try:
+            add_section(out_dir, report)
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+            if isinstance(exc, UserError):
+                raise
+            where = out_dir / "results" / f"{name}.json"
+            raise UserError(
+                f"{where}: not a results file this primspace can read ({type(exc).__name__}: {first_line(exc)}); "
+                "re-run the experiment to rewrite it"
+            ) from None
     _environment_section(out_dir, meta, report)
     return report.write(out_dir / REPORT_FILE)
 

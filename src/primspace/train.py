@@ -75,6 +75,7 @@ __all__ = [
     "reconstruct",
     "evaluate",
     "read_indices",
+    "check_run_data",
     "resolve_device",
 ]
 
@@ -659,6 +660,26 @@ def evaluate(
     sums = _evaluate_loop(model, table, tensors, tc, dev)
     model.to("cpu")
     return _epoch_values(sums, len(data), use_images)
+
+
+def check_run_data(run: TrainedRun, dataset: MotionDataset) -> None:
+    """Refuse a data set that is not the one ``run`` was trained or inferred on.
+
+    Compares what a resume compares: joints and steps, the run's sample indices, and the
+    SHA-1 of those samples' joint values (``config.json`` ``data.motor_sha1``).
+    """
+    where = str(dataset.path) if dataset.path is not None else "the data set"
+    mc = run.model_config
+    if dataset.n_joints != mc.n_joints or dataset.length != mc.length:
+        raise UserError(
+            f"{where}: has T={dataset.length} steps x J={dataset.n_joints} joints; run {run.run_dir} "
+            f"was trained on T={mc.length} x J={mc.n_joints}: not its data"
+        )
+    if len(run.indices) and int(run.indices.max()) >= len(dataset):
+        raise UserError(f"{where}: has {len(dataset)} samples, run {run.run_dir} used sample {int(run.indices.max())}: not its data")
+    saved = run.config.get("data", {}).get("motor_sha1")
+    if saved is not None and _fingerprint(dataset.subset(run.indices)) != saved:
+        raise UserError(f"{where}: its joint values differ from those run {run.run_dir} used (SHA-1 of the run's samples): not its data")
 
 
 def read_indices(path: str | os.PathLike) -> np.ndarray:

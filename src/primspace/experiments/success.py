@@ -52,19 +52,24 @@ def run_success_point(run_dir: Path, data_path: str, infer_dir: str | None) -> d
 
 def run_success(exp: ExperimentDir) -> dict:
     """Judge the generated eval motions of every init at the focus q (runs intra first if needed)."""
+    from primspace.sim.success import JUDGE_VERSION, check_judgeable
+
+    check_judgeable(exp.dataset())  # before any training: the judge needs simulator data
     intra = exp.read_results("intra") or run_intra(exp)
     q, seed, inits = _focus_runs(exp, intra)
-    points = [GridPoint("success/recorded", (str(exp.data_path), None))]
+    judge = f"success/judge{JUDGE_VERSION}"  # verdicts of an older judge are not reused
+    points = [GridPoint(f"{judge}/recorded", (str(exp.data_path), None))]
     for init in inits:
         infer_dir = run_dir_of(exp.path, intra_key(init, q, seed)) / "infer"
-        points.append(GridPoint(f"success/{init}-q{q}-s{seed}", (str(exp.data_path), str(infer_dir))))
+        points.append(GridPoint(f"{judge}/{init}-q{q}-s{seed}", (str(exp.data_path), str(infer_dir))))
     with exp.stage("success"):
         grid = exp.grid(run_success_point, points, "success judging")
     results = {
         "latent_dim": q,
         "seed": seed,
-        "recorded": grid.results.get("success/recorded"),
-        "generated": {init: grid.results[f"success/{init}-q{q}-s{seed}"] for init in inits if f"success/{init}-q{q}-s{seed}" in grid.results},
+        "judge_version": JUDGE_VERSION,
+        "recorded": grid.results.get(f"{judge}/recorded"),
+        "generated": {init: grid.results[f"{judge}/{init}-q{q}-s{seed}"] for init in inits if f"{judge}/{init}-q{q}-s{seed}" in grid.results},
         "failures": grid.failures,
         "label_names": list(exp.dataset().label_names),
     }

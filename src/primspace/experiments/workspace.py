@@ -25,10 +25,10 @@ from typing import Any, Callable, Iterator, Sequence
 
 from primspace import __version__
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.errors import UserError, first_line
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
-from primspace.files import atomic_write_json
+from primspace.files import atomic_write_json, check_outside_inputs
 
 __all__ = ["ExperimentDir", "results_file", "read_results", "read_meta"]
 
@@ -40,15 +40,30 @@ def results_file(out_dir: str | Path, name: str) -> Path:
     return Path(out_dir) / "results" / f"{name}.json"
 
 
+def _read_json(path: Path, what: str) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise UserError(f"{path}: cannot read {what} ({first_line(exc)})") from None
+
+
 def read_results(out_dir: str | Path, name: str) -> Any | None:
     """The results of experiment ``name`` in ``out_dir``, or None if it has not run."""
     path = results_file(out_dir, name)
-    return json.loads(path.read_text()) if path.exists() else None
+    if not path.exists():
+        return None
+    results = _read_json(path, "the results")
+    if not isinstance(results, dict):
+        raise UserError(f"{path}: not a results file (a JSON object was expected)")
+    return results
 
 
 def read_meta(out_dir: str | Path) -> dict:
     """``OUT/experiment.json``: preset, settings, data file, timings, failures."""
-    return json.loads((Path(out_dir) / META_FILE).read_text())
+    meta = _read_json(Path(out_dir) / META_FILE, "the experiment description")
+    if not isinstance(meta, dict):
+        raise UserError(f"{Path(out_dir) / META_FILE}: not an experiment description (a JSON object was expected)")
+    return meta
 
 
 class ExperimentDir:
@@ -87,11 +102,14 @@ class ExperimentDir:
         if self.path.exists() and not self.path.is_dir():
             raise UserError(f"{self.path}: exists and is not a directory")
         data_path = Path(data).resolve() if data is not None else (self.path / "data.h5").resolve()
-        if data is not None and not data_path.exists():
+        if data is not None and not data_path.is_file():
             raise UserError(f"{data}: no such data file")
+        if data is not None and data_path != (self.path / "data.h5").resolve():
+            # the experiment's own generated data.h5 may be named again; any other input stays outside OUT
+            check_outside_inputs(self.path, (data,))
         meta_file = self.path / META_FILE
         if meta_file.exists():
-            self.meta = json.loads(meta_file.read_text())
+            self.meta = read_meta(self.path)
             if self.meta.get("preset") != preset.name:
                 raise UserError(
                     f"{self.path}: made with preset {self.meta.get('preset')!r}, not {preset.name!r}; use another --out"
@@ -105,6 +123,8 @@ class ExperimentDir:
                 )
             if data is not None and self.meta.get("data") != str(data_path):
                 raise UserError(f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out")
+            if not isinstance(self.meta.get("data"), str):
+                raise UserError(f"{meta_file}: has no data file ('data' field)")
             data_path = Path(self.meta["data"])
         else:
             self.meta = {

@@ -111,8 +111,16 @@ __all__ = [
     "evaluate",
     "evaluate_batch",
     "evaluate_dataset",
+    "check_judgeable",
+    "JUDGE_VERSION",
     "success_rates",
 ]
+
+
+#: Bumped whenever a criterion changes, so stored verdicts of an older judge are not
+#: reused (the success experiment keys its runs by it). 2: touch height/approach,
+#: grasp around the sides, push/pull hand held at the block.
+JUDGE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -344,18 +352,10 @@ def evaluate_batch(primitives: Sequence, joints, params, tolerances: Tolerances 
     return out
 
 
-def evaluate_dataset(dataset, motor=None, tolerances: Tolerances = TOLERANCES) -> list[SuccessResult]:
-    """Judge a simulated :class:`~primspace.data.MotionDataset`, or other joints for its samples.
-
-    Parameters
-    ----------
-    dataset : MotionDataset
-        Needs labels (primitive indices, names as in :data:`PRIMITIVES`), params
-        (``block_x, block_y, block_size``) and the simulator's 9 joints.
-    motor : ndarray, shape (N, T', 9), optional
-        Trajectories to judge instead of ``dataset.motor`` (e.g. the model's
-        reconstructions of these samples, in physical units).
-    """
+def check_judgeable(dataset) -> None:
+    """Raise :class:`DataError` unless ``dataset`` is simulator data the judge can replay:
+    labels named as :data:`PRIMITIVES`, params ``block_x, block_y, block_size`` and the
+    Panda's 9 joints. Cheap: experiments call it before any training."""
     if dataset.labels is None or dataset.params is None:
         raise DataError("judging needs labels and params (block_x, block_y, block_size)", path=dataset.path, field="labels")
     if list(dataset.label_names) != list(PRIMITIVES):
@@ -368,6 +368,21 @@ def evaluate_dataset(dataset, motor=None, tolerances: Tolerances = TOLERANCES) -
     want = ["block_x", "block_y", "block_size"]
     if list(dataset.param_names) != want:
         raise DataError(f"param names {dataset.param_names}, wanted {want}", path=dataset.path, field="param_names")
+
+
+def evaluate_dataset(dataset, motor=None, tolerances: Tolerances = TOLERANCES) -> list[SuccessResult]:
+    """Judge a simulated :class:`~primspace.data.MotionDataset`, or other joints for its samples.
+
+    Parameters
+    ----------
+    dataset : MotionDataset
+        Needs labels (primitive indices, names as in :data:`PRIMITIVES`), params
+        (``block_x, block_y, block_size``) and the simulator's 9 joints.
+    motor : ndarray, shape (N, T', 9), optional
+        Trajectories to judge instead of ``dataset.motor`` (e.g. the model's
+        reconstructions of these samples, in physical units).
+    """
+    check_judgeable(dataset)
     motor = dataset.motor if motor is None else np.asarray(motor)
     if len(motor) != len(dataset):
         raise DataError(f"{len(motor)} trajectories for {len(dataset)} samples", path=dataset.path, field="motor")
