@@ -131,10 +131,11 @@ def _fmt(v: Any) -> str:
 
 def _sections() -> list[Callable[[Path, HtmlReport], None]]:
     """The report's sections in order; each adds itself only if its results exist."""
-    from primspace.experiments import clustering, inter, intra, success
+    from primspace.experiments import claims, clustering, inter, intra, success
 
     return [
         intra.report_summary,
+        claims.report_section,
         intra.report_data,
         intra.report_section,
         clustering.report_section,

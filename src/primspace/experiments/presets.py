@@ -41,9 +41,10 @@ class ExperimentPreset:
     batch_size : int
         Samples per step while fitting θ and Z.
     infer_batch_size : int
-        Samples per step while inferring Z with θ frozen. Every code then takes exactly
-        one Adam step per epoch whatever the batch (and Adam cancels the 1/B scale of
-        the mean loss), so a large batch computes the same updates, only faster.
+        Samples per step while inferring Z with θ frozen. Every code takes one Adam step
+        per epoch on the gradient of its own sample's loss, whatever the batch (the
+        table undoes the batch mean's 1/B), so with θ frozen a large batch computes the
+        same updates (to float rounding), only faster.
     lr, latent_lr : float
         Adam learning rates of θ and of the codes.
     final_lr_fraction : float
