@@ -317,3 +317,15 @@ def test_report_on_a_damaged_experiment_json_is_one_line(run_cli, tmp_path):
     assert_user_error(run_cli("report", out), "experiment.json")
     (out / "experiment.json").write_text("{")
     assert_user_error(run_cli("report", out), "experiment.json")
+
+
+def test_an_output_path_through_a_file_is_one_line_for_every_writer(run_cli, npz_file, data_file, tmp_path):
+    """The file system refusing a write (here: a parent that is a regular file, which fails
+    for root too) is one line naming the path, and nothing is left behind."""
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    assert_user_error(run_cli("import", npz_file, "--length", 10, "--out", blocker / "o.h5"), "blocker")
+    assert_user_error(run_cli("cluster", data_file, "--k", 2, "--out", blocker / "c"), "blocker")
+    assert_user_error(run_cli("train", data_file, "--epochs", "1", "--out", blocker / "r", *TRAIN), "blocker")
+    assert_user_error(run_cli("show", data_file, "--out", blocker / "s.png"), "blocker")
+    assert blocker.read_text() == "x"
