@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
+from conftest import assert_figure, assert_user_error, figure_stats, read_png
 
 from primspace.data import MotionDataset
 
@@ -64,7 +64,8 @@ def test_latents_with_labels(run_cli, latents, tmp_path):
     with open(out / "labels.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 90 and set(rows[0]) == {"sample", "predicted", "true"}
-    assert (out / "clustering.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the affinity matrix (a colour map) and the coloured cluster markers: measured ~100000 chromatic pixels
+    assert_figure(out / "clustering.png", width=(800, 2500), min_ink=0.15, min_coloured=30_000)
     assert sorted(p.name for p in out.iterdir()) == ["clustering.png", "labels.csv", "result.json"]
 
 
@@ -90,7 +91,8 @@ def test_sweep_prints_the_table(run_cli, latents, tmp_path):
     with open(out / "sweep.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [float(r["value"]) for r in rows] == [0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.995, 0.999, 0.9999]
-    assert (out / "sweep.png").exists()
+    # R² in black, accuracy / NMI / ARI in tab:blue / tab:green / tab:orange (measured 600-1500 px each)
+    assert_figure(out / "sweep.png", colours=("black", "tab:blue", "tab:green", "tab:orange"), min_colour_pixels=250)
     res = run_cli("cluster", z, "--k", 3, "--sweep-taus", "0.01,0.1,1", "--out", out, "--overwrite")
     assert res.code == 0, res.err
     assert len(json.loads((out / "sweep.json").read_text())) == 3
@@ -193,7 +195,11 @@ def test_figures_handle_unknown_labels_extra_clusters_and_empty_sweeps(tmp_path)
     shown = np.concatenate([c.get_offsets()[:, 1] for c in right.collections])
     assert sorted(set(shown)) == [0, 1, 2, 3, 4]  # matched ids 0-2, unmatched ones above
     save_figure(fig, tmp_path / "c.png")
-    assert (tmp_path / "c.png").stat().st_size > 0
+    # the 12 x 12 affinity image and the markers of all 5 predicted clusters: measured ~180000 chromatic pixels
+    assert_figure(tmp_path / "c.png", width=(800, 2500), min_ink=0.15, min_coloured=50_000)
     fig = plot_tau_sweep([{"tau": None, "rank": 0}, {"tau": 0.1, "r2": 0.9, "rank": 3, "accuracy": 0.8}])
     assert len(fig.axes) == 2 and len(fig.axes[0].lines) == 1
     save_figure(plot_tau_sweep([]), tmp_path / "empty.png")
+    # an empty sweep still makes a readable figure: its message and axes, and no data drawn
+    empty = figure_stats(read_png(tmp_path / "empty.png"))
+    assert empty["coloured"] == 0 and empty["ink"] > 0.01, empty
