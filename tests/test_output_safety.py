@@ -329,3 +329,14 @@ def test_an_output_path_through_a_file_is_one_line_for_every_writer(run_cli, npz
     assert_user_error(run_cli("train", data_file, "--epochs", "1", "--out", blocker / "r", *TRAIN), "blocker")
     assert_user_error(run_cli("show", data_file, "--out", blocker / "s.png"), "blocker")
     assert blocker.read_text() == "x"
+
+
+def test_cluster_labels_from_an_npz_archive_is_one_line(run_cli, tmp_path, npz_file):
+    np.save(tmp_path / "z.npy", np.random.default_rng(0).normal(size=(6, 3)))
+    assert_user_error(run_cli("cluster", tmp_path / "z.npy", "--k", 2, "--labels", npz_file, "--out", tmp_path / "c"),
+                      "a.npz", ".npz archive")
+
+
+def test_experiment_with_zero_epochs_is_refused(run_cli, tmp_path):
+    assert_user_error(run_cli("experiment", "intra", "--epochs", "0,0", "--out", tmp_path / "e"), "at least 1")
+    assert not (tmp_path / "e").exists()

@@ -114,9 +114,13 @@ def _read_npy(path: Path, field: str) -> np.ndarray:
     if not path.is_file():
         raise DataError("no such file", path=path)
     try:
-        return np.load(path, allow_pickle=False)
+        loaded = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as exc:
         raise DataError(f"not a readable .npy array ({first_line(exc)})", path=path, field=field) from None
+    if not isinstance(loaded, np.ndarray):  # an .npz archive loads as a mapping of arrays
+        loaded.close()
+        raise DataError("is an .npz archive; give one array as an .npy file", path=path, field=field)
+    return loaded
 
 
 def _read_labels(path: Path, n: int) -> np.ndarray:

@@ -124,8 +124,8 @@ class ExperimentPreset:
             raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(INIT_METHODS)}")
         if any(q < 1 for q in changes.get("latent_dims", ())):
             raise UserError("latent sizes must be at least 1")
-        if any(changes.get(k, 0) < 0 for k in ("fit_epochs", "infer_epochs")):
-            raise UserError("epochs must be >= 0")
+        if any(changes.get(k, 1) < 1 for k in ("fit_epochs", "infer_epochs")):
+            raise UserError("--epochs: an experiment needs at least 1 fit and 1 infer epoch")
         for key in ("inits", "latent_dims", "seeds"):
             if key in changes and not changes[key]:
                 raise UserError(f"--{key.replace('_', '-')} is empty")
