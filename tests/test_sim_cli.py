@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
+from conftest import assert_figure, assert_user_error
 
 from primspace.data import MotionDataset
 from primspace.sim import generate
@@ -45,7 +45,7 @@ def test_show_draws_a_png(run_cli, tiny_preset, tmp_path):
     assert run_cli("generate", "--preset", tiny_preset, "--out", data, "--workers", 1).code == 0
     res = run_cli("show", data, "--sample", 5, "--out", png)
     assert res.code == 0, res.err
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert_figure(png, height=(200, 3000), width=(300, 4000))
     assert_user_error(run_cli("show", data, "--sample", 14, "--out", png), "sample 14 out of range 0..13")
 
 

@@ -5,7 +5,7 @@ import json
 import h5py
 import numpy as np
 import pytest
-from conftest import assert_user_error
+from conftest import assert_figure, assert_user_error
 
 from primspace.data import MotionDataset
 
@@ -49,7 +49,7 @@ def test_train_infer_reconstruct(run_cli, data_file, tmp_path):
 
     res = run_cli("reconstruct", ev, "--sample", "3", "--out", tmp_path / "s3.png")
     assert res.code == 0, res.err
-    assert (tmp_path / "s3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert_figure(tmp_path / "s3.png", height=(200, 3000), width=(300, 4000))
     res = run_cli("reconstruct", run, "--sample", "3", "--out", tmp_path / "x.png")
     assert_user_error(res, "sample 3 is not one of the run's 4 samples")
     assert not (tmp_path / "x.png").exists()
@@ -76,6 +76,7 @@ def test_train_without_images(run_cli, data_file, tmp_path):
     assert config["model"]["image_size"] is None and config["data"]["images"] is False
     res = run_cli("reconstruct", tmp_path / "run", "--sample", "0", "--out", tmp_path / "r.png")
     assert res.code == 0, res.err
+    assert_figure(tmp_path / "r.png", height=(200, 3000), width=(300, 4000))
 
 
 def test_data_set_without_motor_is_refused(run_cli, tmp_path):
@@ -146,7 +147,7 @@ def test_loss_curve_figure(tmp_path):
     np.testing.assert_allclose(ax.get_lines()[1].get_ydata(), 0.6 / np.arange(1, 6))  # mean of the two runs
     assert ax.get_lines()[1].get_color() == "tab:green"
     save_figure(fig, tmp_path / "curves.png")
-    assert (tmp_path / "curves.png").stat().st_size > 0
+    assert_figure(tmp_path / "curves.png", min_coloured=200, colours=("tab:blue", "tab:green"))
 
 
 def test_loss_band_stays_positive_on_a_log_axis():
