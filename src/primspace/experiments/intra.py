@@ -281,13 +281,13 @@ def report_summary(out_dir: Path, report) -> None:
         report.note(text, "warn")
     elif ok:
         report.note(
-            "The paper's qualitative result holds here: after inference with θ frozen, codes "
+            "The paper's central result, as we test it, holds here: after inference with θ frozen, codes "
             "initialised by random projection reach a lower evaluation loss than zero and random "
-            "initialisation. " + text, "good",
+            "initialisation. (The paper's own sentences are checked one by one in the next section.) " + text, "good",
         )
     else:
         report.note(
-            "The paper's qualitative result does NOT hold in every case here (projection's final "
+            "The paper's central result, as we test it, does NOT hold in every case here (projection's final "
             "evaluation loss is not below both zero and random initialisation). " + text, "warn",
         )
     if results["failures"]:
