@@ -46,8 +46,9 @@ push, pull     ``on_target``: the block ends within 10 mm of its target (x = 0.7
                (TCP within 10 mm of the block's centre line; an off-centre push
                would turn it) and ``height`` (TCP within 10 mm of the grip height;
                a push high on the block would tip it over); in the hold window:
-               ``held`` (closer finger at most 4 mm from the block: the hand stops
-               at the block it has delivered).
+               ``held`` (closer finger at most 10 mm from the block: the hand has
+               not left the block it delivered; 10 mm is the judge's rule for
+               "left the block", see touch_right).
 touch_right    ``touches``: exactly 3 touches (closer finger within 4 mm; a new
                touch needs the fingers to have left the block by at least 10 mm);
                at every touching step: ``right_side`` (TCP on the block's right,
@@ -293,8 +294,8 @@ def judge_rollout(name: str, r: Rollout, tol: Tolerances = TOLERANCES) -> Succes
         v.check("centred", off <= tol.position, off, f"pushes {_mm(off)} off the block's centre line (at most {_mm(tol.position)})")
         v.check("height", dz <= tol.position, dz, f"pushes {_mm(dz)} off the push height (at most {_mm(tol.position)})")
         gap = float(r.contact_distance[hold].max())
-        v.check("held", gap <= tol.touch_gap, gap,
-                f"the fingers are {_mm(gap)} from the block while holding (at most {_mm(tol.touch_gap)}: the hand stays at the block it delivered)")
+        v.check("held", gap <= tol.separation, gap,
+                f"the fingers are {_mm(gap)} from the block while holding (at most {_mm(tol.separation)}: the hand stays at the block it delivered)")
     elif name == "touch_right":
         d = r.contact_distance
         touching = d <= tol.touch_gap
