@@ -340,10 +340,11 @@ def fit(
         Give the model an image head and train it on the data's images. Default: when
         the data has images. (A ``model_config.image_size`` must match the data's.)
     scaler : JointScaler, optional
-        A fitted joint scaler to use instead of one fitted on the training samples. The
-        paper scales each joint to [-1, 1] "over all motions": an experiment that fits
-        on a part of its data passes a scaler fitted on every motion it uses, so the
-        targets of every part lie in [-1, 1]. Not with ``weights_from`` (the parent's
+        A fitted joint scaler to use instead of one fitted on the training samples.
+        The paper: "for each joint angle all the values in all sequences were
+        normalized to be in [-1, 1] interval"; an experiment that fits on a part of its
+        data passes a scaler fitted on every motion it uses, so the targets of every
+        part lie in [-1, 1]. Not with ``weights_from`` (the parent's
         scaler is used). Recorded in config.json.
     progress : bool, optional
         Progress bar (default: when stderr is a terminal); False is silent.

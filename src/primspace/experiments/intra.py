@@ -84,8 +84,9 @@ def load_run_data(data_path: str, preset: ExperimentPreset) -> tuple[MotionDatas
 def experiment_scaler(data: MotionDataset):
     """The joint scaler of every run of an experiment: fitted over all of its motions.
 
-    The paper normalises each joint "over all sequences" to [-1, 1]. Fitting it on the
-    part a run trains on would leave the other part's targets outside [-1, 1] (about 3%
+    The paper (Motion Capture Data): "for each joint angle all the values in all
+    sequences were normalized to be in [-1, 1] interval". Fitting it on the part a run
+    trains on would leave the other part's targets outside [-1, 1] (about 3%
     of intra's evaluation values), and in the inter-primitive fold that holds out
     grasp, whose finger joints never move in phase 1, grasp's finger targets would stay
     in metres (|y| <= 0.04, 1/2500 of their weight). Every experiment run therefore
