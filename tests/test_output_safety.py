@@ -340,3 +340,15 @@ def test_cluster_labels_from_an_npz_archive_is_one_line(run_cli, tmp_path, npz_f
 def test_experiment_with_zero_epochs_is_refused(run_cli, tmp_path):
     assert_user_error(run_cli("experiment", "intra", "--epochs", "0,0", "--out", tmp_path / "e"), "at least 1")
     assert not (tmp_path / "e").exists()
+
+
+def test_indices_out_of_range_name_the_index_file_and_the_data(run_cli, data_file, tmp_path):
+    (tmp_path / "idx.txt").write_text("0 99\n")
+    res = run_cli("train", data_file, "--epochs", "1", "--indices", tmp_path / "idx.txt", "--out", tmp_path / "r", *TRAIN)
+    assert_user_error(res, "idx.txt", "sample 99", "d.h5")
+    assert not (tmp_path / "r").exists()
+
+
+def test_generate_refuses_a_zero_frame_size_even_without_images(run_cli, tmp_path):
+    assert_user_error(run_cli("generate", "--no-images", "--height", 0, "--out", tmp_path / "g.h5"), "height")
+    assert not (tmp_path / "g.h5").exists()

@@ -470,6 +470,13 @@ def _name_list(text: str, option: str) -> tuple[str, ...]:
     return values
 
 
+def _check_indices(idx, path: Path, data) -> None:
+    """Sample indices read from ``path`` must lie in the data set: name both files."""
+    if idx is not None and len(idx) and (idx.min() < 0 or idx.max() >= len(data)):
+        bad = int(idx[(idx < 0) | (idx >= len(data))][0])
+        raise UserError(f"{path}, field 'indices': sample {bad} is out of range for the {len(data)} samples of {data.path}")
+
+
 def _check_workers(workers: Optional[int]) -> None:
     """The same rule for every command's --workers: absent means every core, else >= 1."""
     if workers is not None and workers < 1:
@@ -551,6 +558,7 @@ def train_command(
     check_outside_inputs(out, (file, indices, weights_from))
     idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)
+    _check_indices(idx, indices, ds)
     run = fit(
         ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
         indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
@@ -589,6 +597,7 @@ def infer_command(
     check_outside_inputs(out, (run, file, indices))
     idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)
+    _check_indices(idx, indices, ds)
     result = infer(
         run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
         resume=resume, overwrite=overwrite, **overrides,

@@ -173,7 +173,7 @@ class GenerationConfig:
             raise UserError(f"jitter = {self.jitter}: must be in [0, 0.5] (a fraction of the grid spacing)")
         if not (MIN_LENGTH <= self.length <= 100_000):
             raise UserError(f"length (T) = {self.length}: must be at least {MIN_LENGTH} (the phases need it)")
-        if self.images and not (1 <= self.height <= MAX_IMAGE_SIZE[0] and 1 <= self.width <= MAX_IMAGE_SIZE[1]):
+        if not (1 <= self.height <= MAX_IMAGE_SIZE[0] and 1 <= self.width <= MAX_IMAGE_SIZE[1]):
             raise UserError(
                 f"image size {self.height}x{self.width}: height must be 1..{MAX_IMAGE_SIZE[0]}, width 1..{MAX_IMAGE_SIZE[1]}"
             )
