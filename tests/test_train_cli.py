@@ -128,7 +128,7 @@ def test_bad_options_are_refused(run_cli, data_file, tmp_path, args, fragments):
 def test_bad_indices_and_runs_are_refused(run_cli, data_file, tmp_path):
     (tmp_path / "bad.txt").write_text("0 99\n")
     res = run_cli("train", data_file, "--epochs", "1", "--indices", tmp_path / "bad.txt", "--out", tmp_path / "run")
-    assert_user_error(res, "sample index 99 out of range for 8 samples")
+    assert_user_error(res, "bad.txt", "sample 99 is out of range for the 8 samples")
     res = run_cli("infer", tmp_path / "nothing", data_file, "--epochs", "1", "--out", tmp_path / "e")
     assert_user_error(res, "nothing", "no such run directory")
     res = run_cli("reconstruct", tmp_path / "nothing", "--sample", "0", "--out", tmp_path / "x.png")
