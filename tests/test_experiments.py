@@ -348,3 +348,24 @@ def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
     assert similar.check(doctored)[0] is False
     html = build_report(exp.path).read_text()
     assert "claims, checked" in html and "differs very slightly from random linear projection case." in html
+
+
+def test_tiny_experiment_numbers_are_pinned(finished):
+    """Same seed, same numbers: the tiny grid's losses, clustering accuracies and success
+    rates as of 0.2 (CPU). A refactor that changes any of them changes results, and must
+    say so (re-pin with the reason in the commit)."""
+    _, intra, clustering, success = finished
+    losses = {r["key"]: (r["fit"][-1]["loss"], r["infer"][0]["loss"], r["infer"][-1]["loss"]) for r in intra["runs"]}
+    pinned = {
+        "intra/zero-q4-s0": (0.28391703963279724, 0.2757866084575653, 0.2735570967197418),
+        "intra/projection-q4-s0": (0.25451040267944336, 0.25507625937461853, 0.25482308864593506),
+    }
+    assert losses.keys() == pinned.keys()
+    for key, values in pinned.items():
+        np.testing.assert_allclose(losses[key], values, rtol=1e-5, err_msg=key)
+    accuracy = {(r["init"], r["codes"]): r["accuracy"] for r in clustering["latent"]}
+    assert accuracy == pytest.approx({
+        ("zero", "learned"): 5 / 14, ("projection", "learned"): 12 / 14, ("projection", "initial (P m, untrained)"): 12 / 14,
+    })
+    assert {i: g["overall"] for i, g in success["generated"].items()} == {"zero": 0.0, "projection": 0.0}
+    assert success["recorded"]["overall"] == 1.0
