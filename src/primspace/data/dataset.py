@@ -41,6 +41,7 @@ import h5py
 import numpy as np
 
 from primspace.errors import DataError, UserError, first_line
+from primspace.data.values import as_float32, check_finite, check_int32_labels
 from primspace.files import atomic_path
 
 __all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
@@ -49,7 +50,6 @@ __all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
 SCHEMA_VERSION = 1
 
 _IMAGE_WRITE_BLOCK = 32  # samples per write when copying images into a file
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 # ----------------------------------------------------------------------------- images
@@ -269,7 +269,7 @@ class MotionDataset:
     path: Path | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        self.motor = _as_float_array(self.motor, "motor", self.path)
+        self.motor = as_float32(self.motor, "motor", self.path)
         if self.images is not None and not isinstance(self.images, LazyImages):
             images = np.asarray(self.images)
             if images.dtype != np.uint8:
@@ -279,10 +279,10 @@ class MotionDataset:
             labels = np.asarray(self.labels)
             if labels.size and labels.dtype.kind not in "iu":
                 raise DataError(f"labels must be integers, got {labels.dtype}", path=self.path, field="labels")
-            _check_int32_labels(labels, self.path)
+            check_int32_labels(labels, self.path)
             self.labels = labels.astype(np.int32)
         if self.params is not None:
-            self.params = _as_float_array(self.params, "params", self.path)
+            self.params = as_float32(self.params, "params", self.path)
         n_joints = self.motor.shape[-1] if self.motor.ndim == 3 else 0
         self.joint_names = _names(self.joint_names, n_joints, "j")
         if self.label_names is None:
@@ -341,7 +341,7 @@ class MotionDataset:
             raise DataError(f"sequences need at least 2 time steps, got T={t}", path=p, field="motor")
         if j < 1:
             raise DataError("has no joints (J=0)", path=p, field="motor")
-        _check_finite(m, "motor", p)
+        check_finite(m, "motor", p)
         if len(self.joint_names) != j:
             raise DataError(f"{len(self.joint_names)} joint names for J={j} joints", path=p, field="joint_names")
         if len(set(self.joint_names)) != j:
@@ -372,7 +372,7 @@ class MotionDataset:
             pr = self.params
             if pr.ndim != 2 or pr.shape[0] != n:
                 raise DataError(f"must have shape ({n}, P), got {pr.shape}", path=p, field="params")
-            _check_finite(pr, "params", p)
+            check_finite(pr, "params", p)
             if len(self.param_names) != pr.shape[1]:
                 raise DataError(
                     f"{len(self.param_names)} names for P={pr.shape[1]} params", path=p, field="param_names"
@@ -744,7 +744,7 @@ class DatasetWriter:
         """Validate a block of samples against this file; return it and its slice."""
         if self._file is None:
             raise RuntimeError("DatasetWriter.write outside its with block")
-        motor = _as_float_array(motor, "motor", self.path)
+        motor = as_float32(motor, "motor", self.path)
         k = motor.shape[0] if motor.ndim == 3 else 0
         block = MotionDataset(
             motor=motor,
@@ -827,59 +827,6 @@ class DatasetWriter:
 # --------------------------------------------------------------------------- helpers
 
 
-def _as_float_array(x, field_name: str, path) -> np.ndarray:
-    arr = np.asarray(x)
-    if arr.dtype.kind not in "fiu" or arr.dtype == bool:
-        raise DataError(f"must be numbers, got {arr.dtype}", path=path, field=field_name)
-    hit = _float32_overflow(arr)
-    if hit is not None:  # checked before the cast, which would make it inf
-        pos, value = hit
-        where = ""
-        if arr.ndim == 3:
-            where = f" (step {pos[1]}, joint {pos[2]})"
-        elif arr.ndim == 2:
-            where = f" (column {pos[1]})"
-        raise DataError(
-            _too_large(value) + where, path=path, field=field_name, index=pos[0] if arr.ndim else None
-        )
-    return arr.astype(np.float32, copy=False)
-
-
-def _float32_overflow(arr: np.ndarray) -> tuple[tuple[int, ...], Any] | None:
-    """The position and value of the first finite value that float32 cannot hold, or None.
-
-    Float16/32 always fit, and so does every integer up to 64 bits (|x| < 2e19, far
-    below float32's 3.4e38); NaN and inf are left to the finiteness checks.
-    """
-    if arr.dtype.kind != "f" or arr.dtype.itemsize <= 4:
-        return None
-    with np.errstate(invalid="ignore", over="ignore"):
-        bad = np.isfinite(arr) & (np.abs(arr) > _FLOAT32_MAX)
-    if not bad.any():
-        return None
-    pos = tuple(int(k) for k in np.argwhere(bad)[0])
-    return pos, arr[pos]
-
-
-def _too_large(value) -> str:
-    text = np.format_float_scientific(value, precision=6, trim="-")
-    return f"value {text} exceeds the float32 range (magnitude at most {_FLOAT32_MAX:.6g})"
-
-
-def _check_int32_labels(labels: np.ndarray, path) -> None:
-    """Refuse labels that a cast to int32 would wrap around (onto valid labels, silently)."""
-    if labels.dtype.kind not in "iu" or np.can_cast(labels.dtype, np.int32):
-        return
-    info = np.iinfo(np.int32)
-    bad = np.argwhere((labels < info.min) | (labels > info.max))
-    if bad.size:
-        pos = tuple(int(k) for k in bad[0])
-        raise DataError(
-            f"label {int(labels[pos])} is not a primitive index (it does not fit in int32)",
-            path=path, field="labels", index=pos[0] if labels.ndim == 1 else None,
-        )
-
-
 def _read_samples(dset: h5py.Dataset, rows, path, field_name: str = "images") -> np.ndarray:
     """``dset[rows]`` for a slice or increasing indices; an undecodable sample is a DataError.
 
@@ -900,14 +847,6 @@ def _read_samples(dset: h5py.Dataset, rows, path, field_name: str = "images") ->
                 path=path, field=field_name, index=int(k),
             ) from None
     raise DataError(f"cannot be read, the file may be corrupted ({cause})", path=path, field=field_name) from None
-
-
-def _check_finite(arr: np.ndarray, field_name: str, path) -> None:
-    finite = np.isfinite(arr)
-    if not finite.all():
-        bad = np.argwhere(~finite)[0]
-        where = f" (step {int(bad[1])}, joint {int(bad[2])})" if arr.ndim == 3 else ""
-        raise DataError(f"contains NaN or inf{where}", path=path, field=field_name, index=int(bad[0]))
 
 
 def _names(names: Sequence[str] | None, n: int, prefix: str) -> list[str]:

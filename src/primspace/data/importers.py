@@ -45,7 +45,8 @@ from typing import Sequence
 
 import numpy as np
 
-from primspace.data.dataset import _FLOAT32_MAX, MotionDataset, _float32_overflow, _too_large
+from primspace.data.dataset import MotionDataset
+from primspace.data.values import FLOAT32_MAX, as_float32, too_large
 from primspace.data.resample import resample
 from primspace.errors import DataError, UserError, first_line
 
@@ -235,8 +236,8 @@ def _read_csv(file: Path, index: int) -> tuple[list[str], np.ndarray]:
             if math.isinf(v) and "inf" not in cell.lower():  # e.g. '1e400': a finite number, too large
                 limit = "float64" if is_time else "float32"
                 raise fail(f"line {line}, column {header[c]!r}: value {cell.strip()} exceeds the {limit} range", field)
-            if not is_time and math.isfinite(v) and abs(v) > _FLOAT32_MAX:
-                raise fail(f"line {line}, column {header[c]!r}: {_too_large(v)}", field)
+            if not is_time and math.isfinite(v) and abs(v) > FLOAT32_MAX:
+                raise fail(f"line {line}, column {header[c]!r}: {too_large(v)}", field)
             values[k, c] = v
     if time_cols:
         c = time_cols[0]
@@ -328,11 +329,8 @@ def _resample_located(sequences: list, length: int) -> np.ndarray:
             raise DataError(f"a sequence must be (T_i, J), got shape {a.shape}", field="motor", index=i)
         if a.shape[0] == 0:
             raise DataError("has length 0 (an empty sequence)", field="motor", index=i)
-        hit = _float32_overflow(a)  # before resampling: name the value as given, not its inf
-        if hit is not None:
-            pos, value = hit
-            where = f" (step {pos[0]}, joint {pos[1]})" if a.ndim == 2 else f" (step {pos[0]})"
-            raise DataError(_too_large(value) + where, field="motor", index=i)
+        # before resampling: name the value as given, not the inf it would become
+        as_float32(a if a.ndim == 2 else a[:, None], "motor", None, index=i)
     return resample(sequences, length)
 
 
