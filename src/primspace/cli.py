@@ -73,11 +73,10 @@ def import_command(
 ) -> None:
     """Import demonstrations (npz, CSV folder, LASA) into a MotionDataset file."""
     from primspace.data.importers import import_csv_folder, import_lasa, import_npz
-    from primspace.files import check_output, check_outside_inputs, output_file
+    from primspace.files import output_file
 
-    out = output_file(out)
-    check_outside_inputs(out, (None if src is None or str(src).lower() == "lasa" else src,))
-    check_output(out, overwrite)
+    source = None if src is None or str(src).lower() == "lasa" else src
+    out = output_file(out, inputs=(source,), overwrite=overwrite)
     fmt = format.value if format is not None else _guess_format(src)
     if fmt == "lasa":
         names = [s.strip() for s in shapes.split(",") if s.strip()] if shapes else None
@@ -170,11 +169,10 @@ def generate_command(
     import dataclasses
     import time
 
-    from primspace.files import check_output, check_outside_inputs, output_file
+    from primspace.files import output_file
     from primspace.sim.generate import GenerationConfig, generate_dataset, resolve_config
 
-    out = output_file(out)
-    check_outside_inputs(out, (config_file,))
+    out = output_file(out, inputs=(config_file,), overwrite=overwrite)
     config = resolve_config(preset)
     if config_file is not None:
         try:
@@ -196,7 +194,6 @@ def generate_command(
     except UserError as exc:
         raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
     _check_workers(workers)
-    check_output(out, overwrite)
     start = time.perf_counter()
     shards = []
     ds = generate_dataset(config, seed=seed, workers=workers, backend=backend, address=address, out=out,
@@ -221,12 +218,10 @@ def show_command(
 ) -> None:
     """Draw one sample: a strip of camera frames and its joint curves."""
     from primspace.data.dataset import MotionDataset
-    from primspace.files import check_output, check_outside_inputs, output_file
+    from primspace.files import output_file
     from primspace.plots import plot_sim_sample, save_figure
 
-    out = output_file(out)
-    check_outside_inputs(out, (file,))
-    check_output(out, overwrite)
+    out = output_file(out, inputs=(file,), overwrite=overwrite)
     if frames < 1:
         raise UserError(f"--frames {frames}: must be at least 1")
     ds = MotionDataset.load(file)
@@ -470,13 +465,6 @@ def _name_list(text: str, option: str) -> tuple[str, ...]:
     return values
 
 
-def _check_indices(idx, path: Path, data) -> None:
-    """Sample indices read from ``path`` must lie in the data set: name both files."""
-    if idx is not None and len(idx) and (idx.min() < 0 or idx.max() >= len(data)):
-        bad = int(idx[(idx < 0) | (idx >= len(data))][0])
-        raise UserError(f"{path}, field 'indices': sample {bad} is out of range for the {len(data)} samples of {data.path}")
-
-
 def _check_workers(workers: Optional[int]) -> None:
     """The same rule for every command's --workers: absent means every core, else >= 1."""
     if workers is not None and workers < 1:
@@ -556,9 +544,8 @@ def train_command(
     from primspace.files import check_outside_inputs
 
     check_outside_inputs(out, (file, indices, weights_from))
-    idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)
-    _check_indices(idx, indices, ds)
+    idx = read_indices(indices, ds) if indices is not None else None
     run = fit(
         ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
         indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
@@ -595,9 +582,8 @@ def infer_command(
     from primspace.files import check_outside_inputs
 
     check_outside_inputs(out, (run, file, indices))
-    idx = read_indices(indices) if indices is not None else None
     ds = MotionDataset.load(file)
-    _check_indices(idx, indices, ds)
+    idx = read_indices(indices, ds) if indices is not None else None
     result = infer(
         run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
         resume=resume, overwrite=overwrite, **overrides,
@@ -616,13 +602,11 @@ def reconstruct_command(
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
     from primspace.data.dataset import MotionDataset
-    from primspace.files import check_output, check_outside_inputs, output_file
+    from primspace.files import output_file
     from primspace.plots import plot_reconstruction, save_figure
     from primspace.train import check_run_data, load_run
 
-    out = output_file(out)
-    check_outside_inputs(out, (run, data))
-    check_output(out, overwrite)
+    out = output_file(out, inputs=(run, data), overwrite=overwrite)
     if frames < 1:
         raise UserError(f"--frames {frames}: must be at least 1")
     trained = load_run(run)

@@ -61,15 +61,24 @@ def check_output(path: str | os.PathLike, overwrite: bool = False) -> Path:
     return path
 
 
-def output_file(text: str | os.PathLike, option: str = "--out") -> Path:
-    """The path of a file output as the user typed it: ``dir/`` (a trailing separator)
-    names a directory, so it is refused rather than written as a file called ``dir``."""
+def output_file(
+    text: str | os.PathLike, *, inputs: Iterable = (), overwrite: bool = False, option: str = "--out"
+) -> Path:
+    """The checked path of a command's file output, as the user typed it.
+
+    Refused, each in one line: an empty name; ``dir/`` (a trailing separator names a
+    directory, so no file called ``dir`` is written) or an existing directory; a path that
+    is, contains or lies inside one of ``inputs`` (:func:`check_outside_inputs`); an
+    existing file unless ``overwrite`` (:func:`check_output`).
+    """
     raw = os.fspath(text)
     if not raw.strip():
         raise UserError(f"{option} is empty")
     if raw.endswith(("/", os.sep)) or Path(raw).is_dir():
         raise UserError(f"{raw}: is a directory; {option} must name a file (e.g. {raw.rstrip('/' + os.sep) or '.'}/out)")
-    return Path(raw)
+    path = Path(raw)
+    check_outside_inputs(path, inputs, option)
+    return check_output(path, overwrite)
 
 
 def _within(inner: Path, outer: Path) -> bool:

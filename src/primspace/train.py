@@ -683,9 +683,10 @@ def check_run_data(run: TrainedRun, dataset: MotionDataset) -> None:
         raise UserError(f"{where}: its joint values differ from those run {run.run_dir} used (SHA-1 of the run's samples): not its data")
 
 
-def read_indices(path: str | os.PathLike) -> np.ndarray:
+def read_indices(path: str | os.PathLike, dataset: MotionDataset | None = None) -> np.ndarray:
     """Sample indices from a ``.npy`` file or a text file (integers separated by
-    whitespace or commas; ``#`` starts a comment)."""
+    whitespace or commas; ``#`` starts a comment); with ``dataset``, each must be one of
+    its samples (the error names the index file and the data file)."""
     path = Path(path)
     if not path.is_file():
         raise DataError("no such file", path=path, field="indices")
@@ -703,6 +704,12 @@ def read_indices(path: str | os.PathLike) -> np.ndarray:
         raise DataError("must be a non-empty list of integers", path=path, field="indices")
     if len(np.unique(arr)) != arr.size:
         raise DataError("lists a sample more than once", path=path, field="indices")
+    if dataset is not None:
+        bad = arr[(arr < 0) | (arr >= len(dataset))]
+        if bad.size:
+            where = f" of {dataset.path}" if dataset.path is not None else ""
+            raise DataError(f"sample {int(bad[0])} is out of range for the {len(dataset)} samples{where}",
+                            path=path, field="indices")
     return arr.astype(np.int64)
 
 
