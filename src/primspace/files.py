@@ -75,7 +75,7 @@ def output_file(
     if not raw.strip():
         raise UserError(f"{option} is empty")
     if raw.endswith(("/", os.sep)) or Path(raw).is_dir():
-        raise UserError(f"{raw}: is a directory; {option} must name a file (e.g. {raw.rstrip('/' + os.sep) or '.'}/out)")
+        raise UserError(f"{raw}: is a directory; {option} must name a file")
     path = Path(raw)
     check_outside_inputs(path, inputs, option)
     return check_output(path, overwrite)
