@@ -65,13 +65,18 @@ def _random_fit_bad(results: dict) -> tuple[bool | None, str]:
     return ratio >= 5, f"q = {q}: random's final fit loss is {ratio:.3g}x projection's"
 
 
-def _zero_fit_close(results: dict) -> tuple[bool | None, str]:
-    fits = _by_q(results, "fit")
-    ratios = {q: d["zero"] / d["projection"] for q, d in fits.items() if _need(d, "zero", "projection")}
-    if not ratios:
-        return None, "needs zero and projection runs"
-    ok = all(0.5 <= r <= 2 for r in ratios.values())
-    return ok, "zero / projection final fit loss: " + ", ".join(f"q = {q}: {r:.2g}" for q, r in ratios.items())
+def _zero_within_2x(phase: str, what: str) -> Callable[[dict], tuple[bool | None, str]]:
+    """The check "zero's final ``phase`` loss lies within a factor of 2 of projection's at every q"."""
+
+    def check(results: dict) -> tuple[bool | None, str]:
+        finals = _by_q(results, phase)
+        ratios = {q: d["zero"] / d["projection"] for q, d in finals.items() if _need(d, "zero", "projection")}
+        if not ratios:
+            return None, "needs zero and projection runs"
+        ok = all(0.5 <= r <= 2 for r in ratios.values())
+        return ok, f"zero / projection final {what} loss: " + ", ".join(f"q = {q}: {r:.3g}" for q, r in ratios.items())
+
+    return check
 
 
 def _random_infer_fails(results: dict) -> tuple[bool | None, str]:
@@ -97,15 +102,6 @@ def _projection_good_untrained(results: dict) -> tuple[bool | None, str]:
     return ok, "projection's eval loss before any inference step vs zero's after the last: " + ", ".join(
         f"q = {q}: {a:.2g} vs {b:.2g}" for q, (a, b) in cmp.items()
     )
-
-
-def _zero_projection_similar_loss(results: dict) -> tuple[bool | None, str]:
-    finals = _by_q(results, "infer")
-    ratios = {q: d["zero"] / d["projection"] for q, d in finals.items() if _need(d, "zero", "projection")}
-    if not ratios:
-        return None, "needs zero and projection runs"
-    ok = all(0.5 <= r <= 2 for r in ratios.values())
-    return ok, "zero / projection final eval loss: " + ", ".join(f"q = {q}: {r:.3g}" for q, r in ratios.items())
 
 
 def _success_projection_higher(results: dict) -> tuple[bool | None, str]:
@@ -158,7 +154,7 @@ CLAIMS: tuple[Claim, ...] = (
           "final fit loss at the smallest q: random at least 5x projection's", _random_fit_bad),
     Claim("fit_zero", "intra", "Intra-primitive generalisation, Fig. loss_train",
           "Zero initialization, on the other hand, differs very slightly from random linear projection case.",
-          "final fit loss of zero within a factor of 2 of projection's at every q", _zero_fit_close),
+          "final fit loss of zero within a factor of 2 of projection's at every q", _zero_within_2x("fit", "fit")),
     Claim("infer_random", "intra", "Intra-primitive generalisation, Fig. loss_test",
           "Notice that the case with random initialization did not converge at all.",
           "final eval loss (θ frozen) of random at least 10x projection's at every q", _random_infer_fails),
@@ -169,7 +165,7 @@ CLAIMS: tuple[Claim, ...] = (
     Claim("infer_similar", "intra", "Intra-primitive generalisation",
           "It may look like resulting performance of trained models for zero latent initialization and random "
           "projection latent initialization is very similar",
-          "final eval loss of zero within a factor of 2 of projection's at every q", _zero_projection_similar_loss),
+          "final eval loss of zero within a factor of 2 of projection's at every q", _zero_within_2x("infer", "eval")),
     Claim("success", "success", "Intra-primitive generalisation, Table assessment_table",
           "some primitives from the experimental setup require more precision than others. In particular, "
           "pushing and pulling the block as well as grasping is easy to fail if the gripper fingers miss just a bit.",
