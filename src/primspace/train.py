@@ -24,17 +24,10 @@ large inference batch is only faster. (Before 0.2 the codes stepped on the batch
 gradient, so a code that fell in the short last batch of an epoch got a differently
 scaled gradient; at 300 samples and batch 256 the final codes differed by 19-24%.)
 
-A run directory holds::
-
-    config.json     kind (fit / infer), init, model and train configs, data (path, sample
-                    indices, fingerprint), parent run
-    metrics.jsonl   one line per epoch: epoch, loss, motor, vision, seconds, samples_per_s
-                    (epoch 0 = the codes as initialised, before any update)
-    checkpoint.pt   model, optimiser, codes and their optimiser, scaler, initialiser
-                    (P), RNG states, epoch; written atomically after epoch 0, every
-                    ``checkpoint_seconds`` (or ``checkpoint_every`` epochs) and at the end
-    latents.npy     the codes (N, q) float32 at the last checkpoint (atomically)
-    latents_init.npy  the codes as initialised
+A run directory (:mod:`primspace.rundir`, which owns its layout) holds the configs,
+``metrics.jsonl`` (epoch 0 = the codes as initialised, before any update), the checkpoint
+(written atomically after epoch 0, every ``checkpoint_seconds`` or ``checkpoint_every``
+epochs, and at the end) and the codes.
 
 ``resume`` continues from the checkpoint bit-identically on the CPU.
 """
@@ -43,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import hashlib
 import json
 import math
 import os
@@ -59,8 +51,24 @@ import torch
 import torch.nn.functional as F
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.errors import DataError, OutputExistsError, UserError, config_from_dict
-from primspace.files import atomic_path, atomic_write_json, atomic_write_text, check_outside_inputs, os_error
+from primspace.errors import DataError, UserError, config_from_dict
+from primspace.files import atomic_path, atomic_write_json, atomic_write_text
+from primspace.rundir import (
+    CHECKPOINT_FORMAT,
+    CHECKPOINT_NAME,
+    CONFIG_NAME,
+    LATENTS_INIT_NAME,
+    LATENTS_NAME,
+    METRICS_NAME,
+    check_run_data,
+    prepare_run_dir,
+    read_checkpoint,
+    read_config,
+    read_metrics,
+    run_config,
+    save_npy,
+    start_run_dir,
+)
 from primspace.latent import INIT_METHODS, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.progress import progress_bar
@@ -78,15 +86,6 @@ __all__ = [
     "check_run_data",
     "resolve_device",
 ]
-
-CHECKPOINT_FORMAT = 1
-CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME = "config.json", "metrics.jsonl", "checkpoint.pt"
-LATENTS_NAME, LATENTS_INIT_NAME = "latents.npy", "latents_init.npy"
-_RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_INIT_NAME)
-
-# Train-config fields that may change when a run is resumed (they do not change the numbers).
-_RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc"}
-
 
 # ----------------------------------------------------------------------------- config
 
@@ -398,12 +397,12 @@ def fit(
         if np.isinf(initial_latents).any():
             row = int(np.argwhere(np.isinf(initial_latents))[0, 0])
             raise UserError(f"initial_latents row {row} contains inf (use NaN rows for 'no initial code')")
-    config = _run_config(
+    config = run_config(
         "fit", init, mc, tc, data, idx, use_images,
         parent=None if parent is None else str(parent.run_dir.resolve()),
     )
     config["scaler"] = None if scaler is None else scaler.to_dict()
-    ckpt = _prepare_run_dir(out_dir, config, resume, overwrite, inputs=(dataset.path, weights_from), epochs=tc.epochs)
+    ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=(dataset.path, weights_from), epochs=tc.epochs)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
     _set_threads(tc, device)
@@ -505,8 +504,8 @@ def infer(
     mc = parent.model_config
     use_images = mc.has_images and data.has_images and tc.vision_weight > 0
     _check_data_fits(data, mc, use_images)
-    config = _run_config("infer", init, mc, tc, data, idx, use_images, parent=str(parent.run_dir.resolve()))
-    ckpt = _prepare_run_dir(out_dir, config, resume, overwrite, inputs=(dataset.path, run_dir), epochs=tc.epochs)
+    config = run_config("infer", init, mc, tc, data, idx, use_images, parent=str(parent.run_dir.resolve()))
+    ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=(dataset.path, run_dir), epochs=tc.epochs)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
     _set_threads(tc, device)
@@ -545,8 +544,8 @@ def load_run(run_dir: str | os.PathLike, *, map_location: str | torch.device = "
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise UserError(f"{run_dir}: no such run directory")
-    config = _read_config(run_dir)
-    ckpt = _read_checkpoint(run_dir / CHECKPOINT_NAME, map_location)
+    config = read_config(run_dir)
+    ckpt = read_checkpoint(run_dir / CHECKPOINT_NAME, map_location)
     if ckpt is None:
         raise UserError(f"{run_dir}: has no {CHECKPOINT_NAME} (the run never completed an epoch)")
     try:
@@ -562,7 +561,7 @@ def load_run(run_dir: str | os.PathLike, *, map_location: str | torch.device = "
         epoch = int(ckpt["epoch"])
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise UserError(f"{run_dir / CHECKPOINT_NAME}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
-    history = [h for h in _read_metrics(run_dir / METRICS_NAME) if h["epoch"] <= epoch]
+    history = [h for h in read_metrics(run_dir / METRICS_NAME) if h["epoch"] <= epoch]
     data = config.get("data", {})
     return TrainedRun(
         run_dir=run_dir, kind=config["kind"], init=config["init"], model=model, model_config=mc,
@@ -661,26 +660,6 @@ def evaluate(
     sums = _evaluate_loop(model, table, tensors, tc, dev)
     model.to("cpu")
     return _epoch_values(sums, len(data), use_images)
-
-
-def check_run_data(run: TrainedRun, dataset: MotionDataset) -> None:
-    """Refuse a data set that is not the one ``run`` was trained or inferred on.
-
-    Compares what a resume compares: joints and steps, the run's sample indices, and the
-    SHA-1 of those samples' joint values (``config.json`` ``data.motor_sha1``).
-    """
-    where = str(dataset.path) if dataset.path is not None else "the data set"
-    mc = run.model_config
-    if dataset.n_joints != mc.n_joints or dataset.length != mc.length:
-        raise UserError(
-            f"{where}: has T={dataset.length} steps x J={dataset.n_joints} joints; run {run.run_dir} "
-            f"was trained on T={mc.length} x J={mc.n_joints}: not its data"
-        )
-    if len(run.indices) and int(run.indices.max()) >= len(dataset):
-        raise UserError(f"{where}: has {len(dataset)} samples, run {run.run_dir} used sample {int(run.indices.max())}: not its data")
-    saved = run.config.get("data", {}).get("motor_sha1")
-    if saved is not None and _fingerprint(dataset.subset(run.indices)) != saved:
-        raise UserError(f"{where}: its joint values differ from those run {run.run_dir} used (SHA-1 of the run's samples): not its data")
 
 
 def read_indices(path: str | os.PathLike, dataset: MotionDataset | None = None) -> np.ndarray:
@@ -799,9 +778,9 @@ class _Session:
         if ckpt is not None:
             self._restore(ckpt)
         else:
-            _start_run_dir(self.out_dir)
+            start_run_dir(self.out_dir)
             atomic_write_json(self.out_dir / CONFIG_NAME, self.config)
-            _save_npy(self.out_dir / LATENTS_INIT_NAME, self.initial_codes.numpy())
+            save_npy(self.out_dir / LATENTS_INIT_NAME, self.initial_codes.numpy())
             atomic_write_text(self.out_dir / METRICS_NAME, "")
             if tc.log_initial:
                 t0 = time.perf_counter()
@@ -890,7 +869,7 @@ class _Session:
         }
         with atomic_path(self.out_dir / CHECKPOINT_NAME) as tmp:
             torch.save(state, tmp)
-        _save_npy(self.out_dir / LATENTS_NAME, self.table.numpy())
+        save_npy(self.out_dir / LATENTS_NAME, self.table.numpy())
         self._last_checkpoint = self.epoch
         self._checkpoint_time = time.monotonic()
 
@@ -905,7 +884,7 @@ class _Session:
         random.setstate(_to_tuple(rng["python"]))
         _set_numpy_state(rng["numpy"])
         # metrics past the checkpoint (written before a kill) are dropped: they will be redone
-        kept = [h for h in _read_metrics(self.out_dir / METRICS_NAME) if h["epoch"] <= self.epoch]
+        kept = [h for h in read_metrics(self.out_dir / METRICS_NAME) if h["epoch"] <= self.epoch]
         atomic_write_text(self.out_dir / METRICS_NAME, "".join(json.dumps(h) + "\n" for h in kept))
 
 
@@ -939,153 +918,6 @@ def _check_data_fits(data: MotionDataset, mc: ModelConfig, use_images: bool) -> 
         if tuple(data.image_size) != tuple(mc.image_size):
             h, w = data.image_size
             raise UserError(f"{where}: images are {h}x{w}, the model predicts {mc.image_size[0]}x{mc.image_size[1]}")
-
-
-def _fingerprint(data: MotionDataset) -> str:
-    return hashlib.sha1(np.ascontiguousarray(data.motor, dtype=np.float32).tobytes()).hexdigest()
-
-
-def _run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
-    from primspace import __version__
-
-    return {
-        "kind": kind,
-        "init": init,
-        "model": mc.to_dict(),
-        "train": tc.to_dict(),
-        "data": {
-            "path": None if data.path is None else str(Path(data.path).resolve()),
-            "n_samples": len(data),
-            "indices": idx.tolist(),
-            "images": bool(use_images),
-            "joint_names": list(data.joint_names),
-            "dt": data.dt,
-            "motor_sha1": _fingerprint(data),
-        },
-        "parent": parent,
-        "primspace_version": __version__,
-    }
-
-
-def _prepare_run_dir(
-    out_dir: Path, config: dict, resume: bool, overwrite: bool, inputs: tuple = (), epochs: int | None = None
-) -> dict | None:
-    """Check the run directory; return the checkpoint to resume from (or None).
-
-    Writes nothing: an ``overwrite`` only takes effect when the new run starts writing
-    (:func:`_start_run_dir`), so a run that fails while loading its data loses nothing.
-    Refused: ``resume`` with ``overwrite``; an ``out_dir`` that is, contains or lies inside
-    one of ``inputs``; a non-empty directory that is not a run of the same kind
-    (``fit`` / ``infer``); a resume past ``epochs``.
-    """
-    if resume and overwrite:
-        raise UserError(f"{out_dir}: --resume continues the run and --overwrite replaces it; give one of them")
-    check_outside_inputs(out_dir, inputs)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise UserError(f"{out_dir}: exists and is not a directory")
-    existing = out_dir.is_dir() and any(out_dir.iterdir())
-    is_run = (out_dir / CONFIG_NAME).is_file() or (out_dir / CHECKPOINT_NAME).is_file()
-    if existing and not is_run:
-        raise UserError(f"{out_dir}: exists and is not a primspace run directory; choose another --out")
-    if is_run and (out_dir / CONFIG_NAME).is_file():
-        kind = _read_config(out_dir).get("kind")
-        if kind != config["kind"]:
-            verb = "train" if config["kind"] == "fit" else "infer"
-            raise UserError(
-                f"{out_dir}: is a{'n' if kind == 'infer' else ''} {kind} run; {verb} only resumes or replaces "
-                f"its own ({config['kind']}) runs: choose another --out"
-            )
-    if resume and (out_dir / CHECKPOINT_NAME).is_file():
-        ckpt = _read_checkpoint(out_dir / CHECKPOINT_NAME, "cpu")
-        _check_compatible(out_dir, ckpt["config"], config)
-        done = int(ckpt["epoch"])
-        if epochs is not None and done > epochs:
-            raise UserError(
-                f"{out_dir}: has trained {done} epochs, more than the {epochs} asked for; resume with "
-                f"--epochs {done} or more (more extends the run)"
-            )
-        return ckpt
-    if existing and not resume and not overwrite:
-        raise OutputExistsError(out_dir, hint="--resume or --overwrite")
-    return None
-
-
-def _start_run_dir(out_dir: Path) -> None:
-    """Make ``out_dir`` ready for a new run: remove an earlier run's files (only those a
-    run writes: anything else in the directory stays) and create it."""
-    try:
-        if out_dir.is_dir():
-            for name in _RUN_FILES:
-                with contextlib.suppress(FileNotFoundError):
-                    (out_dir / name).unlink()
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise os_error(exc, out_dir) from None
-
-
-def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
-    def fail(what: str, a, b) -> None:
-        raise UserError(f"{out_dir}: cannot resume: {what} differs (saved {a}, given {b})")
-
-    for key in ("kind", "init", "parent", "scaler"):
-        if saved.get(key) != given.get(key):
-            fail(key, saved.get(key), given.get(key))
-    for key, value in given["model"].items():
-        if saved["model"].get(key) != value:
-            fail(f"model {key}", saved["model"].get(key), value)
-    for key, value in given["train"].items():
-        if key not in _RESUMABLE_CHANGES and saved["train"].get(key) != value:
-            fail(f"train {key}", saved["train"].get(key), value)
-    sd, gd = saved["data"], given["data"]
-    for key in ("n_samples", "images", "motor_sha1"):
-        if sd.get(key) != gd.get(key):
-            fail("data" if key == "motor_sha1" else f"data {key}", sd.get(key), gd.get(key))
-    if sd.get("indices") != gd.get("indices"):
-        fail("data indices", f"{len(sd.get('indices', []))} samples", f"{len(gd['indices'])} samples")
-
-
-def _read_config(run_dir: Path) -> dict:
-    path = run_dir / CONFIG_NAME
-    if not path.is_file():
-        raise UserError(f"{run_dir}: not a primspace run directory (no {CONFIG_NAME})")
-    try:
-        config = json.loads(path.read_text(encoding="utf-8"))
-        for key in ("kind", "init", "model", "train", "data"):
-            config[key]
-    except (ValueError, KeyError, TypeError) as exc:
-        raise UserError(f"{path}: not a primspace run config ({exc})") from None
-    return config
-
-
-def _read_checkpoint(path: Path, map_location) -> dict | None:
-    if not path.is_file():
-        return None
-    try:
-        ckpt = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as exc:  # torch raises many kinds for a damaged file
-        raise UserError(f"{path}: cannot read the checkpoint ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        raise UserError(f"{path}: not a primspace checkpoint (format {ckpt.get('format') if isinstance(ckpt, dict) else '?'})")
-    return ckpt
-
-
-def _read_metrics(path: Path) -> list[dict]:
-    if not path.is_file():
-        return []
-    out = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        if line.strip():
-            try:
-                out.append(json.loads(line))
-            except ValueError:
-                break  # a line cut short by a kill: ignore it and what follows
-    return out
-
-
-def _save_npy(path: Path, array: np.ndarray) -> None:
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            np.save(f, array)
 
 
 def _new_model(mc: ModelConfig, seed: int) -> MTRNNDecoder:
