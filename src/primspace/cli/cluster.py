@@ -1,0 +1,219 @@
+"""The ``cluster`` command: affine low-rank subspace clustering of a data set or codes."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from primspace.errors import UserError, first_line
+
+from primspace.cli.app import app
+from primspace.cli.options import echo_json
+
+
+# ====================================================================== clustering
+
+
+class ClusterAffinity(str, Enum):
+    squared = "squared"
+    abs = "abs"
+
+
+class ClusterSpectral(str, Enum):
+    auto = "auto"
+    dense = "dense"
+    implicit = "implicit"
+
+
+@app.command("cluster")
+def cluster_command(
+    src: Path = typer.Argument(
+        ..., help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened) or an (N, q) .npy of latents."
+    ),
+    k: int = typer.Option(..., "--k", "-k", help="Number of clusters K."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output directory (labels.csv, result.json, clustering.png)."),
+    tau: Optional[float] = typer.Option(None, "--tau", help="The paper's tau, absolute (> 0)."),
+    tau_relative: Optional[float] = typer.Option(
+        None, "--tau-relative", help="Scale-free tau: tau = R / sigma_1^2 (keeps sigma_k / sigma_1 > 1/sqrt(R))."
+    ),
+    r2: Optional[float] = typer.Option(
+        None, "--r2", help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1) (default 0.99)."
+    ),
+    linear: bool = typer.Option(False, "--linear", help="Linear subspaces (no ones row) instead of affine."),
+    affinity: ClusterAffinity = typer.Option(ClusterAffinity.squared, help="W = Q*^2 (scales) or |Q*| (dense only)."),
+    ones_weight: float = typer.Option(1.0, help="Value of the appended ones row (affine)."),
+    spectral: ClusterSpectral = typer.Option(ClusterSpectral.auto, help="Spectral step: dense n x n, implicit, or auto by n."),
+    n_init: int = typer.Option(20, help="k-means restarts."),
+    seed: int = typer.Option(0, help="Random seed (k-means; same seed, same labels)."),
+    labels: Optional[Path] = typer.Option(None, "--labels", help="(N,) integer .npy of true labels (-1 = unknown) for scoring."),
+    do_sweep: bool = typer.Option(False, "--sweep", help="Also print and save R^2, rank and scores over a tau grid."),
+    sweep_taus: Optional[str] = typer.Option(
+        None, "--sweep-taus", help="Comma-separated absolute taus for --sweep (default: R^2 targets 0.5 ... 0.9999)."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print the result JSON instead of text."),
+    overwrite: bool = typer.Option(False, help="Replace a non-empty OUT directory."),
+) -> None:
+    """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
+    import time
+
+    from primspace.cluster import LowRankSubspaceClustering, affinity_from_factor, clustering_scores, sweep
+    from primspace.cluster.inputs import load_points
+    from primspace.cluster.outputs import (
+        atomic_directory,
+        check_output_directory,
+        figure_indices,
+        to_jsonable,
+        write_json,
+        write_labels_csv,
+        write_sweep_csv,
+    )
+    from primspace.files import check_outside_inputs
+    from primspace.plots import plot_clustering, plot_tau_sweep, save_figure
+
+    check_outside_inputs(out, (src, labels))
+    check_output_directory(out, overwrite)
+    _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init)
+    grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
+    points = load_points(src, labels)
+    n, dim = points.X.shape
+    if k > n:
+        raise UserError(f"--k {k} exceeds the {n} samples in {src}")
+    model = LowRankSubspaceClustering(
+        k,
+        affine=not linear,
+        tau=tau,
+        tau_relative=tau_relative,
+        r2_target=r2,
+        affinity=affinity.value,
+        ones_weight=ones_weight,
+        spectral=spectral.value,
+        n_init=n_init,
+        random_state=seed,
+    )
+    started = time.perf_counter()
+    try:
+        model.fit(points.X)
+        seconds = time.perf_counter() - started
+        rows = None
+        if do_sweep or grid is not None:
+            rows = sweep(
+                points.X, k, taus=grid, labels_true=points.labels, affine=not linear, affinity=affinity.value,
+                ones_weight=ones_weight, spectral=spectral.value, n_init=n_init, random_state=seed,
+            )
+    except ValueError as exc:  # parameter / data problems the estimator found
+        raise UserError(f"{src}: {first_line(exc)}") from None
+    scores = clustering_scores(points.labels, model.labels_) if points.labels is not None else None
+    result = {
+        "input": str(src),
+        "points": points.description,
+        "n_samples": n,
+        "n_features": dim,
+        "n_clusters": k,
+        "affine": not linear,
+        "affinity": affinity.value,
+        "ones_weight": ones_weight,
+        "tau_option": _tau_option_text(tau, tau_relative, r2),
+        "tau": model.tau_,
+        "tau_relative": model.tau_relative_,
+        "r2": model.r2_,
+        "rank": model.rank_,
+        "spectral_method": model.spectral_method_,
+        "eigenvalues": model.eigenvalues_,
+        "singular_values": model.singular_values_[:100],
+        "n_init": n_init,
+        "seed": seed,
+        "seconds": round(seconds, 3),
+        "scores": scores,
+        "sweep": None if rows is None else [{k2: v for k2, v in r.items() if k2 != "labels"} for r in rows],
+    }
+    idx = figure_indices(n)
+    shown = "" if idx.size == n else f" ({idx.size} of {n} samples)"
+    acc = "" if scores is None or scores["accuracy"] is None else f", accuracy {scores['accuracy']:.3f}"
+    figure = plot_clustering(
+        affinity_from_factor(model.representation_factor_, affinity.value, rows=idx),
+        model.labels_[idx],
+        None if points.labels is None else points.labels[idx],
+        label_names=points.label_names,
+        title=f"{src.name}: tau = {model.tau_:.3g}, R^2 = {model.r2_:.4f}, rank {model.rank_}{acc}{shown}",
+    )
+    with atomic_directory(out, overwrite) as tmp:
+        write_labels_csv(tmp / "labels.csv", model.labels_, points.labels)
+        write_json(tmp / "result.json", result)
+        save_figure(figure, tmp / "clustering.png")
+        if rows is not None:
+            write_sweep_csv(tmp / "sweep.csv", rows)
+            write_json(tmp / "sweep.json", result["sweep"])
+            save_figure(plot_tau_sweep(rows, title=f"{src.name}: tau sweep"), tmp / "sweep.png")
+    if as_json:
+        echo_json(to_jsonable(result))
+        return
+    if rows is not None:
+        typer.echo(_format_sweep(rows))
+    typer.echo(
+        f"{n} samples x {dim} features -> {k} clusters: tau {model.tau_:.4g} (relative {model.tau_relative_:.4g}), "
+        f"R^2 {model.r2_:.4f}, rank {model.rank_}, spectral {model.spectral_method_}, {seconds:.2f} s"
+    )
+    if scores is not None:
+        if scores["accuracy"] is None:
+            typer.echo("no sample has a known true label: nothing scored")
+        else:
+            typer.echo(
+                f"accuracy {scores['accuracy']:.4f}  NMI {scores['nmi']:.4f}  ARI {scores['ari']:.4f}  "
+                f"({scores['n_scored']} scored, {scores['n_ignored']} with unknown label)"
+            )
+    typer.echo(f"wrote {out}/: labels.csv, result.json, clustering.png" + (", sweep.csv, sweep.json, sweep.png" if rows else ""))
+
+
+def _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init) -> None:
+    if k < 1:
+        raise UserError(f"--k must be at least 1, got {k}")
+    given = [name for name, v in (("--tau", tau), ("--tau-relative", tau_relative), ("--r2", r2)) if v is not None]
+    if len(given) > 1:
+        raise UserError(f"give at most one of --tau, --tau-relative, --r2; got {' and '.join(given)}")
+    for name, value in (("--tau", tau), ("--tau-relative", tau_relative), ("--ones-weight", ones_weight)):
+        if value is not None and not (value > 0 and value != float("inf")):
+            raise UserError(f"{name} must be a positive number, got {value}")
+    if r2 is not None and not 0 < r2 < 1:
+        raise UserError(f"--r2 must lie in (0, 1), got {r2}")
+    if n_init < 1:
+        raise UserError(f"--n-init must be at least 1, got {n_init}")
+
+
+def _parse_float_list(text: str, option: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UserError(f"{option} must be comma-separated numbers, got {text!r}") from None
+    if not values or any(not (v > 0 and v != float("inf")) for v in values):
+        raise UserError(f"{option} must list positive numbers, got {text!r}")
+    return values
+
+
+def _tau_option_text(tau, tau_relative, r2) -> dict:
+    from primspace.cluster import DEFAULT_R2_TARGET
+
+    if tau is not None:
+        return {"tau": tau}
+    if tau_relative is not None:
+        return {"tau_relative": tau_relative}
+    return {"r2_target": DEFAULT_R2_TARGET if r2 is None else r2}
+
+
+def _format_sweep(rows: list[dict]) -> str:
+    def f(v, spec):
+        width = int(spec.split(".")[0].rstrip("df"))
+        return "-".rjust(width) if v is None else format(v, spec)
+
+    grid = rows[0]["grid"] if rows else "tau"
+    head = f"  {grid:>12} {'tau':>10} {'tau_rel':>10} {'R^2':>8} {'rank':>5} {'accuracy':>9} {'NMI':>7} {'ARI':>7}"
+    lines = ["tau sweep (one SVD):", head]
+    for r in rows:
+        lines.append(
+            f"  {r['value']:>12.6g} {f(r.get('tau'), '10.4g')} {f(r.get('tau_relative'), '10.4g')} "
+            f"{f(r.get('r2'), '8.4f')} {f(r.get('rank'), '5d')} {f(r.get('accuracy'), '9.4f')} "
+            f"{f(r.get('nmi'), '7.4f')} {f(r.get('ari'), '7.4f')}"
+        )
+    return "\n".join(lines)

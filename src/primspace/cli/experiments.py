@@ -1,0 +1,147 @@
+"""The paper's experiments, the report and the demo."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from primspace.errors import UserError
+
+from primspace.cli.app import app
+from primspace.cli.options import check_workers, echo_table, int_list, name_list
+
+
+# ============================================================ experiments, report
+
+experiment_app = typer.Typer(
+    help="The paper's experiments (Experimental Results). Re-running with the same --out skips "
+    "finished runs and resumes interrupted ones.",
+    no_args_is_help=True,
+)
+app.add_typer(experiment_app, name="experiment")
+
+
+class Backend(str, Enum):
+    local = "local"
+    ray = "ray"
+
+
+def _experiment(preset: str, data, out, backend, address, workers, seed, overrides: dict):
+    from primspace.experiments.presets import resolve_preset
+    from primspace.experiments.workspace import ExperimentDir
+    from primspace.parallel import default_workers
+
+    check_workers(workers)
+    return ExperimentDir(
+        out, resolve_preset(preset).with_overrides(**overrides), data=data, backend=backend.value,
+        address=address, workers=workers or default_workers(), seed=seed,
+    )
+
+
+def _finish(exp, report: bool) -> None:
+    failures = exp.meta.get("failures", {})
+    if report:
+        from primspace.report import build_report
+
+        typer.echo(f"report: {build_report(exp.path)}")
+    if failures:
+        key, error = next(iter(failures.items()))
+        more = f" and {len(failures) - 1} more" if len(failures) > 1 else ""
+        raise UserError(
+            f"{len(failures)} run(s) failed, the others finished: {key} ({error}){more}; "
+            f"tracebacks in {exp.path}/runs/<run>/error.txt; re-run the same command to retry them"
+        )
+
+
+def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None) -> None:
+    """Register ``primspace experiment NAME``: run ``steps`` (``module:function``), print ``table``."""
+
+    def command(
+        preset: str = typer.Option("demo", "--preset", help="Experiment preset: demo (CPU, minutes) or paper (GPU recommended)."),
+        data: Optional[Path] = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."),
+        out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
+        backend: Backend = typer.Option(Backend.local, "--backend", help="local (process pool) or ray."),
+        address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray instance)."),
+        workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the generated data."),
+        latent_dims: Optional[str] = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."),
+        inits: Optional[str] = typer.Option(None, "--inits", help="Override the initialisations, e.g. zero,projection."),
+        seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
+        epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
+        images: Optional[bool] = typer.Option(None, "--images/--no-images", help="Override whether the vision loss is trained."),
+        report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
+    ) -> None:
+        import importlib
+
+        overrides = {
+            "latent_dims": int_list(latent_dims, "--latent-dims") if latent_dims is not None else None,
+            "inits": name_list(inits, "--inits") if inits is not None else None,
+            "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
+            "images": images,
+        }
+        if epochs is not None:
+            fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]
+            overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
+        exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
+        if "success:run_success" in steps and data is not None:
+            from primspace.sim.success import check_judgeable
+
+            check_judgeable(exp.dataset())  # up front: before hours of training, not after
+        result = None
+        for step in steps:
+            module, function = step.split(":")
+            result = getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp)
+        if table is not None:
+            module, function = table.split(":")
+            echo_table(*getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(result))
+        _finish(exp, report or name == "all")
+
+    command.__doc__ = doc
+    experiment_app.command(name)(command)
+
+
+_experiment_command(
+    "intra", "Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size.",
+    ("intra:run_intra",), "intra:final_loss_table",
+)
+_experiment_command(
+    "clustering", "Subspace clustering of learned codes (runs intra if needed) and of raw trajectories (data, LASA).",
+    ("clustering:run_clustering",), "clustering:latent_table",
+)
+_experiment_command(
+    "success", "Success rates of generated eval motions, judged by the simulator (runs intra if needed).",
+    ("success:run_success",), "success:success_table",
+)
+_experiment_command(
+    "inter", "Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay.",
+    ("inter:run_inter",), "inter:inter_table",
+)
+_experiment_command(
+    "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
+    ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"), None,
+)
+
+
+@app.command("report")
+def report_command(directory: Path = typer.Argument(..., help="An experiment directory.")) -> None:
+    """Write DIR/report.html from the results the directory holds."""
+    from primspace.report import build_report
+
+    typer.echo(f"report: {build_report(directory)}")
+
+
+@app.command("demo")
+def demo_command(
+    out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Where the demo writes its data, runs and report."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+) -> None:
+    """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
+    from primspace.experiments.demo import run_demo
+    from primspace.parallel import default_workers
+
+    check_workers(workers)
+    summary = run_demo(out, workers=workers or default_workers())
+    typer.echo(summary)

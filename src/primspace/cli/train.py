@@ -1,0 +1,163 @@
+"""Model commands: train, infer, reconstruct."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from primspace.errors import UserError
+
+from primspace.cli.app import app
+from primspace.cli.options import float_list, int_list
+
+
+# =================================================================== model, train
+
+
+class LatentInit(str, Enum):
+    zero = "zero"
+    random = "random"
+    projection = "projection"
+    pca = "pca"
+
+
+def _run_summary(run) -> str:
+    last = run.history[-1] if run.history else {}
+    vision = last.get("vision")
+    parts = [f"loss {last.get('loss', float('nan')):.5g}", f"motor {last.get('motor', float('nan')):.5g}"]
+    if vision is not None:
+        parts.append(f"vision {vision:.5g}")
+    return (
+        f"wrote {run.run_dir}: {run.kind}, {len(run.indices)} samples, init {run.init}, "
+        f"q={run.model_config.latent_dim}, epoch {run.epoch}: " + ", ".join(parts)
+    )
+
+
+@app.command("train")
+def train_command(
+    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
+    out: Path = typer.Option(..., "--out", "-o", help="The run directory to create."),
+    init: LatentInit = typer.Option(LatentInit.projection, "--init", help="How the latent codes start."),
+    latent_dim: int = typer.Option(20, "--latent-dim", "-q", help="q, the size of each latent code."),
+    epochs: int = typer.Option(100, "--epochs", help="Total epochs (with --resume: train up to this many)."),
+    no_images: bool = typer.Option(False, "--no-images", help="Motor only: no image head, images ignored."),
+    indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to train on (.npy or text)."),
+    batch_size: int = typer.Option(32, "--batch-size"),
+    lr: float = typer.Option(1e-3, "--lr", help="Learning rate of the weights."),
+    latent_lr: float = typer.Option(1e-2, "--latent-lr", help="Learning rate of the latent codes."),
+    final_lr_fraction: float = typer.Option(
+        1.0, "--final-lr-fraction", help="Cosine decay of both learning rates to this fraction by the last epoch (1: constant)."
+    ),
+    motor_weight: float = typer.Option(1.0, "--motor-weight"),
+    vision_weight: float = typer.Option(1.0, "--vision-weight"),
+    layers: str = typer.Option("32,12", "--layers", help="Units per MTRNN layer, fastest first."),
+    taus: str = typer.Option("2,8", "--taus", help="Time constant per layer, fastest first."),
+    image_channels: str = typer.Option("64,32,16", "--image-channels", help="Channels of the deconvolution stack."),
+    seed: int = typer.Option(0, "--seed"),
+    device: str = typer.Option("auto", "--device", help="auto, cpu, cuda or cuda:N."),
+    amp: bool = typer.Option(False, "--amp", help="bfloat16 mixed precision (CUDA only)."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="Torch CPU threads."),
+    checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Also checkpoint every N epochs."),
+    checkpoint_seconds: float = typer.Option(60.0, "--checkpoint-seconds", help="Checkpoint at least this often."),
+    weights_from: Optional[Path] = typer.Option(
+        None, "--weights-from",
+        help="Start from this run's weights, scaler and initialiser (its model config: model flags are ignored).",
+    ),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
+) -> None:
+    """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
+    from primspace.data.dataset import MotionDataset
+    from primspace.model import ModelConfig
+    from primspace.train import TrainConfig, fit, read_indices
+
+    mc = ModelConfig(
+        latent_dim=latent_dim, layer_sizes=int_list(layers, "--layers"), taus=float_list(taus, "--taus"),
+        image_channels=int_list(image_channels, "--image-channels"),
+    )
+    tc = TrainConfig(
+        epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
+        motor_weight=motor_weight,
+        vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
+        checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
+    )
+    from primspace.files import check_outside_inputs
+
+    check_outside_inputs(out, (file, indices, weights_from))
+    ds = MotionDataset.load(file)
+    idx = read_indices(indices, ds) if indices is not None else None
+    run = fit(
+        ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
+        indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
+        images=False if no_images else None,
+    )
+    typer.echo(_run_summary(run))
+
+
+@app.command("infer")
+def infer_command(
+    run: Path = typer.Argument(..., help="A trained run directory."),
+    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the new samples."),
+    out: Path = typer.Option(..., "--out", "-o", help="The run directory to create for the new codes."),
+    epochs: int = typer.Option(100, "--epochs", help="Total epochs of code optimisation."),
+    init: Optional[LatentInit] = typer.Option(None, "--init", help="How the codes start (default: the run's)."),
+    indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to use (.npy or text)."),
+    batch_size: Optional[int] = typer.Option(None, "--batch-size"),
+    latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
+    device: str = typer.Option("auto", "--device"),
+    amp: bool = typer.Option(False, "--amp"),
+    threads: Optional[int] = typer.Option(None, "--threads"),
+    resume: bool = typer.Option(False, "--resume"),
+    overwrite: bool = typer.Option(False, "--overwrite"),
+) -> None:
+    """Find latent codes for new samples with the trained weights frozen."""
+    from primspace.data.dataset import MotionDataset
+    from primspace.train import infer, read_indices
+
+    overrides = {"device": device, "amp": amp, "threads": threads}
+    for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed)):
+        if value is not None:
+            overrides[name] = value
+    from primspace.files import check_outside_inputs
+
+    check_outside_inputs(out, (run, file, indices))
+    ds = MotionDataset.load(file)
+    idx = read_indices(indices, ds) if indices is not None else None
+    result = infer(
+        run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
+        resume=resume, overwrite=overwrite, **overrides,
+    )
+    typer.echo(_run_summary(result))
+
+
+@app.command("reconstruct")
+def reconstruct_command(
+    run: Path = typer.Argument(..., help="A run directory (fit or infer)."),
+    sample: int = typer.Option(..., "--sample", help="Sample index in the data file (one the run used)."),
+    out: str = typer.Option(..., "--out", "-o", help="The PNG to write."),
+    data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
+    frames: int = typer.Option(8, "--frames", help="Frames shown per strip."),
+    overwrite: bool = typer.Option(False, "--overwrite"),
+) -> None:
+    """Draw generated against ground-truth joints (and frames) for one sample."""
+    from primspace.data.dataset import MotionDataset
+    from primspace.files import output_file
+    from primspace.plots import plot_reconstruction, save_figure
+    from primspace.train import check_run_data, load_run
+
+    out = output_file(out, inputs=(run, data), overwrite=overwrite)
+    if frames < 1:
+        raise UserError(f"--frames {frames}: must be at least 1")
+    trained = load_run(run)
+    path = data if data is not None else trained.data_path
+    if path is None:
+        raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
+    ds = MotionDataset.load(path)
+    check_run_data(trained, ds)
+    fig = plot_reconstruction(trained, ds, sample, n_frames=frames)
+    save_figure(fig, out)
+    typer.echo(f"wrote {out}")
