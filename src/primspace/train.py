@@ -85,6 +85,7 @@ __all__ = [
     "read_indices",
     "check_run_data",
     "resolve_device",
+    "configure_process",
 ]
 
 # ----------------------------------------------------------------------------- config
@@ -931,6 +932,23 @@ def _seeds(seed: int) -> dict:
     names = ("model", "projection", "codes_fit", "codes_infer", "shuffle")
     values = np.random.SeedSequence(int(seed)).generate_state(len(names), dtype=np.uint32)
     return {name: int(v) for name, v in zip(names, values)}
+
+
+def configure_process(tc: TrainConfig) -> None:
+    """Apply the process-wide settings of ``tc``: the torch CPU thread count
+    (``threads``), glibc's heap thresholds on a CPU device (``tune_malloc``) and cuDNN's
+    kernel autotuning on CUDA.
+
+    The library never changes process-wide state itself: entry points call this (the
+    ``primspace`` command's train / infer, an experiment's worker job) before training.
+    """
+    device = resolve_device(tc.device, tc.amp)
+    if tc.threads is not None and torch.get_num_threads() != tc.threads:
+        torch.set_num_threads(tc.threads)
+    if device.type == "cuda":
+        torch.backends.cudnn.benchmark = True  # fixed shapes: let cuDNN pick the fastest kernels
+    elif tc.tune_malloc:
+        _tune_malloc()
 
 
 def _set_threads(tc: TrainConfig, device: torch.device) -> None:

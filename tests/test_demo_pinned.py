@@ -1,0 +1,176 @@
+"""The demo-scale numbers, pinned (issue 12: the package reshape changes none of them).
+
+Runs the shipped demo preset (``PRESETS["demo"]``: 126 simulated motions, four inits,
+q = 8 and 40, 400 + 250 epochs, motor only) through intra, clustering and success with
+two workers, and compares every number the demo's summary and report rest on with the
+values recorded before the reshape (commit 05271bd, CPU, torch 2.13.0). About 100 s on 2
+cores; the CI also runs ``make demo``, which prints the same numbers.
+
+If a deliberate change alters results, re-run the affected results (docs/reproduce.md)
+and record the new values here in the same commit, saying why.
+"""
+
+import pytest
+
+from primspace.experiments.clustering import run_clustering
+from primspace.experiments.intra import run_intra
+from primspace.experiments.presets import PRESETS
+from primspace.experiments.success import run_success
+from primspace.experiments.workspace import ExperimentDir
+
+PINNED = {
+    "losses": {
+        "intra/zero-q8-s0": [
+            0.0005961688501494271,
+            0.15743181109428406,
+            0.05737915635108948
+        ],
+        "intra/random-q8-s0": [
+            0.000855907315521368,
+            0.30118054151535034,
+            0.05156948044896126
+        ],
+        "intra/projection-q8-s0": [
+            0.00044429842715284655,
+            0.021868331357836723,
+            0.005485937464982271
+        ],
+        "intra/pca-q8-s0": [
+            0.0004504494593545262,
+            0.03240812569856644,
+            0.008165044710040092
+        ],
+        "intra/zero-q40-s0": [
+            0.0006590090259643537,
+            0.2087351679801941,
+            0.010417504236102104
+        ],
+        "intra/random-q40-s0": [
+            0.0004636557839278664,
+            0.3092068135738373,
+            0.020389745011925697
+        ],
+        "intra/projection-q40-s0": [
+            0.0005150987500590938,
+            0.017996683716773987,
+            0.0026461477391421795
+        ],
+        "intra/pca-q40-s0": [
+            0.0005635216366499662,
+            0.038752131164073944,
+            0.005256087519228458
+        ]
+    },
+    "clustering": {
+        "zero/learned": 0.25396825396825395,
+        "random/learned": 0.24603174603174602,
+        "projection/learned": 0.373015873015873,
+        "pca/learned": 0.373015873015873,
+        "projection/initial (P m, untrained)": 1.0
+    },
+    "sweep_accuracy": {
+        "zero": [
+            0.6904761904761905,
+            0.6587301587301587,
+            0.6746031746031746,
+            0.6031746031746031,
+            0.5,
+            0.4365079365079365,
+            0.3253968253968254,
+            0.2222222222222222,
+            0.25396825396825395
+        ],
+        "random": [
+            0.29365079365079366,
+            0.3253968253968254,
+            0.30158730158730157,
+            0.2698412698412698,
+            0.2777777777777778,
+            0.2619047619047619,
+            0.25396825396825395,
+            0.2619047619047619,
+            0.24603174603174602
+        ],
+        "projection": [
+            0.3888888888888889,
+            0.42063492063492064,
+            0.5952380952380952,
+            0.6825396825396826,
+            0.6825396825396826,
+            0.7777777777777778,
+            0.6507936507936508,
+            0.35714285714285715,
+            0.373015873015873
+        ],
+        "pca": [
+            0.24603174603174602,
+            0.4523809523809524,
+            0.4603174603174603,
+            0.5317460317460317,
+            0.5396825396825397,
+            0.5714285714285714,
+            0.5396825396825397,
+            0.3412698412698413,
+            0.373015873015873
+        ],
+        "projection, initial P m": [
+            0.3968253968253968,
+            0.29365079365079366,
+            0.3253968253968254,
+            0.3412698412698413,
+            0.42857142857142855,
+            0.5476190476190477,
+            0.753968253968254,
+            0.7857142857142857,
+            1.0
+        ]
+    },
+    "trajectory": {
+        "data": {
+            "accuracy": 0.5952380952380952,
+            "nmi": 0.5247092809539126,
+            "rank": 5
+        },
+        "lasa": {
+            "accuracy": 0.9505494505494505,
+            "nmi": 0.9635539432840893,
+            "rank": 4
+        }
+    },
+    "success": {
+        "zero": 0.11224489795918367,
+        "random": 0.0,
+        "projection": 0.1326530612244898,
+        "pca": 0.10204081632653061
+    },
+    "recorded": 1.0
+}
+
+
+def _numbers(intra: dict, clustering: dict, success: dict) -> dict:
+    return {
+        "losses": {r["key"]: [r["fit"][-1]["loss"], r["infer"][0]["loss"], r["infer"][-1]["loss"]] for r in intra["runs"]},
+        "clustering": {f"{r['init']}/{r['codes']}": r["accuracy"] for r in clustering["latent"]},
+        "sweep_accuracy": {k: [r["accuracy"] for r in v] for k, v in clustering["latent_sweep"].items()},
+        "trajectory": {k: {m: v["chosen"][m] for m in ("accuracy", "nmi", "rank")} for k, v in clustering["trajectory"].items()},
+        "success": {i: r["overall"] for i, r in success["generated"].items()},
+        "recorded": success["recorded"]["overall"],
+    }
+
+
+@pytest.mark.slow
+def test_demo_numbers_are_pinned(tmp_path):
+    exp = ExperimentDir(tmp_path / "demo", PRESETS["demo"], workers=2, progress=False)
+    exp.dataset()
+    got = _numbers(run_intra(exp), run_clustering(exp), run_success(exp))
+    assert _flat(got).keys() == _flat(PINNED).keys()
+    assert _flat(got) == pytest.approx(_flat(PINNED), rel=1e-6, abs=1e-12)
+
+
+def _flat(tree, prefix: str = "") -> dict:
+    """{"a": {"b": [x, y]}} -> {"a/b/0": x, "a/b/1": y}: one comparable number per key."""
+    if isinstance(tree, dict):
+        return {k: v for key, sub in tree.items() for k, v in _flat(sub, f"{prefix}{key}/").items()}
+    if isinstance(tree, list):
+        return {k: v for i, sub in enumerate(tree) for k, v in _flat(sub, f"{prefix}{i}/").items()}
+    return {prefix.rstrip("/"): tree}
