@@ -215,7 +215,7 @@ def test_resume_with_an_incompatible_config_is_refused(train_set, tmp_path):
 def test_existing_run_dir_is_refused_and_untouched(train_set, tmp_path):
     fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=1), progress=False)
     snapshot = {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()}
-    with pytest.raises(OutputExistsError, match="--resume or --overwrite"):
+    with pytest.raises(OutputExistsError, match="resume=True or overwrite=True"):
         fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=1), progress=False)
     assert {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()} == snapshot
     other = tmp_path / "notes"
@@ -332,18 +332,18 @@ def test_cosine_learning_rate_schedule_ends_at_its_fraction():
 
 def test_resume_after_a_kill_continues_the_schedule_exactly(train_set, tmp_path, monkeypatch):
     """Interrupted mid-run (KeyboardInterrupt after the epoch-2 checkpoint), then resumed."""
-    import primspace.train as train_module
+    from primspace.train.loop import Session
 
     tc = _tc(epochs=4, batch_size=5, final_lr_fraction=0.1, checkpoint_every=1)
     straight = fit(train_set, tmp_path / "straight", model_config=SMALL, train_config=tc, progress=False)
-    original = train_module._Session._checkpoint
+    original = Session._checkpoint
 
     def checkpoint_then_die(self):
         original(self)
         if self.epoch == 2:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(train_module._Session, "_checkpoint", checkpoint_then_die)
+    monkeypatch.setattr(Session, "_checkpoint", checkpoint_then_die)
     with pytest.raises(KeyboardInterrupt):
         fit(train_set, tmp_path / "killed", model_config=SMALL, train_config=tc, progress=False)
     monkeypatch.undo()

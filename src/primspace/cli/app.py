@@ -7,6 +7,7 @@ one line, ``primspace: error: ...``, with exit status 2 and no traceback.
 
 from __future__ import annotations
 
+import re
 import sys
 
 import typer
@@ -40,12 +41,28 @@ def _main_options(
     decoder, subspace clustering, experiments."""
 
 
+# Library errors name Python parameters; the command line names its flags instead.
+_PARAMETER_FLAGS = (
+    (re.compile(r"\bresume=True\b"), "--resume"),
+    (re.compile(r"\boverwrite=True\b"), "--overwrite"),
+    (re.compile(r"\bepochs=(\d+)"), r"--epochs \1"),
+    (re.compile(r"\bout_dir\b"), "--out"),
+)
+
+
+def as_flags(message: str) -> str:
+    """A library error message in the command line's words (``resume=True`` -> ``--resume``)."""
+    for pattern, flag in _PARAMETER_FLAGS:
+        message = pattern.sub(flag, message)
+    return message
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``primspace`` command (and ``python -m primspace``)."""
     try:
         app(args=argv, prog_name="primspace")
     except UserError as exc:
-        typer.echo(f"primspace: error: {exc}", err=True)
+        typer.echo(f"primspace: error: {as_flags(str(exc))}", err=True)
         sys.exit(2)
     except OSError as exc:  # the file system said no (permissions, disk full, read-only): one line
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""

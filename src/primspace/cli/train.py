@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 from typing import Optional
@@ -11,6 +12,8 @@ import typer
 from primspace.errors import UserError
 
 from primspace.cli.app import app
+from primspace.model_config import ModelConfig
+from primspace.train.config import TrainConfig
 from primspace.cli.options import float_list, int_list
 
 
@@ -36,32 +39,42 @@ def _run_summary(run) -> str:
     )
 
 
+# Defaults come from the configuration classes (written once there); these two imports
+# do not load torch.
+_MC, _TC = ModelConfig(), TrainConfig()
+
+
+def _csv(values) -> str:
+    return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
+
+
 @app.command("train")
 def train_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create."),
     init: LatentInit = typer.Option(LatentInit.projection, "--init", help="How the latent codes start."),
-    latent_dim: int = typer.Option(20, "--latent-dim", "-q", help="q, the size of each latent code."),
-    epochs: int = typer.Option(100, "--epochs", help="Total epochs (with --resume: train up to this many)."),
+    latent_dim: int = typer.Option(_MC.latent_dim, "--latent-dim", "-q", help="q, the size of each latent code."),
+    epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs (with --resume: train up to this many)."),
     no_images: bool = typer.Option(False, "--no-images", help="Motor only: no image head, images ignored."),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to train on (.npy or text)."),
-    batch_size: int = typer.Option(32, "--batch-size"),
-    lr: float = typer.Option(1e-3, "--lr", help="Learning rate of the weights."),
-    latent_lr: float = typer.Option(1e-2, "--latent-lr", help="Learning rate of the latent codes."),
+    batch_size: int = typer.Option(_TC.batch_size, "--batch-size"),
+    lr: float = typer.Option(_TC.lr, "--lr", help="Learning rate of the weights."),
+    latent_lr: float = typer.Option(_TC.latent_lr, "--latent-lr", help="Learning rate of the latent codes."),
     final_lr_fraction: float = typer.Option(
-        1.0, "--final-lr-fraction", help="Cosine decay of both learning rates to this fraction by the last epoch (1: constant)."
+        _TC.final_lr_fraction, "--final-lr-fraction",
+        help="Cosine decay of both learning rates to this fraction by the last epoch (1: constant).",
     ),
-    motor_weight: float = typer.Option(1.0, "--motor-weight"),
-    vision_weight: float = typer.Option(1.0, "--vision-weight"),
-    layers: str = typer.Option("32,12", "--layers", help="Units per MTRNN layer, fastest first."),
-    taus: str = typer.Option("2,8", "--taus", help="Time constant per layer, fastest first."),
-    image_channels: str = typer.Option("64,32,16", "--image-channels", help="Channels of the deconvolution stack."),
-    seed: int = typer.Option(0, "--seed"),
-    device: str = typer.Option("auto", "--device", help="auto, cpu, cuda or cuda:N."),
-    amp: bool = typer.Option(False, "--amp", help="bfloat16 mixed precision (CUDA only)."),
-    threads: Optional[int] = typer.Option(None, "--threads", help="Torch CPU threads."),
-    checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Also checkpoint every N epochs."),
-    checkpoint_seconds: float = typer.Option(60.0, "--checkpoint-seconds", help="Checkpoint at least this often."),
+    motor_weight: float = typer.Option(_TC.motor_weight, "--motor-weight"),
+    vision_weight: float = typer.Option(_TC.vision_weight, "--vision-weight"),
+    layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
+    taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
+    image_channels: str = typer.Option(_csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."),
+    seed: int = typer.Option(_TC.seed, "--seed"),
+    device: str = typer.Option(_TC.device, "--device", help="auto, cpu, cuda or cuda:N."),
+    amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
+    threads: Optional[int] = typer.Option(_TC.threads, "--threads", help="Torch CPU threads."),
+    checkpoint_every: Optional[int] = typer.Option(_TC.checkpoint_every, "--checkpoint-every", help="Also checkpoint every N epochs."),
+    checkpoint_seconds: float = typer.Option(_TC.checkpoint_seconds, "--checkpoint-seconds", help="Checkpoint at least this often."),
     weights_from: Optional[Path] = typer.Option(
         None, "--weights-from",
         help="Start from this run's weights, scaler and initialiser (its model config: model flags are ignored).",
@@ -71,24 +84,22 @@ def train_command(
 ) -> None:
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
     from primspace.data.dataset import MotionDataset
-    from primspace.model import ModelConfig
-    from primspace.train import TrainConfig, fit, read_indices
+    from primspace.files import check_outside_inputs
+    from primspace.train import configure_process, fit, read_indices
 
-    mc = ModelConfig(
-        latent_dim=latent_dim, layer_sizes=int_list(layers, "--layers"), taus=float_list(taus, "--taus"),
+    mc = replace(
+        _MC, latent_dim=latent_dim, layer_sizes=int_list(layers, "--layers"), taus=float_list(taus, "--taus"),
         image_channels=int_list(image_channels, "--image-channels"),
     )
-    tc = TrainConfig(
-        epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
-        motor_weight=motor_weight,
-        vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
+    tc = replace(
+        _TC, epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
+        motor_weight=motor_weight, vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
         checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
-    )
-    from primspace.files import check_outside_inputs
-
+    ).validate()
     check_outside_inputs(out, (file, indices, weights_from))
     ds = MotionDataset.load(file)
     idx = read_indices(indices, ds) if indices is not None else None
+    configure_process(tc)
     run = fit(
         ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
         indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
@@ -102,31 +113,31 @@ def infer_command(
     run: Path = typer.Argument(..., help="A trained run directory."),
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the new samples."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create for the new codes."),
-    epochs: int = typer.Option(100, "--epochs", help="Total epochs of code optimisation."),
+    epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs of code optimisation."),
     init: Optional[LatentInit] = typer.Option(None, "--init", help="How the codes start (default: the run's)."),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to use (.npy or text)."),
-    batch_size: Optional[int] = typer.Option(None, "--batch-size"),
+    batch_size: Optional[int] = typer.Option(None, "--batch-size", help="Default: the run's."),
     latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
-    device: str = typer.Option("auto", "--device"),
-    amp: bool = typer.Option(False, "--amp"),
-    threads: Optional[int] = typer.Option(None, "--threads"),
+    device: str = typer.Option(_TC.device, "--device"),
+    amp: bool = typer.Option(_TC.amp, "--amp"),
+    threads: Optional[int] = typer.Option(_TC.threads, "--threads"),
     resume: bool = typer.Option(False, "--resume"),
     overwrite: bool = typer.Option(False, "--overwrite"),
 ) -> None:
     """Find latent codes for new samples with the trained weights frozen."""
     from primspace.data.dataset import MotionDataset
-    from primspace.train import infer, read_indices
+    from primspace.files import check_outside_inputs
+    from primspace.train import configure_process, infer, read_indices
 
     overrides = {"device": device, "amp": amp, "threads": threads}
     for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed)):
         if value is not None:
             overrides[name] = value
-    from primspace.files import check_outside_inputs
-
     check_outside_inputs(out, (run, file, indices))
     ds = MotionDataset.load(file)
     idx = read_indices(indices, ds) if indices is not None else None
+    configure_process(replace(_TC, device=device, amp=amp, threads=threads).validate())
     result = infer(
         run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
         resume=resume, overwrite=overwrite, **overrides,

@@ -1,0 +1,483 @@
+"""The training functions: :func:`fit` (θ and the codes, the paper's training),
+:func:`infer` (codes only, θ frozen, the paper's evaluation), :func:`reconstruct` (codes
+to motion) and :func:`evaluate` (the loss of given codes).
+
+Each accepts what the others return (a :class:`TrainedRun`) or a run directory, and runs
+in memory unless given an ``out_dir``. None of them changes process-wide settings
+(:func:`primspace.train.config.configure_process` does, called by entry points) or the
+caller's model.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import os
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from primspace.data import JointScaler, MotionDataset
+from primspace.errors import UserError
+from primspace.latent import INIT_METHODS, LatentInitializer, LatentTable
+from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.train.config import TrainConfig, resolve_device
+from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
+from primspace.train.run import TrainedRun
+from primspace.train.rundir import (
+    RunDirectory,
+    load_run,
+    prepare_run_dir,
+    run_config,
+    run_from_state,
+    unpack_checkpoint,
+)
+
+__all__ = ["fit", "infer", "reconstruct", "evaluate", "uses_images", "as_run"]
+
+
+def fit(
+    dataset: MotionDataset,
+    out_dir: str | os.PathLike | None = None,
+    *,
+    model_config: ModelConfig | None = None,
+    train_config: TrainConfig | None = None,
+    init: str = "projection",
+    indices=None,
+    resume: bool = False,
+    overwrite: bool = False,
+    weights_from: TrainedRun | str | os.PathLike | None = None,
+    initial_latents: np.ndarray | None = None,
+    images: bool | None = None,
+    scaler: JointScaler | None = None,
+    progress: bool | None = None,
+) -> TrainedRun:
+    """Train the decoder's weights θ and one code per sample jointly (the paper's training).
+
+    Parameters
+    ----------
+    dataset : MotionDataset
+        Training data (motor in physical units; images optional).
+    out_dir : path-like, optional
+        The run directory to create (or resume). None: train in memory, write nothing
+        (the returned run can be saved later with :func:`primspace.train.rundir.write_run`).
+    model_config : ModelConfig, optional
+        Sizes; J, T and the image size are filled in from ``dataset``. Default:
+        ``ModelConfig()`` with an image head when the data has images (see ``images``).
+    train_config : TrainConfig, optional
+    init : {"zero", "random", "projection", "pca"}
+        How the codes start (:class:`primspace.latent.LatentInitializer`).
+    indices : array-like of int, optional
+        Samples of ``dataset`` to train on (recorded in config.json). Default: all.
+    resume : bool
+        Continue the run in ``out_dir`` from its checkpoint (up to ``train_config.epochs``
+        in total); starts afresh if there is no checkpoint yet. The configs must match
+        the saved ones (only ``epochs``, ``checkpoint_every``, ``threads`` may change).
+        ``epochs`` below the checkpoint's is refused; above it extends the run (with a
+        cosine schedule, ``final_lr_fraction < 1``, the rest of the decay is stretched
+        to the new length: not the numbers of a run started with that many epochs).
+    overwrite : bool
+        Replace an earlier run of the same kind in ``out_dir``: only the files a run
+        writes are replaced, anything else in the directory stays. Not with ``resume``.
+        ``out_dir`` may not be, contain or lie inside the data file or ``weights_from``.
+    weights_from : TrainedRun or path-like, optional
+        A run (or its directory): start from its θ, scaler and initialiser (its model config is
+        used; a fresh optimiser). For incremental learning (the paper's inter-primitive
+        experiment).
+    initial_latents : ndarray (N, q), optional
+        Starting codes, one row per selected sample; rows containing NaN use ``init``
+        instead. E.g. replayed samples keep the codes they learned.
+    images : bool, optional
+        Give the model an image head and train it on the data's images. Default: when
+        the data has images. (A ``model_config.image_size`` must match the data's.) Whether
+        the vision loss is trained then follows one rule, :func:`uses_images`.
+    scaler : JointScaler, optional
+        A fitted joint scaler to use instead of one fitted on the training samples.
+        The paper: "for each joint angle all the values in all sequences were
+        normalized to be in [-1, 1] interval"; an experiment that fits on a part of its
+        data passes a scaler fitted on every motion it uses, so the targets of every
+        part lie in [-1, 1]. Not with ``weights_from`` (the parent's
+        scaler is used). Recorded in config.json.
+    progress : bool, optional
+        Progress bar (default: when stderr is a terminal); False is silent.
+
+    Returns
+    -------
+    TrainedRun
+
+    Raises
+    ------
+    UserError
+        Bad configuration or data, an existing ``out_dir`` without ``resume=True`` /
+        ``overwrite=True``, a resume with an incompatible configuration.
+    TrainingDivergedError
+        The loss became NaN/inf (the last good checkpoint is kept).
+    """
+    tc = (train_config or TrainConfig()).validate()
+    _check_init(init)
+    data, idx = _select(dataset, indices)
+    parent = None if weights_from is None else as_run(weights_from)
+    _check_scaler(scaler, parent, data)
+    mc = _fit_model_config(model_config, parent, data, images)
+    use_images = uses_images(mc, data, tc, images, where=None if parent is None else _run_name(parent))
+    initial_latents = _check_initial_latents(initial_latents, len(data), mc.latent_dim)
+    config = run_config("fit", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
+    config["scaler"] = None if scaler is None else scaler.to_dict()
+    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
+    device = resolve_device(tc.device, tc.amp)
+    seeds = _seeds(tc.seed)
+    if ckpt is not None:
+        parts = unpack_checkpoint(ckpt, out_dir)
+        scaler, initializer = parts.scaler, parts.initializer
+        model = _new_model(mc, seeds["model"], parts.model)
+        model.to(device)
+        theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
+        theta_opt.load_state_dict(parts.theta_optimizer)
+        table = LatentTable.from_state_dict(parts.latents, device)
+    else:
+        scaler = parent.scaler if parent is not None else scaler or JointScaler().fit(data.motor)
+        model = _new_model(mc, seeds["model"], None if parent is None else parent.model.state_dict())
+        scaled = scaler.transform(data.motor)
+        initializer = _initializer(init, parent, mc.latent_dim, scaled, seeds)
+        model.to(device)
+        theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
+        codes = initializer.transform(scaled, random_state=seeds["codes_fit"]).astype(np.float64)
+        if initial_latents is not None:
+            given = ~np.isnan(initial_latents).any(axis=1)
+            codes[given] = initial_latents[given]
+        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
+    session = Session(
+        store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
+        initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
+    )
+    session.run(ckpt, progress, label="fit")
+    return run_from_state(session.state(), session.history, None if store is None else store.path)
+
+
+def infer(
+    run: TrainedRun | str | os.PathLike,
+    dataset: MotionDataset,
+    out_dir: str | os.PathLike | None = None,
+    *,
+    epochs: int,
+    init: str | None = None,
+    indices=None,
+    train_config: TrainConfig | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool | None = None,
+    **overrides: Any,
+) -> TrainedRun:
+    """Find codes for new samples with the trained weights θ frozen (the paper's evaluation).
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+        A trained run or its directory (its θ, scaler and initialiser are used; the run
+        itself is not changed).
+    dataset : MotionDataset
+        New samples with the same J and T (and image size, if it has images; without
+        images only the motor loss is used).
+    out_dir : path-like, optional
+        The new run directory (kind ``infer``); it holds its own copy of θ, so
+        :func:`load_run` / :func:`reconstruct` work on it alone. None: in memory.
+    epochs : int
+    init : str, optional
+        How the new codes start; default: the trained run's init. The same init reuses
+        the run's initialiser (its ``P``); another one is fitted here (``pca`` on the new
+        data, ``projection`` with a new ``P`` from ``seed``).
+    indices : array-like of int, optional
+        Samples of ``dataset`` to use.
+    train_config : TrainConfig, optional
+        Default: the trained run's, with ``epochs`` and ``overrides`` applied
+        (e.g. ``latent_lr=...``, ``batch_size=...``, ``device=...``). ``lr`` is unused.
+    resume, overwrite, progress
+        As in :func:`fit`.
+
+    Returns
+    -------
+    TrainedRun
+    """
+    parent = as_run(run)
+    base = train_config or replace(parent.train_config, threads=None)
+    try:
+        tc = replace(base, epochs=epochs, **overrides).validate()
+    except TypeError as exc:
+        raise UserError(f"unknown train config override ({exc})") from None
+    init = init or parent.init
+    _check_init(init)
+    data, idx = _select(dataset, indices)
+    mc = parent.model_config
+    use_images = uses_images(mc, data, tc)
+    config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
+    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
+    device = resolve_device(tc.device, tc.amp)
+    seeds = _seeds(tc.seed)
+    model = copy.deepcopy(parent.model)  # θ frozen, but the caller's model is never moved or changed
+    if ckpt is not None:
+        parts = unpack_checkpoint(ckpt, out_dir)
+        model.load_state_dict(parts.model)
+        initializer = parts.initializer
+        table = LatentTable.from_state_dict(parts.latents, device)
+    else:
+        scaled = parent.scaler.transform(data.motor)
+        initializer = _initializer(init, parent, mc.latent_dim, scaled, seeds)
+        codes = initializer.transform(scaled, random_state=seeds["codes_infer"])
+        table = LatentTable(torch.from_numpy(codes).to(device), tc.latent_lr)
+    model.to(device).requires_grad_(False)
+    session = Session(
+        store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
+        initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
+    )
+    session.run(ckpt, progress, label="infer")
+    return run_from_state(session.state(), session.history, None if store is None else store.path)
+
+
+@torch.no_grad()
+def reconstruct(
+    run: TrainedRun | str | os.PathLike,
+    latents: np.ndarray | None = None,
+    *,
+    images: bool = True,
+    batch_size: int = 64,
+    device: str = "cpu",
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Decode codes into motion: ``d(θ, z)`` in physical units.
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+    latents : ndarray (n, q), optional
+        Codes to decode (default: the run's own codes).
+    images : bool
+        Also decode frames (if the model has an image head).
+    batch_size : int
+    device : str
+        Where to decode; the run's model is copied there if it lives elsewhere (the
+        caller's model is never moved).
+
+    Returns
+    -------
+    motor : ndarray (n, T, J) float32
+        Joint values in physical units (the run's scaler inverted).
+    frames : ndarray (n, T, H, W, 3) uint8 or None
+    """
+    run = as_run(run)
+    z_all = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
+    q = run.model_config.latent_dim
+    if z_all.ndim != 2 or z_all.shape[1] != q:
+        raise UserError(f"latents must have shape (n, {q}), got {z_all.shape}")
+    if not np.isfinite(z_all).all():
+        raise UserError("latents contain NaN or inf")
+    dev = resolve_device(device)
+    motors, frames = [], []
+    with _eval_model(run.model, dev) as model:
+        want_images = images and model.image_head is not None
+        for start in range(0, len(z_all), batch_size):
+            z = torch.from_numpy(np.ascontiguousarray(z_all[start : start + batch_size])).to(dev)
+            out = model(z, images=want_images)
+            motors.append(out.motor.float().cpu().numpy())
+            if want_images:
+                frames.append(out.images.float().mul(255).round_().clamp_(0, 255).to(torch.uint8).cpu().numpy())
+    motor = run.scaler.inverse_transform(np.concatenate(motors, 0)).astype(np.float32)
+    return motor, (np.concatenate(frames, 0) if want_images else None)
+
+
+@torch.no_grad()
+def evaluate(
+    run: TrainedRun | str | os.PathLike,
+    dataset: MotionDataset,
+    latents: np.ndarray | None = None,
+    *,
+    indices=None,
+    batch_size: int = 64,
+    device: str = "cpu",
+) -> dict:
+    """The loss (as logged in metrics.jsonl) of codes on a data set, without training.
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+    dataset : MotionDataset
+    latents : ndarray (n, q), optional
+        Default: the run's codes (then ``dataset`` / ``indices`` must select its samples).
+    indices : array-like of int, optional
+
+    Returns
+    -------
+    dict
+        ``loss``, ``motor``, ``vision`` (None without images).
+    """
+    run = as_run(run)
+    data, _ = _select(dataset, indices)
+    z = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
+    if z.shape != (len(data), run.model_config.latent_dim):
+        raise UserError(f"latents must have shape ({len(data)}, {run.model_config.latent_dim}), got {z.shape}")
+    tc = replace(run.train_config, batch_size=batch_size, device=device, amp=False)
+    use_images = uses_images(run.model_config, data, tc)
+    dev = resolve_device(device)
+    tensors = DataTensors.build(data, run.scaler, use_images, dev)
+    table = LatentTable(torch.from_numpy(np.ascontiguousarray(z)).to(dev), 0.0)
+    with _eval_model(run.model, dev) as model:
+        sums = evaluate_loop(model, table, tensors, tc, dev)
+    return epoch_values(sums, len(data), use_images)
+
+
+def uses_images(
+    mc: ModelConfig, data: MotionDataset, tc: TrainConfig, images: bool | None = None, *, where: str | None = None
+) -> bool:
+    """Whether a run trains (or scores) the vision loss: the one rule.
+
+    Yes when the model has an image head, the data has images (and ``images`` is not
+    False), and ``vision_weight > 0``. ``images=True`` with a model without an image
+    head, or with data without images, is an error; so is data whose T, J or image size
+    differ from the model's.
+    """
+    if images and not mc.has_images:
+        raise UserError(f"{where + ': ' if where else ''}the model has no image head")
+    want = mc.has_images and (data.has_images if images is None else bool(images))
+    _check_data_fits(data, mc, want)
+    return bool(want) and tc.vision_weight > 0
+
+
+def as_run(run: TrainedRun | str | os.PathLike) -> TrainedRun:
+    """A :class:`TrainedRun` as is, or the run read from its directory."""
+    if isinstance(run, TrainedRun):
+        return run
+    if isinstance(run, (str, os.PathLike)):
+        return load_run(run)
+    raise UserError(f"expected a TrainedRun or a run directory, got {type(run).__name__}")
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, epochs: int):
+    """The run directory to write (None: in memory) and the checkpoint to resume from."""
+    if out_dir is None:
+        if resume:
+            raise UserError("resume=True needs the out_dir of the run to continue")
+        return None, None
+    out_dir = Path(out_dir)
+    ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=inputs, epochs=epochs)
+    return RunDirectory(out_dir), ckpt
+
+
+def _check_init(init: str) -> None:
+    if init not in INIT_METHODS:
+        raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(INIT_METHODS)}")
+
+
+def _check_scaler(scaler, parent: TrainedRun | None, data: MotionDataset) -> None:
+    if scaler is None:
+        return
+    if parent is not None:
+        raise UserError("give either weights_from (its scaler is used) or scaler, not both")
+    if not isinstance(scaler, JointScaler) or scaler.data_min_ is None:
+        raise UserError("scaler must be a fitted primspace.data.JointScaler")
+    if scaler.n_joints != data.n_joints:
+        raise UserError(f"scaler was fitted on {scaler.n_joints} joints, the data has {data.n_joints}")
+
+
+def _fit_model_config(model_config, parent: TrainedRun | None, data: MotionDataset, images) -> ModelConfig:
+    """The model config of a fit: the parent's (a given one must agree), or the given one fitted to the data."""
+    if parent is None:
+        return (model_config or ModelConfig()).fitted_to(data, images=data.has_images if images is None else images)
+    mc = parent.model_config
+    if model_config is not None:
+        given = model_config.fitted_to(data, images=mc.has_images if images is None else images)
+        if given.to_dict() != mc.to_dict():
+            raise UserError(f"{_run_name(parent)}: model config differs from the one given; omit model_config")
+    return mc
+
+
+def _check_initial_latents(initial_latents, n: int, q: int) -> np.ndarray | None:
+    if initial_latents is None:
+        return None
+    initial_latents = np.asarray(initial_latents, dtype=np.float64)
+    if initial_latents.shape != (n, q):
+        raise UserError(f"initial_latents must have shape ({n}, {q}), got {initial_latents.shape}")
+    if np.isinf(initial_latents).any():
+        row = int(np.argwhere(np.isinf(initial_latents))[0, 0])
+        raise UserError(f"initial_latents row {row} contains inf (use NaN rows for 'no initial code')")
+    return initial_latents
+
+
+def _initializer(init: str, parent: TrainedRun | None, q: int, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
+    """The parent's initialiser for the same init (its ``P``); otherwise one fitted here."""
+    if parent is not None and init == parent.init:
+        return parent.initializer
+    return LatentInitializer(init, q, random_state=seeds["projection"]).fit(scaled)
+
+
+def _select(dataset: MotionDataset, indices) -> tuple[MotionDataset, np.ndarray]:
+    if not isinstance(dataset, MotionDataset):
+        raise UserError(f"expected a MotionDataset, got {type(dataset).__name__}")
+    if indices is None:
+        return dataset, np.arange(len(dataset), dtype=np.int64)
+    idx = np.asarray(indices)
+    if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
+        raise UserError("sample indices must be a 1-d list of integers")
+    idx = idx.astype(np.int64)
+    if len(np.unique(idx)) != idx.size:
+        raise UserError("sample indices list a sample more than once")
+    return dataset.subset(idx), idx
+
+
+def _check_data_fits(data: MotionDataset, mc: ModelConfig, use_images: bool) -> None:
+    where = str(data.path) if data.path is not None else "the data set"
+    if data.n_joints != mc.n_joints or data.length != mc.length:
+        raise UserError(
+            f"{where}: has T={data.length} steps x J={data.n_joints} joints, the model expects "
+            f"T={mc.length} x J={mc.n_joints}"
+        )
+    if use_images:
+        if not data.has_images:
+            raise UserError(f"{where}: has no images")
+        if tuple(data.image_size) != tuple(mc.image_size):
+            h, w = data.image_size
+            raise UserError(f"{where}: images are {h}x{w}, the model predicts {mc.image_size[0]}x{mc.image_size[1]}")
+
+
+def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDecoder:
+    """A decoder with weights drawn from ``seed`` (without touching the global RNG), then ``state`` loaded."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        model = MTRNNDecoder(mc)
+    if state is not None:
+        model.load_state_dict(state)
+    return model
+
+
+def _seeds(seed: int) -> dict:
+    """Independent seeds for each use of randomness, all derived from ``seed``."""
+    names = ("model", "projection", "codes_fit", "codes_infer", "shuffle")
+    values = np.random.SeedSequence(int(seed)).generate_state(len(names), dtype=np.uint32)
+    return {name: int(v) for name, v in zip(names, values)}
+
+
+def _run_path(run: TrainedRun | None) -> str | None:
+    return None if run is None or run.run_dir is None else str(Path(run.run_dir).resolve())
+
+
+def _run_name(run: TrainedRun) -> str:
+    return str(run.run_dir) if run.run_dir is not None else "the given run"
+
+
+@contextlib.contextmanager
+def _eval_model(model: MTRNNDecoder, device: torch.device):
+    """The model in eval mode on ``device``: itself if it is there (its mode restored
+    after), else a copy, so the caller's model is never moved."""
+    on = next(model.parameters()).device
+    if on != device:
+        yield copy.deepcopy(model).to(device).eval()
+        return
+    was_training = model.training
+    model.eval()
+    try:
+        yield model
+    finally:
+        model.train(was_training)

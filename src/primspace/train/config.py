@@ -1,0 +1,195 @@
+"""How to optimise: :class:`TrainConfig`, the learning-rate schedule, the device, and the
+process-wide settings an entry point applies (:func:`configure_process`).
+
+Torch is imported only by the functions that need it, so configurations (and the command
+line's defaults, read from :class:`TrainConfig`) load without it.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import sys
+from dataclasses import asdict, dataclass
+
+from primspace.errors import UserError, config_from_dict
+
+__all__ = ["TrainConfig", "TrainingDivergedError", "lr_factor", "resolve_device", "configure_process"]
+
+
+class TrainingDivergedError(UserError):
+    """The loss became NaN or infinite; a run directory keeps its last good checkpoint."""
+
+
+@dataclass
+class TrainConfig:
+    """How to optimise (saved as JSON in a run's ``config.json``).
+
+    Parameters
+    ----------
+    epochs : int
+        Total epochs of the run (a resumed run trains up to this many).
+    batch_size : int
+        Samples per mini-batch. Every code is updated once per epoch; θ once per batch.
+    lr : float
+        Adam learning rate of the model weights θ.
+    latent_lr : float
+        Learning rate of the codes (row-wise Adam, :class:`primspace.latent.LatentTable`).
+    final_lr_fraction : float
+        Both learning rates follow a cosine from their value in the first epoch to this
+        fraction of it in the last (1.0: constant). The factor depends only on the epoch
+        index and ``epochs``, so a resumed run continues the same schedule (unless
+        ``epochs`` is changed on resume, which stretches the rest of it).
+    motor_weight, vision_weight : float
+        ``w_m``, ``w_v`` of the loss (module docstring). ``vision_weight = 0`` skips the
+        image head.
+    seed : int
+        Seeds the weights, ``P``, random codes and the batch order.
+    device : str
+        ``auto`` (CUDA when present, else CPU), ``cpu``, ``cuda`` or ``cuda:N``.
+    amp : bool
+        bfloat16 autocast on CUDA (LayerNorm and the loss stay float32).
+    checkpoint_every : int, optional
+        Also write the checkpoint every this many epochs.
+    checkpoint_seconds : float
+        Write the checkpoint when this long has passed since the last one. It is always
+        written after epoch 0 (the initial state) and after the last epoch; a checkpoint
+        costs ~10 ms for a small model, so tiny runs are not slowed by one per epoch.
+    log_initial : bool
+        Log epoch 0: the loss of the initial codes, before any update.
+    threads : int, optional
+        ``torch.set_num_threads`` for the process, applied by :func:`configure_process`
+        (which the ``primspace`` command and experiment workers call; the library itself
+        never changes process-wide state). None: leave as is.
+    tune_malloc : bool
+        On Linux/glibc CPU runs, keep freed memory in the heap (``mallopt``) so large
+        activation buffers are reused instead of page-faulted in every batch (the image
+        head ran 1.6x faster in a measurement; see docs/model.md). Process-wide: applied by
+        :func:`configure_process`.
+    """
+
+    epochs: int = 100
+    batch_size: int = 32
+    lr: float = 1e-3
+    latent_lr: float = 1e-2
+    final_lr_fraction: float = 1.0
+    motor_weight: float = 1.0
+    vision_weight: float = 1.0
+    seed: int = 0
+    device: str = "auto"
+    amp: bool = False
+    checkpoint_every: int | None = None
+    checkpoint_seconds: float = 60.0
+    log_initial: bool = True
+    threads: int | None = None
+    tune_malloc: bool = True
+
+    def validate(self) -> "TrainConfig":
+        if not isinstance(self.epochs, int) or self.epochs < 0:
+            raise UserError(f"epochs must be a whole number >= 0, got {self.epochs}")
+        if not isinstance(self.batch_size, int) or self.batch_size < 1:
+            raise UserError(f"batch_size must be at least 1, got {self.batch_size}")
+        for name in ("lr", "latent_lr"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise UserError(f"{name} must be a finite number >= 0, got {v}")
+        f = self.final_lr_fraction
+        if not (isinstance(f, (int, float)) and 0 < f <= 1):
+            raise UserError(f"final_lr_fraction must be in (0, 1], got {f}")
+        for name in ("motor_weight", "vision_weight"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise UserError(f"{name} must be a finite number >= 0, got {v}")
+        if self.motor_weight == 0 and self.vision_weight == 0:
+            raise UserError("motor_weight and vision_weight are both 0: nothing to train")
+        if self.checkpoint_every is not None and (not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1):
+            raise UserError(f"checkpoint_every must be at least 1, got {self.checkpoint_every}")
+        if not (isinstance(self.checkpoint_seconds, (int, float)) and self.checkpoint_seconds >= 0):
+            raise UserError(f"checkpoint_seconds must be a number >= 0, got {self.checkpoint_seconds}")
+        if self.threads is not None and (not isinstance(self.threads, int) or self.threads < 1):
+            raise UserError(f"threads must be at least 1, got {self.threads}")
+        resolve_device(self.device, self.amp)
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        return config_from_dict(cls, d, "train config")
+
+
+def lr_factor(epoch: int, epochs: int, final_fraction: float) -> float:
+    """Cosine factor of the learning rates in epoch ``epoch`` (0-based) of ``epochs``: 1 → ``final_fraction``."""
+    if final_fraction >= 1.0 or epochs <= 1:
+        return 1.0
+    progress = min(epoch, epochs - 1) / (epochs - 1)
+    return final_fraction + (1.0 - final_fraction) * 0.5 * (1.0 + math.cos(math.pi * progress))
+
+
+def resolve_device(device: str = "auto", amp: bool = False) -> "torch.device":  # noqa: F821
+    """``auto`` -> CUDA when available, else CPU. Raises :class:`UserError` for a device
+    that is not there, or ``amp`` off CUDA."""
+    import torch
+
+    name = str(device).strip().lower()
+    if name == "auto":
+        dev = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    else:
+        try:
+            dev = torch.device(name)
+        except RuntimeError:
+            raise UserError(f"unknown device '{device}'; use auto, cpu or cuda[:N]") from None
+        if dev.type == "cuda":
+            if not torch.cuda.is_available():
+                raise UserError(f"device '{device}' asked for but CUDA is not available on this machine")
+            if dev.index is not None and dev.index >= torch.cuda.device_count():
+                raise UserError(f"device '{device}': only {torch.cuda.device_count()} CUDA device(s)")
+        elif dev.type != "cpu":
+            raise UserError(f"unsupported device '{device}'; use auto, cpu or cuda[:N]")
+    if amp and dev.type != "cuda":
+        raise UserError("mixed precision (amp) needs a CUDA device")
+    return dev
+
+
+def configure_process(tc: TrainConfig) -> None:
+    """Apply the process-wide settings of ``tc``: the torch CPU thread count
+    (``threads``), glibc's heap thresholds on a CPU device (``tune_malloc``) and cuDNN's
+    kernel autotuning on CUDA.
+
+    The library never changes process-wide state itself: entry points call this (the
+    ``primspace`` command's train / infer, an experiment's worker job) before training.
+    """
+    import torch
+
+    device = resolve_device(tc.device, tc.amp)
+    if tc.threads is not None and torch.get_num_threads() != tc.threads:
+        torch.set_num_threads(tc.threads)
+    if device.type == "cuda":
+        torch.backends.cudnn.benchmark = True  # fixed shapes: let cuDNN pick the fastest kernels
+    elif tc.tune_malloc:
+        _tune_malloc()
+
+
+_MALLOC_TUNED = False
+
+
+def _tune_malloc() -> None:
+    """Raise glibc's mmap and trim thresholds so large freed buffers stay in the heap.
+
+    glibc serves blocks above its (at most 32 MiB) mmap threshold with fresh ``mmap``
+    calls and unmaps them on free; an image-head activation of a batch is ~100 MB, so
+    every batch page-faulted it in again (measured: the head's forward+backward ran at
+    ~48 instead of ~77 GFLOP/s). No-op off Linux/glibc.
+    """
+    global _MALLOC_TUNED
+    if _MALLOC_TUNED or not sys.platform.startswith("linux"):
+        return
+    _MALLOC_TUNED = True
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        m_trim_threshold, m_mmap_threshold = -1, -3
+        libc.mallopt(m_mmap_threshold, 1 << 30)
+        libc.mallopt(m_trim_threshold, (1 << 31) - 1)
+    except (OSError, AttributeError):  # not glibc
+        pass

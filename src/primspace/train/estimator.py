@@ -1,0 +1,171 @@
+"""The model in scikit-learn's words: :class:`AutoDecoder`.
+
+The paper's system is an auto-decoder: no encoder, one latent code per demonstration
+trained with the decoder's weights ("train"), and codes for new demonstrations found by
+gradient descent with the weights frozen ("evaluation", paper *Main Results*). In
+scikit-learn terms: ``fit_transform`` trains θ and the codes and returns the codes,
+``transform`` infers codes for new data, ``inverse_transform`` decodes codes into motion.
+It wraps :func:`~primspace.train.fit`, :func:`~primspace.train.infer` and
+:func:`~primspace.train.reconstruct` (same seed, same numbers) and, like them, works in
+memory unless given a checkpoint directory.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from primspace.data import MotionDataset
+from primspace.errors import UserError
+from primspace.latent import INIT_METHODS
+from primspace.model import ModelConfig
+from primspace.train.api import evaluate, fit, infer, reconstruct
+from primspace.train.config import TrainConfig
+from primspace.train.run import TrainedRun
+from primspace.train.rundir import load_run, write_run
+
+__all__ = ["AutoDecoder"]
+
+
+class AutoDecoder(BaseEstimator):
+    """An MTRNN decoder with one latent code per sample (Nikulin & Tani).
+
+    Parameters
+    ----------
+    model_config : ModelConfig, optional
+        Sizes of the decoder; J, T and the image size are taken from the data at ``fit``.
+        Default: ``ModelConfig()``.
+    train_config : TrainConfig, optional
+        How to optimise (epochs, learning rates, seed ...). Default: ``TrainConfig()``.
+    init : {"projection", "zero", "random", "pca"}
+        How the codes start (paper: random linear projection ``P m``).
+    images : bool, optional
+        Train an image head on the data's frames (default: when the data has images).
+    checkpoint_dir : path-like, optional
+        Write the fit as a run directory there (checkpoints, metrics, codes; resumable
+        with ``fit(..., resume=True)``). Default: in memory only.
+    progress : bool, optional
+        Progress bars (default: when stderr is a terminal).
+
+    Attributes
+    ----------
+    run_ : TrainedRun
+        The fitted run: decoder, scaler, initialiser, codes, history.
+    codes_ : ndarray (n_samples, latent_dim) float32
+        The trained codes, in the order of the samples given to ``fit``.
+    history_ : list of dict
+        Per-epoch losses of the fit (epoch 0: the codes as initialised).
+    inference_ : TrainedRun
+        The last ``transform``'s run (its history holds the inference losses).
+
+    Examples
+    --------
+    >>> model = AutoDecoder(ModelConfig(latent_dim=20), TrainConfig(epochs=800), init="projection")
+    >>> Z = model.fit_transform(data)                 # doctest: +SKIP
+    >>> Z_new = model.transform(new, epochs=600)      # doctest: +SKIP
+    >>> motor, frames = model.inverse_transform(Z)    # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        model_config: ModelConfig | None = None,
+        train_config: TrainConfig | None = None,
+        init: str = "projection",
+        *,
+        images: bool | None = None,
+        checkpoint_dir: str | os.PathLike | None = None,
+        progress: bool | None = None,
+    ) -> None:
+        self.model_config = model_config
+        self.train_config = train_config
+        self.init = init
+        self.images = images
+        self.checkpoint_dir = checkpoint_dir
+        self.progress = progress
+
+    # ------------------------------------------------------------------ training
+    def fit(self, X: MotionDataset, y=None, *, resume: bool = False, overwrite: bool = False) -> "AutoDecoder":
+        """Train θ and one code per sample of ``X`` (``y`` is ignored).
+
+        ``resume`` / ``overwrite`` apply to ``checkpoint_dir`` (as in :func:`~primspace.train.fit`).
+        """
+        if self.init not in INIT_METHODS:
+            raise UserError(f"unknown latent init '{self.init}'; choose one of {', '.join(INIT_METHODS)}")
+        self.run_ = fit(
+            X, self.checkpoint_dir, model_config=self.model_config, train_config=self.train_config,
+            init=self.init, images=self.images, resume=resume, overwrite=overwrite, progress=self.progress,
+        )
+        self.codes_ = self.run_.latents
+        self.history_ = self.run_.history
+        return self
+
+    def fit_transform(self, X: MotionDataset, y=None, **fit_params) -> np.ndarray:
+        """Fit, then return the trained codes (n_samples, latent_dim), in ``X``'s order."""
+        return self.fit(X, y, **fit_params).codes_
+
+    def transform(
+        self,
+        X: MotionDataset,
+        *,
+        epochs: int | None = None,
+        init: str | None = None,
+        checkpoint_dir: str | os.PathLike | None = None,
+        **overrides,
+    ) -> np.ndarray:
+        """Codes for the samples of ``X`` with θ frozen (the paper's evaluation), in ``X``'s order.
+
+        Parameters
+        ----------
+        epochs : int, optional
+            Epochs of code optimisation (default: the fit's).
+        init : str, optional
+            How the new codes start (default: the fit's init, with its ``P``).
+        checkpoint_dir : path-like, optional
+            Write the inference as a run directory (default: in memory).
+        **overrides
+            Train-config fields for the inference, e.g. ``latent_lr=``, ``batch_size=``.
+        """
+        run = self._fitted()
+        self.inference_ = infer(
+            run, X, checkpoint_dir, epochs=run.train_config.epochs if epochs is None else epochs,
+            init=init, progress=self.progress, **overrides,
+        )
+        return self.inference_.latents
+
+    def inverse_transform(self, Z: np.ndarray, *, images: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Decode codes ``Z`` (n, latent_dim): joint values in physical units (n, T, J)
+        float32, and frames (n, T, H, W, 3) uint8 (None without an image head or with
+        ``images=False``)."""
+        return reconstruct(self._fitted(), Z, images=images)
+
+    def score_samples(self, X: MotionDataset, Z: np.ndarray) -> dict:
+        """The loss of codes ``Z`` on ``X`` (``loss``, ``motor``, ``vision``), as logged while training."""
+        return evaluate(self._fitted(), X, Z)
+
+    # ---------------------------------------------------------------- persistence
+    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write the fitted model as a run directory (what ``primspace train`` writes)."""
+        return write_run(path, self._fitted(), overwrite=overwrite)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, *, progress: bool | None = None) -> "AutoDecoder":
+        """An AutoDecoder fitted from a run directory (written by :meth:`save`, ``fit`` or ``primspace train``)."""
+        run = load_run(path)
+        model = cls(
+            run.model_config, run.train_config, run.init, images=run.config["data"]["images"],
+            progress=progress,
+        )
+        model.run_, model.codes_, model.history_ = run, run.latents, run.history
+        return model
+
+    def _fitted(self) -> TrainedRun:
+        run = getattr(self, "run_", None)
+        if run is None:
+            raise UserError("this AutoDecoder is not fitted yet: call fit (or AutoDecoder.load) first")
+        return run
+
+    def __sklearn_is_fitted__(self) -> bool:
+        return getattr(self, "run_", None) is not None

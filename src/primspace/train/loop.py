@@ -1,0 +1,213 @@
+"""The training loop: one :class:`Session` per ``fit`` / ``infer`` call steps θ (unless
+frozen) and the codes, logs every epoch and checkpoints through an optional
+:class:`~primspace.train.rundir.RunDirectory` (None: the run lives in memory only).
+
+The loss (paper, *Main Results*: ``L(θ, z_1..z_n) = Σ_i ‖d(θ, z_i) − o_i‖²``) is taken here
+as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from primspace.data import JointScaler, MotionDataset
+from primspace.latent import LatentInitializer, LatentTable
+from primspace.model import MTRNNDecoder
+from primspace.progress import progress_bar
+from primspace.train.config import TrainConfig, TrainingDivergedError, lr_factor
+from primspace.train.rundir import RunDirectory, checkpoint_state, restore_rng, unpack_checkpoint
+
+__all__ = ["DataTensors", "Session", "batch_loss", "evaluate_loop", "epoch_values"]
+
+
+@dataclass
+class DataTensors:
+    """Training targets on the device: scaled motor (float32) and frames (uint8, converted per batch)."""
+
+    motor: torch.Tensor  # (N, T, J) float32, scaled to [-1, 1]
+    images: torch.Tensor | None  # (N, T, H, W, 3) uint8
+
+    @classmethod
+    def build(cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device) -> "DataTensors":
+        motor = torch.from_numpy(np.ascontiguousarray(scaler.transform(data.motor), dtype=np.float32)).to(device)
+        images = None
+        if use_images:
+            loaded = data.load_images().images
+            images = torch.from_numpy(np.ascontiguousarray(loaded)).to(device)
+        return cls(motor, images)
+
+
+def batch_loss(model, z, idx, tensors: DataTensors, tc: TrainConfig, autocast) -> tuple[torch.Tensor, torch.Tensor]:
+    """The loss of one batch and the detached ``[loss, motor, vision]`` means."""
+    use_images = tensors.images is not None
+    with autocast:
+        out = model(z, images=use_images)
+    motor = F.mse_loss(out.motor.float(), tensors.motor.index_select(0, idx))
+    if use_images:
+        target = tensors.images.index_select(0, idx).to(torch.float32).div_(255.0)
+        vision = F.mse_loss(out.images.float(), target)
+        loss = tc.motor_weight * motor + tc.vision_weight * vision
+    else:
+        vision = torch.zeros((), device=motor.device)
+        loss = tc.motor_weight * motor
+    return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
+
+
+def autocast_for(tc: TrainConfig, device: torch.device):
+    if tc.amp and device.type == "cuda":
+        return torch.autocast(device_type="cuda", dtype=torch.bfloat16)
+    return contextlib.nullcontext()
+
+
+def evaluate_loop(model, table: LatentTable, tensors: DataTensors, tc: TrainConfig, device) -> torch.Tensor:
+    """Sums over samples of ``[loss, motor, vision]`` (no updates, samples in order)."""
+    n = len(table)
+    order = torch.arange(n, device=device)
+    sums = torch.zeros(3, dtype=torch.float64, device=device)
+    with torch.no_grad():
+        for start in range(0, n, tc.batch_size):
+            idx = order[start : start + tc.batch_size]
+            z = table.codes.index_select(0, idx)
+            _, parts = batch_loss(model, z, idx, tensors, tc, autocast_for(tc, device))
+            sums += parts.double() * idx.numel()
+    return sums
+
+
+def epoch_values(sums: torch.Tensor, n: int, use_images: bool) -> dict:
+    loss, motor, vision = (sums / n).tolist()
+    return {"loss": loss, "motor": motor, "vision": vision if use_images else None}
+
+
+
+class Session:
+    """One run's training loop: θ (unless ``theta_opt`` is None: frozen) and the codes.
+
+    ``store`` receives the config, metrics and checkpoints (written after epoch 0, every
+    ``checkpoint_seconds`` or ``checkpoint_every`` epochs, and at the end); with None the
+    run is kept in memory: :attr:`history` and :meth:`state` are all there is.
+    """
+
+    def __init__(
+        self, *, store: RunDirectory | None, config: dict, model: MTRNNDecoder, theta_opt, table: LatentTable,
+        scaler: JointScaler, initializer: LatentInitializer, data: MotionDataset, use_images: bool,
+        tc: TrainConfig, device: torch.device, shuffle_seed: int,
+    ) -> None:
+        self.store, self.config, self.model, self.theta_opt = store, config, model, theta_opt
+        self.table, self.scaler, self.initializer, self.tc, self.device = table, scaler, initializer, tc, device
+        self.tensors = DataTensors.build(data, scaler, use_images, device)
+        self.use_images = use_images
+        self.generator = torch.Generator().manual_seed(shuffle_seed)
+        self.initial_codes = table.codes.detach().cpu().clone()
+        self.history: list[dict] = []
+        self.epoch = 0
+        self.n = len(table)
+        self._last_checkpoint = 0
+        self._checkpoint_time = time.monotonic()
+
+    @property
+    def name(self) -> str:
+        return self.store.path.name if self.store is not None else "(in memory)"
+
+    def state(self) -> dict:
+        """The checkpoint of the session as it stands (:func:`~primspace.train.rundir.checkpoint_state`)."""
+        return checkpoint_state(
+            config=self.config, epoch=self.epoch, model=self.model, theta_opt=self.theta_opt, table=self.table,
+            initial_codes=self.initial_codes, scaler=self.scaler, initializer=self.initializer,
+            generator=self.generator,
+        )
+
+    # ------------------------------------------------------------------------ loop
+    def run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
+        """Train up to ``tc.epochs``, from ``ckpt`` (a checkpoint dict) or from the start."""
+        tc = self.tc
+        if ckpt is not None:
+            self._restore(ckpt)
+        else:
+            if self.store is not None:
+                self.store.begin(self.config, self.initial_codes.numpy())
+            if tc.log_initial:
+                t0 = time.perf_counter()
+                self.model.eval()
+                sums = evaluate_loop(self.model, self.table, self.tensors, tc, self.device)
+                self._log(0, epoch_values(sums, self.n, self.use_images), time.perf_counter() - t0)
+            self._checkpoint()
+        fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
+        with progress_bar(tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
+            if self.epoch:
+                advance(self.epoch)
+            while self.epoch < tc.epochs:
+                t0 = time.perf_counter()
+                values = epoch_values(self._train_epoch(), self.n, self.use_images)
+                seconds = time.perf_counter() - t0
+                self._check_finite(values)
+                self.epoch += 1
+                self._log(self.epoch, values, seconds)
+                due = tc.checkpoint_every is not None and self.epoch % tc.checkpoint_every == 0
+                if due or self.epoch == tc.epochs or time.monotonic() - self._checkpoint_time >= tc.checkpoint_seconds:
+                    self._checkpoint()
+                advance(loss=values["loss"], sps=self.n / max(seconds, 1e-9))
+
+    def _check_finite(self, values: dict) -> None:
+        bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
+        if bad:
+            what = "loss" if bad[0] == "loss" else f"{bad[0]} loss"
+            kept = f"the last good checkpoint (epoch {self._last_checkpoint}) is kept" if self.store else "nothing was saved"
+            raise TrainingDivergedError(
+                f"{self.name}: the {what} became {values[bad[0]]} in epoch {self.epoch + 1}; "
+                f"stopped, {kept} (lower the learning rates, then resume)"
+            )
+
+    def _train_epoch(self) -> torch.Tensor:
+        model, table, tc = self.model, self.table, self.tc
+        train_theta = self.theta_opt is not None
+        factor = lr_factor(self.epoch, tc.epochs, tc.final_lr_fraction)
+        table.lr = tc.latent_lr * factor
+        if train_theta:
+            for group in self.theta_opt.param_groups:
+                group["lr"] = tc.lr * factor
+        model.train(train_theta)
+        order = torch.randperm(self.n, generator=self.generator).to(self.device)
+        sums = torch.zeros(3, dtype=torch.float64, device=self.device)
+        autocast = autocast_for(tc, self.device)
+        for start in range(0, self.n, tc.batch_size):
+            idx = order[start : start + tc.batch_size]
+            z = table.batch(idx)
+            loss, parts = batch_loss(model, z, idx, self.tensors, tc, autocast)
+            if train_theta:
+                self.theta_opt.zero_grad(set_to_none=True)
+            loss.backward()
+            if train_theta:
+                self.theta_opt.step()
+            # the batch mean scaled z.grad by 1/B: undo it, so each code steps on the
+            # gradient of its own sample's loss whatever the batch (module docstring)
+            table.step(idx, z.grad.mul_(idx.numel()))
+            sums += parts.double() * idx.numel()
+        return sums
+
+    def _log(self, epoch: int, values: dict, seconds: float) -> None:
+        line = {"epoch": epoch, **values, "seconds": round(seconds, 6), "samples_per_s": round(self.n / max(seconds, 1e-9), 3)}
+        self.history.append(line)
+        if self.store is not None:
+            self.store.log(line)
+
+    # ----------------------------------------------------------------- checkpoints
+    def _checkpoint(self) -> None:
+        if self.store is not None:
+            self.store.save(self.state(), self.table.numpy())
+        self._last_checkpoint = self.epoch
+        self._checkpoint_time = time.monotonic()
+
+    def _restore(self, state: dict) -> None:
+        ckpt = unpack_checkpoint(state)
+        self.epoch = self._last_checkpoint = ckpt.epoch
+        self._checkpoint_time = time.monotonic()
+        self.initial_codes = ckpt.initial_codes
+        restore_rng(ckpt.rng, self.generator)
+        self.history = self.store.history_through(self.epoch) if self.store is not None else []

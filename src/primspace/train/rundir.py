@@ -1,0 +1,398 @@
+"""A run on disk and the checkpoint format: the one module that names a run's files and
+its checkpoint's keys.
+
+A run directory holds::
+
+    config.json       kind (fit / infer), init, model and train configs, data (path,
+                      sample indices, SHA-1 of the samples' joints), parent run, scaler
+    metrics.jsonl     one line per epoch
+    checkpoint.pt     model, optimiser, codes and their optimiser, scaler, initialiser,
+                      RNG states, epoch (written atomically)
+    latents.npy       the codes at the last checkpoint
+    latents_init.npy  the codes as initialised
+
+Anything else in the directory is not the run's: an overwrite removes only the files
+above, and only when the new run starts writing (:meth:`RunDirectory.begin`).
+
+The training loop (:mod:`primspace.train.loop`) hands its state to
+:func:`checkpoint_state` and its files to a :class:`RunDirectory`; everything that reads a
+checkpoint goes through :func:`unpack_checkpoint` (resume) or :func:`run_from_state`
+(:func:`load_run`, and a run trained in memory).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import random
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from primspace.data import JointScaler, MotionDataset
+from primspace.errors import OutputExistsError, UserError
+from primspace.files import atomic_path, atomic_write_json, atomic_write_text, check_outside_inputs, os_error
+from primspace.latent import LatentInitializer
+from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.train.config import TrainConfig
+from primspace.train.run import TrainedRun
+
+__all__ = [
+    "CHECKPOINT_FORMAT", "CONFIG_NAME", "METRICS_NAME", "CHECKPOINT_NAME", "LATENTS_NAME", "LATENTS_INIT_NAME",
+    "RUN_FILES", "RESUMABLE_CHANGES", "Checkpoint", "RunDirectory", "run_config", "prepare_run_dir",
+    "checkpoint_state", "unpack_checkpoint", "restore_rng", "run_from_state", "load_run", "write_run",
+    "read_config", "read_checkpoint", "read_metrics", "fingerprint", "check_run_data",
+]
+
+CHECKPOINT_FORMAT = 1
+CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME = "config.json", "metrics.jsonl", "checkpoint.pt"
+LATENTS_NAME, LATENTS_INIT_NAME = "latents.npy", "latents_init.npy"
+RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_INIT_NAME)
+
+# Train-config fields that may change when a run is resumed (they do not change the numbers).
+RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc"}
+
+
+def fingerprint(data: MotionDataset) -> str:
+    return hashlib.sha1(np.ascontiguousarray(data.motor, dtype=np.float32).tobytes()).hexdigest()
+
+
+def run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
+    from primspace import __version__
+
+    return {
+        "kind": kind,
+        "init": init,
+        "model": mc.to_dict(),
+        "train": tc.to_dict(),
+        "data": {
+            "path": None if data.path is None else str(Path(data.path).resolve()),
+            "n_samples": len(data),
+            "indices": idx.tolist(),
+            "images": bool(use_images),
+            "joint_names": list(data.joint_names),
+            "dt": data.dt,
+            "motor_sha1": fingerprint(data),
+        },
+        "parent": parent,
+        "primspace_version": __version__,
+    }
+
+
+def prepare_run_dir(
+    out_dir: Path, config: dict, resume: bool, overwrite: bool, inputs: tuple = (), epochs: int | None = None
+) -> dict | None:
+    """Check the run directory; return the checkpoint to resume from (or None).
+
+    Writes nothing: an ``overwrite`` only takes effect when the new run starts writing
+    (:func:`start_run_dir`), so a run that fails while loading its data loses nothing.
+    Errors name the Python parameters (``resume=True``); the command line says its flags
+    instead (:func:`primspace.cli.app.main`). Refused: ``resume`` with ``overwrite``; an ``out_dir`` that is, contains or lies inside
+    one of ``inputs``; a non-empty directory that is not a run of the same kind
+    (``fit`` / ``infer``); a resume past ``epochs``.
+    """
+    if resume and overwrite:
+        raise UserError(f"{out_dir}: resume=True continues the run and overwrite=True replaces it; give one of them")
+    check_outside_inputs(out_dir, inputs)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"{out_dir}: exists and is not a directory")
+    existing = out_dir.is_dir() and any(out_dir.iterdir())
+    is_run = (out_dir / CONFIG_NAME).is_file() or (out_dir / CHECKPOINT_NAME).is_file()
+    if existing and not is_run:
+        raise UserError(f"{out_dir}: exists and is not a primspace run directory; choose another out_dir")
+    if is_run and (out_dir / CONFIG_NAME).is_file():
+        kind = read_config(out_dir).get("kind")
+        if kind != config["kind"]:
+            verb = "train" if config["kind"] == "fit" else "infer"
+            raise UserError(
+                f"{out_dir}: is a{'n' if kind == 'infer' else ''} {kind} run; {verb} only resumes or replaces "
+                f"its own ({config['kind']}) runs: choose another out_dir"
+            )
+    if resume and (out_dir / CHECKPOINT_NAME).is_file():
+        ckpt = read_checkpoint(out_dir / CHECKPOINT_NAME, "cpu")
+        _check_compatible(out_dir, ckpt["config"], config)
+        done = int(ckpt["epoch"])
+        if epochs is not None and done > epochs:
+            raise UserError(
+                f"{out_dir}: has trained {done} epochs, more than the {epochs} asked for; resume with "
+                f"epochs={done} or more (more extends the run)"
+            )
+        return ckpt
+    if existing and not resume and not overwrite:
+        raise OutputExistsError(out_dir, hint="resume=True or overwrite=True")
+    return None
+
+
+def start_run_dir(out_dir: Path) -> None:
+    """Make ``out_dir`` ready for a new run: remove an earlier run's files (only those a
+    run writes: anything else in the directory stays) and create it."""
+    try:
+        if out_dir.is_dir():
+            for name in RUN_FILES:
+                with contextlib.suppress(FileNotFoundError):
+                    (out_dir / name).unlink()
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise os_error(exc, out_dir) from None
+
+
+def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
+    def fail(what: str, a, b) -> None:
+        raise UserError(f"{out_dir}: cannot resume: {what} differs (saved {a}, given {b})")
+
+    for key in ("kind", "init", "parent", "scaler"):
+        if saved.get(key) != given.get(key):
+            fail(key, saved.get(key), given.get(key))
+    for key, value in given["model"].items():
+        if saved["model"].get(key) != value:
+            fail(f"model {key}", saved["model"].get(key), value)
+    for key, value in given["train"].items():
+        if key not in RESUMABLE_CHANGES and saved["train"].get(key) != value:
+            fail(f"train {key}", saved["train"].get(key), value)
+    sd, gd = saved["data"], given["data"]
+    for key in ("n_samples", "images", "motor_sha1"):
+        if sd.get(key) != gd.get(key):
+            fail("data" if key == "motor_sha1" else f"data {key}", sd.get(key), gd.get(key))
+    if sd.get("indices") != gd.get("indices"):
+        fail("data indices", f"{len(sd.get('indices', []))} samples", f"{len(gd['indices'])} samples")
+
+
+def read_config(run_dir: Path) -> dict:
+    path = run_dir / CONFIG_NAME
+    if not path.is_file():
+        raise UserError(f"{run_dir}: not a primspace run directory (no {CONFIG_NAME})")
+    try:
+        config = json.loads(path.read_text(encoding="utf-8"))
+        for key in ("kind", "init", "model", "train", "data"):
+            config[key]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise UserError(f"{path}: not a primspace run config ({exc})") from None
+    return config
+
+
+def read_checkpoint(path: Path, map_location) -> dict | None:
+    if not path.is_file():
+        return None
+    try:
+        ckpt = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # torch raises many kinds for a damaged file
+        raise UserError(f"{path}: cannot read the checkpoint ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        raise UserError(f"{path}: not a primspace checkpoint (format {ckpt.get('format') if isinstance(ckpt, dict) else '?'})")
+    return ckpt
+
+
+def read_metrics(path: Path) -> list[dict]:
+    if not path.is_file():
+        return []
+    out = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.strip():
+            try:
+                out.append(json.loads(line))
+            except ValueError:
+                break  # a line cut short by a kill: ignore it and what follows
+    return out
+
+
+def save_npy(path: Path, array: np.ndarray) -> None:
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, array)
+
+# ------------------------------------------------------------------------ checkpoint
+
+
+def checkpoint_state(
+    *, config: dict, epoch: int, model: torch.nn.Module, theta_opt, table, initial_codes: torch.Tensor,
+    scaler: JointScaler, initializer: LatentInitializer, generator: torch.Generator,
+) -> dict:
+    """Everything a run needs to continue bit-identically, as one dict (``checkpoint.pt``).
+
+    ``theta_opt`` is None while inferring (θ frozen). The RNG states are the batch-order
+    generator's and the process's global torch, Python and NumPy generators.
+    """
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "kind": config["kind"],
+        "epoch": epoch,
+        "model": model.state_dict(),
+        "theta_optimizer": None if theta_opt is None else theta_opt.state_dict(),
+        "latents": table.state_dict(),
+        "initial_codes": initial_codes,
+        "scaler": scaler.to_dict(),
+        "initializer": initializer.state_dict(),
+        "rng": {
+            "shuffle": generator.get_state(),
+            "torch": torch.get_rng_state(),
+            "python": random.getstate(),
+            "numpy": _numpy_state(),
+        },
+        "config": config,
+    }
+
+
+@dataclass
+class Checkpoint:
+    """A checkpoint's parts, unpacked and checked (:func:`unpack_checkpoint`)."""
+
+    epoch: int
+    model: dict  # state dict of the MTRNNDecoder
+    theta_optimizer: dict | None
+    latents: dict  # LatentTable state dict
+    initial_codes: torch.Tensor
+    scaler: JointScaler
+    initializer: LatentInitializer
+    rng: dict
+    config: dict
+
+
+def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoint:
+    """The parts of a checkpoint dict; one clear :class:`UserError` naming ``where`` if a part is missing."""
+    try:
+        return Checkpoint(
+            epoch=int(state["epoch"]), model=state["model"], theta_optimizer=state["theta_optimizer"],
+            latents=state["latents"], initial_codes=state["initial_codes"],
+            scaler=JointScaler.from_dict(state["scaler"]),
+            initializer=LatentInitializer.from_state_dict(state["initializer"]),
+            rng=state["rng"], config=state["config"],
+        )
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
+
+
+def restore_rng(rng: dict, generator: torch.Generator) -> None:
+    """Put the batch-order generator and the global generators back where a checkpoint saved them."""
+    generator.set_state(rng["shuffle"])
+    torch.set_rng_state(rng["torch"])
+    random.setstate(_to_tuple(rng["python"]))
+    _set_numpy_state(rng["numpy"])
+
+
+def run_from_state(state: dict, history: list[dict], run_dir: Path | None) -> TrainedRun:
+    """A :class:`TrainedRun` (its own model, on the CPU, in eval mode) from a checkpoint dict."""
+    where = run_dir / CHECKPOINT_NAME if run_dir is not None else "checkpoint"
+    ckpt = unpack_checkpoint(state, where)
+    config = ckpt.config
+    try:
+        mc = ModelConfig.from_dict(config["model"]).validate()
+        tc = TrainConfig.from_dict(config["train"])
+        model = MTRNNDecoder(mc)
+        model.load_state_dict(ckpt.model)
+        model.eval()
+        latents = ckpt.latents["codes"].detach().cpu().numpy().astype(np.float32)
+        initial = ckpt.initial_codes.cpu().numpy().astype(np.float32)
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+        raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
+    data = config.get("data", {})
+    return TrainedRun(
+        run_dir=run_dir, kind=config["kind"], init=config["init"], model=model, model_config=mc,
+        train_config=tc, scaler=ckpt.scaler, initializer=ckpt.initializer, latents=latents,
+        initial_latents=initial, history=[h for h in history if h["epoch"] <= ckpt.epoch],
+        indices=np.asarray(data.get("indices", []), dtype=np.int64), data_path=data.get("path"),
+        parent=config.get("parent"), epoch=ckpt.epoch, config=config, state=state,
+    )
+
+
+def load_run(run_dir: str | Path, *, map_location: str | torch.device = "cpu") -> TrainedRun:
+    """Read a run directory written by ``fit`` or ``infer`` (or :func:`write_run`).
+
+    Raises
+    ------
+    UserError
+        If the directory is not a run or its files are unreadable.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise UserError(f"{run_dir}: no such run directory")
+    read_config(run_dir)
+    state = read_checkpoint(run_dir / CHECKPOINT_NAME, map_location)
+    if state is None:
+        raise UserError(f"{run_dir}: has no {CHECKPOINT_NAME} (the run never completed an epoch)")
+    return run_from_state(state, read_metrics(run_dir / METRICS_NAME), run_dir)
+
+
+def write_run(out_dir: str | Path, run: TrainedRun, *, overwrite: bool = False, inputs: tuple = ()) -> Path:
+    """Save a run (e.g. one trained in memory) as a run directory that :func:`load_run`
+    reads and ``fit`` / ``infer`` can resume. Refuses what :func:`prepare_run_dir` refuses."""
+    out_dir = Path(out_dir)
+    if run.state is None:
+        raise UserError("this run holds no checkpoint state to save")
+    prepare_run_dir(out_dir, run.config, resume=False, overwrite=overwrite, inputs=inputs)
+    store = RunDirectory(out_dir)
+    store.begin(run.config, run.initial_latents)
+    for line in run.history:
+        store.log(line)
+    store.save(run.state, run.latents)
+    return out_dir
+
+
+# ------------------------------------------------------------------------ the files
+
+
+class RunDirectory:
+    """The files of one run as training writes them (config, metrics, checkpoint, codes)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def begin(self, config: dict, initial_codes: np.ndarray) -> None:
+        """Start a new run: remove an earlier run's files, write the config and the initial codes."""
+        start_run_dir(self.path)
+        atomic_write_json(self.path / CONFIG_NAME, config)
+        save_npy(self.path / LATENTS_INIT_NAME, np.asarray(initial_codes))
+        atomic_write_text(self.path / METRICS_NAME, "")
+
+    def log(self, line: dict) -> None:
+        """Append one epoch's metrics."""
+        with open(self.path / METRICS_NAME, "a", encoding="utf-8") as f:
+            f.write(json.dumps(line) + "\n")
+
+    def save(self, state: dict, codes: np.ndarray) -> None:
+        """Write the checkpoint (atomically) and the codes it holds."""
+        with atomic_path(self.path / CHECKPOINT_NAME) as tmp:
+            torch.save(state, tmp)
+        save_npy(self.path / LATENTS_NAME, codes)
+
+    def history_through(self, epoch: int) -> list[dict]:
+        """The metrics up to ``epoch``; lines past it (written before a kill) are dropped from the file."""
+        kept = [h for h in read_metrics(self.path / METRICS_NAME) if h["epoch"] <= epoch]
+        atomic_write_text(self.path / METRICS_NAME, "".join(json.dumps(h) + "\n" for h in kept))
+        return kept
+
+
+def check_run_data(run: TrainedRun, dataset: MotionDataset) -> None:
+    """Refuse a data set that is not the one ``run`` was trained or inferred on.
+
+    Compares what a resume compares: joints and steps, the run's sample indices, and the
+    SHA-1 of those samples' joint values (``config.json`` ``data.motor_sha1``).
+    """
+    where = str(dataset.path) if dataset.path is not None else "the data set"
+    mc = run.model_config
+    if dataset.n_joints != mc.n_joints or dataset.length != mc.length:
+        raise UserError(
+            f"{where}: has T={dataset.length} steps x J={dataset.n_joints} joints; run {run.run_dir or '(in memory)'} "
+            f"was trained on T={mc.length} x J={mc.n_joints}: not its data"
+        )
+    if len(run.indices) and int(run.indices.max()) >= len(dataset):
+        raise UserError(f"{where}: has {len(dataset)} samples, run {run.run_dir or '(in memory)'} used sample {int(run.indices.max())}: not its data")
+    saved = run.config.get("data", {}).get("motor_sha1")
+    if saved is not None and fingerprint(dataset.subset(run.indices)) != saved:
+        raise UserError(f"{where}: its joint values differ from those run {run.run_dir or '(in memory)'} used (SHA-1 of the run's samples): not its data")
+
+
+def _numpy_state() -> dict:
+    name, keys, pos, has_gauss, cached = np.random.get_state()
+    return {"name": name, "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
+            "has_gauss": int(has_gauss), "cached": float(cached)}
+
+
+def _set_numpy_state(s: dict) -> None:
+    np.random.set_state((s["name"], s["keys"].numpy().astype(np.uint32), s["pos"], s["has_gauss"], s["cached"]))
+
+
+def _to_tuple(x):
+    return tuple(_to_tuple(v) for v in x) if isinstance(x, (list, tuple)) else x
