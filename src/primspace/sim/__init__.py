@@ -5,11 +5,14 @@ RGB camera. Seven motion primitives are scripted relative to the block, turned i
 trajectories by inverse kinematics and rendered headless on the CPU:
 
 - :mod:`primspace.sim.scene`      the MuJoCo model (robot files from gymnasium-robotics)
-- :mod:`primspace.sim.primitives` the scripted end-effector paths of the seven primitives
+- :mod:`primspace.sim.primitives` the seven primitives, one class each (script, success
+  criteria, metadata), and their registry in label order
 - :mod:`primspace.sim.ik`         damped-least-squares inverse kinematics along a path
 - :mod:`primspace.sim.rollout`    replay through the kinematics: block motion, contacts
 - :mod:`primspace.sim.render`     the offscreen camera
-- :mod:`primspace.sim.generate`   presets, sharded parallel generation into HDF5
+- :mod:`primspace.sim.config`     what to generate: settings, presets, each sample's block
+- :mod:`primspace.sim.shards`     the shard layout of a generation into a file
+- :mod:`primspace.sim.generate`   sharded parallel generation into HDF5 (or memory)
 - :mod:`primspace.sim.success`    the objective success judge of a joint trajectory
 
 Importing this package chooses the OpenGL platform before anything imports ``mujoco``:

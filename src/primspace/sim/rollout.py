@@ -158,12 +158,10 @@ def replay(scene: Scene, joints: np.ndarray, block_xy, size: float, push_axis: i
     """
     joints = np.asarray(joints, dtype=float)
     t_len = len(joints)
-    m, d = scene.model, scene.data
     scene.set_block(float(block_xy[0]), float(block_xy[1]), float(size))
     half = 0.5 * size
     block = np.array([block_xy[0], block_xy[1], half], dtype=float)
     fingers = scene.left_finger_geoms + scene.right_finger_geoms
-    tip_geoms = (scene.left_finger_geoms[0], scene.right_finger_geoms[0])
     out = {
         "tcp": np.empty((t_len, 3)), "rotation": np.empty((t_len, 3, 3)), "block": np.empty((t_len, 3)),
         "finger_distance": np.empty((t_len, 2)), "finger_side": np.empty((t_len, 2)),
@@ -184,16 +182,24 @@ def replay(scene: Scene, joints: np.ndarray, block_xy, size: float, push_axis: i
                     gap = 0.0
                 behind = gap <= _FACE_TOLERANCE
         scene.data.mocap_pos[scene.block_mocap] = block
-        mujoco.mj_kinematics(m, d)
-        out["tcp"][t] = d.site_xpos[scene.tcp]
-        out["rotation"][t] = d.site_xmat[scene.tcp].reshape(3, 3)
-        out["block"][t] = block
-        bg, tg = scene.block_geom, scene.table_geom
-        out["finger_distance"][t, 0] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.left_finger_geoms)
-        out["finger_distance"][t, 1] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.right_finger_geoms)
-        out["finger_side"][t] = [d.geom_xpos[g, 1] - block[1] for g in tip_geoms]
-        out["arm_distance"][t] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.hand_geoms)
-        out["table_distance"][t] = min(
-            mujoco.mj_geomDistance(m, d, g, tg, DIST_MAX, None) for g in fingers + scene.hand_geoms
-        )
+        _record(scene, out, t, block)
     return Rollout(fingers=joints[:, 7:9].copy(), size=float(size), **out)
+
+
+def _record(scene: Scene, out: dict, t: int, block: np.ndarray) -> None:
+    """Step ``t`` of :func:`replay` (joints and block already set): TCP, block and distances."""
+    m, d = scene.model, scene.data
+    fingers = scene.left_finger_geoms + scene.right_finger_geoms
+    tip_geoms = (scene.left_finger_geoms[0], scene.right_finger_geoms[0])
+    mujoco.mj_kinematics(m, d)
+    out["tcp"][t] = d.site_xpos[scene.tcp]
+    out["rotation"][t] = d.site_xmat[scene.tcp].reshape(3, 3)
+    out["block"][t] = block
+    bg, tg = scene.block_geom, scene.table_geom
+    out["finger_distance"][t, 0] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.left_finger_geoms)
+    out["finger_distance"][t, 1] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.right_finger_geoms)
+    out["finger_side"][t] = [d.geom_xpos[g, 1] - block[1] for g in tip_geoms]
+    out["arm_distance"][t] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.hand_geoms)
+    out["table_distance"][t] = min(
+        mujoco.mj_geomDistance(m, d, g, tg, DIST_MAX, None) for g in fingers + scene.hand_geoms
+    )

@@ -150,12 +150,9 @@ def _camera_quat(pos, target) -> np.ndarray:
     return quat
 
 
-def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]:
-    """The scene's MJCF text and its mesh files (a MuJoCo virtual file system)."""
-    asset_root = ET.parse(assets / "assets.xml").getroot()
-    chain_root = ET.parse(assets / "chain.xml").getroot()
-
-    defaults = asset_root.find("default")
+def _collision_meshes(asset_root: ET.Element, assets: Path) -> tuple[ET.Element, dict[str, bytes]]:
+    """The ``<asset>`` of the robot's collision meshes and their files (the heavy visual
+    meshes are never loaded)."""
     meshes = ET.Element("asset")
     files: dict[str, bytes] = {}
     for mesh in asset_root.find("asset").findall("mesh"):
@@ -165,7 +162,11 @@ def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]
         name = "franka_" + rel.replace("/", "_")
         files[name] = (assets / "meshes" / rel).read_bytes()
         meshes.append(ET.Element("mesh", name=mesh.get("name"), file=name, **({"scale": mesh.get("scale")} if mesh.get("scale") else {})))
+    return meshes, files
 
+
+def _robot_body(chain_root: ET.Element) -> ET.Element:
+    """The robot's body tree at the origin, its collision meshes drawn, with the TCP site."""
     robot = chain_root.find("body")
     robot.set("pos", "0 0 0")
     for body in robot.iter("body"):
@@ -185,6 +186,16 @@ def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]
                 body, "site", name="tcp", pos=" ".join(map(str, TCP_POS)),
                 quat=" ".join(map(str, TCP_QUAT)), size="0.005", group="4",
             )
+    return robot
+
+
+def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]:
+    """The scene's MJCF text and its mesh files (a MuJoCo virtual file system)."""
+    asset_root = ET.parse(assets / "assets.xml").getroot()
+    chain_root = ET.parse(assets / "chain.xml").getroot()
+    defaults = asset_root.find("default")
+    meshes, files = _collision_meshes(asset_root, assets)
+    robot = _robot_body(chain_root)
 
     cam_quat = " ".join(f"{v:.8f}" for v in _camera_quat(camera.pos, camera.target))
     tx0, tx1 = TABLE.x_range
