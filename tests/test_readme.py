@@ -1,0 +1,27 @@
+"""The README's Python example runs as written (on a small data set made here)."""
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from test_train import primitives
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def test_readme_python_example_runs_as_written(tmp_path, monkeypatch):
+    blocks = re.findall(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S)
+    example = next(b for b in blocks if "AutoDecoder" in b)
+    monkeypatch.chdir(tmp_path)
+    # seven primitives (the example clusters into 7), short sequences: the 800 + 600 epochs take seconds
+    primitives(3, seed=0, T=20, K=7).save("demos.h5")
+    primitives(2, seed=1, T=20, K=7).save("new.h5")
+    namespace: dict = {}
+    exec(compile(example, str(README), "exec"), namespace)
+    Z, Z_new, labels, motor = namespace["Z"], namespace["Z_new"], namespace["labels"], namespace["motor"]
+    assert Z.shape == (21, 20) and Z_new.shape == (14, 20) and motor.shape == (14, 20, 4)
+    assert sorted(set(labels)) == list(range(7))
+    assert namespace["frames"] is None  # these demonstrations have no camera frames
+    np.testing.assert_array_equal(namespace["model"].codes_, Z)  # loaded back from runs/fit
+    assert (tmp_path / "runs" / "fit" / "checkpoint.pt").is_file()
