@@ -35,7 +35,7 @@ def main() -> None:
 
     from primspace.data import MotionDataset
     from primspace.model import ModelConfig
-    from primspace.train import TrainConfig, fit, infer
+    from primspace.train import TrainConfig, configure_process, fit, infer
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -50,6 +50,7 @@ def main() -> None:
         n_fit = min(args.n_fit, len(data) // 2)
         fit_idx, new_idx = np.sort(order[:n_fit]), np.sort(order[n_fit : n_fit + args.n_infer])
         tc = TrainConfig(epochs=args.epochs, batch_size=32, threads=1, final_lr_fraction=0.1)
+        configure_process(tc)
         fit(data, tmp / "fit", model_config=ModelConfig(latent_dim=20), train_config=tc, init="projection",
             indices=fit_idx, images=False, progress=False)
         codes, seconds = {}, {}

@@ -34,7 +34,7 @@ from torch.utils.flop_counter import FlopCounterMode
 
 from primspace.data import MotionDataset
 from primspace.model import ModelConfig, MTRNNDecoder
-from primspace.train import TrainConfig, fit, infer
+from primspace.train import TrainConfig, configure_process, fit, infer
 
 T, J, H, W, Q = 61, 9, 48, 64, 40
 PAPER_FIT_SAMPLES, PAPER_INFER_SAMPLES, PAPER_FIT_EPOCHS, PAPER_INFER_EPOCHS = 343, 1372, 800, 600
@@ -88,6 +88,7 @@ def train_flops_per_sample(cfg: ModelConfig, *, frozen: bool, batch: int = 8) ->
 
 def timed_epochs(dataset, cfg: ModelConfig, tc: TrainConfig, workdir: Path, *, epochs: int = 2) -> dict:
     """Run fit then infer for ``epochs`` each; return the last epoch's seconds of each."""
+    configure_process(tc)  # threads, heap tuning, cuDNN autotune: what the CLI applies
     run = fit(dataset, workdir / "fit", model_config=cfg, train_config=tc, overwrite=True, progress=False)
     ev = infer(workdir / "fit", dataset, workdir / "infer", epochs=epochs, overwrite=True, progress=False)
     return {"fit_s": run.history[-1]["seconds"], "infer_s": ev.history[-1]["seconds"]}
@@ -139,6 +140,7 @@ def bench_demo(workdir: Path) -> None:
             data = synthetic(126, size, seed=1)
             cfg = ModelConfig(latent_dim=20, image_channels=channels)
             tc = TrainConfig(epochs=3, batch_size=32, device="cpu", threads=threads, log_initial=False)
+            configure_process(tc)
             run = fit(data, workdir / "demo", model_config=cfg, train_config=tc, overwrite=True, progress=False,
                       images=size is not None)
             ev = infer(workdir / "demo", data, workdir / "demo_e", epochs=3, overwrite=True, progress=False)
