@@ -30,17 +30,19 @@ import numpy as np
 def make_shard(path: Path, n: int) -> None:
     """A shard file of ``n`` samples spread over the paper grid (every primitive)."""
     from primspace.data import DatasetWriter
+    from primspace.data.schema import arrays_of
     from primspace.sim.generate import PRESETS, _file_settings, generate_shard
 
     config = PRESETS["paper"]
     shard = generate_shard(config, 0, range(0, config.n_samples, config.n_samples // n)[:n])
     with DatasetWriter(path, **_file_settings(config, 0, n)) as writer:  # as write_shard does
-        writer.write(0, motor=shard["motor"], images=shard["images"], labels=shard["labels"], params=shard["params"])
+        writer.write(0, **arrays_of(shard))
 
 
 def time_merge(shard: Path, copies: int, how: str, tmp: Path) -> float:
     """Seconds per sample to fill a file of ``copies`` shards ``how``."""
     from primspace.data import DatasetWriter, MotionDataset
+    from primspace.data.schema import arrays_of
     from primspace.sim.generate import PRESETS, _file_settings
 
     src = MotionDataset.load(shard)
@@ -54,7 +56,7 @@ def time_merge(shard: Path, copies: int, how: str, tmp: Path) -> float:
                 writer.copy_from(c * n, shard)
             else:
                 images = arrays if arrays is not None else np.asarray(src.images)  # decode every time
-                writer.write(c * n, motor=src.motor, images=images, labels=src.labels, params=src.params)
+                writer.write(c * n, **dict(arrays_of(src), images=images))
     took = time.perf_counter() - t0
     merged = MotionDataset.load(out)
     np.testing.assert_array_equal(merged.images[-1], src.images[-1])

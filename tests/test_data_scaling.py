@@ -18,7 +18,9 @@ def test_scales_into_unit_box_and_inverts(x):
     y = scaler.transform(x)
     assert y.shape == x.shape
     assert np.all(y >= -1 - 1e-9) and np.all(y <= 1 + 1e-9)
-    moving = x.reshape(-1, x.shape[-1]).max(0) > x.reshape(-1, x.shape[-1]).min(0)
+    # a joint moves when its half range is a positive float (5e-324 / 2 underflows to 0:
+    # such a joint is still, as for the scaler)
+    moving = (x.reshape(-1, x.shape[-1]).max(0) - x.reshape(-1, x.shape[-1]).min(0)) / 2 > 0
     # every moving joint reaches both ends of [-1, 1]
     flat = y.reshape(-1, y.shape[-1])
     np.testing.assert_allclose(flat.min(0)[moving], -1, atol=1e-9)

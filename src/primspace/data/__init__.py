@@ -1,7 +1,17 @@
-"""The motion data layer: data sets, their HDF5 file, resampling, scaling, importers."""
+"""The motion data layer: data sets, their HDF5 file, resampling, scaling, importers.
+
+Modules: :mod:`~primspace.data.schema` (the fields of a data set, once),
+:mod:`~primspace.data.dataset` (:class:`MotionDataset`, in memory),
+:mod:`~primspace.data.storage` (its HDF5 file: reading, :class:`DatasetWriter`),
+:mod:`~primspace.data.images` (:class:`LazyImages`), :mod:`~primspace.data.indices`
+(sample indices), :mod:`~primspace.data.values` (number checks),
+:mod:`~primspace.data.resample`, :mod:`~primspace.data.scaling`,
+:mod:`~primspace.data.importers`.
+"""
 
 from primspace.data.dataset import DatasetWriter, LazyImages, MotionDataset
 from primspace.data.importers import import_csv_folder, import_lasa, import_npz
+from primspace.data.indices import check_indices, read_indices
 from primspace.data.resample import resample
 from primspace.data.scaling import JointScaler
 
@@ -14,4 +24,6 @@ __all__ = [
     "import_npz",
     "import_csv_folder",
     "import_lasa",
+    "check_indices",
+    "read_indices",
 ]

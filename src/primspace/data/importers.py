@@ -14,7 +14,8 @@ Formats
     * ``arr_0, arr_1, ...`` each ``(T_i, J)``, as written by ``np.savez(f, *sequences)``.
 
     Optional: ``labels`` ``(N,)`` (integers, ``-1`` unknown, or strings), ``label_names``,
-    ``joint_names``, ``params`` ``(N, P)``, ``param_names``, ``dt`` (seconds per input step).
+    ``joint_names``, ``params`` ``(N, P)``, ``param_names``, ``dt`` (seconds per input step):
+    the keys are the data set's field names (:data:`primspace.data.schema.FIELDS`).
 ``csv``
     A folder of ``.csv`` files, one demonstration each, header row = joint names. A file
     in a subfolder gets the subfolder's name as its label; files directly in the folder
@@ -46,6 +47,7 @@ from typing import Sequence
 import numpy as np
 
 from primspace.data.dataset import MotionDataset
+from primspace.data.schema import ATTRIBUTES
 from primspace.data.values import FLOAT32_MAX, as_float32, too_large
 from primspace.data.resample import resample
 from primspace.errors import DataError, UserError, first_line
@@ -83,16 +85,15 @@ def import_npz(path: str | os.PathLike, length: int) -> MotionDataset:
         sequences = _npz_sequences(data)
         n = len(sequences)
         motor = _resample_located(sequences, length)
-        labels, label_names = _labels(data.get("labels"), data.get("label_names"), n)
+        names = {a.name: _opt_names(data.get(a.name)) for a in ATTRIBUTES if a.owner is not None}
+        labels, names["label_names"] = _labels(data.get("labels"), names["label_names"], n)
         params = data.get("params")
         dt_in = _npz_dt(data)
         return MotionDataset(
             motor=motor,
             labels=labels,
-            label_names=label_names,
             params=params,
-            param_names=_opt_names(data.get("param_names")),
-            joint_names=_opt_names(data.get("joint_names")),
+            **names,
             dt=_resampled_dt(dt_in, [len(s) for s in sequences], length),
             source=f"npz:{path.name}",
         )
@@ -240,21 +241,24 @@ def _read_csv(file: Path, index: int) -> tuple[list[str], np.ndarray]:
                 raise fail(f"line {line}, column {header[c]!r}: {too_large(v)}", field)
             values[k, c] = v
     if time_cols:
-        c = time_cols[0]
-        t = values[:, c]
-        not_finite = np.flatnonzero(~np.isfinite(t))
-        if not_finite.size:
-            k = int(not_finite[0])
-            raise fail(f"line {lines[k]}: time stamp {body[k][c].strip()!r} is not a finite number", header[c])
-        backwards = np.flatnonzero(np.diff(t) <= 0)
-        if backwards.size:
-            k = int(backwards[0]) + 1
-            raise fail(
-                f"line {lines[k]}: time {t[k]:g} does not come after {t[k - 1]:g} on line {lines[k - 1]} "
-                "(time stamps must strictly increase)",
-                header[c],
-            )
+        _check_clock(values[:, time_cols[0]], [row[time_cols[0]] for row in body], lines, header[time_cols[0]], fail)
     return header, values
+
+
+def _check_clock(t: np.ndarray, cells: list[str], lines: list[int], name: str, fail) -> None:
+    """Time stamps ``t`` (read from ``cells`` on ``lines``) must be finite and strictly increase."""
+    not_finite = np.flatnonzero(~np.isfinite(t))
+    if not_finite.size:
+        k = int(not_finite[0])
+        raise fail(f"line {lines[k]}: time stamp {cells[k].strip()!r} is not a finite number", name)
+    backwards = np.flatnonzero(np.diff(t) <= 0)
+    if backwards.size:
+        k = int(backwards[0]) + 1
+        raise fail(
+            f"line {lines[k]}: time {t[k]:g} does not come after {t[k - 1]:g} on line {lines[k - 1]} "
+            "(time stamps must strictly increase)",
+            name,
+        )
 
 
 # ------------------------------------------------------------------------------ lasa

@@ -1,0 +1,430 @@
+"""The data set's fields, once: one table that reading, writing, subsetting and checks iterate.
+
+A data set file holds arrays (HDF5 datasets, batch-first) and file attributes. Each is
+one :class:`Field` in :data:`FIELDS`, which says what it stores (dtype, shape, whether
+it is required), how it is stored (chunks, compression, fill value), how the in-memory
+:class:`~primspace.data.MotionDataset` converts and checks it, and how it is subset.
+Code that handles "every field" iterates the table instead of naming fields:
+
+* :class:`~primspace.data.MotionDataset` converts (``coerce``, ``normalize``) and
+  checks (``validate``) every field, subsets the arrays (``lazy``: a view, else rows)
+  and summarises them (``summary_key``);
+* :func:`primspace.data.storage.read_fields` reads and checks the file
+  (``check_stored``, ``missing``, ``codec``);
+* :class:`~primspace.data.DatasetWriter` creates the file's arrays (``file_shape``,
+  ``create_options``) and attributes (``codec``), checks each block against the file
+  (``writer_option``, ``block_dims``) and compares a merged file's names (``owner``).
+
+Shapes are symbolic: ``N`` samples, ``T`` time steps, ``J`` joints, ``H`` x ``W``
+frames, ``P`` generative factors; ``J`` and ``P`` are also the lengths of
+``joint_names`` and ``param_names``. :func:`markdown_table` renders the arrays as the
+table of ``docs/data.md`` (a test keeps the two equal).
+
+Examples
+--------
+>>> from primspace.data.schema import ARRAYS, field
+>>> [f.name for f in ARRAYS]
+['motor', 'images', 'labels', 'params']
+>>> field("images").file_shape({"N": 2, "T": 5, "H": 48, "W": 64})
+(2, 5, 48, 64, 3)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Callable, Literal, Mapping
+
+import numpy as np
+
+from primspace.data.images import LazyImages
+from primspace.data.values import as_float32, check_finite, check_int32_labels
+from primspace.errors import DataError
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "Field",
+    "FIELDS",
+    "ARRAYS",
+    "ATTRIBUTES",
+    "field",
+    "names_of",
+    "arrays_of",
+    "empty_arrays",
+    "dims_of",
+    "markdown_table",
+]
+
+#: Version of the HDF5 layout that :class:`~primspace.data.DatasetWriter` writes.
+SCHEMA_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Field:
+    """One field of a data set: an HDF5 dataset (array) or a file attribute.
+
+    Parameters
+    ----------
+    name : str
+        The HDF5 node or attribute name, and the :class:`MotionDataset` attribute.
+    stored : {"dataset", "attribute"}
+        An array (HDF5 dataset, first axis = sample) or a file attribute.
+    doc : str
+        What it holds (the docs' "type" column).
+    required : bool
+        Every file has it (else optional: None in memory, absent from the file).
+    dtype : numpy dtype, optional
+        The array's type in the file.
+    shape : tuple of str or int
+        The array's shape in the file, in symbols (see the module docstring); the
+        per-sample shape is ``shape[1:]``.
+    chunks : {"contiguous", "sample"}
+        HDF5 storage: contiguous, or one chunk per sample (read one sample at a time).
+    compression : str, optional
+        HDF5 filter of the chunks (``"gzip"``: level = the writer's ``compression_level``).
+    fillvalue : optional
+        HDF5 fill value (what an unwritten sample reads as).
+    lazy : bool
+        Read on demand (a :class:`~primspace.data.LazyImages` view): subset as a view,
+        written first and merged chunk by chunk, dropped by ``without_images``.
+    owner : str, optional
+        For a names attribute: the array whose last axis it names. Names are checked
+        after their array.
+    matched : bool
+        An attribute that a file merged by ``DatasetWriter.copy_from`` must share with
+        the target: compared when its owner is required or none (first), or held by the
+        target file and named there (then).
+    writer_option : str, optional
+        The :class:`~primspace.data.DatasetWriter` argument saying whether the file
+        holds this optional array: ``block_dims`` of the array (``image_size``) or a
+        bool (``with_labels``).
+    block_dims : tuple of str
+        The dimensions a block given to ``DatasetWriter.write`` must share with the file.
+    summary_key : str, optional
+        ``MotionDataset.summary`` key of the array's per-name ``[min, max]`` ranges.
+    missing : str
+        For a required array: why a file without it is refused.
+    codec : {"strings", "number", "text", "version"}, optional
+        How an attribute is written and read: an array of strings, one number, free
+        text, the schema version.
+    default : optional
+        An attribute's value when a file lacks it (also the constructor default).
+    coerce : callable, optional
+        ``coerce(value, path) -> ndarray``: the constructor's conversion of an array
+        (raises :class:`DataError`).
+    normalize : callable, optional
+        ``normalize(value, dataset) -> value``: the constructor's conversion of an
+        attribute, given the data set's converted arrays (default names).
+    validate : callable, optional
+        ``validate(dataset)``: raise :class:`DataError` naming file, field and sample.
+    check_stored : callable, optional
+        ``check_stored(dtype) -> reason or None``: the dtype a file may store.
+    """
+
+    name: str
+    stored: Literal["dataset", "attribute"]
+    doc: str
+    required: bool = False
+    dtype: np.dtype | None = None
+    shape: tuple[str | int, ...] = ()
+    chunks: Literal["contiguous", "sample"] = "contiguous"
+    compression: str | None = None
+    fillvalue: Any = None
+    lazy: bool = False
+    owner: str | None = None
+    matched: bool = False
+    writer_option: str | None = None
+    block_dims: tuple[str, ...] = ()
+    summary_key: str | None = None
+    missing: str = ""
+    codec: Literal["strings", "number", "text", "version"] | None = None
+    default: Any = None
+    coerce: Callable[[Any, Any], np.ndarray] | None = None
+    normalize: Callable[[Any, Any], Any] | None = None
+    validate: Callable[[Any], None] | None = None
+    check_stored: Callable[[np.dtype], str | None] | None = None
+
+    @property
+    def is_array(self) -> bool:
+        """An HDF5 dataset (else a file attribute)."""
+        return self.stored == "dataset"
+
+    @property
+    def in_memory(self) -> bool:
+        """A :class:`MotionDataset` attribute (the schema version is only in the file)."""
+        return self.codec != "version"
+
+    def file_shape(self, dims: Mapping[str, int]) -> tuple[int, ...]:
+        """The array's shape for the dimensions ``dims`` (``{"N": 10, "T": 61, ...}``)."""
+        return tuple(int(dims[d]) if isinstance(d, str) else d for d in self.shape)
+
+    def create_options(self, dims: Mapping[str, int], compression_level: int) -> dict:
+        """Keyword arguments of ``h5py.Group.create_dataset`` for this array."""
+        shape = self.file_shape(dims)
+        options: dict = {"shape": shape, "dtype": self.dtype}
+        if self.fillvalue is not None:
+            options["fillvalue"] = self.fillvalue
+        if self.chunks == "sample":
+            options["chunks"] = (1,) + shape[1:]
+        if self.compression is not None:
+            options["compression"] = self.compression
+            options["compression_opts"] = compression_level
+        return options
+
+    def empty(self, dims: Mapping[str, int]) -> np.ndarray:
+        """An uninitialised in-memory array of this field's type and shape."""
+        return np.empty(self.file_shape(dims), dtype=self.dtype)
+
+
+# ------------------------------------------------------------------- conversions
+
+
+def _coerce_motor(motor, path) -> np.ndarray:
+    return as_float32(motor, "motor", path)
+
+
+def _coerce_params(params, path) -> np.ndarray:
+    return as_float32(params, "params", path)
+
+
+def _coerce_images(images, path):
+    if isinstance(images, LazyImages):
+        return images
+    images = np.asarray(images)
+    if images.dtype != np.uint8:
+        raise DataError(f"images must be uint8, got {images.dtype}", path=path, field="images")
+    return images
+
+
+def _coerce_labels(labels, path):
+    labels = np.asarray(labels)
+    if labels.size and labels.dtype.kind not in "iu":
+        raise DataError(f"labels must be integers, got {labels.dtype}", path=path, field="labels")
+    check_int32_labels(labels, path)
+    return labels.astype(np.int32)
+
+
+def _default_names(names, ds, *, prefix: str, array: str, ndim: int) -> list[str]:
+    """Names as given, else ``prefix0..``, one per entry of the last axis of ``array``."""
+    value = getattr(ds, array)
+    n = value.shape[-1] if value is not None and value.ndim == ndim else 0
+    if names is None or len(names) == 0:
+        return [f"{prefix}{i}" for i in range(n)]
+    return [str(s) for s in names]
+
+
+def _number(value, ds) -> float:
+    return float(value)
+
+
+def _text(value, ds) -> str:
+    return str(value)
+
+
+def _label_names(names, ds) -> list[str]:
+    """Names as given, else ``"0".."K-1"`` for labels up to K-1."""
+    if names is None:
+        top = int(ds.labels.max()) + 1 if ds.labels is not None and ds.labels.size else 0
+        return [str(i) for i in range(max(top, 0))]
+    return [str(s) for s in names]
+
+
+# ---------------------------------------------------------------------- checks
+
+
+def _validate_motor(ds) -> None:
+    p, m = ds.path, ds.motor
+    if m.ndim != 3:
+        raise DataError(f"must have shape (N, T, J), got rank {m.ndim} {m.shape}", path=p, field="motor")
+    n, t, j = m.shape
+    if n < 1:
+        raise DataError("holds no samples", path=p, field="motor")
+    if t < 2:
+        raise DataError(f"sequences need at least 2 time steps, got T={t}", path=p, field="motor")
+    if j < 1:
+        raise DataError("has no joints (J=0)", path=p, field="motor")
+    check_finite(m, "motor", p)
+
+
+def _validate_joint_names(ds) -> None:
+    j = ds.motor.shape[2]
+    if len(ds.joint_names) != j:
+        raise DataError(f"{len(ds.joint_names)} joint names for J={j} joints", path=ds.path, field="joint_names")
+    if len(set(ds.joint_names)) != j:
+        raise DataError("joint names are not unique", path=ds.path, field="joint_names")
+
+
+def _validate_images(ds) -> None:
+    p, (n, t, _) = ds.path, ds.motor.shape
+    s = tuple(ds.images.shape)
+    if len(s) != 5 or s[4] != 3:
+        raise DataError(f"must have shape (N, T, H, W, 3), got {s}", path=p, field="images")
+    if s[0] != n:
+        raise DataError(f"{s[0]} samples but motor has {n}", path=p, field="images")
+    if s[1] != t:
+        raise DataError(f"{s[1]} time steps but motor has T={t}", path=p, field="images")
+    if ds.images.dtype != np.uint8:
+        raise DataError(f"must be uint8, got {ds.images.dtype}", path=p, field="images")
+
+
+def _validate_labels(ds) -> None:
+    p, n, lab = ds.path, ds.motor.shape[0], ds.labels
+    if lab.shape != (n,):
+        raise DataError(f"must have shape ({n},) to match motor, got {lab.shape}", path=p, field="labels")
+    k = len(ds.label_names)
+    bad = np.flatnonzero((lab < -1) | (lab >= k))
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(
+            f"label {int(lab[i])} out of range [-1, {k - 1}] ({k} label names)", path=p, field="labels", index=i
+        )
+
+
+def _validate_params(ds) -> None:
+    p, n, pr = ds.path, ds.motor.shape[0], ds.params
+    if pr.ndim != 2 or pr.shape[0] != n:
+        raise DataError(f"must have shape ({n}, P), got {pr.shape}", path=p, field="params")
+    check_finite(pr, "params", p)
+
+
+def _validate_param_names(ds) -> None:
+    n_params = ds.params.shape[1]
+    if len(ds.param_names) != n_params:
+        raise DataError(f"{len(ds.param_names)} names for P={n_params} params", path=ds.path, field="param_names")
+
+
+def _validate_dt(ds) -> None:
+    if not np.isfinite(ds.dt) or ds.dt <= 0:
+        raise DataError(f"must be a positive number, got {ds.dt}", path=ds.path, field="dt")
+
+
+def _floating(dtype: np.dtype) -> str | None:
+    return None if dtype.kind == "f" else f"must be floating point, got {dtype}"
+
+
+def _uint8(dtype: np.dtype) -> str | None:
+    return None if dtype == np.uint8 else f"must be uint8, got {dtype}"
+
+
+# ----------------------------------------------------------------------- table
+
+#: Every field, in the order they are converted, checked, read and written: arrays
+#: first (``motor`` then the optional ones), then the file attributes in file order.
+FIELDS: tuple[Field, ...] = (
+    Field(
+        "motor", "dataset", "float32, joint values in physical units", required=True,
+        dtype=np.dtype(np.float32), shape=("N", "T", "J"), block_dims=("T", "J"), summary_key="joint_ranges",
+        missing="missing (every data set needs joint values)",
+        coerce=_coerce_motor, validate=_validate_motor,
+        check_stored=_floating,
+    ),
+    Field(
+        "images", "dataset", "uint8, one gzip-compressed chunk per sample",
+        dtype=np.dtype(np.uint8), shape=("N", "T", "H", "W", 3), chunks="sample", compression="gzip",
+        lazy=True, writer_option="image_size", block_dims=("H", "W"),
+        coerce=_coerce_images, validate=_validate_images, check_stored=_uint8,
+    ),
+    Field(
+        "labels", "dataset", "int32, primitive index, -1 = unknown",
+        dtype=np.dtype(np.int32), shape=("N",), fillvalue=-1, writer_option="with_labels",
+        coerce=_coerce_labels, validate=_validate_labels,
+    ),
+    Field(
+        "params", "dataset", "float32, generative factors (block x, y, size ...)",
+        dtype=np.dtype(np.float32), shape=("N", "P"), writer_option="with_params", summary_key="param_ranges",
+        coerce=_coerce_params, validate=_validate_params,
+    ),
+    Field("schema_version", "attribute", "layout version of the file", codec="version", default=None),
+    Field(
+        "joint_names", "attribute", "J joint names", owner="motor", matched=True, codec="strings", default=None,
+        normalize=partial(_default_names, prefix="j", array="motor", ndim=3), validate=_validate_joint_names,
+    ),
+    Field(
+        "label_names", "attribute", "a name per label value", owner="labels", matched=True, codec="strings", default=None,
+        normalize=_label_names,
+    ),
+    Field(
+        "param_names", "attribute", "P names of the params", owner="params", matched=True, codec="strings", default=None,
+        normalize=partial(_default_names, prefix="p", array="params", ndim=2), validate=_validate_param_names,
+    ),
+    Field(
+        "dt", "attribute", "seconds between time steps", matched=True, codec="number", default=1.0,
+        normalize=_number, validate=_validate_dt,
+    ),
+    Field(
+        "source", "attribute", "free text: where the data came from", codec="text", default="",
+        normalize=_text,
+    ),
+)
+
+#: The arrays (HDF5 datasets), in table order.
+ARRAYS: tuple[Field, ...] = tuple(f for f in FIELDS if f.is_array)
+#: The file attributes, in table order.
+ATTRIBUTES: tuple[Field, ...] = tuple(f for f in FIELDS if not f.is_array)
+
+_BY_NAME = {f.name: f for f in FIELDS}
+
+
+def field(name: str) -> Field:
+    """The field called ``name`` (KeyError for a name the schema does not have)."""
+    return _BY_NAME[name]
+
+
+def names_of(array: Field) -> Field | None:
+    """The attribute naming the last axis of ``array`` (``joint_names`` for ``motor``)."""
+    return next((f for f in ATTRIBUTES if f.owner == array.name), None)
+
+
+def arrays_of(values) -> dict[str, Any]:
+    """The data set's arrays among ``values``, by name, in table order (None where absent).
+
+    ``values`` is a mapping (a generation shard's dict: other keys are dropped) or an
+    object with the arrays as attributes (a :class:`MotionDataset`), e.g.
+    ``writer.write(start, **arrays_of(shard))``.
+    """
+    if isinstance(values, Mapping):
+        return {f.name: values.get(f.name) for f in ARRAYS}
+    return {f.name: getattr(values, f.name, None) for f in ARRAYS}
+
+
+def empty_arrays(dims: Mapping[str, int], names=None) -> dict[str, np.ndarray]:
+    """Uninitialised arrays of the schema's types and shapes, to be filled in place.
+
+    Parameters
+    ----------
+    dims : mapping
+        The dimensions by symbol, e.g. ``{"N": 10, "T": 61, "J": 9, "P": 3}`` (add
+        ``H`` and ``W`` for images).
+    names : iterable of str, optional
+        The arrays to make (default: ``motor`` and every optional array whose
+        dimensions are all in ``dims``).
+    """
+    if names is None:
+        names = [f.name for f in ARRAYS if all(d in dims for d in f.shape if isinstance(d, str))]
+    return {name: field(name).empty(dims) for name in names}
+
+
+def dims_of(arrays: Mapping[str, Any]) -> dict[str, int]:
+    """The symbolic dimensions (N, T, J, ...) read off the shapes of the given arrays.
+
+    ``arrays`` maps field names to arrays (or None, skipped); a dimension is taken from
+    the first array that has it in the table's order.
+    """
+    dims: dict[str, int] = {}
+    for f in ARRAYS:
+        value = arrays.get(f.name)
+        if value is None or len(value.shape) != len(f.shape):
+            continue
+        for symbol, size in zip(f.shape, value.shape):
+            if isinstance(symbol, str):
+                dims.setdefault(symbol, int(size))
+    return dims
+
+
+def markdown_table() -> str:
+    """The arrays as the Markdown table of ``docs/data.md`` (node, type, shape, required)."""
+    rows = ["| node | type | shape | required |", "|---|---|---|---|"]
+    for f in ARRAYS:
+        shape = "(" + ", ".join(str(d) for d in f.shape) + ("," if len(f.shape) == 1 else "") + ")"
+        rows.append(f"| `{f.name}` | {f.doc} | {shape} | {'yes' if f.required else 'no'} |")
+    return "\n".join(rows)
