@@ -85,7 +85,8 @@ def train_command(
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
     from primspace.data.dataset import MotionDataset
     from primspace.files import check_outside_inputs
-    from primspace.train import configure_process, fit, read_indices
+    from primspace.data.indices import read_indices
+    from primspace.train import configure_process, fit
 
     mc = replace(
         _MC, latent_dim=latent_dim, layer_sizes=int_list(layers, "--layers"), taus=float_list(taus, "--taus"),
@@ -128,7 +129,8 @@ def infer_command(
     """Find latent codes for new samples with the trained weights frozen."""
     from primspace.data.dataset import MotionDataset
     from primspace.files import check_outside_inputs
-    from primspace.train import configure_process, infer, read_indices
+    from primspace.data.indices import read_indices
+    from primspace.train import configure_process, infer
 
     overrides = {"device": device, "amp": amp, "threads": threads}
     for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed)):
@@ -157,8 +159,10 @@ def reconstruct_command(
     """Draw generated against ground-truth joints (and frames) for one sample."""
     from primspace.data.dataset import MotionDataset
     from primspace.files import output_file
-    from primspace.plots import plot_reconstruction, save_figure
-    from primspace.train import check_run_data, load_run
+    import numpy as np
+
+    from primspace.plots import plot_reconstruction, reconstruction_title, save_figure
+    from primspace.train import check_run_data, load_run, reconstruct
 
     out = output_file(out, inputs=(run, data), overwrite=overwrite)
     if frames < 1:
@@ -169,6 +173,21 @@ def reconstruct_command(
         raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
     ds = MotionDataset.load(path)
     check_run_data(trained, ds)
-    fig = plot_reconstruction(trained, ds, sample, n_frames=frames)
+    rows = np.flatnonzero(trained.indices == int(sample))
+    if rows.size == 0:
+        shown = ", ".join(map(str, trained.indices[:5])) + (" ..." if len(trained.indices) > 5 else "")
+        raise UserError(f"sample {sample} is not one of the run's {len(trained.indices)} samples ({shown})")
+    if not 0 <= int(sample) < len(ds):
+        raise UserError(f"sample {sample} out of range for {len(ds)} samples")
+    row = int(rows[0])
+    motor, generated = reconstruct(trained, trained.latents[row : row + 1])  # the model runs here, not in plots
+    truth = ds.subset([int(sample)])
+    images = None if truth.images is None else np.asarray(truth.images)[0]
+    primitive = None if truth.labels is None or truth.labels[0] < 0 else truth.label_names[truth.labels[0]]
+    fig = plot_reconstruction(
+        truth.motor[0], motor[0], images=images, generated_images=None if generated is None else generated[0],
+        joint_names=truth.joint_names, dt=truth.dt, n_frames=frames,
+        title=reconstruction_title(sample, primitive, trained.kind, trained.init, trained.model_config.latent_dim),
+    )
     save_figure(fig, out)
     typer.echo(f"wrote {out}")

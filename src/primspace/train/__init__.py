@@ -65,7 +65,7 @@ _HOME = {
     "load_run": "rundir",
     "write_run": "rundir",
     "check_run_data": "rundir",
-    "read_indices": "_indices_tmp",
+    "read_indices": "primspace.data.indices",  # an index file, checked by data.check_indices
 }
 __all__ = list(_HOME)
 
@@ -73,7 +73,8 @@ __all__ = list(_HOME)
 def __getattr__(name: str):
     if name not in _HOME:
         raise AttributeError(f"module 'primspace.train' has no attribute {name!r}")
-    value = getattr(import_module(f"primspace.train.{_HOME[name]}"), name)
+    home = _HOME[name]
+    value = getattr(import_module(home if "." in home else f"primspace.train.{home}"), name)
     globals()[name] = value
     return value
 
@@ -83,7 +84,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs
-    from primspace.train._indices_tmp import read_indices  # noqa: F401
+    from primspace.data.indices import read_indices  # noqa: F401
     from primspace.train.api import as_run, evaluate, fit, infer, reconstruct, uses_images  # noqa: F401
     from primspace.train.config import (  # noqa: F401
         TrainConfig,

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from primspace.data import JointScaler, MotionDataset
+from primspace.data.indices import check_indices
 from primspace.errors import UserError
 from primspace.latent import INIT_METHODS, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
@@ -418,12 +419,7 @@ def _select(dataset: MotionDataset, indices) -> tuple[MotionDataset, np.ndarray]
         raise UserError(f"expected a MotionDataset, got {type(dataset).__name__}")
     if indices is None:
         return dataset, np.arange(len(dataset), dtype=np.int64)
-    idx = np.asarray(indices)
-    if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
-        raise UserError("sample indices must be a 1-d list of integers")
-    idx = idx.astype(np.int64)
-    if len(np.unique(idx)) != idx.size:
-        raise UserError("sample indices list a sample more than once")
+    idx = check_indices(indices, len(dataset))
     return dataset.subset(idx), idx
 
 
