@@ -37,6 +37,7 @@ from typing import Callable
 
 import numpy as np
 
+from primspace.data.schema import arrays_of, empty_arrays
 from primspace.errors import DataError, UserError
 from primspace.sim.config import MIN_LENGTH, PARAM_NAMES, PRESETS, GenerationConfig, resolve_config, sample_params
 from primspace.sim.primitives import R_DOWN, finger_geometry, get_primitive
@@ -148,15 +149,8 @@ def generate_shard(config: GenerationConfig, seed: int, sample_indices) -> dict[
 
     indices = [int(i) for i in sample_indices]
     scene = _worker_scene()
-    k, t_len = len(indices), config.length
-    out = {
-        "start": indices[0] if indices else 0,
-        "motor": np.empty((k, t_len, 9), dtype=np.float32),
-        "images": np.empty((k, t_len, config.height, config.width, 3), dtype=np.uint8) if config.images else None,
-        "labels": np.empty(k, dtype=np.int32),
-        "params": np.empty((k, 3), dtype=np.float32),
-        "ik_error": np.empty(k),
-    }
+    k = len(indices)
+    out = {"start": indices[0] if indices else 0, **_buffers(config, k), "ik_error": np.empty(k)}
     camera = Camera(scene, config.height, config.width) if config.images else None
     try:
         for j, index in enumerate(indices):
@@ -187,7 +181,7 @@ def write_shard(config: GenerationConfig, seed: int, start: int, stop: int, path
 
     shard = generate_shard(config, seed, range(start, stop))
     with DatasetWriter(path, overwrite=True, **file_settings(config, seed, stop - start)) as writer:
-        writer.write(0, motor=shard["motor"], images=shard["images"], labels=shard["labels"], params=shard["params"])
+        writer.write(0, **arrays_of(shard))
     return {"start": start, "stop": stop, "path": str(path), "ik_error": shard["ik_error"], "reused": False}
 
 
@@ -326,22 +320,29 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
     from primspace.parallel import run_jobs
 
     jobs = run_jobs(generate_shard, [(config, seed, range(a, b)) for a, b in shard_ranges(config.n_samples)], **run_options)
-    n, t_len = config.n_samples, config.length
-    motor = np.empty((n, t_len, 9), dtype=np.float32)
-    images = np.empty((n, t_len, config.height, config.width, 3), dtype=np.uint8) if config.images else None
-    labels, params = np.empty(n, dtype=np.int32), np.empty((n, 3), dtype=np.float32)
+    n = config.n_samples
+    arrays = _buffers(config, n)
     for shard in _finished(jobs):
         sl = slice(shard["start"], shard["start"] + len(shard["motor"]))
-        motor[sl], labels[sl], params[sl] = shard["motor"], shard["labels"], shard["params"]
-        if images is not None:
-            images[sl] = shard["images"]
+        for name, values in arrays_of(shard).items():
+            if values is not None:
+                arrays[name][sl] = values
         if on_shard is not None:
             on_shard(shard)
     meta = file_settings(config, seed, n)
     return MotionDataset(
-        motor=motor, images=images, labels=labels, params=params, joint_names=meta["joint_names"],
-        label_names=meta["label_names"], param_names=meta["param_names"], dt=config.dt, source=meta["source"],
+        **arrays, joint_names=meta["joint_names"], label_names=meta["label_names"],
+        param_names=meta["param_names"], dt=config.dt, source=meta["source"],
     )
+
+
+def _buffers(config: GenerationConfig, n: int) -> dict:
+    """Empty arrays of the data set's fields (:mod:`primspace.data.schema`) for ``n`` motions
+    of 9 joints and 3 generative factors (``images`` None without frames)."""
+    dims = {"N": n, "T": config.length, "J": 9, "P": 3}
+    if config.images:
+        dims |= {"H": config.height, "W": config.width}
+    return {"images": None, **empty_arrays(dims)}
 
 
 def _finished(jobs):

@@ -61,7 +61,7 @@ def shard_dir(out: str | os.PathLike) -> Path:
 def shard_manifest(config: GenerationConfig, seed: int) -> dict[str, Any]:
     """What identifies a generation's shards: settings, seed, layout and versions (JSON)."""
     from primspace import __version__
-    from primspace.data.dataset import SCHEMA_VERSION
+    from primspace.data.schema import SCHEMA_VERSION
 
     manifest = {
         "format": "primspace generation shards", "primspace_version": __version__,
