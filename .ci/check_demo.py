@@ -2,8 +2,9 @@
 
 Usage: python .ci/check_demo.py DEMO_OUT SUMMARY_TXT
 Fails (exit 1, one line per problem) unless the report has every section with its
-figures embedded as PNG, the results files hold every grid run with no failure, every
-recorded motion passes the judge, and the printed summary gives a verdict.
+figures embedded as PNG, the results files hold every grid run with no failure (and the
+data summary, Appendix A and latent-figure results the report reads), every recorded
+motion passes the judge, and the printed summary gives a verdict.
 """
 
 import base64
@@ -32,6 +33,9 @@ if intra["failures"] or len(intra["runs"]) != 8:
 success = json.loads((out / "results/success.json").read_text())
 if success["recorded"] is None or success["recorded"]["overall"] != 1.0:
     problems.append("results/success.json: not every recorded motion passes the judge")
+for name in ("data", "appendix_a", "intra_latent"):  # what the report's Data, Appendix A and latent figures read
+    if not (out / f"results/{name}.json").exists():
+        problems.append(f"results/{name}.json: not written (the report reads it, it computes nothing)")
 if not re.search(r"paper's qualitative result .*: (HOLDS|DOES NOT HOLD)", summary):
     problems.append("demo summary: no verdict on the paper's qualitative result")
 if problems:

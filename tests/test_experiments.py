@@ -3,6 +3,7 @@ resuming, failures, and the Ray backend giving the same numbers as the local one
 
 import json
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,8 +13,9 @@ from primspace.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.clustering import run_clustering
 from primspace.experiments.inter import run_inter
-from primspace.experiments.intra import qualitative_check, run_intra, split_indices
-from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.intra import run_intra, split_indices
+from primspace.experiments.presets import ExperimentPreset, default_train
+from primspace.experiments.results import qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
@@ -26,7 +28,7 @@ TINY = ExperimentPreset(
     latent_dims=(4,),
     fit_epochs=3,
     infer_epochs=2,
-    batch_size=8,
+    train=replace(default_train(), batch_size=8),
     images=False,
     cluster_latent_dim=4,
     cluster_r2=0.99,
@@ -102,8 +104,8 @@ def _hungarian_accuracy(true, pred) -> float:
 
 def test_clustering_and_success_results(finished):
     from primspace.cluster import LowRankSubspaceClustering
-    from primspace.experiments.clustering import INITIAL_CODES, LEARNED_CODES
-    from primspace.experiments.intra import intra_key, load_codes
+    from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
+    from primspace.experiments.runs import intra_key, load_codes
     from primspace.experiments.sweep import run_dir_of
     from primspace.sim.success import evaluate_dataset
     from primspace.train import load_run, reconstruct
@@ -168,6 +170,26 @@ def test_report_embeds_every_section(finished):
         assert f">{heading}" in html, heading
     assert html.count("<img") >= 10 and "data:image/png;base64," in html
     assert "trains on joint angles only" in html  # the preset's lack of a vision loss is said
+
+
+def test_figures_are_drawn_from_the_results_alone(finished, tmp_path):
+    """Copied without its runs and data, a directory's results redraw the same figures."""
+    import shutil
+
+    from conftest import read_png
+
+    from primspace.experiments import figures
+
+    exp = finished[0]
+    copy = tmp_path / "copy"
+    shutil.copytree(exp.path / "results", copy / "results")
+    drawn = figures.draw_intra(copy) + figures.draw_latent_accuracy(copy)
+    names = sorted(p.name for p in drawn)
+    assert names == sorted(["intra_loss_fit.png", "intra_loss_infer.png", "latent_pca2d.png", "latent_pca3d.png",
+                            "reconstruction_grasp.png", "reconstruction_push.png", "reconstruction_circle_cw.png",
+                            "latent_accuracy_vs_r2.png"])
+    for path in drawn:
+        assert np.array_equal(read_png(path), read_png(exp.figure(path.stem))), path.name
 
 
 def test_rerun_skips_finished_runs(finished):
@@ -270,7 +292,7 @@ def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path):
 
 
 def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_path, monkeypatch):
-    from primspace.experiments.demo import run_demo
+    from primspace.demo import run_demo
 
     demo = ExperimentPreset(**{**TINY.to_dict(), "name": "demo", "inits": ("zero", "random", "projection")})
     monkeypatch.setitem(experiment_presets.PRESETS, "demo", demo)

@@ -29,15 +29,16 @@ class Backend(str, Enum):
     ray = "ray"
 
 
-def _experiment(preset: str, data, out, backend, address, workers, seed, overrides: dict):
-    from primspace.experiments.presets import resolve_preset
+def _experiment(preset: str | None, data, out, backend, address, workers, seed, overrides: dict):
+    from primspace.experiments.presets import DEFAULT_PRESET, resolve_preset
     from primspace.experiments.workspace import ExperimentDir
     from primspace.parallel import default_workers
 
     check_workers(workers)
+    chosen = resolve_preset(preset or DEFAULT_PRESET).with_overrides(**overrides)
     return ExperimentDir(
-        out, resolve_preset(preset).with_overrides(**overrides), data=data, backend=backend.value,
-        address=address, workers=workers or default_workers(), seed=seed,
+        out, chosen, data=data, backend=backend.value, address=address, workers=workers or default_workers(),
+        **({} if seed is None else {"seed": seed}),  # else ExperimentDir's default
     )
 
 
@@ -57,16 +58,19 @@ def _finish(exp, report: bool) -> None:
 
 
 def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None) -> None:
-    """Register ``primspace experiment NAME``: run ``steps`` (``module:function``), print ``table``."""
+    """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
+    then print ``table`` (a function of :mod:`primspace.experiments.results`) of the first step's results."""
 
     def command(
-        preset: str = typer.Option("demo", "--preset", help="Experiment preset: demo (CPU, minutes) or paper (GPU recommended)."),
+        preset: Optional[str] = typer.Option(
+            None, "--preset", help="Experiment preset: demo (CPU, minutes; the default) or paper (GPU recommended)."
+        ),
         data: Optional[Path] = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."),
         out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
         backend: Backend = typer.Option(Backend.local, "--backend", help="local (process pool) or ray."),
         address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray instance)."),
         workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the generated data."),
+        seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."),
         latent_dims: Optional[str] = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."),
         inits: Optional[str] = typer.Option(None, "--inits", help="Override the initialisations, e.g. zero,projection."),
         seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
@@ -90,13 +94,14 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             from primspace.sim.success import check_judgeable
 
             check_judgeable(exp.dataset())  # up front: before hours of training, not after
-        result = None
+        results = []
         for step in steps:
             module, function = step.split(":")
-            result = getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp)
+            results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
         if table is not None:
-            module, function = table.split(":")
-            echo_table(*getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(result))
+            from primspace.experiments import results as tables
+
+            echo_table(*getattr(tables, table)(results[0]))
         _finish(exp, report or name == "all")
 
     command.__doc__ = doc
@@ -105,19 +110,19 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
 
 _experiment_command(
     "intra", "Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size.",
-    ("intra:run_intra",), "intra:final_loss_table",
+    ("intra:run_intra",), "final_loss_table",
 )
 _experiment_command(
     "clustering", "Subspace clustering of learned codes (runs intra if needed) and of raw trajectories (data, LASA).",
-    ("clustering:run_clustering",), "clustering:latent_table",
+    ("clustering:run_clustering",), "latent_table",
 )
 _experiment_command(
     "success", "Success rates of generated eval motions, judged by the simulator (runs intra if needed).",
-    ("success:run_success",), "success:success_table",
+    ("success:run_success",), "success_table",
 )
 _experiment_command(
     "inter", "Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay.",
-    ("inter:run_inter",), "inter:inter_table",
+    ("inter:run_inter",), "inter_table",
 )
 _experiment_command(
     "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
@@ -139,7 +144,7 @@ def demo_command(
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
 ) -> None:
     """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
-    from primspace.experiments.demo import run_demo
+    from primspace.demo import run_demo
     from primspace.parallel import default_workers
 
     check_workers(workers)

@@ -3,9 +3,10 @@
 Where docs or the report say what "the paper" says, they quote it: :data:`CLAIMS` holds
 each sentence exactly as in shared/paper.tex (section *Experimental Results*), what we
 measure to test it, and the rule that decides "holds". :func:`check_claims` applies the
-rules to an experiment directory's results; the report prints the table and
-docs/reproduce.md carries it for the paper preset. A claim whose experiment has not run
-reads "not run".
+rules to an experiment directory's results (read through
+:mod:`primspace.experiments.results`: this module imports no experiment); the report
+prints the table and docs/reproduce.md carries it for the paper preset. A claim whose
+experiment has not run reads "not run".
 
 The rules are ours: the paper gives no numbers for its loss curves or its clustering,
 so each rule states the reading we test (e.g. "very similar" as within a factor of 2).
@@ -19,7 +20,7 @@ from typing import Callable
 
 import numpy as np
 
-from primspace.experiments.workspace import read_results
+from primspace.experiments.results import LEARNED_CODES, read_results
 
 __all__ = ["Claim", "CLAIMS", "check_claims", "claims_table"]
 
@@ -121,8 +122,6 @@ def _success_projection_higher(results: dict) -> tuple[bool | None, str]:
 
 
 def _clustering_similar(results: dict) -> tuple[bool | None, str]:
-    from primspace.experiments.clustering import LEARNED_CODES
-
     acc = {r["init"]: r["accuracy"] for r in results.get("latent", []) if r.get("codes") == LEARNED_CODES}
     if not _need(acc, "zero", "projection"):
         return None, "needs zero and projection codes"
@@ -202,19 +201,8 @@ def check_claims(out_dir: str | Path) -> list[dict]:
 
 
 def claims_table(out_dir: str | Path) -> tuple[list[str], list[list]]:
+    """The claims as a table: the paper's sentence, our test, the verdict, our numbers."""
     rows = check_claims(out_dir)
     return (["the paper (verbatim)", "what we test", "verdict", "ours"],
             [[f"“{r['quote']}” ({r['where']})", r["test"], r["verdict"], r["ours"]] for r in rows])
 
-
-def report_section(out_dir: Path, report) -> None:
-    if all(r["verdict"] == "not run" for r in check_claims(out_dir)):
-        return
-    report.section("The paper's claims, checked")
-    report.paragraph(
-        "Each sentence is quoted verbatim from the paper's Experimental Results; the paper gives no numbers for "
-        "its curves, so the rule in the second column is our reading of it. \"does not hold\" marks where our "
-        "results differ from the sentence (stronger or weaker: the numbers say which)."
-    )
-    columns, rows = claims_table(out_dir)
-    report.table(columns, rows)

@@ -11,23 +11,23 @@ Two experiments of the paper:
 * *Motion capture data* (Fig. "Clustering results for robotic trajectory data"): the raw
   joint trajectories, scaled per joint and flattened, clustered over a τ sweep with the
   R² of each τ, as the paper chose τ; on the experiment's data set and on LASA.
+
+Results go to ``results/clustering.json``; the accuracy-per-R² figure is drawn from them
+(:mod:`primspace.experiments.figures`). The affinity and τ-sweep figures are still drawn
+here from the fitted estimators (the shared clustering pipeline will take them over).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from primspace.experiments.intra import _focus_runs, intra_key, load_codes, run_intra
-from primspace.experiments.sweep import run_dir_of
-from primspace.experiments.workspace import ExperimentDir, read_results
+from primspace.experiments import figures
+from primspace.experiments.intra import run_intra
+from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
+from primspace.experiments.runs import focus_runs, initial_codes, load_codes
+from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["run_clustering", "latent_table", "report_section", "LEARNED_CODES", "INITIAL_CODES"]
-
-# the "codes" of a latent clustering row: codes after training, or the projection before it
-LEARNED_CODES = "learned"
-INITIAL_CODES = "initial (P m, untrained)"
+__all__ = ["run_clustering", "LEARNED_CODES", "INITIAL_CODES"]
 
 _R2_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.999, 0.9999)
 
@@ -82,12 +82,11 @@ def _trajectories(exp: ExperimentDir, name: str, motor, labels, label_names, r2_
 def run_clustering(exp: ExperimentDir) -> dict:
     """Cluster the codes of every init at the preset's q, and the raw trajectories (data, LASA)."""
     from primspace.data import import_lasa
-    from primspace.train import load_run
 
     preset = exp.preset
     intra = exp.read_results("intra") or run_intra(exp)
     data = exp.dataset()
-    q, seed, inits = _focus_runs(exp, intra)
+    q, seed, inits = focus_runs(exp, intra)
     results: dict = {"latent_dim": q, "seed": seed, "r2_target": preset.cluster_r2, "latent": [], "trajectory": {}, "latent_sweep": {}}
     with exp.stage("clustering"):
         for init in inits:
@@ -98,20 +97,12 @@ def run_clustering(exp: ExperimentDir) -> dict:
             _figure(exp, f"latent_clustering_{init}", est, data.labels, data.label_names,
                     f"learned codes, {init} init, q = {q}: τ = {row['tau']:.3g} for R² = {row['r2']:.4f}")
         if "projection" in inits:  # the projection before any training: P m for every sample
-            run_dir = run_dir_of(exp.path, intra_key("projection", q, seed))
-            fitted, inferred = load_run(run_dir / "fit"), load_run(run_dir / "infer")
-            z0 = np.empty((len(data), q))
-            z0[fitted.indices], z0[inferred.indices] = fitted.initial_latents, inferred.initial_latents
+            z0 = initial_codes(exp, "projection", q, seed)
             row, est = _cluster(z0, data.labels, preset.cluster_r2)
             results["latent"].append({"init": "projection", "codes": INITIAL_CODES} | row)
             results["latent_sweep"]["projection, initial P m"] = _latent_sweep(z0, data.labels)
             _figure(exp, "latent_clustering_projection_initial", est, data.labels, data.label_names,
                     f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}")
-        if results["latent_sweep"]:
-            from primspace import plots
-
-            fig = plots.plot_accuracy_vs_r2(results["latent_sweep"], title=f"Clustering the codes (q = {q}): accuracy per R² target")
-            plots.save_figure(fig, exp.figure("latent_accuracy_vs_r2"))
         results["trajectory"]["data"] = _trajectories(
             exp, "data", data.motor, data.labels, data.label_names, preset.trajectory_r2
         )
@@ -120,38 +111,6 @@ def run_clustering(exp: ExperimentDir) -> dict:
             exp, "lasa", lasa.motor, lasa.labels, lasa.label_names, preset.trajectory_r2
         )
     exp.write_results("clustering", results)
+    figures.draw_latent_accuracy(exp.path)
     return results
 
-
-def latent_table(results: dict) -> tuple[list[str], list[list]]:
-    rows = [[r["init"], r["codes"], r["tau"], r["r2"], r["rank"], r["accuracy"], r["nmi"], r["ari"]] for r in results["latent"]]
-    for name, t in results["trajectory"].items():
-        c = t["chosen"]
-        rows.append([f"raw trajectories ({name})", f"{t['n']} x {t['dim']}", c["tau"], c["r2"], c["rank"], c["accuracy"], c["nmi"], c["ari"]])
-    return ["init / data", "codes", "τ", "R²", "rank", "accuracy", "NMI", "ARI"], rows
-
-
-def report_section(out_dir: Path, report) -> None:
-    results = read_results(out_dir, "clustering")
-    if results is None:
-        return
-    report.section("Subspace clustering")
-    report.paragraph(
-        f"Affine low-rank subspace clustering (Q* = V P(Λ) Vᵀ, Ng–Jordan–Weiss spectral step on Q*∘Q*) of the "
-        f"codes of all samples at q = {results['latent_dim']}, τ chosen for R² = {results['r2_target']} "
-        "(the paper's setting), and of the raw joint trajectories (scaled to [-1, 1] per joint, flattened) with a "
-        "τ sweep. Accuracy after Hungarian matching of clusters to primitives; NMI and ARI."
-    )
-    columns, rows = latent_table(results)
-    report.table(columns, rows)
-    figures = out_dir / "figures"
-    report.figure(figures / "latent_accuracy_vs_r2.png",
-                  "Accuracy of clustering the codes when τ is chosen for other R² targets (dashed: the projection "
-                  "before training). With few points per primitive in q dimensions, high targets keep every component "
-                  "and the affinity degenerates towards the identity.")
-    for r in results["latent"]:
-        name = "latent_clustering_projection_initial" if r["codes"] == INITIAL_CODES else f"latent_clustering_{r['init']}"
-        report.figure(figures / f"{name}.png", f"{r['init']} ({r['codes']}): affinity ordered by primitive, and the predicted cluster of each sample.")
-    for name in results["trajectory"]:
-        report.figure(figures / f"trajectory_sweep_{name}.png", f"τ sweep on raw trajectories ({name}): R², rank and scores per τ.")
-        report.figure(figures / f"trajectory_clustering_{name}.png", f"Raw trajectories ({name}) clustered at the chosen τ.")

@@ -14,12 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.experiments.intra import _configs, _curves, experiment_scaler, load_run_data
+from primspace.experiments import figures
+from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.runs import curves, experiment_scaler, load_run_data, train_configs
 from primspace.experiments.sweep import GridPoint
-from primspace.experiments.workspace import ExperimentDir, read_results
+from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["run_inter", "run_inter_point", "replay_indices", "report_section"]
+__all__ = ["run_inter", "run_inter_point", "replay_indices"]
 
 
 def replay_indices(first: np.ndarray, fraction: float, seed: int, fold: int) -> np.ndarray:
@@ -31,14 +33,15 @@ def replay_indices(first: np.ndarray, fraction: float, seed: int, fold: int) -> 
 
 def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_dim: int, seed: int, preset: dict) -> dict:
     """One fold: phase 1 on six primitives, phase 2 on the held-out one plus replay."""
-    from primspace.train import fit
+    from primspace.train import configure_process, fit
 
     p = ExperimentPreset.from_dict(preset)
     data, use_images = load_run_data(data_path, p)
     start = time.perf_counter()
     first = np.flatnonzero(data.labels != fold)
     new = np.flatnonzero(data.labels == fold)
-    model_config, tc1 = _configs(p, latent_dim, seed, p.inter_epochs[0])
+    model_config, tc1 = train_configs(p, latent_dim, seed, p.inter_epochs[0])
+    configure_process(tc1)  # one thread per run (the preset's threads), as every backend
     phase1 = fit(data, run_dir / "phase1", model_config=model_config, train_config=tc1, init=init,
                  indices=first, resume=True, images=use_images, scaler=experiment_scaler(data), progress=False)
     replay = replay_indices(first, p.inter_replay, seed, fold)
@@ -46,7 +49,7 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     initial = np.full((len(second), latent_dim), np.nan, dtype=np.float32)
     row_of = {int(s): r for r, s in enumerate(phase1.indices)}
     initial[len(new):] = phase1.latents[[row_of[int(s)] for s in replay]]
-    _, tc2 = _configs(p, latent_dim, seed, p.inter_epochs[1])
+    _, tc2 = train_configs(p, latent_dim, seed, p.inter_epochs[1])
     phase2 = fit(data, run_dir / "phase2", train_config=tc2, init=init, indices=second, resume=True,
                  weights_from=run_dir / "phase1", initial_latents=initial, images=use_images, progress=False)
     return {
@@ -58,13 +61,14 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
         "n_phase1": len(first),
         "n_new": len(new),
         "n_replay": len(replay),
-        "phase1": _curves(phase1.history),
-        "phase2": _curves(phase2.history),
+        "phase1": curves(phase1.history),
+        "phase2": curves(phase2.history),
         "seconds": round(time.perf_counter() - start, 2),
     }
 
 
 def run_inter(exp: ExperimentDir) -> dict:
+    """Run (or finish) the seven folds per init; write results/inter.json and its figure."""
     preset = exp.preset
     data = exp.dataset()
     folds = sorted(int(v) for v in np.unique(data.labels))
@@ -81,43 +85,6 @@ def run_inter(exp: ExperimentDir) -> dict:
         "replay": preset.inter_replay,
     }
     exp.write_results("inter", results)
-    if results["runs"]:
-        from primspace import plots
-
-        histories: dict[str, list] = {}
-        for r in results["runs"]:
-            histories.setdefault(r["init"], []).append(r["phase2"])
-        fig = plots.plot_loss_curves(
-            histories, title=f"Inter-primitive, phase 2 (new primitive + {preset.inter_replay:.0%} replay), "
-            f"q = {preset.inter_latent_dim}: mean ± std over folds",
-        )
-        plots.save_figure(fig, exp.figure("inter_loss"))
+    run_appendix_a(exp)
+    figures.draw_inter(exp.path)
     return results
-
-
-def inter_table(results: dict) -> tuple[list[str], list[list]]:
-    by: dict[str, list] = {}
-    for r in results["runs"]:
-        by.setdefault(r["init"], []).append(r)
-    rows = []
-    for init, runs in by.items():
-        first = np.array([r["phase2"][0]["loss"] for r in runs])
-        final = np.array([r["phase2"][-1]["loss"] for r in runs])
-        rows.append([init, len(runs), f"{first.mean():.4g} ± {first.std():.2g}", f"{final.mean():.4g} ± {final.std():.2g}"])
-    return ["init", "folds", "phase-2 loss at start", "phase-2 final loss"], rows
-
-
-def report_section(out_dir: Path, report) -> None:
-    results = read_results(out_dir, "inter")
-    if results is None:
-        return
-    report.section("Inter-primitive generalisation")
-    report.paragraph(
-        "Seven folds: θ and Z fitted on six primitives (phase 1), then on the seventh plus "
-        f"{results['replay']:.0%} replay of the others (phase 2), q = {results['latent_dim']}."
-    )
-    report.figure(out_dir / "figures/inter_loss.png", "Phase-2 loss, mean ± std over folds (the paper's inter-primitive figure; on the log axis the band stops at the lowest fold).")
-    columns, rows = inter_table(results)
-    report.table(columns, rows)
-    if results["failures"]:
-        report.note(f"{len(results['failures'])} fold run(s) failed: " + "; ".join(results["failures"]), "warn")

@@ -8,15 +8,49 @@ clustering at q = 40 with τ chosen for R² = 0.9999; inter-primitive folds at q
 10% replay. Where the paper is silent (τ of the layers, learning rates, batch size, the
 epochs of the inter-primitive phases, the latent sizes other than 20 and 40) the values
 below are ours; docs/reproduce.md lists them beside the paper's.
+
+A preset holds the decoder's :class:`~primspace.model.ModelConfig` and the optimiser's
+:class:`~primspace.train.TrainConfig` as they are; each run derives its own from them
+(:func:`primspace.experiments.runs.train_configs`: the run's q, seed and epochs).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 from primspace.errors import UserError, config_from_dict
+from primspace.model import ModelConfig
+from primspace.train import TrainConfig
 
-__all__ = ["ExperimentPreset", "PRESETS", "resolve_preset"]
+__all__ = ["ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "default_model", "default_train", "resolve_preset"]
+
+#: The preset ``primspace experiment`` runs without ``--preset``.
+DEFAULT_PRESET = "demo"
+
+# Fields of the presets written before they held a ModelConfig and a TrainConfig
+# (experiment.json of older experiment directories): where each one lives now.
+_FLAT_MODEL_FIELDS = ("layer_sizes", "taus")
+_FLAT_TRAIN_FIELDS = ("batch_size", "lr", "latent_lr", "final_lr_fraction", "vision_weight")
+_TUPLE_FIELDS = ("inits", "latent_dims", "seeds", "inter_inits", "inter_epochs")
+
+
+def default_model() -> ModelConfig:
+    """The decoder of every preset: the paper's two MTRNN layers, 32 fast and 12 slow units.
+
+    ``latent_dim`` is set per run (the preset's ``latent_dims``); ``n_joints``,
+    ``length`` and ``image_size`` come from the data.
+    """
+    return ModelConfig(layer_sizes=(32, 12), taus=(2.0, 8.0))
+
+
+def default_train() -> TrainConfig:
+    """The optimiser of every preset (``epochs`` and ``seed`` are set per run).
+
+    Both learning rates decay along a cosine to 10% by the last epoch (ours; the paper
+    does not say). ``threads=1``: the runs of a grid go in parallel across processes,
+    and one thread each keeps every backend bit-identical.
+    """
+    return TrainConfig(final_lr_fraction=0.1, threads=1)
 
 
 @dataclass(frozen=True)
@@ -38,23 +72,20 @@ class ExperimentPreset:
         Repetitions (each seed: its own split, weights, projection).
     fit_epochs, infer_epochs : int
         Epochs of the two phases (the paper: 800, 600).
-    batch_size : int
-        Samples per step while fitting θ and Z.
     infer_batch_size : int
         Samples per step while inferring Z with θ frozen. Every code takes one Adam step
         per epoch on the gradient of its own sample's loss, whatever the batch (the
         table undoes the batch mean's 1/B), so with θ frozen a large batch computes the
         same updates (to float rounding), only faster.
-    lr, latent_lr : float
-        Adam learning rates of θ and of the codes.
-    final_lr_fraction : float
-        Both rates decay along a cosine to this fraction by the last epoch (ours; the
-        paper does not say).
     images : bool
         Train with the vision loss (when the data has images).
-    vision_weight : float
-    layer_sizes, taus : tuple
-        The MTRNN layers (fast first) and their time constants.
+    model : ModelConfig
+        The MTRNN decoder (layers fast first, their time constants); each run sets its
+        ``latent_dim``.
+    train : TrainConfig
+        The optimiser while fitting θ and Z: batch size, Adam learning rates of θ and of
+        the codes, their cosine decay, loss weights, threads; each run sets its
+        ``epochs``, ``seed`` and ``checkpoint_every``.
     cluster_latent_dim : int
         q of the latents that are clustered (the paper: 40).
     cluster_r2 : float
@@ -71,6 +102,10 @@ class ExperimentPreset:
         Epochs of phase 1 (six primitives) and phase 2 (the seventh + replay).
     inter_replay : float
         Share of phase-1 samples replayed in phase 2 (the paper: 10%).
+
+    Notes
+    -----
+    ``model`` and ``train`` may also be given as dicts (as :meth:`to_dict` writes them).
     """
 
     name: str
@@ -81,15 +116,10 @@ class ExperimentPreset:
     seeds: tuple[int, ...] = (0,)
     fit_epochs: int = 800
     infer_epochs: int = 600
-    batch_size: int = 32
     infer_batch_size: int = 256
-    lr: float = 1e-3
-    latent_lr: float = 1e-2
-    final_lr_fraction: float = 0.1
     images: bool = True
-    vision_weight: float = 1.0
-    layer_sizes: tuple[int, ...] = (32, 12)
-    taus: tuple[float, ...] = (2.0, 8.0)
+    model: ModelConfig = field(default_factory=default_model)
+    train: TrainConfig = field(default_factory=default_train)
     cluster_latent_dim: int = 40
     cluster_r2: float = 0.9999
     trajectory_r2: float = 0.9
@@ -100,13 +130,45 @@ class ExperimentPreset:
     inter_replay: float = 0.1
     extra: dict = field(default_factory=dict, compare=False)
 
+    def __post_init__(self) -> None:
+        if isinstance(self.model, dict):
+            object.__setattr__(self, "model", ModelConfig.from_dict(self.model))
+        if isinstance(self.train, dict):
+            object.__setattr__(self, "train", TrainConfig.from_dict(self.train))
+        for key in _TUPLE_FIELDS:
+            object.__setattr__(self, key, tuple(getattr(self, key)))
+
     def to_dict(self) -> dict:
-        return asdict(self)
+        """JSON-ready: ``model`` and ``train`` nested as their own ``to_dict``."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["model"], out["train"] = self.model.to_dict(), self.train.to_dict()
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()} | {"extra": dict(self.extra)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ExperimentPreset":
-        tuples = {"inits", "latent_dims", "seeds", "layer_sizes", "taus", "inter_inits", "inter_epochs"}
-        return config_from_dict(cls, {k: tuple(v) if k in tuples else v for k, v in d.items()}, "experiment preset")
+        """Read :meth:`to_dict`'s form, or the flat form of older experiment directories.
+
+        The old form repeated the decoder's and the optimiser's fields at the top
+        (``layer_sizes``, ``taus``; ``batch_size``, ``lr``, ``latent_lr``,
+        ``final_lr_fraction``, ``vision_weight``); they are moved into ``model`` and
+        ``train`` over the defaults (:func:`default_model`, :func:`default_train`),
+        which give the very configurations the old version built from them.
+        """
+        d = dict(d)
+        model = d.pop("model", None)
+        train = d.pop("train", None)
+        flat_model = {k: d.pop(k) for k in _FLAT_MODEL_FIELDS if k in d}
+        flat_train = {k: d.pop(k) for k in _FLAT_TRAIN_FIELDS if k in d}
+        if (flat_model and model is not None) or (flat_train and train is not None):
+            both = sorted(flat_model if model is not None else flat_train)
+            raise UserError(f"experiment preset: {', '.join(both)} given both flat and inside model/train")
+        if model is None:
+            model = default_model().to_dict() | flat_model
+        if train is None:
+            train = default_train().to_dict() | flat_train
+        return config_from_dict(
+            cls, d | {"model": ModelConfig.from_dict(model), "train": TrainConfig.from_dict(train)}, "experiment preset"
+        )
 
     def with_overrides(self, **changes) -> "ExperimentPreset":
         """A copy with some fields changed (``None`` values are ignored), checked.
@@ -131,6 +193,16 @@ class ExperimentPreset:
                 raise UserError(f"--{key.replace('_', '-')} is empty")
         return replace(self, **changes)
 
+    def settings(self) -> dict:
+        """Every setting as one flat dict, nested ones dotted (``train.lr``): for comparing presets."""
+        flat = {}
+        for key, value in self.to_dict().items():
+            if isinstance(value, dict) and key in ("model", "train"):
+                flat |= {f"{key}.{k}": v for k, v in value.items()}
+            else:
+                flat[key] = value
+        return flat
+
 
 PRESETS: dict[str, ExperimentPreset] = {
     "paper": ExperimentPreset(name="paper", data_preset="paper"),
@@ -142,9 +214,7 @@ PRESETS: dict[str, ExperimentPreset] = {
         images=False,
         fit_epochs=400,
         infer_epochs=250,
-        batch_size=16,
-        lr=3e-3,
-        latent_lr=3e-2,
+        train=replace(default_train(), batch_size=16, lr=3e-3, latent_lr=3e-2),
         inter_epochs=(100, 100),
     ),
 }

@@ -15,18 +15,20 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.experiments.intra import _focus_runs, intra_key, run_intra
-from primspace.experiments.sweep import GridPoint, run_dir_of
-from primspace.experiments.workspace import ExperimentDir, read_results
+from primspace.experiments.intra import run_intra
+from primspace.experiments.runs import focus_runs, intra_run_dir
+from primspace.experiments.sweep import GridPoint
+from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["run_success", "run_success_point", "report_section"]
+__all__ = ["run_success", "run_success_point"]
 
 
 def run_success_point(run_dir: Path, data_path: str, infer_dir: str | None) -> dict:
     """Judge one run's generated eval motions (or, with ``infer_dir=None``, the recorded ones)."""
     from primspace.sim.success import evaluate_dataset
-    from primspace.train import load_run, reconstruct
+    from primspace.train import TrainConfig, configure_process, load_run, reconstruct
 
+    configure_process(TrainConfig(device="cpu", threads=1))  # reconstruct runs on the CPU, one thread per job
     data = MotionDataset.load(data_path)
     if infer_dir is None:
         judged = data.without_images()
@@ -56,11 +58,11 @@ def run_success(exp: ExperimentDir) -> dict:
 
     check_judgeable(exp.dataset())  # before any training: the judge needs simulator data
     intra = exp.read_results("intra") or run_intra(exp)
-    q, seed, inits = _focus_runs(exp, intra)
+    q, seed, inits = focus_runs(exp, intra)
     judge = f"success/judge{JUDGE_VERSION}"  # verdicts of an older judge are not reused
     points = [GridPoint(f"{judge}/recorded", (str(exp.data_path), None))]
     for init in inits:
-        infer_dir = run_dir_of(exp.path, intra_key(init, q, seed)) / "infer"
+        infer_dir = intra_run_dir(exp.path, init, q, seed) / "infer"
         points.append(GridPoint(f"{judge}/{init}-q{q}-s{seed}", (str(exp.data_path), str(infer_dir))))
     with exp.stage("success"):
         grid = exp.grid(run_success_point, points, "success judging")
@@ -76,40 +78,3 @@ def run_success(exp: ExperimentDir) -> dict:
     exp.write_results("success", results)
     return results
 
-
-def success_table(results: dict) -> tuple[list[str], list[list]]:
-    """Rows: primitive; columns: recorded, then each init's success rate."""
-    inits = list(results["generated"])
-    prims = [p for p in results["label_names"] if results["recorded"] and p in results["recorded"]["rates"]]
-    rows = []
-    for p in prims:
-        rows.append([p, results["recorded"]["rates"][p]] + [results["generated"][i]["rates"].get(p, float("nan")) for i in inits])
-    rows.append(["all"] + [results["recorded"]["overall"]] + [results["generated"][i]["overall"] for i in inits])
-    return ["primitive", "recorded"] + [f"{i} init" for i in inits], rows
-
-
-def report_section(out_dir: Path, report) -> None:
-    results = read_results(out_dir, "success")
-    if results is None:
-        return
-    report.section("Success rates of generated motions")
-    report.paragraph(
-        f"Eval-part codes (q = {results['latent_dim']}) decoded to joint trajectories and judged by the simulator "
-        "(criteria in docs/simulator.md), per primitive. The paper judged grasp, push and pull by eye and reported "
-        "0.8 / 0.9 / 0.86 (zero init) against 1.0 / 0.94 / 0.92 (projection init)."
-    )
-    if results["recorded"] is None:
-        report.note("The recorded trajectories were not judged (the run failed).", "warn")
-        return
-    if results["recorded"]["overall"] < 1.0:
-        report.note("Not every recorded trajectory passes the judge: the judge or the data is at fault.", "warn")
-    columns, rows = success_table(results)
-    report.table(columns, rows, "Fraction of successful motions per primitive.")
-    reasons = []
-    for init, res in results["generated"].items():
-        for prim, counts in res.get("failed_criteria", {}).items():
-            if counts:
-                reasons.append([init, prim, f"{res['counts'][prim]}", "; ".join(f"{k} ({v})" for k, v in counts.items())])
-    if reasons:
-        report.table(["init", "primitive", "judged", "failed criteria (samples)"], reasons,
-                     "Criteria are defined in docs/simulator.md; a sample can fail several.")

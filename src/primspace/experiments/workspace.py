@@ -5,13 +5,15 @@ Layout of ``OUT``::
     experiment.json        preset, data file, backend, timings per stage, versions
     data.h5                the simulated data (when no --data was given)
     runs/<key>/            one directory per grid run (fit/, infer/, result.json)
-    results/<name>.json    each experiment's numbers
+    results/<name>.json    each experiment's numbers (data.json: the data set's summary)
+    results/<name>.npz     arrays the figures are drawn from
     figures/<name>.png     each experiment's figures
     report.html            the report (primspace.report)
 
 Re-running a command with the same ``OUT`` reuses what is there: the data file, finished
 runs (skipped), interrupted runs (resumed from their checkpoints). A different preset or
-data file for an existing ``OUT`` is refused.
+data file for an existing ``OUT`` is refused. The file names and their readers are in
+:mod:`primspace.experiments.results` (re-exported here).
 """
 
 from __future__ import annotations
@@ -23,47 +25,24 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
+import numpy as np
+
 from primspace import __version__
 from primspace.data import MotionDataset
-from primspace.errors import UserError, first_line
+from primspace.errors import UserError
 from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.results import (
+    META_FILE,
+    arrays_file,
+    figure_file,
+    read_meta,
+    read_results,
+    results_file,
+)
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
-from primspace.files import atomic_write_json, check_outside_inputs
+from primspace.files import atomic_path, atomic_write_json, check_outside_inputs
 
 __all__ = ["ExperimentDir", "results_file", "read_results", "read_meta"]
-
-META_FILE = "experiment.json"
-
-
-def results_file(out_dir: str | Path, name: str) -> Path:
-    """Where experiment ``name`` keeps its numbers: ``OUT/results/<name>.json``."""
-    return Path(out_dir) / "results" / f"{name}.json"
-
-
-def _read_json(path: Path, what: str) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise UserError(f"{path}: cannot read {what} ({first_line(exc)})") from None
-
-
-def read_results(out_dir: str | Path, name: str) -> Any | None:
-    """The results of experiment ``name`` in ``out_dir``, or None if it has not run."""
-    path = results_file(out_dir, name)
-    if not path.exists():
-        return None
-    results = _read_json(path, "the results")
-    if not isinstance(results, dict):
-        raise UserError(f"{path}: not a results file (a JSON object was expected)")
-    return results
-
-
-def read_meta(out_dir: str | Path) -> dict:
-    """``OUT/experiment.json``: preset, settings, data file, timings, failures."""
-    meta = _read_json(Path(out_dir) / META_FILE, "the experiment description")
-    if not isinstance(meta, dict):
-        raise UserError(f"{Path(out_dir) / META_FILE}: not an experiment description (a JSON object was expected)")
-    return meta
 
 
 class ExperimentDir:
@@ -114,13 +93,7 @@ class ExperimentDir:
                 raise UserError(
                     f"{self.path}: made with preset {self.meta.get('preset')!r}, not {preset.name!r}; use another --out"
                 )
-            saved = self.meta.get("preset_config", {})
-            changed = sorted(k for k, v in preset.to_dict().items() if k in saved and _jsonable(v) != saved[k])
-            if changed:
-                raise UserError(
-                    f"{self.path}: made with other settings ({', '.join(f'{k}={saved[k]}' for k in changed)}); "
-                    "use another --out to run with these"
-                )
+            _check_same_settings(meta_file, preset, self.meta.get("preset_config", {}))
             if data is not None and self.meta.get("data") != str(data_path):
                 raise UserError(f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out")
             if not isinstance(self.meta.get("data"), str):
@@ -157,8 +130,15 @@ class ExperimentDir:
     def read_results(self, name: str) -> Any | None:
         return read_results(self.path, name)
 
+    def write_arrays(self, name: str, arrays: dict[str, np.ndarray]) -> Path:
+        """Write ``arrays`` to ``OUT/results/<name>.npz`` (compressed, atomically)."""
+        path = arrays_file(self.path, name)
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        return path
+
     def figure(self, name: str) -> Path:
-        return self.path / "figures" / f"{name}.png"
+        return figure_file(self.path, name)
 
     # ------------------------------------------------------------------------ data
     def dataset(self) -> MotionDataset:
@@ -177,6 +157,8 @@ class ExperimentDir:
             self._dataset = MotionDataset.load(self.data_path)
             if self._dataset.labels is None or (self._dataset.labels < 0).any():
                 raise UserError(f"{self.data_path}: experiments need a primitive label for every sample")
+            if not self.results_file("data").exists():  # what the report's Data section shows
+                self.write_results("data", _plain(self._dataset.summary()))
         return self._dataset
 
     # ---------------------------------------------------------------------- stages
@@ -208,3 +190,27 @@ class ExperimentDir:
 def _jsonable(value: Any) -> Any:
     """A value as it reads back from JSON (tuples become lists)."""
     return json.loads(json.dumps(value))
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists (for JSON)."""
+    return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
+
+
+def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict) -> None:
+    """Refuse ``preset`` if any setting differs from those ``meta_file`` was made with.
+
+    ``saved`` may be in the flat form of older versions: both are compared as
+    :meth:`ExperimentPreset.settings` (nested fields dotted, e.g. ``train.lr``).
+    """
+    try:
+        before = _jsonable(ExperimentPreset.from_dict(saved).settings())
+    except (UserError, TypeError, ValueError) as exc:
+        raise UserError(f"{meta_file}: cannot read its preset_config ({exc})") from None
+    now = _jsonable(preset.settings())
+    changed = sorted(k for k, v in now.items() if k in before and v != before[k])
+    if changed:
+        raise UserError(
+            f"{meta_file.parent}: made with other settings ({', '.join(f'{k}={before[k]}' for k in changed)}); "
+            "use another --out to run with these"
+        )

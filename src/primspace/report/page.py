@@ -1,29 +1,20 @@
-"""The HTML report of an experiment directory: one self-contained file, figures embedded.
+"""The HTML page: headings, paragraphs, notes, tables and embedded PNG figures.
 
-``primspace report DIR`` (and every experiment, when it ends) writes ``DIR/report.html``:
-a summary of the findings, then one section per experiment that has results in ``DIR``
-(intra-primitive generalisation, clustering, success rates, inter-primitive
-generalisation, latent-space figures, reconstructions, the Appendix A check), then the
-configuration, software versions and timings. PNG figures are embedded as base64, so the
-file can be mailed or attached to a paper's supplementary material as it is.
+:class:`HtmlReport` knows nothing of experiments; :mod:`primspace.report.sections` fills
+it from an experiment directory's results. (Named ``page``, not ``html``, so that it
+never shadows the standard library's :mod:`html`, which it uses.)
 """
 
 from __future__ import annotations
 
 import base64
-import datetime as _dt
 import html
-import json
-import platform
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
-from primspace.errors import UserError, first_line
 from primspace.files import atomic_write_text
 
-__all__ = ["HtmlReport", "build_report", "REPORT_FILE"]
-
-REPORT_FILE = "report.html"
+__all__ = ["HtmlReport"]
 
 _CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 0 auto;
@@ -124,87 +115,3 @@ def _fmt(v: Any) -> str:
             return "–"
         return f"{v:.4g}"
     return str(v)
-
-
-# ----------------------------------------------------------------------------- build
-
-
-def _sections() -> list[Callable[[Path, HtmlReport], None]]:
-    """The report's sections in order; each adds itself only if its results exist."""
-    from primspace.experiments import claims, clustering, inter, intra, success
-
-    return [
-        intra.report_summary,
-        claims.report_section,
-        intra.report_data,
-        intra.report_section,
-        clustering.report_section,
-        success.report_section,
-        inter.report_section,
-        intra.report_latent_figures,
-        intra.report_appendix_a,
-    ]
-
-
-def build_report(out_dir: str | Path) -> Path:
-    """Write ``out_dir/report.html`` from whatever results the directory holds.
-
-    Raises
-    ------
-    UserError
-        If ``out_dir`` is not an experiment directory (no ``experiment.json``).
-    """
-    from primspace.experiments.workspace import META_FILE, read_meta
-
-    out_dir = Path(out_dir)
-    if not (out_dir / META_FILE).exists():
-        raise UserError(f"{out_dir}: not an experiment directory (no {META_FILE})")
-    meta = read_meta(out_dir)
-    report = HtmlReport(
-        "primspace report",
-        f"{out_dir.resolve().name} — preset {meta.get('preset', '?')} — "
-        f"written {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}",
-    )
-    if not isinstance(meta, dict):
-        raise UserError(f"{out_dir / META_FILE}: not an experiment description (a JSON object was expected)")
-    for add_section in _sections():
-        name = add_section.__module__.rsplit(".", 1)[-1]
-        try:
-            add_section(out_dir, report)
-        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
-            if isinstance(exc, UserError):
-                raise
-            where = out_dir / "results" / f"{name}.json"
-            raise UserError(
-                f"{where}: not a results file this primspace can read ({type(exc).__name__}: {first_line(exc)}); "
-                "re-run the experiment to rewrite it"
-            ) from None
-    _environment_section(out_dir, meta, report)
-    return report.write(out_dir / REPORT_FILE)
-
-
-def _environment_section(out_dir: Path, meta: dict, report: HtmlReport) -> None:
-    import numpy
-    import torch
-
-    from primspace import __version__
-
-    report.section("Configuration, versions, timings")
-    versions = [
-        ["primspace", __version__],
-        ["python", platform.python_version()],
-        ["numpy", numpy.__version__],
-        ["torch", torch.__version__],
-        ["machine", f"{platform.machine()} {platform.system()}"],
-    ]
-    try:
-        import mujoco
-
-        versions.append(["mujoco", mujoco.__version__])
-    except ImportError:  # pragma: no cover - a dependency
-        pass
-    report.table(["software", "version"], versions)
-    timings = meta.get("timings", {})
-    if timings:
-        report.table(["stage", "seconds"], [[k, float(v)] for k, v in timings.items()], "Wall-clock time per stage.")
-    report.code(json.dumps(meta, indent=2))

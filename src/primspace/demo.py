@@ -7,6 +7,9 @@ learned codes and the raw trajectories, judge the generated motions in the simul
 and write the HTML report. Whether the paper's qualitative result (projection-initialised
 codes infer to a lower loss than zero and random ones) holds at this scale is stated
 plainly in the summary and the report, whichever way it comes out.
+
+This module sits above both the experiments (which compute and write results) and the
+report (which reads them): neither imports it, and the report imports no experiment.
 """
 
 from __future__ import annotations
@@ -14,9 +17,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from primspace.experiments.clustering import LEARNED_CODES, run_clustering
-from primspace.experiments.intra import _final, qualitative_check, run_intra
+from primspace.experiments.clustering import run_clustering
+from primspace.experiments.intra import run_intra
 from primspace.experiments.presets import PRESETS
+from primspace.experiments.results import LEARNED_CODES, final, qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
@@ -37,9 +41,10 @@ def run_demo(out_dir: str | Path, *, workers: int = 2, progress: bool | None = N
 
 
 def _summary(exp, intra, clustering, success, report, seconds) -> str:
+    """The text ``primspace demo`` prints: report path, a table per init, the verdict."""
     finals = {}
     for r in intra["runs"]:
-        finals[(r["init"], r["latent_dim"])] = _final([h["loss"] for h in r["infer"]])
+        finals[(r["init"], r["latent_dim"])] = final([h["loss"] for h in r["infer"]])
     dims = sorted({q for _, q in finals})
     inits = [i for i in exp.preset.inits if any((i, q) in finals for q in dims)]
     latent_rows = clustering.get("latent", [])

@@ -1,0 +1,89 @@
+"""The experiments' figures, drawn from their results files alone.
+
+Each function reads ``OUT/results`` (JSON and arrays, :mod:`primspace.experiments.results`)
+and writes PNGs to ``OUT/figures``; none loads a model or the data set, so a figure can be
+redrawn from a finished experiment directory. The experiments call them when they end.
+Imports no experiment.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from primspace.experiments.results import LATENT_RESULTS, figure_file, read_arrays, read_results
+
+__all__ = ["draw_intra", "draw_latent", "draw_inter", "draw_latent_accuracy"]
+
+
+def draw_intra(out_dir: str | Path) -> list[Path]:
+    """The paper's two convergence figures (fit, infer), then :func:`draw_latent`."""
+    from primspace import plots
+
+    results = read_results(out_dir, "intra")
+    if results is None or not results["runs"]:
+        return []
+    drawn = []
+    for phase, title in (("fit", "fit θ and Z (train part)"), ("infer", "infer Z, θ frozen (eval part)")):
+        fig = plots.plot_intra_losses(results["runs"], phase=phase, title=f"Intra-primitive: {title}")
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"intra_loss_{phase}")))
+    return drawn + draw_latent(out_dir)
+
+
+def draw_latent(out_dir: str | Path) -> list[Path]:
+    """The latent-encoding figure (2-D and 3-D principal components of one primitive's
+    codes per init) and the Appendix B reconstructions, from ``intra_latent``."""
+    from primspace import plots
+
+    meta, arrays = read_results(out_dir, LATENT_RESULTS), read_arrays(out_dir, LATENT_RESULTS)
+    if meta is None or arrays is None:
+        return []
+    drawn = []
+    primitive = int(meta["primitive"])
+    if "params" in arrays:
+        codes = {init: arrays[f"codes_{init}"] for init in meta["inits"]}
+        for dims in (2, 3):
+            fig = plots.plot_latent_pca(
+                codes, arrays["labels"], arrays["params"], primitive=primitive,
+                primitive_name=meta["label_names"][primitive], n_components=dims,
+            )
+            drawn.append(plots.save_figure(fig, figure_file(out_dir, f"latent_pca{dims}d")))
+    for r in meta["reconstructions"]:
+        prefix = f"recon_{r['name']}_"
+        fig = plots.plot_reconstruction(
+            arrays[prefix + "motor"], arrays[prefix + "generated_motor"],
+            images=arrays.get(prefix + "images"), generated_images=arrays.get(prefix + "generated_images"),
+            joint_names=r["joint_names"], dt=r["dt"],
+            title=plots.reconstruction_title(r["sample"], r["primitive"], r["kind"], r["init"], r["latent_dim"]),
+        )
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"reconstruction_{r['name']}")))
+    return drawn
+
+
+def draw_inter(out_dir: str | Path) -> list[Path]:
+    """The paper's inter-primitive figure: phase-2 loss, mean ± std over folds, per init."""
+    from primspace import plots
+
+    results = read_results(out_dir, "inter")
+    if results is None or not results["runs"]:
+        return []
+    histories: dict[str, list] = {}
+    for r in results["runs"]:
+        histories.setdefault(r["init"], []).append(r["phase2"])
+    fig = plots.plot_loss_curves(
+        histories, title=f"Inter-primitive, phase 2 (new primitive + {results['replay']:.0%} replay), "
+        f"q = {results['latent_dim']}: mean ± std over folds",
+    )
+    return [plots.save_figure(fig, figure_file(out_dir, "inter_loss"))]
+
+
+def draw_latent_accuracy(out_dir: str | Path) -> list[Path]:
+    """Clustering accuracy of the codes against the R² target that picks τ."""
+    from primspace import plots
+
+    results = read_results(out_dir, "clustering")
+    if results is None or not results.get("latent_sweep"):
+        return []
+    fig = plots.plot_accuracy_vs_r2(
+        results["latent_sweep"], title=f"Clustering the codes (q = {results['latent_dim']}): accuracy per R² target"
+    )
+    return [plots.save_figure(fig, figure_file(out_dir, "latent_accuracy_vs_r2"))]

@@ -1,0 +1,192 @@
+"""Reading an experiment directory's results, and the tables and verdicts they give.
+
+The one module of :mod:`primspace.experiments` that the report layer
+(:mod:`primspace.report`) and the figures (:mod:`primspace.experiments.figures`) read
+through: it names the files an experiment writes and turns their numbers into tables,
+and it imports no experiment (nothing here trains, clusters, judges or draws).
+
+Files of ``OUT``::
+
+    experiment.json        preset, data file, backend, timings per stage, versions
+    results/<name>.json    each experiment's numbers (intra, clustering, success, inter,
+                           data, appendix_a)
+    results/<name>.npz     arrays the figures are drawn from (intra_latent: codes, reconstructions)
+    figures/<name>.png     each experiment's figures
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from primspace.errors import UserError, first_line
+
+__all__ = [
+    "META_FILE",
+    "LATENT_RESULTS",
+    "LEARNED_CODES",
+    "INITIAL_CODES",
+    "results_file",
+    "arrays_file",
+    "figure_file",
+    "read_results",
+    "read_arrays",
+    "read_meta",
+    "final",
+    "final_loss_table",
+    "qualitative_check",
+    "latent_table",
+    "success_table",
+    "failed_criteria_table",
+    "inter_table",
+]
+
+META_FILE = "experiment.json"
+
+#: The results (JSON + arrays) the latent-space and reconstruction figures are drawn from.
+LATENT_RESULTS = "intra_latent"
+
+# the "codes" of a latent clustering row: codes after training, or the projection before it
+LEARNED_CODES = "learned"
+INITIAL_CODES = "initial (P m, untrained)"
+
+
+# ----------------------------------------------------------------------- files
+
+
+def results_file(out_dir: str | Path, name: str) -> Path:
+    """Where experiment ``name`` keeps its numbers: ``OUT/results/<name>.json``."""
+    return Path(out_dir) / "results" / f"{name}.json"
+
+
+def arrays_file(out_dir: str | Path, name: str) -> Path:
+    """Where arrays ``name`` are kept: ``OUT/results/<name>.npz``."""
+    return Path(out_dir) / "results" / f"{name}.npz"
+
+
+def figure_file(out_dir: str | Path, name: str) -> Path:
+    """Where figure ``name`` is drawn: ``OUT/figures/<name>.png``."""
+    return Path(out_dir) / "figures" / f"{name}.png"
+
+
+def _read_json(path: Path, what: str) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise UserError(f"{path}: cannot read {what} ({first_line(exc)})") from None
+
+
+def read_results(out_dir: str | Path, name: str) -> Any | None:
+    """The results of experiment ``name`` in ``out_dir``, or None if it has not run."""
+    path = results_file(out_dir, name)
+    if not path.exists():
+        return None
+    results = _read_json(path, "the results")
+    if not isinstance(results, dict):
+        raise UserError(f"{path}: not a results file (a JSON object was expected)")
+    return results
+
+
+def read_arrays(out_dir: str | Path, name: str) -> dict[str, np.ndarray] | None:
+    """The arrays ``OUT/results/<name>.npz`` as a dict, or None if they were not written."""
+    path = arrays_file(out_dir, name)
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return {key: npz[key] for key in npz.files}
+    except (OSError, ValueError) as exc:
+        raise UserError(f"{path}: cannot read the arrays ({first_line(exc)})") from None
+
+
+def read_meta(out_dir: str | Path) -> dict:
+    """``OUT/experiment.json``: preset, settings, data file, timings, failures."""
+    meta = _read_json(Path(out_dir) / META_FILE, "the experiment description")
+    if not isinstance(meta, dict):
+        raise UserError(f"{Path(out_dir) / META_FILE}: not an experiment description (a JSON object was expected)")
+    return meta
+
+
+# ---------------------------------------------------------------------- tables
+
+
+def final(curve: list) -> float:
+    """The last value of a loss curve that is not None (NaN for none)."""
+    vals = [v for v in curve if v is not None]
+    return float(vals[-1]) if vals else float("nan")
+
+
+def final_loss_table(results: dict) -> tuple[list[str], list[list]]:
+    """Intra: rows ``init, q, seed, fit loss, eval loss at epoch 0, eval loss at the end``."""
+    rows = []
+    for r in sorted(results["runs"], key=lambda r: (r["latent_dim"], r["seed"], r["init"])):
+        fit_loss = [h["loss"] for h in r["fit"]]
+        eval_loss = [h["loss"] for h in r["infer"]]
+        rows.append([r["init"], r["latent_dim"], r["seed"], final(fit_loss), eval_loss[0], final(eval_loss)])
+    return ["init", "q", "seed", "final fit loss", "eval loss before inference", "final eval loss"], rows
+
+
+def qualitative_check(results: dict) -> tuple[bool | None, str]:
+    """Intra: does projection's final eval loss lie below zero's and random's at every q? (the paper's claim)"""
+    by: dict = {}
+    for r in results["runs"]:
+        by.setdefault((r["latent_dim"], r["seed"]), {})[r["init"]] = final([h["loss"] for h in r["infer"]])
+    verdicts, lines = [], []
+    for (q, seed), losses in sorted(by.items()):
+        if not {"projection", "zero", "random"} <= losses.keys():
+            continue
+        ok = losses["projection"] < losses["zero"] and losses["projection"] < losses["random"]
+        verdicts.append(ok)
+        lines.append(
+            f"q={q}, seed {seed}: projection {losses['projection']:.4g}, zero {losses['zero']:.4g}, "
+            f"random {losses['random']:.4g} — {'holds' if ok else 'does NOT hold'}"
+        )
+    if not verdicts:
+        return None, "not enough runs to compare projection with zero and random"
+    return all(verdicts), "; ".join(lines)
+
+
+def latent_table(results: dict) -> tuple[list[str], list[list]]:
+    """Clustering: one row per set of codes, then one per raw-trajectory data set."""
+    rows = [[r["init"], r["codes"], r["tau"], r["r2"], r["rank"], r["accuracy"], r["nmi"], r["ari"]] for r in results["latent"]]
+    for name, t in results["trajectory"].items():
+        c = t["chosen"]
+        rows.append([f"raw trajectories ({name})", f"{t['n']} x {t['dim']}", c["tau"], c["r2"], c["rank"], c["accuracy"], c["nmi"], c["ari"]])
+    return ["init / data", "codes", "τ", "R²", "rank", "accuracy", "NMI", "ARI"], rows
+
+
+def success_table(results: dict) -> tuple[list[str], list[list]]:
+    """Success: rows primitive; columns recorded, then each init's success rate."""
+    inits = list(results["generated"])
+    prims = [p for p in results["label_names"] if results["recorded"] and p in results["recorded"]["rates"]]
+    rows = []
+    for p in prims:
+        rows.append([p, results["recorded"]["rates"][p]] + [results["generated"][i]["rates"].get(p, float("nan")) for i in inits])
+    rows.append(["all"] + [results["recorded"]["overall"]] + [results["generated"][i]["overall"] for i in inits])
+    return ["primitive", "recorded"] + [f"{i} init" for i in inits], rows
+
+
+def failed_criteria_table(results: dict) -> tuple[list[str], list[list]]:
+    """Success: for each init and primitive with failures, how often each criterion failed."""
+    rows = []
+    for init, res in results["generated"].items():
+        for prim, counts in res.get("failed_criteria", {}).items():
+            if counts:
+                rows.append([init, prim, f"{res['counts'][prim]}", "; ".join(f"{k} ({v})" for k, v in counts.items())])
+    return ["init", "primitive", "judged", "failed criteria (samples)"], rows
+
+
+def inter_table(results: dict) -> tuple[list[str], list[list]]:
+    """Inter: phase-2 loss at the start and at the end, mean ± std over folds, per init."""
+    by: dict[str, list] = {}
+    for r in results["runs"]:
+        by.setdefault(r["init"], []).append(r)
+    rows = []
+    for init, runs in by.items():
+        first = np.array([r["phase2"][0]["loss"] for r in runs])
+        last = np.array([r["phase2"][-1]["loss"] for r in runs])
+        rows.append([init, len(runs), f"{first.mean():.4g} ± {first.std():.2g}", f"{last.mean():.4g} ± {last.std():.2g}"])
+    return ["init", "folds", "phase-2 loss at start", "phase-2 final loss"], rows

@@ -1,0 +1,122 @@
+"""What the experiments share about their runs: keys, configurations, data, codes.
+
+Every experiment (intra, clustering, success, inter) builds on the intra-primitive
+grid's runs ``OUT/runs/intra/<init>-q<q>-s<seed>/{fit,infer}``; this module names them,
+derives each run's configurations from the preset, loads a run's data and scaler, and
+reads the codes back. It imports no experiment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from primspace.data import MotionDataset
+from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.sweep import run_dir_of
+from primspace.experiments.workspace import ExperimentDir
+
+__all__ = [
+    "intra_key",
+    "intra_run_dir",
+    "train_configs",
+    "load_run_data",
+    "experiment_scaler",
+    "curves",
+    "focus_runs",
+    "load_codes",
+    "initial_codes",
+]
+
+
+def intra_key(init: str, latent_dim: int, seed: int) -> str:
+    """The grid key (and ``OUT/runs/`` folder) of one intra-primitive run."""
+    return f"intra/{init}-q{latent_dim}-s{seed}"
+
+
+def intra_run_dir(out_dir: str | Path, init: str, latent_dim: int, seed: int) -> Path:
+    """``OUT/runs/intra/<init>-q<q>-s<seed>``: its ``fit/`` and ``infer/`` run directories."""
+    return run_dir_of(out_dir, intra_key(init, latent_dim, seed))
+
+
+def train_configs(preset: ExperimentPreset, latent_dim: int, seed: int, epochs: int):
+    """The model and train configurations of one run: the preset's, with the run's q, seed
+    and epochs (a checkpoint every tenth of them).
+
+    Returns
+    -------
+    (ModelConfig, TrainConfig)
+    """
+    model_config = replace(preset.model, latent_dim=latent_dim)
+    train_config = replace(preset.train, epochs=epochs, seed=seed, checkpoint_every=max(1, epochs // 10))
+    return model_config, train_config
+
+
+def load_run_data(data_path: str, preset: ExperimentPreset) -> tuple[MotionDataset, bool]:
+    """The data set of a grid run, and whether it trains the vision loss (images then in memory)."""
+    data = MotionDataset.load(data_path)
+    use_images = preset.images and data.has_images
+    return (data.load_images() if use_images else data), use_images
+
+
+def experiment_scaler(data: MotionDataset):
+    """The joint scaler of every run of an experiment: fitted over all of its motions.
+
+    The paper (Motion Capture Data): "for each joint angle all the values in all
+    sequences were normalized to be in [-1, 1] interval". Fitting it on the part a run
+    trains on would leave the other part's targets outside [-1, 1] (about 3%
+    of intra's evaluation values), and in the inter-primitive fold that holds out
+    grasp, whose finger joints never move in phase 1, grasp's finger targets would stay
+    in metres (|y| <= 0.04, 1/2500 of their weight). Every experiment run therefore
+    scales with the extremes of the whole data set it was given.
+    """
+    from primspace.data import JointScaler
+
+    return JointScaler().fit(data.motor)
+
+
+def curves(history: list[dict]) -> list[dict]:
+    """The per-epoch losses of a run (its metrics.jsonl without timings)."""
+    return [{k: h.get(k) for k in ("epoch", "loss", "motor", "vision")} for h in history]
+
+
+def focus_runs(exp: ExperimentDir, results: dict) -> tuple[int, int, list[str]]:
+    """(q, seed, inits) of the finished intra runs that clustering, success and the latent
+    figures use: the preset's ``cluster_latent_dim`` (else the largest q), the first seed."""
+    preset = exp.preset
+    q = preset.cluster_latent_dim if preset.cluster_latent_dim in preset.latent_dims else max(preset.latent_dims)
+    seed = preset.seeds[0]
+    done = {(r["init"], r["latent_dim"], r["seed"]) for r in results["runs"]}
+    return q, seed, [i for i in preset.inits if (i, q, seed) in done]
+
+
+def load_codes(exp: ExperimentDir, init: str, latent_dim: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """All samples' codes of one intra run, in data-set order, and a mask of the train part.
+
+    Returns ``(Z, is_train)``: ``Z`` (N, q) with the fitted codes of the train samples
+    and the inferred codes of the eval samples.
+    """
+    from primspace.train import load_run
+
+    run_dir = intra_run_dir(exp.path, init, latent_dim, seed)
+    fitted, inferred = load_run(run_dir / "fit"), load_run(run_dir / "infer")
+    n = len(exp.dataset())
+    z = np.full((n, latent_dim), np.nan, dtype=np.float32)
+    z[fitted.indices] = fitted.latents
+    z[inferred.indices] = inferred.latents
+    is_train = np.zeros(n, dtype=bool)
+    is_train[fitted.indices] = True
+    return z, is_train
+
+
+def initial_codes(exp: ExperimentDir, init: str, latent_dim: int, seed: int) -> np.ndarray:
+    """All samples' codes of one intra run *before* training (e.g. ``P m``), float64, data-set order."""
+    from primspace.train import load_run
+
+    run_dir = intra_run_dir(exp.path, init, latent_dim, seed)
+    fitted, inferred = load_run(run_dir / "fit"), load_run(run_dir / "infer")
+    z0 = np.empty((len(exp.dataset()), latent_dim))
+    z0[fitted.indices], z0[inferred.indices] = fitted.initial_latents, inferred.initial_latents
+    return z0

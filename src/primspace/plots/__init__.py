@@ -1,0 +1,40 @@
+"""Every figure primspace draws (matplotlib, Agg backend, written atomically as PNG).
+
+Functions take arrays and results (never a model or a run directory) and return a
+:class:`matplotlib.figure.Figure`; :func:`save_figure` writes it and closes it. Figures
+name the paper's figure they reproduce in their docstring.
+
+- :mod:`~primspace.plots.base`: :func:`save_figure`, the colours shared by every figure.
+- :mod:`~primspace.plots.samples`: one motion (frames and joints), recorded against generated.
+- :mod:`~primspace.plots.clustering`: affinity and predicted labels, τ sweeps, accuracy per R².
+- :mod:`~primspace.plots.training`: loss curves, the convergence figures, the latent PCA.
+"""
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: never needs a display; before any pyplot import below
+
+from primspace.plots.base import INIT_COLORS, save_figure  # noqa: E402
+from primspace.plots.clustering import plot_accuracy_vs_r2, plot_clustering, plot_tau_sweep  # noqa: E402
+from primspace.plots.samples import (  # noqa: E402
+    plot_motion_sample,
+    plot_reconstruction,
+    plot_sim_sample,
+    reconstruction_title,
+)
+from primspace.plots.training import plot_intra_losses, plot_latent_pca, plot_loss_curves  # noqa: E402
+
+__all__ = [
+    "INIT_COLORS",
+    "save_figure",
+    "plot_motion_sample",
+    "plot_sim_sample",
+    "plot_reconstruction",
+    "reconstruction_title",
+    "plot_clustering",
+    "plot_tau_sweep",
+    "plot_accuracy_vs_r2",
+    "plot_loss_curves",
+    "plot_intra_losses",
+    "plot_latent_pca",
+]

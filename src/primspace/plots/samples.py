@@ -1,0 +1,170 @@
+"""One motion: a strip of camera frames above its joint curves, recorded against generated.
+
+What ``primspace show`` (:func:`plot_sim_sample`) and ``primspace reconstruct`` and the
+paper's Appendix B (:func:`plot_reconstruction`) draw. Every function here takes arrays:
+the generated motion is decoded by the caller (:func:`primspace.train.reconstruct`).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.figure import Figure
+
+__all__ = ["plot_motion_sample", "plot_sim_sample", "plot_reconstruction", "reconstruction_title"]
+
+
+def plot_motion_sample(
+    motor: np.ndarray,
+    images: np.ndarray | None = None,
+    *,
+    joint_names: Sequence[str] | None = None,
+    generated_motor: np.ndarray | None = None,
+    generated_images: np.ndarray | None = None,
+    n_frames: int = 8,
+    dt: float | None = None,
+    title: str = "",
+) -> Figure:
+    """One demonstration: a strip of camera frames above its joint curves.
+
+    With ``generated_motor`` / ``generated_images`` it becomes the paper's Appendix B
+    comparison: generated (dashed) against ground truth (solid), and a second frame
+    strip of generated images under the recorded one.
+
+    Parameters
+    ----------
+    motor : ndarray, shape (T, J)
+        Ground-truth (or the only) joint values.
+    images : ndarray, shape (T, H, W, 3), uint8, optional
+        Ground-truth frames.
+    joint_names : list of str, optional
+    generated_motor : ndarray, shape (T, J), optional
+    generated_images : ndarray, shape (T, H, W, 3), optional
+    n_frames : int
+        Frames shown per strip, evenly spaced in time.
+    dt : float, optional
+        Seconds per step (the time axis is in steps otherwise).
+    title : str
+    """
+    motor = np.asarray(motor)
+    t_len, n_joints = motor.shape
+    names = list(joint_names) if joint_names is not None else [f"j{i}" for i in range(n_joints)]
+    strips = [s for s in (images, generated_images) if s is not None]
+    n_frames = min(n_frames, t_len)
+    n_cols = 3 if n_joints > 4 else min(n_joints, 2)
+    n_rows_j = int(np.ceil(n_joints / n_cols))
+    fig = plt.figure(figsize=(2.0 * max(n_frames, 2 * n_cols), 1.4 * len(strips) + 1.9 * n_rows_j + 0.4))
+    grid = fig.add_gridspec(len(strips) + n_rows_j, max(n_frames, 1), height_ratios=[1.2] * len(strips) + [1.6] * n_rows_j)
+    _frame_strips(fig, grid, strips, np.linspace(0, t_len - 1, n_frames).round().astype(int))
+    sub = grid[len(strips):, :].subgridspec(n_rows_j, n_cols, hspace=0.6, wspace=0.25)
+    _joint_curves(fig, sub, motor, generated_motor, names, n_cols, n_rows_j, dt)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def _frame_strips(fig: Figure, grid, strips: list, frame_idx: np.ndarray) -> None:
+    """One row of frames per strip (recorded, then generated), times above the first."""
+    strip_labels = ["recorded", "generated"] if len(strips) == 2 else [None]
+    for row, (strip, label) in enumerate(zip(strips, strip_labels)):
+        for col, t in enumerate(frame_idx):
+            ax = fig.add_subplot(grid[row, col])
+            ax.imshow(np.asarray(strip[t]))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if row == 0:
+                ax.set_title(f"t={t}", fontsize=8)
+            if col == 0 and label:
+                ax.set_ylabel(label, fontsize=8)
+
+
+def _joint_curves(fig: Figure, sub, motor, generated_motor, names, n_cols: int, n_rows_j: int, dt) -> None:
+    """One panel per joint: ground truth (solid black), generated (dashed orange)."""
+    t_len, n_joints = motor.shape
+    time = np.arange(t_len) * (dt if dt else 1.0)
+    for j in range(n_joints):
+        ax = fig.add_subplot(sub[j // n_cols, j % n_cols])
+        ax.plot(time, motor[:, j], color="black", lw=1.4, label="ground truth" if generated_motor is not None else None)
+        if generated_motor is not None:
+            ax.plot(time, np.asarray(generated_motor)[:, j], color="tab:orange", lw=1.4, ls="--", label="generated")
+        ax.set_title(names[j], fontsize=8)
+        ax.tick_params(labelsize=7)
+        if j == 0 and generated_motor is not None:
+            ax.legend(fontsize=7, loc="best")
+        if j // n_cols == n_rows_j - 1:
+            ax.set_xlabel("time [s]" if dt else "step", fontsize=7)
+
+
+def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
+    """One sample of a data set (simulated or not): frame strip and joint curves.
+
+    The title names the sample, its primitive and, for simulated data, the block
+    (``block_x``, ``block_y``, ``block_size`` in cm). What ``primspace show`` draws.
+
+    Parameters
+    ----------
+    dataset : MotionDataset
+    index : int
+        Sample index.
+    n_frames : int
+        Frames in the strip, evenly spaced in time.
+    """
+    i = int(index)
+    parts = [f"sample {i}"]
+    if dataset.labels is not None and 0 <= int(dataset.labels[i]) < len(dataset.label_names):
+        parts.append(dataset.label_names[int(dataset.labels[i])])
+    if dataset.params is not None:
+        values = dataset.params[i]
+        cm = {"block_x", "block_y", "block_size"}
+        parts.append(", ".join(
+            f"{n} {v * 100:.1f} cm" if n in cm else f"{n} {v:.4g}" for n, v in zip(dataset.param_names, values)
+        ))
+    images = None if dataset.images is None else np.asarray(dataset.images[i])
+    return plot_motion_sample(
+        dataset.motor[i], images, joint_names=[n.removeprefix("robot:panda0_") for n in dataset.joint_names],
+        n_frames=n_frames, dt=dataset.dt, title=" | ".join(parts),
+    )
+
+
+def plot_reconstruction(
+    motor: np.ndarray,
+    generated_motor: np.ndarray,
+    *,
+    images: np.ndarray | None = None,
+    generated_images: np.ndarray | None = None,
+    joint_names: Sequence[str] | None = None,
+    dt: float | None = None,
+    n_frames: int = 8,
+    title: str = "",
+) -> Figure:
+    """Generated against ground-truth joints and frames for one sample (paper Appendix B).
+
+    The caller decodes the sample's code (:func:`primspace.train.reconstruct`); this only
+    draws. Generated frames are shown only beside recorded ones.
+
+    Parameters
+    ----------
+    motor, generated_motor : ndarray, shape (T, J)
+        Recorded and generated joint values (physical units).
+    images, generated_images : ndarray, shape (T, H, W, 3), uint8, optional
+        Recorded and generated frames.
+    joint_names : list of str, optional
+    dt : float, optional
+        Seconds per step.
+    n_frames : int
+        Frames shown per strip.
+    title : str
+        E.g. :func:`reconstruction_title`.
+    """
+    return plot_motion_sample(
+        motor, images, joint_names=joint_names, generated_motor=generated_motor,
+        generated_images=None if images is None else generated_images, n_frames=n_frames, dt=dt, title=title,
+    )
+
+
+def reconstruction_title(sample: int, primitive: str | None, kind: str, init: str, latent_dim: int) -> str:
+    """``sample 12 (primitive grasp): infer run, init projection, q=40``."""
+    label = "" if primitive is None else f" (primitive {primitive})"
+    return f"sample {sample}{label}: {kind} run, init {init}, q={latent_dim}"

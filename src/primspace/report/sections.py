@@ -1,0 +1,269 @@
+"""The report's sections, each written from an experiment directory's results files.
+
+A section reads ``OUT/experiment.json``, ``OUT/results/*.json`` and the PNGs of
+``OUT/figures`` (through :mod:`primspace.experiments.results` and
+:mod:`primspace.experiments.claims`, which import no experiment) and computes nothing:
+no model is loaded, no data set is read, nothing is drawn or sampled. A section whose
+results are absent adds nothing, or a note saying what is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+
+from primspace.experiments.claims import check_claims, claims_table
+from primspace.experiments.results import (
+    INITIAL_CODES,
+    failed_criteria_table,
+    final_loss_table,
+    figure_file,
+    inter_table,
+    latent_table,
+    qualitative_check,
+    read_meta,
+    read_results,
+    results_file,
+    success_table,
+)
+from primspace.report.page import HtmlReport
+
+__all__ = [
+    "summary",
+    "claims",
+    "data",
+    "intra",
+    "clustering",
+    "success",
+    "inter",
+    "latent_figures",
+    "appendix_a",
+    "environment",
+]
+
+
+def summary(out_dir: Path, report: HtmlReport) -> None:
+    """The paper's central result as we test it (intra), and failed runs."""
+    results = read_results(out_dir, "intra")
+    report.section("Summary")
+    if results is None:
+        report.paragraph("No intra-primitive results yet.")
+        return
+    ok, text = qualitative_check(results)
+    if ok is None:
+        report.note(text, "warn")
+    elif ok:
+        report.note(
+            "The paper's central result, as we test it, holds here: after inference with θ frozen, codes "
+            "initialised by random projection reach a lower evaluation loss than zero and random "
+            "initialisation. (The paper's own sentences are checked one by one in the next section.) " + text, "good",
+        )
+    else:
+        report.note(
+            "The paper's central result, as we test it, does NOT hold in every case here (projection's final "
+            "evaluation loss is not below both zero and random initialisation). " + text, "warn",
+        )
+    if results["failures"]:
+        report.note(f"{len(results['failures'])} run(s) failed: " + "; ".join(f"{k}: {v}" for k, v in results["failures"].items()), "warn")
+
+
+def claims(out_dir: Path, report: HtmlReport) -> None:
+    """The paper's sentences, verbatim, with our verdict on each."""
+    if all(r["verdict"] == "not run" for r in check_claims(out_dir)):
+        return
+    report.section("The paper's claims, checked")
+    report.paragraph(
+        "Each sentence is quoted verbatim from the paper's Experimental Results; the paper gives no numbers for "
+        "its curves, so the rule in the second column is our reading of it. \"does not hold\" marks where our "
+        "results differ from the sentence (stronger or weaker: the numbers say which)."
+    )
+    columns, rows = claims_table(out_dir)
+    report.table(columns, rows)
+
+
+def data(out_dir: Path, report: HtmlReport) -> None:
+    """The data set's summary (``results/data.json``, written when an experiment loads it)."""
+    s = read_results(out_dir, "data")
+    report.section("Data")
+    if s is None:
+        meta = read_meta(out_dir)
+        report.note(
+            f"No data summary here: results/{results_file(out_dir, 'data').name} is written when an experiment "
+            "loads its data, and an older primspace did not write it. Re-run an experiment command with "
+            f"--out {out_dir} (finished runs are skipped) to write it. Data file: {meta.get('data', '?')}.", "warn",
+        )
+        return
+    report.paragraph(
+        f"{s['n_samples']} samples, T = {s['length']} steps, J = {s['n_joints']} joints "
+        f"({', '.join(s['joint_names'])}), images {('x'.join(map(str, s['image_shape'])) if s['image_shape'] else 'none')}; "
+        f"file {s['path']}."
+    )
+    report.code(s["source"])
+    if s["label_counts"]:
+        report.table(["primitive", "samples"], list(s["label_counts"].items()))
+
+
+def intra(out_dir: Path, report: HtmlReport) -> None:
+    """Intra-primitive generalisation: the two convergence figures and the final losses."""
+    results = read_results(out_dir, "intra")
+    if results is None:
+        return
+    report.section("Intra-primitive generalisation")
+    split = next(iter(results["splits"].values()), {})
+    report.paragraph(
+        f"θ and Z fitted on {split.get('n_train', '?')} samples (the train part), Z inferred with θ frozen on "
+        f"{split.get('n_eval', '?')} samples (the eval part), per initialisation and latent size q. "
+        "Loss: mean squared error of the motor sequence scaled to [-1, 1], plus the vision weight times "
+        "the mean squared error of the frames in [0, 1]. Epoch 0 is the loss of the initial codes."
+    )
+    preset = read_meta(out_dir)["preset_config"]
+    if not preset["images"]:
+        report.note(
+            f"The '{preset['name']}' preset trains on joint angles only (no vision loss), to fit its CPU time "
+            "budget; the camera images are generated and shown, but not learned. The paper preset learns both.",
+            "warn",
+        )
+    report.figure(figure_file(out_dir, "intra_loss_fit"), "Loss while fitting θ and Z (the paper's first convergence figure).")
+    report.figure(figure_file(out_dir, "intra_loss_infer"), "Loss while inferring Z with θ frozen (the paper's second convergence figure).")
+    columns, rows = final_loss_table(results)
+    report.table(columns, rows, "Final losses per run.")
+
+
+def clustering(out_dir: Path, report: HtmlReport) -> None:
+    """Subspace clustering of the codes and of the raw trajectories."""
+    results = read_results(out_dir, "clustering")
+    if results is None:
+        return
+    report.section("Subspace clustering")
+    report.paragraph(
+        f"Affine low-rank subspace clustering (Q* = V P(Λ) Vᵀ, Ng–Jordan–Weiss spectral step on Q*∘Q*) of the "
+        f"codes of all samples at q = {results['latent_dim']}, τ chosen for R² = {results['r2_target']} "
+        "(the paper's setting), and of the raw joint trajectories (scaled to [-1, 1] per joint, flattened) with a "
+        "τ sweep. Accuracy after Hungarian matching of clusters to primitives; NMI and ARI."
+    )
+    columns, rows = latent_table(results)
+    report.table(columns, rows)
+    report.figure(figure_file(out_dir, "latent_accuracy_vs_r2"),
+                  "Accuracy of clustering the codes when τ is chosen for other R² targets (dashed: the projection "
+                  "before training). With few points per primitive in q dimensions, high targets keep every component "
+                  "and the affinity degenerates towards the identity.")
+    for r in results["latent"]:
+        name = "latent_clustering_projection_initial" if r["codes"] == INITIAL_CODES else f"latent_clustering_{r['init']}"
+        report.figure(figure_file(out_dir, name), f"{r['init']} ({r['codes']}): affinity ordered by primitive, and the predicted cluster of each sample.")
+    for name in results["trajectory"]:
+        report.figure(figure_file(out_dir, f"trajectory_sweep_{name}"), f"τ sweep on raw trajectories ({name}): R², rank and scores per τ.")
+        report.figure(figure_file(out_dir, f"trajectory_clustering_{name}"), f"Raw trajectories ({name}) clustered at the chosen τ.")
+
+
+def success(out_dir: Path, report: HtmlReport) -> None:
+    """Success rates of the generated motions, and the criteria that failed."""
+    results = read_results(out_dir, "success")
+    if results is None:
+        return
+    report.section("Success rates of generated motions")
+    report.paragraph(
+        f"Eval-part codes (q = {results['latent_dim']}) decoded to joint trajectories and judged by the simulator "
+        "(criteria in docs/simulator.md), per primitive. The paper judged grasp, push and pull by eye and reported "
+        "0.8 / 0.9 / 0.86 (zero init) against 1.0 / 0.94 / 0.92 (projection init)."
+    )
+    if results["recorded"] is None:
+        report.note("The recorded trajectories were not judged (the run failed).", "warn")
+        return
+    if results["recorded"]["overall"] < 1.0:
+        report.note("Not every recorded trajectory passes the judge: the judge or the data is at fault.", "warn")
+    columns, rows = success_table(results)
+    report.table(columns, rows, "Fraction of successful motions per primitive.")
+    columns, reasons = failed_criteria_table(results)
+    if reasons:
+        report.table(columns, reasons, "Criteria are defined in docs/simulator.md; a sample can fail several.")
+
+
+def inter(out_dir: Path, report: HtmlReport) -> None:
+    """Inter-primitive generalisation: the phase-2 loss over folds."""
+    results = read_results(out_dir, "inter")
+    if results is None:
+        return
+    report.section("Inter-primitive generalisation")
+    report.paragraph(
+        "Seven folds: θ and Z fitted on six primitives (phase 1), then on the seventh plus "
+        f"{results['replay']:.0%} replay of the others (phase 2), q = {results['latent_dim']}."
+    )
+    report.figure(figure_file(out_dir, "inter_loss"), "Phase-2 loss, mean ± std over folds (the paper's inter-primitive figure; on the log axis the band stops at the lowest fold).")
+    columns, rows = inter_table(results)
+    report.table(columns, rows)
+    if results["failures"]:
+        report.note(f"{len(results['failures'])} fold run(s) failed: " + "; ".join(results["failures"]), "warn")
+
+
+def latent_figures(out_dir: Path, report: HtmlReport) -> None:
+    """The latent-encoding figures and the Appendix B reconstructions, as drawn."""
+    figs = sorted((out_dir / "figures").glob("latent_pca*.png")) + sorted((out_dir / "figures").glob("reconstruction_*.png"))
+    if not figs:
+        return
+    report.section("Latent space and reconstructions")
+    for fig in figs:
+        if fig.name.startswith("latent_pca"):
+            caption = (
+                "First principal components of one primitive's codes (train and eval), coloured by the block "
+                "position on the table (left: the positions), per initialisation — the paper's latent-encoding figure."
+            )
+        else:
+            caption = "Generated (dashed, lower frames) against recorded (solid, upper frames) — the paper's Appendix B."
+        report.figure(fig, caption)
+
+
+def appendix_a(out_dir: Path, report: HtmlReport) -> None:
+    """Appendix A's identities, checked by sampling (``results/appendix_a.json``)."""
+    results = read_results(out_dir, "appendix_a")
+    if results is None and not any(results_file(out_dir, n).exists() for n in ("intra", "inter", "data")):
+        return  # nothing has run here yet
+    report.section("Appendix A: random projections keep inner products")
+    report.paragraph(
+        "For P with entries N(0, 1/q), the paper shows E[Pa·Pb] = a·b and "
+        f"Var[Pa·Pb] ≤ (3|a|²|b|² − (a·b)²)/q. Checked by drawing {results['n_draws'] if results else 2000} matrices P, "
+        "with a and b two scaled, flattened motor sequences of this data set. 'mean z' is the deviation of the sample "
+        "mean from a·b in standard errors; the exact variance for Gaussian P is (|a|²|b|² + (a·b)²)/q."
+    )
+    if results is None:
+        report.note(
+            f"Not computed here: results/{results_file(out_dir, 'appendix_a').name} is written by the intra and "
+            "inter experiments, and an older primspace did not write it. Re-run "
+            f"`primspace experiment intra --out {out_dir}` (finished runs are skipped) to compute it.", "warn",
+        )
+        return
+    rows = [
+        [r["pair"], r["latent_dim"], r["dot"], r["mean"], r["mean_z"], r["var"], r["var_exact"], r["var_bound"],
+         "yes" if r["var"] <= r["var_bound"] else "no"]
+        for r in results["rows"]
+    ]
+    report.table(["pair", "q", "a·b", "mean Pa·Pb", "mean z", "var", "exact var", "bound", "var ≤ bound"], rows)
+
+
+def environment(out_dir: Path, report: HtmlReport) -> None:
+    """Software versions of the machine writing the report, timings per stage, experiment.json."""
+    import numpy
+    import torch
+
+    from primspace import __version__
+
+    meta = read_meta(out_dir)
+    report.section("Configuration, versions, timings")
+    versions = [
+        ["primspace", __version__],
+        ["python", platform.python_version()],
+        ["numpy", numpy.__version__],
+        ["torch", torch.__version__],
+        ["machine", f"{platform.machine()} {platform.system()}"],
+    ]
+    try:
+        import mujoco
+
+        versions.append(["mujoco", mujoco.__version__])
+    except ImportError:  # pragma: no cover - a dependency
+        pass
+    report.table(["software", "version"], versions)
+    timings = meta.get("timings", {})
+    if timings:
+        report.table(["stage", "seconds"], [[k, float(v)] for k, v in timings.items()], "Wall-clock time per stage.")
+    report.code(json.dumps(meta, indent=2))

@@ -1,0 +1,176 @@
+"""Experiments flow one way: compute -> results -> figures -> report (issue 12, item 5).
+
+The report reads results and imports no experiment; no experiment imports the report;
+figures are drawn from arrays; the demo sits above both. Checked on the source (``ast``),
+by importing every module, and on an experiment directory written by an older version.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import json
+import pkgutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import primspace
+
+SRC = Path(primspace.__file__).resolve().parent
+
+# the modules of primspace.experiments that read results and import no experiment
+READERS = {"primspace.experiments.results", "primspace.experiments.claims"}
+
+
+def _modules(package: str) -> list[str]:
+    pkg = importlib.import_module(package)
+    names = [package]
+    if hasattr(pkg, "__path__"):
+        names += [m.name for m in pkgutil.walk_packages(pkg.__path__, prefix=f"{package}.")]
+    return names
+
+
+def _source(module: str) -> Path:
+    rel = Path(*module.split(".")[1:])
+    path = SRC / rel / "__init__.py"
+    return path if path.exists() else SRC / rel.with_suffix(".py")
+
+
+def _imports(module: str) -> set[str]:
+    """Every primspace module ``module`` imports, at any depth of its code (lazy imports included)."""
+    tree = ast.parse(_source(module).read_text(encoding="utf-8"))
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            # "from primspace.experiments import figures" imports a module, not a name
+            found |= {f"{node.module}.{a.name}" for a in node.names if _is_module(f"{node.module}.{a.name}")}
+    return {m for m in found if m.startswith("primspace")}
+
+
+def _is_module(name: str) -> bool:
+    return _source(name).exists() if name.startswith("primspace.") else False
+
+
+def _within(name: str, package: str) -> bool:
+    return name == package or name.startswith(package + ".")
+
+
+@pytest.mark.parametrize("package", ["primspace.report", "primspace.experiments", "primspace.plots", "primspace.demo"])
+def test_every_module_imports(package):
+    for name in _modules(package):
+        importlib.import_module(name)
+
+
+def test_the_report_imports_only_the_results_readers():
+    for module in _modules("primspace.report"):
+        allowed = READERS | {"primspace.experiments"}
+        bad = {m for m in _imports(module) if _within(m, "primspace.experiments") and m not in allowed}
+        assert not bad, (module, bad)
+        assert "primspace.demo" not in _imports(module)
+
+
+def test_no_experiment_imports_the_report_or_the_demo():
+    for module in _modules("primspace.experiments"):
+        bad = {m for m in _imports(module) if _within(m, "primspace.report") or _within(m, "primspace.demo")}
+        assert not bad, (module, bad)
+
+
+def test_readers_and_figures_import_no_experiment():
+    for module in sorted(READERS | {"primspace.experiments.figures"}):
+        others = {m for m in _imports(module) if _within(m, "primspace.experiments")} - READERS
+        assert not others, (module, others)
+    assert not {m for m in _imports("primspace.experiments.results") if _within(m, "primspace.experiments")}
+
+
+def test_figures_never_run_a_model():
+    for module in _modules("primspace.plots"):
+        bad = {m for m in _imports(module) if any(_within(m, p) for p in (
+            "primspace.train", "primspace.model", "primspace.experiments", "primspace.report", "primspace.demo"))}
+        assert not bad, (module, bad)
+
+
+def test_importing_the_report_loads_no_experiment():
+    code = "import sys, primspace.report; print(sorted(m for m in sys.modules if m.startswith('primspace.experiments')))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert set(json.loads(out.replace("'", '"'))) <= READERS | {"primspace.experiments"}
+
+
+# ------------------------------------------------- an experiment directory of an older version
+
+
+def _old_experiment_dir(path: Path) -> Path:
+    """experiment.json with the flat preset of older versions, and intra results; no
+    data summary, no Appendix A results, no figures."""
+    flat = {
+        "name": "demo", "data_preset": "demo", "train_fraction": 0.2, "inits": ["zero", "random", "projection"],
+        "latent_dims": [8], "seeds": [0], "fit_epochs": 400, "infer_epochs": 250, "batch_size": 16,
+        "infer_batch_size": 256, "lr": 0.003, "latent_lr": 0.03, "final_lr_fraction": 0.1, "images": False,
+        "vision_weight": 1.0, "layer_sizes": [32, 12], "taus": [2.0, 8.0], "cluster_latent_dim": 40,
+        "cluster_r2": 0.9999, "trajectory_r2": 0.9, "lasa_length": 100, "inter_latent_dim": 20,
+        "inter_inits": ["zero", "projection"], "inter_epochs": [100, 100], "inter_replay": 0.1, "extra": {},
+    }
+    meta = {"preset": "demo", "preset_config": flat, "data": str(path / "gone.h5"), "timings": {"intra": 1.0}}
+    (path / "results").mkdir(parents=True)
+    (path / "experiment.json").write_text(json.dumps(meta))
+
+    def run(init, fit, infer):
+        return {"init": init, "latent_dim": 8, "seed": 0, "key": f"intra/{init}-q8-s0",
+                "fit": [{"epoch": e, "loss": v} for e, v in enumerate(fit)],
+                "infer": [{"epoch": e, "loss": v} for e, v in enumerate(infer)]}
+
+    intra = {"runs": [run("zero", [1.0, 0.1], [0.5, 0.2]), run("random", [1.0, 0.3], [0.6, 0.3]),
+                      run("projection", [1.0, 0.05], [0.1, 0.01])],
+             "failures": {}, "splits": {"0": {"n_train": 28, "n_eval": 98}}, "label_names": ["touch", "grasp"]}
+    (path / "results" / "intra.json").write_text(json.dumps(intra))
+    return path
+
+
+def test_the_report_reads_an_old_directory_and_computes_nothing(tmp_path, monkeypatch):
+    import primspace.latent
+    import primspace.train
+    from primspace.report import build_report
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the report computed something")
+
+    for module, name in ((primspace.latent, "appendix_a_check"), (primspace.train, "reconstruct"),
+                         (primspace.train, "load_run"), (primspace.train, "fit"), (primspace.train, "infer")):
+        monkeypatch.setattr(module, name, forbidden)
+    out = _old_experiment_dir(tmp_path / "old")
+    html = build_report(out).read_text()
+    for heading in ("Summary", "claims, checked", "Data", "Intra-primitive generalisation", "Appendix A",
+                    "Configuration, versions, timings"):
+        assert f">{heading}" in html or heading in html, heading
+    assert "No data summary here" in html and "appendix_a.json" in html and "Not computed here" in html
+    assert "figure missing: intra_loss_fit" in html  # said, not drawn
+    assert not (out / "results" / "appendix_a.json").exists() and not (out / "figures").exists()
+
+
+def test_an_old_flat_preset_reads_as_the_same_configurations():
+    from dataclasses import replace
+
+    from primspace.experiments.presets import PRESETS, ExperimentPreset
+    from primspace.experiments.runs import train_configs
+    from primspace.model import ModelConfig
+    from primspace.train import TrainConfig
+
+    flat = json.loads(json.dumps(PRESETS["demo"].to_dict()))  # then in the old, flat form:
+    model, train = flat.pop("model"), flat.pop("train")
+    flat |= {k: model[k] for k in ("layer_sizes", "taus")}
+    flat |= {k: train[k] for k in ("batch_size", "lr", "latent_lr", "final_lr_fraction", "vision_weight")}
+    old = ExperimentPreset.from_dict(flat)
+    assert old == PRESETS["demo"]
+    # what the old code built by hand, field by field, for one run
+    mc, tc = train_configs(old, 40, 3, 400)
+    assert mc == ModelConfig(latent_dim=40, layer_sizes=(32, 12), taus=(2.0, 8.0))
+    assert tc == TrainConfig(epochs=400, batch_size=16, lr=3e-3, latent_lr=3e-2, final_lr_fraction=0.1,
+                             vision_weight=1.0, seed=3, checkpoint_every=40, threads=1)
+    assert replace(PRESETS["paper"].train, epochs=1) == TrainConfig(epochs=1, final_lr_fraction=0.1, threads=1)
+    with pytest.raises(Exception, match="both flat and inside"):
+        ExperimentPreset.from_dict({**PRESETS["demo"].to_dict(), "lr": 0.1})
