@@ -14,10 +14,16 @@ the same steps reports where the time goes. At --sklearn-n points (default 1e4) 
 also times scikit-learn's SpectralClustering(affinity="precomputed") on the same affinity
 W = Q* o Q* (given W; building W is not counted against it) and prints the ratio.
 
+``--sweep`` times :func:`primspace.cluster.sweep` instead (same data, labels given, the
+command's default R^2 grid or ``--sweep-grid``): end to end, and the SVD alone, so the cost
+per grid value shows; a sweep computes its SVD once. To compare with an older checkout, run
+the same script with ``PYTHONPATH=OLD/src``.
+
 Run (the machine is shared; the lock keeps benchmarks apart)::
 
     flock /tmp/primspace-bench.lock python benchmarks/bench_cluster.py
     python benchmarks/bench_cluster.py --sizes 1e4,1e5 --threads 1
+    python benchmarks/bench_cluster.py --sweep --sizes 1e4,1e5 --repeat 3
 """
 
 from __future__ import annotations
@@ -73,11 +79,42 @@ def worker(args) -> dict:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(limits=args.threads)
+    x, y = make_data(args.worker, args.noise)
+    if args.sweep:
+        return sweep_worker(args, x, y)
+    return fit_worker(args, x, y)
+
+
+def sweep_worker(args, x, y) -> dict:
+    """Time ``sweep`` over the grid (best of ``--repeat``), and the one SVD it needs."""
+    from primspace.cluster import self_representation_svd, sweep
+
+    grid = [float(v) for v in args.sweep_grid.split(",")] if args.sweep_grid else None
+    times, rows = [], None
+    for _ in range(args.repeat):
+        t = time.perf_counter()
+        rows = sweep(x, 7, r2_targets=grid, labels_true=y, n_init=args.n_init, random_state=0)
+        times.append(time.perf_counter() - t)
+    t = time.perf_counter()
+    self_representation_svd(x)
+    svd_seconds = time.perf_counter() - t
+    return {
+        "n": args.worker,
+        "sweep_seconds": min(times),
+        "sweep_times": times,
+        "svd_seconds": svd_seconds,
+        "grid_values": len(rows),
+        "accuracy": [r.get("accuracy") for r in rows],
+        "threads": args.threads,
+    }
+
+
+def fit_worker(args, x, y) -> dict:
+    """One end-to-end fit (time, peak memory, accuracy), then its phases timed one by one."""
     from primspace.cluster import LowRankSubspaceClustering, clustering_accuracy, njw_labels, self_representation_svd
     from primspace.cluster.spectral import choose_spectral_method, spectral_embedding
 
     n = args.worker
-    x, y = make_data(n, args.noise)
     rss_data = _vm_rss_mb()
     _reset_peak()
     model = LowRankSubspaceClustering(7, r2_target=args.r2, n_init=args.n_init, random_state=0)
@@ -141,6 +178,9 @@ def main(argv=None) -> None:
     p.add_argument("--r2", type=float, default=0.999, help="R^2 target that picks tau")
     p.add_argument("--n-init", type=int, default=20)
     p.add_argument("--sklearn-n", type=float, default=1e4, help="size at which sklearn is compared (0: never)")
+    p.add_argument("--sweep", action="store_true", help="time sweep() over an R^2 grid instead of one fit")
+    p.add_argument("--sweep-grid", default="", help="comma-separated R^2 targets for --sweep (default: the command's grid)")
+    p.add_argument("--repeat", type=int, default=1, help="--sweep: runs per size; the best is reported")
     p.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     args.sklearn_n = int(args.sklearn_n)
@@ -151,23 +191,46 @@ def main(argv=None) -> None:
           f"(1/5/15 min), {os.cpu_count()} CPUs, threads {args.threads}, noise {args.noise}, R^2 target {args.r2}")
     results = []
     for size in [int(float(s)) for s in args.sizes.split(",")]:
-        cmd = [sys.executable, __file__, "--worker", str(size), "--threads", str(args.threads), "--noise", str(args.noise),
-               "--r2", str(args.r2), "--n-init", str(args.n_init), "--sklearn-n", str(args.sklearn_n)]
-        env = {**os.environ, "OMP_NUM_THREADS": str(args.threads), "OPENBLAS_NUM_THREADS": str(args.threads)}
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
-        if proc.returncode != 0:
-            print(f"n={size}: worker failed\n{proc.stderr}", file=sys.stderr)
-            sys.exit(1)
-        r = json.loads(proc.stdout.strip().splitlines()[-1])
+        r = run_worker(size, args)
         results.append(r)
-        phases = "  ".join(f"{k} {v:.2f}" for k, v in r["phases"].items())
-        print(f"n={r['n']:>9,}  fit {r['seconds']:7.2f} s  peak {r['process_peak_mb']:7.0f} MB (fit +{r['fit_peak_mb']:.0f}, "
-              f"data {r['data_mb']:.0f})  accuracy {r['accuracy']:.4f}  rank {r['rank']}  {r['method']}  | {phases}", flush=True)
-        if "sklearn_seconds" in r:
-            print(f"           sklearn SpectralClustering(precomputed W) {r['sklearn_seconds']:.2f} s, accuracy "
-                  f"{r['sklearn_accuracy']:.4f}; ours {r['seconds']:.2f} s: {r['sklearn_seconds'] / r['seconds']:.1f}x faster",
-                  flush=True)
+        print_sweep(r) if args.sweep else print_fit(r)
     print(f"load after: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}")
+    if not args.sweep:
+        print_targets(results)
+
+
+def run_worker(size: int, args) -> dict:
+    """One size in a fresh subprocess (its own peak memory and thread settings)."""
+    cmd = [sys.executable, __file__, "--worker", str(size), "--threads", str(args.threads), "--noise", str(args.noise),
+           "--r2", str(args.r2), "--n-init", str(args.n_init), "--sklearn-n", str(args.sklearn_n),
+           "--repeat", str(args.repeat), "--sweep-grid", args.sweep_grid] + (["--sweep"] if args.sweep else [])
+    env = {**os.environ, "OMP_NUM_THREADS": str(args.threads), "OPENBLAS_NUM_THREADS": str(args.threads)}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        print(f"n={size}: worker failed\n{proc.stderr}", file=sys.stderr)
+        sys.exit(1)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def print_sweep(r: dict) -> None:
+    times = " ".join(f"{t:.2f}" for t in r["sweep_times"])
+    per_value = (r["sweep_seconds"] - r["svd_seconds"]) / r["grid_values"]
+    accuracy = " ".join("-" if a is None else f"{a:.3f}" for a in r["accuracy"])
+    print(f"n={r['n']:>9,}  sweep of {r['grid_values']} values {r['sweep_seconds']:7.2f} s (best of: {times})  "
+          f"svd {r['svd_seconds']:.2f} s, {per_value:.2f} s per value  | accuracy {accuracy}", flush=True)
+
+
+def print_fit(r: dict) -> None:
+    phases = "  ".join(f"{k} {v:.2f}" for k, v in r["phases"].items())
+    print(f"n={r['n']:>9,}  fit {r['seconds']:7.2f} s  peak {r['process_peak_mb']:7.0f} MB (fit +{r['fit_peak_mb']:.0f}, "
+          f"data {r['data_mb']:.0f})  accuracy {r['accuracy']:.4f}  rank {r['rank']}  {r['method']}  | {phases}", flush=True)
+    if "sklearn_seconds" in r:
+        print(f"           sklearn SpectralClustering(precomputed W) {r['sklearn_seconds']:.2f} s, accuracy "
+              f"{r['sklearn_accuracy']:.4f}; ours {r['seconds']:.2f} s: {r['sklearn_seconds'] / r['seconds']:.1f}x faster",
+              flush=True)
+
+
+def print_targets(results: list[dict]) -> None:
     big = [r for r in results if r["n"] == TARGETS["n"]]
     if big:
         r = big[0]

@@ -57,105 +57,73 @@ def cluster_command(
     overwrite: bool = typer.Option(False, help="Replace a non-empty OUT directory."),
 ) -> None:
     """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
-    import time
-
-    from primspace.cluster import LowRankSubspaceClustering, affinity_from_factor, clustering_scores, sweep
     from primspace.cluster.inputs import load_points
-    from primspace.cluster.outputs import (
-        atomic_directory,
-        check_output_directory,
-        figure_indices,
-        to_jsonable,
-        write_json,
-        write_labels_csv,
-        write_sweep_csv,
-    )
+    from primspace.cluster.outputs import check_output_directory
     from primspace.files import check_outside_inputs
-    from primspace.plots import plot_clustering, plot_tau_sweep, save_figure
 
     check_outside_inputs(out, (src, labels))
     check_output_directory(out, overwrite)
     _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
     points = load_points(src, labels)
-    n, dim = points.X.shape
-    if k > n:
-        raise UserError(f"--k {k} exceeds the {n} samples in {src}")
-    model = LowRankSubspaceClustering(
-        k,
-        affine=not linear,
-        tau=tau,
-        tau_relative=tau_relative,
-        r2_target=r2,
-        affinity=affinity.value,
-        ones_weight=ones_weight,
-        spectral=spectral.value,
-        n_init=n_init,
-        random_state=seed,
-    )
-    started = time.perf_counter()
+    if k > points.X.shape[0]:
+        raise UserError(f"--k {k} exceeds the {points.X.shape[0]} samples in {src}")
+    options = {"affine": not linear, "tau": tau, "tau_relative": tau_relative, "r2_target": r2, "affinity": affinity.value,
+               "ones_weight": ones_weight, "spectral": spectral.value, "n_init": n_init, "random_state": seed}
+    result = _cluster(src, points, k, options, do_sweep, grid)
+    record = {"input": str(src), "points": points.description, **result.to_dict()}
+    _write_outputs(out, overwrite, src, result, record)
+    if as_json:
+        echo_json(record)
+        return
+    _print_summary(out, result)
+
+
+def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
+    """The pipeline on the loaded points; the estimator's ValueErrors as one-line errors."""
+    from primspace.cluster import LowRankSubspaceClustering, cluster_points
+
+    sweep_param = "tau" if grid is not None else "r2_target" if do_sweep else None
     try:
-        model.fit(points.X)
-        seconds = time.perf_counter() - started
-        rows = None
-        if do_sweep or grid is not None:
-            rows = sweep(
-                points.X, k, taus=grid, labels_true=points.labels, affine=not linear, affinity=affinity.value,
-                ones_weight=ones_weight, spectral=spectral.value, n_init=n_init, random_state=seed,
-            )
+        return cluster_points(
+            points.X, LowRankSubspaceClustering(k, **options), labels_true=points.labels, label_names=points.label_names,
+            sweep_param=sweep_param, sweep_values=grid,
+        )
     except ValueError as exc:  # parameter / data problems the estimator found
         raise UserError(f"{src}: {first_line(exc)}") from None
-    scores = clustering_scores(points.labels, model.labels_) if points.labels is not None else None
-    result = {
-        "input": str(src),
-        "points": points.description,
-        "n_samples": n,
-        "n_features": dim,
-        "n_clusters": k,
-        "affine": not linear,
-        "affinity": affinity.value,
-        "ones_weight": ones_weight,
-        "tau_option": _tau_option_text(tau, tau_relative, r2),
-        "tau": model.tau_,
-        "tau_relative": model.tau_relative_,
-        "r2": model.r2_,
-        "rank": model.rank_,
-        "spectral_method": model.spectral_method_,
-        "eigenvalues": model.eigenvalues_,
-        "singular_values": model.singular_values_[:100],
-        "n_init": n_init,
-        "seed": seed,
-        "seconds": round(seconds, 3),
-        "scores": scores,
-        "sweep": None if rows is None else [{k2: v for k2, v in r.items() if k2 != "labels"} for r in rows],
-    }
-    idx = figure_indices(n)
-    shown = "" if idx.size == n else f" ({idx.size} of {n} samples)"
+
+
+def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict) -> None:
+    """``labels.csv``, ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
+    from primspace.cluster import clustering_figure, sweep_figure
+    from primspace.cluster.outputs import atomic_directory, write_json, write_labels_csv, write_sweep_csv
+    from primspace.plots import save_figure
+
+    n, scores = result.n_samples, result.scores
+    shown = "" if result.figure_indices.size == n else f" ({result.figure_indices.size} of {n} samples)"
     acc = "" if scores is None or scores["accuracy"] is None else f", accuracy {scores['accuracy']:.3f}"
-    figure = plot_clustering(
-        affinity_from_factor(model.representation_factor_, affinity.value, rows=idx),
-        model.labels_[idx],
-        None if points.labels is None else points.labels[idx],
-        label_names=points.label_names,
-        title=f"{src.name}: tau = {model.tau_:.3g}, R^2 = {model.r2_:.4f}, rank {model.rank_}{acc}{shown}",
+    figure = clustering_figure(
+        result, title=f"{src.name}: tau = {result.tau:.3g}, R^2 = {result.r2:.4f}, rank {result.rank}{acc}{shown}"
     )
     with atomic_directory(out, overwrite) as tmp:
-        write_labels_csv(tmp / "labels.csv", model.labels_, points.labels)
-        write_json(tmp / "result.json", result)
+        write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true)
+        write_json(tmp / "result.json", record)
         save_figure(figure, tmp / "clustering.png")
-        if rows is not None:
-            write_sweep_csv(tmp / "sweep.csv", rows)
-            write_json(tmp / "sweep.json", result["sweep"])
-            save_figure(plot_tau_sweep(rows, title=f"{src.name}: tau sweep"), tmp / "sweep.png")
-    if as_json:
-        echo_json(to_jsonable(result))
-        return
-    if rows is not None:
-        typer.echo(_format_sweep(rows))
+        if result.sweep is not None:
+            write_sweep_csv(tmp / "sweep.csv", result.sweep)
+            write_json(tmp / "sweep.json", record["sweep"])
+            save_figure(sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png")
+
+
+def _print_summary(out: Path, result) -> None:
+    if result.sweep is not None:
+        typer.echo(_format_sweep(result.sweep))
     typer.echo(
-        f"{n} samples x {dim} features -> {k} clusters: tau {model.tau_:.4g} (relative {model.tau_relative_:.4g}), "
-        f"R^2 {model.r2_:.4f}, rank {model.rank_}, spectral {model.spectral_method_}, {seconds:.2f} s"
+        f"{result.n_samples} samples x {result.n_features} features -> {result.n_clusters} clusters: "
+        f"tau {result.tau:.4g} (relative {result.tau_relative:.4g}), R^2 {result.r2:.4f}, rank {result.rank}, "
+        f"spectral {result.spectral_method}, {result.seconds:.2f} s"
     )
+    scores = result.scores
     if scores is not None:
         if scores["accuracy"] is None:
             typer.echo("no sample has a known true label: nothing scored")
@@ -164,7 +132,7 @@ def cluster_command(
                 f"accuracy {scores['accuracy']:.4f}  NMI {scores['nmi']:.4f}  ARI {scores['ari']:.4f}  "
                 f"({scores['n_scored']} scored, {scores['n_ignored']} with unknown label)"
             )
-    typer.echo(f"wrote {out}/: labels.csv, result.json, clustering.png" + (", sweep.csv, sweep.json, sweep.png" if rows else ""))
+    typer.echo(f"wrote {out}/: labels.csv, result.json, clustering.png" + (", sweep.csv, sweep.json, sweep.png" if result.sweep else ""))
 
 
 def _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init) -> None:
@@ -190,16 +158,6 @@ def _parse_float_list(text: str, option: str) -> list[float]:
     if not values or any(not (v > 0 and v != float("inf")) for v in values):
         raise UserError(f"{option} must list positive numbers, got {text!r}")
     return values
-
-
-def _tau_option_text(tau, tau_relative, r2) -> dict:
-    from primspace.cluster import DEFAULT_R2_TARGET
-
-    if tau is not None:
-        return {"tau": tau}
-    if tau_relative is not None:
-        return {"tau_relative": tau_relative}
-    return {"r2_target": DEFAULT_R2_TARGET if r2 is None else r2}
 
 
 def _format_sweep(rows: list[dict]) -> str:

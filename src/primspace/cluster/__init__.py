@@ -9,9 +9,15 @@ Modules
 :mod:`~primspace.cluster.estimator`
     :class:`LowRankSubspaceClustering`, the scikit-learn estimator.
 :mod:`~primspace.cluster.sweep`
-    R^2, rank and scores over a tau grid from one SVD.
+    R^2, rank and scores over a tau grid: clones of the estimator sharing one SVD; the one
+    R^2 grid, :data:`R2_GRID`.
+:mod:`~primspace.cluster.pipeline`
+    Fit, score, sweep and figure data in one call (:func:`cluster_points`), shared by
+    ``primspace cluster`` and the clustering experiment; figures from its result.
 :mod:`~primspace.cluster.metrics`
     Accuracy (Hungarian matching), NMI, ARI.
+:mod:`~primspace.cluster.inputs`, :mod:`~primspace.cluster.outputs`
+    The command's input files and output directory.
 """
 
 from primspace.cluster.estimator import DEFAULT_R2_TARGET, LowRankSubspaceClustering
@@ -23,6 +29,12 @@ from primspace.cluster.lrsc import (
     tau_for_r2,
 )
 from primspace.cluster.metrics import clustering_accuracy, clustering_scores
+from primspace.cluster.pipeline import (
+    ClusteringResult,
+    cluster_points,
+    clustering_figure,
+    sweep_figure,
+)
 from primspace.cluster.spectral import (
     NormalizedAffinityOperator,
     affinity_from_factor,
@@ -30,7 +42,7 @@ from primspace.cluster.spectral import (
     njw_labels,
     spectral_embedding,
 )
-from primspace.cluster.sweep import DEFAULT_R2_GRID, sweep
+from primspace.cluster.sweep import DEFAULT_R2_GRID, R2_GRID, sweep, tau_sweep
 
 __all__ = [
     "LowRankSubspaceClustering",
@@ -48,5 +60,11 @@ __all__ = [
     "clustering_accuracy",
     "clustering_scores",
     "sweep",
+    "tau_sweep",
+    "R2_GRID",
     "DEFAULT_R2_GRID",
+    "cluster_points",
+    "ClusteringResult",
+    "clustering_figure",
+    "sweep_figure",
 ]

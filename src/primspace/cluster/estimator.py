@@ -10,12 +10,13 @@ route that scales to millions of points.
 from __future__ import annotations
 
 import contextlib
+import threading
 from dataclasses import dataclass
 from numbers import Integral, Real
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClusterMixin
-from sklearn.utils import check_random_state
+from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import validate_data
 from threadpoolctl import threadpool_limits
@@ -164,7 +165,7 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         self.n_init = n_init
         self.random_state = random_state
 
-    def fit(self, X, y=None):
+    def fit(self, X, y=None, *, svd=None):
         """Cluster the rows of ``X``.
 
         Parameters
@@ -172,6 +173,15 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         X : array-like of shape (n_samples, n_features)
             Points as rows; finite.
         y : ignored
+
+        Other Parameters
+        ----------------
+        svd : SelfRepresentationSVD, optional
+            The decomposition of ``Z~`` for this ``X``, from :meth:`decompose` (or
+            :func:`~primspace.cluster.self_representation_svd` with this estimator's
+            ``affine`` and ``ones_weight``). Fits that differ only in tau share one SVD this
+            way, as :func:`~primspace.cluster.tau_sweep` does; the result is the same as
+            without it. Only its size and settings are checked against ``X``.
 
         Returns
         -------
@@ -181,16 +191,15 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         ------
         ValueError
             Invalid parameters, NaN/inf, 1-D input, fewer than 2 points or fewer points than
-            clusters, two tau options at once, or a tau that keeps no component.
+            clusters, two tau options at once, a tau that keeps no component, or an ``svd``
+            of other points or other settings.
         """
-        self._validate_params()
-        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=2)
-        n_samples = X.shape[0]
-        if n_samples < self.n_clusters:
-            raise UserError(f"n_samples={n_samples} should be >= n_clusters={self.n_clusters}")
-        tau_option = tau_option_from(self.tau, self.tau_relative, self.r2_target)
-        with small_problem_threads(n_samples):
-            svd = self_representation_svd(X, affine=self.affine, ones_weight=self.ones_weight)
+        X, tau_option = self._check_fit_input(X, reset=True)
+        with small_problem_threads(X.shape[0]):
+            if svd is None:
+                svd = self_representation_svd(X, affine=self.affine, ones_weight=self.ones_weight)
+            else:
+                self._check_svd(svd, X.shape[0])
             del X
             result = cluster_at_tau(
                 svd,
@@ -213,8 +222,55 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         self.spectral_method_ = result.method
         return self
 
+    def decompose(self, X) -> SelfRepresentationSVD:
+        """The SVD of ``Z~`` that :meth:`fit` would compute for ``X``, to share between fits.
 
-# ----------------------------------------------------------- shared with sweep()
+        Everything tau-dependent follows from this one decomposition
+        (:mod:`primspace.cluster.lrsc`), so fits of ``X`` that differ only in ``tau``,
+        ``tau_relative`` or ``r2_target`` can pass it as ``fit(X, svd=...)`` and skip the
+        SVD: how :func:`~primspace.cluster.tau_sweep` computes one SVD per sweep. Parameters
+        and ``X`` are validated as :meth:`fit` validates them; the estimator is not fitted.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_features)
+
+        Returns
+        -------
+        SelfRepresentationSVD
+        """
+        X, _ = self._check_fit_input(X, reset=False)
+        with small_problem_threads(X.shape[0]):
+            return self_representation_svd(X, affine=self.affine, ones_weight=self.ones_weight)
+
+    def _check_fit_input(self, X, *, reset: bool) -> tuple[np.ndarray, tuple[str, float]]:
+        """Parameters, then ``X`` (float64, >= 2 rows, >= n_clusters rows), then the tau option.
+
+        ``reset``: record ``n_features_in_`` (fit); else leave the estimator unfitted.
+        """
+        self._validate_params()
+        if reset:
+            X = validate_data(self, X, dtype=np.float64, ensure_min_samples=2)
+        else:
+            X = check_array(X, dtype=np.float64, ensure_min_samples=2, estimator=self)
+        n_samples = X.shape[0]
+        if n_samples < self.n_clusters:
+            raise UserError(f"n_samples={n_samples} should be >= n_clusters={self.n_clusters}")
+        return X, tau_option_from(self.tau, self.tau_relative, self.r2_target)
+
+    def _check_svd(self, svd, n_samples: int) -> None:
+        if not isinstance(svd, SelfRepresentationSVD):
+            raise UserError(f"svd must be a SelfRepresentationSVD (from decompose), got {type(svd).__name__}")
+        settings = (bool(self.affine), float(self.ones_weight) if self.affine else None)
+        if (svd.affine, svd.ones_weight if svd.affine else None) != settings or svd.n_samples != n_samples:
+            raise UserError(
+                f"svd is of {svd.n_samples} points with affine={svd.affine}, ones_weight={svd.ones_weight}; "
+                f"this fit has {n_samples} points with affine={self.affine}, ones_weight={self.ones_weight}: "
+                "use decompose(X) of this estimator"
+            )
+
+
+# ------------------------------------------------------- shared with tau_sweep()
 
 #: Up to this many points the fit runs on one BLAS/OpenMP thread: threads cost more than they
 #: give on small problems, and far more on a busy machine (measured on 2 cores under load:
@@ -222,11 +278,25 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
 SINGLE_THREAD_MAX_SAMPLES = 20_000
 
 
+_single_thread = threading.local()  # inside small_problem_threads' limit, in this thread
+
+
+@contextlib.contextmanager
 def small_problem_threads(n_samples: int):
-    """A context that limits BLAS and OpenMP to one thread for small problems (else no-op)."""
-    if n_samples <= SINGLE_THREAD_MAX_SAMPLES:
-        return threadpool_limits(limits=1)
-    return contextlib.nullcontext()
+    """A context that limits BLAS and OpenMP to one thread for small problems (else no-op).
+
+    Nested uses inside an active limit are no-ops: entering ``threadpool_limits`` costs about
+    1 ms (it inspects the loaded libraries), once per fit of a tau sweep otherwise.
+    """
+    if n_samples > SINGLE_THREAD_MAX_SAMPLES or getattr(_single_thread, "active", False):
+        yield
+        return
+    with threadpool_limits(limits=1):
+        _single_thread.active = True
+        try:
+            yield
+        finally:
+            _single_thread.active = False
 
 
 
@@ -254,7 +324,7 @@ def resolve_tau(svd: SelfRepresentationSVD, kind: str, value: float) -> float:
 
 
 @dataclass(frozen=True, eq=False)
-class ClusteringResult:
+class TauClustering:
     """What one tau gives: labels, rank, R^2, the factor of Q*, and the spectral details."""
 
     tau: float
@@ -276,7 +346,7 @@ def cluster_at_tau(
     spectral: str = "auto",
     n_init: int = 20,
     random_state=None,
-) -> ClusteringResult:
+) -> TauClustering:
     """Closed form at ``tau``, then the NJW spectral step.
 
     Raises
@@ -303,7 +373,7 @@ def cluster_at_tau(
     else:
         embedding = spectral_embedding(factor, n_clusters, affinity=affinity, method=method, random_state=arpack_seed)
     labels = njw_labels(embedding.vectors, n_clusters, n_init=n_init, random_state=kmeans_seed)
-    return ClusteringResult(
+    return TauClustering(
         tau=float(tau),
         rank=rank,
         r2=svd.r2(tau),
