@@ -15,13 +15,7 @@ def echo_json(obj) -> None:
 
 
 def int_list(text: str, option: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.replace(" ", "").split(",") if v)
-    except ValueError:
-        raise UserError(f"{option} must be comma-separated whole numbers, got '{text}'") from None
-    if not values:
-        raise UserError(f"{option} is empty")
-    return values
+    return _number_list(text, option, int, "whole numbers")
 
 
 def name_list(text: str, option: str) -> tuple[str, ...]:
@@ -38,10 +32,15 @@ def check_workers(workers: Optional[int]) -> None:
 
 
 def float_list(text: str, option: str) -> tuple[float, ...]:
+    return _number_list(text, option, float, "numbers")
+
+
+def _number_list(text: str, option: str, kind: type, what: str) -> tuple:
+    """``"1, 2,3"`` -> ``(1, 2, 3)``; one line naming ``option`` if a value is not a ``kind`` or none is given."""
     try:
-        values = tuple(float(v) for v in text.replace(" ", "").split(",") if v)
+        values = tuple(kind(v) for v in text.replace(" ", "").split(",") if v)
     except ValueError:
-        raise UserError(f"{option} must be comma-separated numbers, got '{text}'") from None
+        raise UserError(f"{option} must be comma-separated {what}, got '{text}'") from None
     if not values:
         raise UserError(f"{option} is empty")
     return values

@@ -13,8 +13,9 @@ Two experiments of the paper:
   R² of each τ, as the paper chose τ; on the experiment's data set and on LASA.
 
 Results go to ``results/clustering.json``; the accuracy-per-R² figure is drawn from them
-(:mod:`primspace.experiments.figures`). The affinity and τ-sweep figures are still drawn
-here from the fitted estimators (the shared clustering pipeline will take them over).
+(:mod:`primspace.experiments.figures`). Each set of points goes through the same pipeline
+as ``primspace cluster`` (:func:`primspace.cluster.cluster_points`: fit, scores, τ sweep
+over the one R² grid, figures drawn from its result).
 """
 
 from __future__ import annotations
@@ -29,54 +30,36 @@ from primspace.experiments.workspace import ExperimentDir
 
 __all__ = ["run_clustering", "LEARNED_CODES", "INITIAL_CODES"]
 
-_R2_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.999, 0.9999)
-
-
-def _latent_sweep(X: np.ndarray, labels: np.ndarray) -> list[dict]:
-    from primspace.cluster import sweep
-    from primspace.cluster.outputs import to_jsonable
-
-    k = len(np.unique(labels))
-    return to_jsonable(sweep(X, k, r2_targets=_R2_GRID, labels_true=labels, random_state=0))
-
-
-def _cluster(X: np.ndarray, labels: np.ndarray, r2_target: float) -> tuple[dict, object]:
-    from primspace.cluster import LowRankSubspaceClustering, clustering_scores
+def _clustered(X: np.ndarray, labels: np.ndarray, label_names, r2_target: float):
+    """The shared pipeline (:func:`primspace.cluster.cluster_points`, as ``primspace cluster``):
+    one fit at ``r2_target`` and the sweep over :data:`primspace.cluster.sweep.R2_GRID`, on one SVD."""
+    from primspace.cluster import LowRankSubspaceClustering, cluster_points
 
     k = len(np.unique(labels[labels >= 0]))
-    est = LowRankSubspaceClustering(n_clusters=k, r2_target=r2_target, random_state=0).fit(X)
-    row = {"tau": float(est.tau_), "r2": float(est.r2_), "rank": int(est.rank_)} | {
-        key: float(v) for key, v in clustering_scores(labels, est.labels_).items() if key in ("accuracy", "nmi", "ari")
-    }
-    return row, est
+    estimator = LowRankSubspaceClustering(n_clusters=k, r2_target=r2_target, random_state=0)
+    return cluster_points(X, estimator, labels_true=labels, label_names=label_names, sweep_param="r2_target")
 
 
-def _figure(exp: ExperimentDir, name: str, est, labels, label_names, title: str) -> None:
+def _figure(exp: ExperimentDir, name: str, result, title: str) -> None:
     from primspace import plots
-    from primspace.cluster import affinity_from_factor
-    from primspace.cluster.outputs import figure_indices
+    from primspace.cluster import clustering_figure
 
-    shown = figure_indices(len(labels))
-    w = affinity_from_factor(est.representation_factor_, "squared", rows=shown, cols=shown)
-    fig = plots.plot_clustering(w, est.labels_[shown], labels[shown], label_names=label_names, title=title)
-    plots.save_figure(fig, exp.figure(name))
+    plots.save_figure(clustering_figure(result, title=title), exp.figure(name))
 
 
 def _trajectories(exp: ExperimentDir, name: str, motor, labels, label_names, r2_target: float) -> dict:
     """τ sweep and one clustering at ``r2_target`` of raw trajectories."""
     from primspace import plots
-    from primspace.cluster import sweep
+    from primspace.cluster import sweep_figure
     from primspace.cluster.inputs import trajectory_matrix
-    from primspace.cluster.outputs import to_jsonable
 
-    X = trajectory_matrix(motor)
-    k = len(np.unique(labels))
-    rows = sweep(X, k, r2_targets=_R2_GRID, labels_true=labels, random_state=0)
-    plots.save_figure(plots.plot_tau_sweep(rows, title=f"{name}: τ sweep of raw trajectories"), exp.figure(f"trajectory_sweep_{name}"))
-    chosen, est = _cluster(X, labels, r2_target)
-    _figure(exp, f"trajectory_clustering_{name}", est, labels, label_names,
+    result = _clustered(trajectory_matrix(motor), labels, label_names, r2_target)
+    plots.save_figure(sweep_figure(result, title=f"{name}: τ sweep of raw trajectories"), exp.figure(f"trajectory_sweep_{name}"))
+    chosen = result.summary()
+    _figure(exp, f"trajectory_clustering_{name}", result,
             f"{name}: raw trajectories, τ = {chosen['tau']:.3g} (R² = {chosen['r2']:.3f})")
-    return {"n": int(len(X)), "dim": int(X.shape[1]), "k": int(k), "r2_target": r2_target, "chosen": chosen, "sweep": to_jsonable(rows)}
+    return {"n": result.n_samples, "dim": result.n_features, "k": int(len(np.unique(labels[labels >= 0]))),
+            "r2_target": r2_target, "chosen": chosen, "sweep": result.to_dict()["sweep"]}
 
 
 def run_clustering(exp: ExperimentDir) -> dict:
@@ -91,17 +74,19 @@ def run_clustering(exp: ExperimentDir) -> dict:
     with exp.stage("clustering"):
         for init in inits:
             z, _ = load_codes(exp, init, q, seed)
-            results["latent_sweep"][init] = _latent_sweep(z.astype(np.float64), data.labels)
-            row, est = _cluster(z.astype(np.float64), data.labels, preset.cluster_r2)
+            result = _clustered(z.astype(np.float64), data.labels, data.label_names, preset.cluster_r2)
+            row = result.summary()
+            results["latent_sweep"][init] = result.to_dict()["sweep"]
             results["latent"].append({"init": init, "codes": LEARNED_CODES} | row)
-            _figure(exp, f"latent_clustering_{init}", est, data.labels, data.label_names,
+            _figure(exp, f"latent_clustering_{init}", result,
                     f"learned codes, {init} init, q = {q}: τ = {row['tau']:.3g} for R² = {row['r2']:.4f}")
         if "projection" in inits:  # the projection before any training: P m for every sample
             z0 = initial_codes(exp, "projection", q, seed)
-            row, est = _cluster(z0, data.labels, preset.cluster_r2)
+            result = _clustered(z0, data.labels, data.label_names, preset.cluster_r2)
+            row = result.summary()
             results["latent"].append({"init": "projection", "codes": INITIAL_CODES} | row)
-            results["latent_sweep"]["projection, initial P m"] = _latent_sweep(z0, data.labels)
-            _figure(exp, "latent_clustering_projection_initial", est, data.labels, data.label_names,
+            results["latent_sweep"]["projection, initial P m"] = result.to_dict()["sweep"]
+            _figure(exp, "latent_clustering_projection_initial", result,
                     f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}")
         results["trajectory"]["data"] = _trajectories(
             exp, "data", data.motor, data.labels, data.label_names, preset.trajectory_r2
