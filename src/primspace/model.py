@@ -285,7 +285,7 @@ class MTRNNDecoder(nn.Module):
             u = self.layers[i].run(states0[i], u, self.config.length)
         return u
 
-    def forward(self, z: torch.Tensor, *, images: bool = True) -> DecoderOutput:
+    def forward(self, z: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None) -> DecoderOutput:
         """Decode codes ``z`` (B, q) into motor (and image) sequences.
 
         Parameters
@@ -293,6 +293,11 @@ class MTRNNDecoder(nn.Module):
         z : Tensor (B, q)
         images : bool
             Run the image head (if the model has one). False skips it (motor only).
+        frame_steps : LongTensor (B, K), optional
+            Decode frames only at these steps of each sequence (0-based, in the order
+            given): ``images`` is then ``(B, K, H, W, 3)``. The image head dominates the
+            cost, so a few steps cost a fraction of all T (the vision loss on K drawn
+            frames, :class:`~primspace.train.TrainConfig` ``vision_frames``).
         """
         fast = self.dynamics(z)
         b, t, k = fast.shape
@@ -301,7 +306,11 @@ class MTRNNDecoder(nn.Module):
         frames = None
         if images and self.image_head is not None:
             h, w = self.config.image_size
-            frames = self.image_head(flat).view(b, t, h, w, 3)
+            if frame_steps is None:
+                frames = self.image_head(flat).view(b, t, h, w, 3)
+            else:
+                rows = (frame_steps + torch.arange(b, device=flat.device).unsqueeze(1) * t).reshape(-1)
+                frames = self.image_head(flat.index_select(0, rows)).view(b, frame_steps.shape[1], h, w, 3)
         return DecoderOutput(motor, frames, fast)
 
     # ------------------------------------------------------------------ accounting

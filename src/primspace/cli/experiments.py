@@ -76,6 +76,9 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
         epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
         images: Optional[bool] = typer.Option(None, "--images/--no-images", help="Override whether the vision loss is trained."),
+        vision_frames: Optional[int] = typer.Option(
+            None, "--vision-frames", help="Vision loss on K drawn frames per sequence and step (default: every frame)."
+        ),
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
     ) -> None:
         import importlib
@@ -85,6 +88,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             "inits": name_list(inits, "--inits") if inits is not None else None,
             "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
             "images": images,
+            "vision_frames": vision_frames,
         }
         if epochs is not None:
             fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]

@@ -181,6 +181,9 @@ class ExperimentPreset:
         from primspace.latent import INIT_METHODS
 
         changes = {k: v for k, v in changes.items() if v is not None}
+        if "vision_frames" in changes:  # a training setting: it goes into the preset's TrainConfig
+            changes["train"] = replace(changes.get("train", self.train), vision_frames=changes.pop("vision_frames"))
+            changes["train"].validate()
         unknown = [i for i in changes.get("inits", ()) if i not in INIT_METHODS]
         if unknown:
             raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(INIT_METHODS)}")

@@ -153,6 +153,7 @@ def fit(
     session = Session(
         store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
+        frames_seed=seeds["frames"],
     )
     session.run(ckpt, progress, label="fit")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -232,6 +233,7 @@ def infer(
     session = Session(
         store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
+        frames_seed=seeds["frames"],
     )
     session.run(ckpt, progress, label="infer")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -450,7 +452,7 @@ def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDe
 
 def _seeds(seed: int) -> dict:
     """Independent seeds for each use of randomness, all derived from ``seed``."""
-    names = ("model", "projection", "codes_fit", "codes_infer", "shuffle")
+    names = ("model", "projection", "codes_fit", "codes_infer", "shuffle", "frames")  # append only: keeps the others
     values = np.random.SeedSequence(int(seed)).generate_state(len(names), dtype=np.uint32)
     return {name: int(v) for name, v in zip(names, values)}
 

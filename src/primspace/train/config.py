@@ -43,6 +43,13 @@ class TrainConfig:
     motor_weight, vision_weight : float
         ``w_m``, ``w_v`` of the loss (module docstring). ``vision_weight = 0`` skips the
         image head.
+    vision_frames : int, optional
+        Compute the vision loss of each training step on this many frames per sequence,
+        drawn uniformly without replacement (a fresh draw per sequence and step, from
+        the run's seed): an unbiased estimate of the all-frame loss and of its gradient,
+        at about ``K / T`` of the image head's cost. None (default) or ``>= T``: every
+        frame, the exact loss. Epoch 0 and :func:`~primspace.train.evaluate` always use
+        every frame; logged training epochs report the estimate.
     seed : int
         Seeds the weights, ``P``, random codes and the batch order.
     device : str
@@ -75,6 +82,7 @@ class TrainConfig:
     final_lr_fraction: float = 1.0
     motor_weight: float = 1.0
     vision_weight: float = 1.0
+    vision_frames: int | None = None
     seed: int = 0
     device: str = "auto"
     amp: bool = False
@@ -100,6 +108,8 @@ class TrainConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise UserError(f"{name} must be a finite number >= 0, got {v}")
+        if self.vision_frames is not None and (not isinstance(self.vision_frames, int) or self.vision_frames < 1):
+            raise UserError(f"vision_frames must be a whole number >= 1 (or None: every frame), got {self.vision_frames}")
         if self.motor_weight == 0 and self.vision_weight == 0:
             raise UserError("motor_weight and vision_weight are both 0: nothing to train")
         if self.checkpoint_every is not None and (not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1):

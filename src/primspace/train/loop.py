@@ -44,14 +44,27 @@ class DataTensors:
         return cls(motor, images)
 
 
-def batch_loss(model, z, idx, tensors: DataTensors, tc: TrainConfig, autocast) -> tuple[torch.Tensor, torch.Tensor]:
-    """The loss of one batch and the detached ``[loss, motor, vision]`` means."""
+def batch_loss(
+    model, z, idx, tensors: DataTensors, tc: TrainConfig, autocast, steps: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The loss of one batch and the detached ``[loss, motor, vision]`` means.
+
+    ``steps`` (B, K): the vision loss on those frames of each sequence only (every
+    frame when None).
+    """
     use_images = tensors.images is not None
     with autocast:
-        out = model(z, images=use_images)
+        out = model(z, images=use_images, frame_steps=steps if use_images else None)
     motor = F.mse_loss(out.motor.float(), tensors.motor.index_select(0, idx))
     if use_images:
-        target = tensors.images.index_select(0, idx).to(torch.float32).div_(255.0)
+        if steps is None:
+            target = tensors.images.index_select(0, idx)
+        else:
+            n, t = tensors.images.shape[:2]
+            rows = (idx.unsqueeze(1) * t + steps).reshape(-1)
+            target = tensors.images.view(n * t, *tensors.images.shape[2:]).index_select(0, rows)
+            target = target.view(*steps.shape, *tensors.images.shape[2:])
+        target = target.to(torch.float32).div_(255.0)
         vision = F.mse_loss(out.images.float(), target)
         loss = tc.motor_weight * motor + tc.vision_weight * vision
     else:
@@ -97,13 +110,18 @@ class Session:
     def __init__(
         self, *, store: RunDirectory | None, config: dict, model: MTRNNDecoder, theta_opt, table: LatentTable,
         scaler: JointScaler, initializer: LatentInitializer, data: MotionDataset, use_images: bool,
-        tc: TrainConfig, device: torch.device, shuffle_seed: int,
+        tc: TrainConfig, device: torch.device, shuffle_seed: int, frames_seed: int = 0,
     ) -> None:
         self.store, self.config, self.model, self.theta_opt = store, config, model, theta_opt
         self.table, self.scaler, self.initializer, self.tc, self.device = table, scaler, initializer, tc, device
         self.tensors = DataTensors.build(data, scaler, use_images, device)
         self.use_images = use_images
         self.generator = torch.Generator().manual_seed(shuffle_seed)
+        length = self.tensors.motor.shape[1]
+        k = tc.vision_frames
+        # the vision loss on K drawn frames per sequence (None: every frame, the exact loss)
+        self.frames = None if not use_images or k is None or k >= length else (k, length)
+        self.frame_generator = torch.Generator().manual_seed(frames_seed) if self.frames else None
         self.initial_codes = table.codes.detach().cpu().clone()
         self.history: list[dict] = []
         self.epoch = 0
@@ -120,7 +138,7 @@ class Session:
         return checkpoint_state(
             config=self.config, epoch=self.epoch, model=self.model, theta_opt=self.theta_opt, table=self.table,
             initial_codes=self.initial_codes, scaler=self.scaler, initializer=self.initializer,
-            generator=self.generator,
+            generator=self.generator, frame_generator=self.frame_generator,
         )
 
     # ------------------------------------------------------------------------ loop
@@ -179,7 +197,7 @@ class Session:
         for start in range(0, self.n, tc.batch_size):
             idx = order[start : start + tc.batch_size]
             z = table.batch(idx)
-            loss, parts = batch_loss(model, z, idx, self.tensors, tc, autocast)
+            loss, parts = batch_loss(model, z, idx, self.tensors, tc, autocast, self._draw_frames(idx.numel()))
             if train_theta:
                 self.theta_opt.zero_grad(set_to_none=True)
             loss.backward()
@@ -190,6 +208,14 @@ class Session:
             table.step(idx, z.grad.mul_(idx.numel()))
             sums += parts.double() * idx.numel()
         return sums
+
+    def _draw_frames(self, batch: int) -> torch.Tensor | None:
+        """K distinct steps per sequence, uniformly drawn (None: every frame)."""
+        if self.frames is None:
+            return None
+        k, length = self.frames
+        steps = torch.rand(batch, length, generator=self.frame_generator).argsort(dim=1)[:, :k]
+        return steps.to(self.device)
 
     def _log(self, epoch: int, values: dict, seconds: float) -> None:
         line = {"epoch": epoch, **values, "seconds": round(seconds, 6), "samples_per_s": round(self.n / max(seconds, 1e-9), 3)}
@@ -209,5 +235,5 @@ class Session:
         self.epoch = self._last_checkpoint = ckpt.epoch
         self._checkpoint_time = time.monotonic()
         self.initial_codes = ckpt.initial_codes
-        restore_rng(ckpt.rng, self.generator)
+        restore_rng(ckpt.rng, self.generator, self.frame_generator)
         self.history = self.store.history_through(self.epoch) if self.store is not None else []

@@ -209,12 +209,22 @@ def save_npy(path: Path, array: np.ndarray) -> None:
 def checkpoint_state(
     *, config: dict, epoch: int, model: torch.nn.Module, theta_opt, table, initial_codes: torch.Tensor,
     scaler: JointScaler, initializer: LatentInitializer, generator: torch.Generator,
+    frame_generator: torch.Generator | None = None,
 ) -> dict:
     """Everything a run needs to continue bit-identically, as one dict (``checkpoint.pt``).
 
     ``theta_opt`` is None while inferring (θ frozen). The RNG states are the batch-order
-    generator's and the process's global torch, Python and NumPy generators.
+    generator's, the frame-drawing generator's (``vision_frames`` runs only) and the
+    process's global torch, Python and NumPy generators.
     """
+    rng = {
+        "shuffle": generator.get_state(),
+        "torch": torch.get_rng_state(),
+        "python": random.getstate(),
+        "numpy": _numpy_state(),
+    }
+    if frame_generator is not None:
+        rng["frames"] = frame_generator.get_state()
     return {
         "format": CHECKPOINT_FORMAT,
         "kind": config["kind"],
@@ -225,12 +235,7 @@ def checkpoint_state(
         "initial_codes": initial_codes,
         "scaler": scaler.to_dict(),
         "initializer": initializer.state_dict(),
-        "rng": {
-            "shuffle": generator.get_state(),
-            "torch": torch.get_rng_state(),
-            "python": random.getstate(),
-            "numpy": _numpy_state(),
-        },
+        "rng": rng,
         "config": config,
     }
 
@@ -264,9 +269,11 @@ def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoi
         raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
 
 
-def restore_rng(rng: dict, generator: torch.Generator) -> None:
-    """Put the batch-order generator and the global generators back where a checkpoint saved them."""
+def restore_rng(rng: dict, generator: torch.Generator, frame_generator: torch.Generator | None = None) -> None:
+    """Put the batch-order and frame-drawing generators and the global generators back where a checkpoint saved them."""
     generator.set_state(rng["shuffle"])
+    if frame_generator is not None:
+        frame_generator.set_state(rng["frames"])
     torch.set_rng_state(rng["torch"])
     random.setstate(_to_tuple(rng["python"]))
     _set_numpy_state(rng["numpy"])
