@@ -8,6 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
+import primspace.data.importers.frames
 import primspace.data.indices
 import primspace.data.schema
 from primspace.data import DatasetWriter, MotionDataset, check_indices, read_indices
@@ -71,7 +72,7 @@ def test_a_shard_dict_writes_through_arrays_of(tmp_path):
     np.testing.assert_array_equal(back.labels, [0, -1])
 
 
-@pytest.mark.parametrize("module", [primspace.data.schema, primspace.data.indices])
+@pytest.mark.parametrize("module", [primspace.data.schema, primspace.data.indices, primspace.data.importers.frames])
 def test_module_examples_run(module):
     assert doctest.testmod(module, optionflags=doctest.ELLIPSIS).failed == 0
 

@@ -12,7 +12,7 @@ import typer
 from primspace.errors import UserError
 
 from primspace.cli.app import app
-from primspace.cli.options import check_workers, echo_json
+from primspace.cli.options import check_workers, echo_json, name_list
 
 
 # ============================================================================ data
@@ -22,50 +22,132 @@ class ImportFormat(str, Enum):
     npz = "npz"
     csv = "csv"
     lasa = "lasa"
+    robomimic = "robomimic"
+    lerobot = "lerobot"
+
+
+_FRAME_FORMATS = ("robomimic", "lerobot")  # formats that take --joints and --images
 
 
 @app.command("import")
 def import_command(
     src: Optional[Path] = typer.Argument(
-        None, help="A .npz file, a folder of CSV files, or nothing / 'lasa' for --format lasa."
+        None, help="A .npz file, a folder of CSV files, a robomimic .hdf5 file, a LeRobot data set folder, "
+        "or nothing / 'lasa' for --format lasa."
     ),
     format: Optional[ImportFormat] = typer.Option(
         None, "--format", "-f", help="Input format; guessed from SRC when omitted."
     ),
     length: int = typer.Option(..., "--length", "-T", help="Resample every sequence to T steps."),
     out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
+    joints: Optional[str] = typer.Option(
+        None, "--joints", help="robomimic: obs keys, comma-separated, concatenated in this order (required); "
+        "lerobot: state features (default observation.state)."
+    ),
+    images: Optional[str] = typer.Option(
+        None, "--images", help="robomimic: the obs key of the frames (e.g. agentview_image); "
+        "lerobot: the camera feature (e.g. observation.images.top). npz: frames are read from 'images'."
+    ),
+    image_size: Optional[str] = typer.Option(
+        None, "--image-size", help="HxW of the stored frames (default 48x64): resized with an anti-aliasing filter."
+    ),
     shapes: Optional[str] = typer.Option(None, help="lasa: comma-separated shape names (default: 26 single-pattern shapes)."),
     velocities: bool = typer.Option(False, help="lasa: add velocities vx, vy as joints."),
     overwrite: bool = typer.Option(False, help="Replace OUT if it exists."),
 ) -> None:
-    """Import demonstrations (npz, CSV folder, LASA) into a MotionDataset file."""
-    from primspace.data.importers import import_csv_folder, import_lasa, import_npz
+    """Import demonstrations (npz, CSV folder, LASA, robomimic HDF5, LeRobot) into a MotionDataset file.
+
+    Frames: each step takes the recorded frame nearest in time, resized to --image-size.
+    """
     from primspace.files import output_file
 
     source = None if src is None or str(src).lower() == "lasa" else src
     out = output_file(out, inputs=(source,), overwrite=overwrite)
     fmt = format.value if format is not None else _guess_format(src)
+    _check_import_options(fmt, joints, images, image_size)
     if fmt == "lasa":
+        from primspace.data.importers import import_lasa
+
         names = [s.strip() for s in shapes.split(",") if s.strip()] if shapes else None
         ds = import_lasa(length, shapes=names, velocities=velocities)
     elif src is None:
         raise UserError(f"--format {fmt} needs a source path")
-    elif fmt == "npz":
-        ds = import_npz(src, length)
     else:
-        ds = import_csv_folder(src, length)
+        ds = _import_file(fmt, src, length, joints, images, _parse_image_size(image_size))
     ds.save(out, overwrite=overwrite)
-    typer.echo(f"wrote {out}: {len(ds)} samples x {ds.length} steps x {ds.n_joints} joints")
+    frames = f", frames {ds.image_size[0]}x{ds.image_size[1]}" if ds.has_images else ""
+    typer.echo(f"wrote {out}: {len(ds)} samples x {ds.length} steps x {ds.n_joints} joints{frames}")
+
+
+def _import_file(fmt: str, src: Path, length: int, joints: Optional[str], images: Optional[str], size):
+    """Run the importer of ``fmt`` on ``src``."""
+    from primspace.data import importers
+
+    if fmt == "npz":
+        return importers.import_npz(src, length, image_size=size)
+    if fmt == "csv":
+        return importers.import_csv_folder(src, length)
+    keys = name_list(joints, "--joints") if joints is not None else None
+    if fmt == "robomimic":
+        return importers.import_robomimic(src, length, joints=keys or (), images=images, image_size=size)
+    return importers.import_lerobot(
+        src, length, joints=keys or ("observation.state",), images=images, image_size=size
+    )
+
+
+def _check_import_options(fmt: str, joints, images, image_size) -> None:
+    """Refuse flags the format does not take (one line naming the flag)."""
+    if fmt not in _FRAME_FORMATS:
+        for flag, value in (("--joints", joints), ("--images", images)):
+            if value is not None:
+                raise UserError(f"{flag} applies to --format robomimic or lerobot, not {fmt}")
+    if image_size is not None and (fmt in ("csv", "lasa") or (fmt in _FRAME_FORMATS and not images)):
+        raise UserError(f"--image-size {image_size}: there are no frames to resize (--format {fmt}"
+                        f"{' without --images' if fmt in _FRAME_FORMATS else ''})")
+
+
+def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
+    """``"48x64"`` -> ``(48, 64)``, a size the decoder's image head can produce."""
+    from primspace.data.importers import DEFAULT_IMAGE_SIZE
+    from primspace.model_config import ModelConfig, check_image_size
+
+    if text is None:
+        return DEFAULT_IMAGE_SIZE
+    parts = text.lower().replace(" ", "").split("x")
+    if len(parts) != 2 or not all(p.isdigit() and int(p) > 0 for p in parts):
+        raise UserError(f"--image-size must be HxW in pixels, e.g. 48x64; got '{text}'")
+    size = (int(parts[0]), int(parts[1]))
+    try:
+        check_image_size(size, ModelConfig().image_channels)
+    except UserError as exc:
+        raise UserError(f"--image-size {text}: {exc}") from None
+    return size
 
 
 def _guess_format(src: Optional[Path]) -> str:
+    """The format of ``src``; an HDF5 file is robomimic only when it is a ``.hdf5`` file with
+    ``data/demo_N`` groups (a ``.h5`` file is usually a primspace data set already)."""
     if src is None or str(src).lower() == "lasa":
         return "lasa"
     if src.is_dir():
-        return "csv"
-    if src.suffix.lower() == ".npz":
+        from primspace.data.importers import is_lerobot_dir
+
+        return "lerobot" if is_lerobot_dir(src) else "csv"
+    suffix = src.suffix.lower()
+    if suffix == ".npz":
         return "npz"
-    raise UserError(f"{src}: cannot tell the format; pass --format npz|csv|lasa")
+    if suffix == ".hdf5":
+        from primspace.data.importers import looks_like_robomimic
+
+        if not src.exists() or looks_like_robomimic(src):
+            return "robomimic"
+        raise UserError(f"{src}: cannot tell the format (an HDF5 file without data/demo_N groups); pass --format")
+    if suffix == ".h5":
+        raise UserError(
+            f"{src}: cannot tell the format of a .h5 file (usually a primspace data set, which needs no import); "
+            "pass --format robomimic for a robomimic-style file"
+        )
+    raise UserError(f"{src}: cannot tell the format; pass --format npz|csv|lasa|robomimic|lerobot")
 
 
 @app.command("info")

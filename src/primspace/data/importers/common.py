@@ -1,0 +1,77 @@
+"""Helpers shared by the importers: checked resampling, labels, names, the resampled ``dt``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from primspace.data.resample import resample
+from primspace.data.values import as_float32
+from primspace.errors import DataError
+
+__all__ = ["resample_located", "parse_labels", "opt_names", "resampled_dt", "natural_key"]
+
+
+def resample_located(sequences: list, length: int) -> np.ndarray:
+    """Check each sequence (numbers, rank, not empty, fits float32), then resample to ``length``.
+
+    Raises
+    ------
+    DataError
+        Naming field ``motor`` and the sample index (the caller adds the file).
+    """
+    for i, seq in enumerate(sequences):
+        a = np.asarray(seq)
+        if a.dtype.kind not in "fiu" or a.dtype == bool:
+            raise DataError(f"must be numbers, got {a.dtype}", field="motor", index=i)
+        if a.ndim not in (1, 2):
+            raise DataError(f"a sequence must be (T_i, J), got shape {a.shape}", field="motor", index=i)
+        if a.shape[0] == 0:
+            raise DataError("has length 0 (an empty sequence)", field="motor", index=i)
+        # before resampling: name the value as given, not the inf it would become
+        as_float32(a if a.ndim == 2 else a[:, None], "motor", None, index=i)
+    return resample(sequences, length)
+
+
+def parse_labels(labels, label_names, n: int):
+    """``labels`` (ints, -1 unknown, or strings) and their names, for ``n`` sequences.
+
+    Returns
+    -------
+    (labels or None, label names or None)
+        String labels become indices into ``label_names`` (default: the sorted strings).
+    """
+    if labels is None:
+        return None, opt_names(label_names)
+    labels = np.asarray(labels).reshape(-1) if np.ndim(labels) else np.asarray(labels)
+    if labels.ndim != 1 or labels.shape[0] != n:
+        raise DataError(f"{labels.size} labels for {n} sequences", field="labels")
+    if labels.dtype.kind in "US":
+        names = opt_names(label_names) or sorted(set(labels.astype(str)))
+        ids = []
+        for i, lab in enumerate(labels.astype(str)):
+            if lab not in names:
+                raise DataError(f"label {lab!r} is not among label_names", field="labels", index=i)
+            ids.append(names.index(lab))
+        return np.array(ids, dtype=np.int32), names
+    if labels.dtype.kind not in "iu":
+        raise DataError(f"must be integers or strings, got {labels.dtype}", field="labels")
+    return labels, opt_names(label_names)  # MotionDataset checks the range, then casts to int32
+
+
+def opt_names(names) -> list[str] | None:
+    """Names as a list of str (None stays None)."""
+    if names is None:
+        return None
+    return [str(s) for s in np.asarray(names).reshape(-1)]
+
+
+def resampled_dt(dt_in: float, lengths: list[int], length: int) -> float:
+    """Seconds per output step, keeping each demonstration's duration on average."""
+    if not np.isfinite(dt_in) or dt_in <= 0:
+        raise DataError(f"must be a positive number, got {dt_in}", field="dt")
+    return float(dt_in * np.mean([max(t - 1, 1) for t in lengths]) / (length - 1))
+
+
+def natural_key(name: str, prefix: str) -> int:
+    """The number of ``prefix_<n>`` (``demo_10`` -> 10), for natural numeric order."""
+    return int(name[len(prefix) + 1 :])
