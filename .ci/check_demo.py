@@ -2,16 +2,20 @@
 
 Usage: python .ci/check_demo.py DEMO_OUT SUMMARY_TXT
 Fails (exit 1, one line per problem) unless the report has every section with its
-figures embedded as PNG, the results files hold every grid run with no failure (and the
-data summary, Appendix A and latent-figure results the report reads), every recorded
-motion passes the judge, and the printed summary gives a verdict.
+figures embedded as PNG and one small animated GIF per primitive (the report < 8 MB), the
+results files hold every grid run with no failure (and the data summary, Appendix A and
+latent-figure results the report reads), every recorded motion passes the judge, and the
+printed summary gives a verdict.
 """
 
 import base64
+import io
 import json
 import re
 import sys
 from pathlib import Path
+
+from PIL import Image
 
 out, summary = Path(sys.argv[1]), Path(sys.argv[2]).read_text()
 problems = []
@@ -27,6 +31,17 @@ for i, data in enumerate(pngs):
     raw = base64.b64decode(data)
     if not raw.startswith(b"\x89PNG\r\n\x1a\n") or len(raw) < 5000:
         problems.append(f"report.html: figure {i} is not a drawn PNG ({len(raw)} bytes)")
+gifs = re.findall(r'src="data:image/gif;base64,([A-Za-z0-9+/=]+)"', html)  # one animation per primitive
+if len(gifs) < 7:
+    problems.append(f"report.html: {len(gifs)} embedded animations, expected one per primitive (7)")
+for i, data in enumerate(gifs):
+    raw = base64.b64decode(data)
+    with Image.open(io.BytesIO(raw)) as gif:
+        frames = gif.n_frames if gif.format == "GIF" else 0
+    if frames < 2 or len(raw) > 300_000:
+        problems.append(f"report.html: animation {i} is not an animated GIF under 300 kB ({frames} frames, {len(raw)} bytes)")
+if len(html) > 8_000_000:
+    problems.append(f"report.html: {len(html) / 1e6:.1f} MB, expected a light report (< 8 MB)")
 intra = json.loads((out / "results/intra.json").read_text())
 if intra["failures"] or len(intra["runs"]) != 8:
     problems.append(f"results/intra.json: {len(intra['runs'])} runs (expected 8), failures {intra['failures']}")
@@ -41,4 +56,4 @@ if not re.search(r"paper's qualitative result .*: (HOLDS|DOES NOT HOLD)", summar
 if problems:
     print("\n".join(problems))
     sys.exit(1)
-print(f"demo check: report with {len(pngs)} figures, 8 intra runs, recorded motions all pass; ok")
+print(f"demo check: report with {len(pngs)} figures, {len(gifs)} animations, 8 intra runs, recorded motions all pass; ok")

@@ -48,6 +48,17 @@ def _csv(values) -> str:
     return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
 
 
+def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path]):
+    """The data set and its --indices selection, once --out is known to lie outside every input."""
+    from primspace.data.dataset import MotionDataset
+    from primspace.data.indices import read_indices
+    from primspace.files import check_outside_inputs
+
+    check_outside_inputs(out, (file, indices, other))
+    ds = MotionDataset.load(file)
+    return ds, (read_indices(indices, ds) if indices is not None else None)
+
+
 @app.command("train")
 def train_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
@@ -66,6 +77,10 @@ def train_command(
     ),
     motor_weight: float = typer.Option(_TC.motor_weight, "--motor-weight"),
     vision_weight: float = typer.Option(_TC.vision_weight, "--vision-weight"),
+    vision_frames: Optional[int] = typer.Option(
+        _TC.vision_frames, "--vision-frames",
+        help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
+    ),
     layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
     taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
     image_channels: str = typer.Option(_csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."),
@@ -83,9 +98,6 @@ def train_command(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
 ) -> None:
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
-    from primspace.data.dataset import MotionDataset
-    from primspace.files import check_outside_inputs
-    from primspace.data.indices import read_indices
     from primspace.train import configure_process, fit
 
     mc = replace(
@@ -94,12 +106,10 @@ def train_command(
     )
     tc = replace(
         _TC, epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
-        motor_weight=motor_weight, vision_weight=vision_weight, seed=seed, device=device, amp=amp, threads=threads,
+        motor_weight=motor_weight, vision_weight=vision_weight, vision_frames=vision_frames, seed=seed, device=device, amp=amp, threads=threads,
         checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
     ).validate()
-    check_outside_inputs(out, (file, indices, weights_from))
-    ds = MotionDataset.load(file)
-    idx = read_indices(indices, ds) if indices is not None else None
+    ds, idx = _inputs(out, file, indices, weights_from)
     configure_process(tc)
     run = fit(
         ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
@@ -127,18 +137,13 @@ def infer_command(
     overwrite: bool = typer.Option(False, "--overwrite"),
 ) -> None:
     """Find latent codes for new samples with the trained weights frozen."""
-    from primspace.data.dataset import MotionDataset
-    from primspace.files import check_outside_inputs
-    from primspace.data.indices import read_indices
     from primspace.train import configure_process, infer
 
     overrides = {"device": device, "amp": amp, "threads": threads}
     for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed)):
         if value is not None:
             overrides[name] = value
-    check_outside_inputs(out, (run, file, indices))
-    ds = MotionDataset.load(file)
-    idx = read_indices(indices, ds) if indices is not None else None
+    ds, idx = _inputs(out, file, indices, run)
     configure_process(replace(_TC, device=device, amp=amp, threads=threads).validate())
     result = infer(
         run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
@@ -157,16 +162,43 @@ def reconstruct_command(
     overwrite: bool = typer.Option(False, "--overwrite"),
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
-    from primspace.data.dataset import MotionDataset
-    from primspace.files import output_file
     import numpy as np
 
     from primspace.plots import plot_reconstruction, reconstruction_title, save_figure
-    from primspace.train import check_run_data, load_run, reconstruct
+    from primspace.train import reconstruct
+
+    out, trained, ds, row = run_sample(run, sample, out, data, frames, overwrite)
+    motor, generated = reconstruct(trained, trained.latents[row : row + 1])  # the model runs here, not in plots
+    truth = ds.subset([int(sample)])
+    images = None if truth.images is None else np.asarray(truth.images)[0]
+    primitive = None if truth.labels is None or truth.labels[0] < 0 else truth.label_names[truth.labels[0]]
+    fig = plot_reconstruction(
+        truth.motor[0], motor[0], images=images, generated_images=None if generated is None else generated[0],
+        joint_names=truth.joint_names, dt=truth.dt, n_frames=frames,
+        title=reconstruction_title(sample, primitive, trained.kind, trained.init, trained.model_config.latent_dim),
+    )
+    save_figure(fig, out)
+    typer.echo(f"wrote {out}")
+
+
+def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: int, overwrite: bool, min_frames: int = 1):
+    """What ``reconstruct`` and ``animate`` check and load: the output, ``--frames``, the
+    run, its data file (``--data`` or the run's) and that ``sample`` is one the run used.
+
+    Returns
+    -------
+    (Path, TrainedRun, MotionDataset, int)
+        The checked output, the run, its data set and the sample's row in the run's codes.
+    """
+    import numpy as np
+
+    from primspace.data.dataset import MotionDataset
+    from primspace.files import output_file
+    from primspace.train import check_run_data, load_run
 
     out = output_file(out, inputs=(run, data), overwrite=overwrite)
-    if frames < 1:
-        raise UserError(f"--frames {frames}: must be at least 1")
+    if frames < min_frames:
+        raise UserError(f"--frames {frames}: must be at least {min_frames}")
     trained = load_run(run)
     path = data if data is not None else trained.data_path
     if path is None:
@@ -179,15 +211,4 @@ def reconstruct_command(
         raise UserError(f"sample {sample} is not one of the run's {len(trained.indices)} samples ({shown})")
     if not 0 <= int(sample) < len(ds):
         raise UserError(f"sample {sample} out of range for {len(ds)} samples")
-    row = int(rows[0])
-    motor, generated = reconstruct(trained, trained.latents[row : row + 1])  # the model runs here, not in plots
-    truth = ds.subset([int(sample)])
-    images = None if truth.images is None else np.asarray(truth.images)[0]
-    primitive = None if truth.labels is None or truth.labels[0] < 0 else truth.label_names[truth.labels[0]]
-    fig = plot_reconstruction(
-        truth.motor[0], motor[0], images=images, generated_images=None if generated is None else generated[0],
-        joint_names=truth.joint_names, dt=truth.dt, n_frames=frames,
-        title=reconstruction_title(sample, primitive, trained.kind, trained.init, trained.model_config.latent_dim),
-    )
-    save_figure(fig, out)
-    typer.echo(f"wrote {out}")
+    return out, trained, ds, int(rows[0])

@@ -1,7 +1,7 @@
 """The experiments' figures, drawn from their results files alone.
 
 Each function reads ``OUT/results`` (JSON and arrays, :mod:`primspace.experiments.results`)
-and writes PNGs to ``OUT/figures``; none loads a model or the data set, so a figure can be
+and writes PNGs (and the animations' GIFs) to ``OUT/figures``; none loads a model or the data set, so a figure can be
 redrawn from a finished experiment directory. The experiments call them when they end.
 Imports no experiment.
 """
@@ -10,9 +10,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from primspace.experiments.results import LATENT_RESULTS, figure_file, read_arrays, read_results
+from primspace.experiments.results import (
+    ANIMATION_RESULTS,
+    LATENT_RESULTS,
+    animation_file,
+    figure_file,
+    read_arrays,
+    read_results,
+)
 
-__all__ = ["draw_intra", "draw_latent", "draw_inter", "draw_latent_accuracy"]
+__all__ = ["draw_intra", "draw_latent", "draw_animations", "draw_inter", "draw_latent_accuracy"]
 
 
 def draw_intra(out_dir: str | Path) -> list[Path]:
@@ -56,6 +63,26 @@ def draw_latent(out_dir: str | Path) -> list[Path]:
             title=plots.reconstruction_title(r["sample"], r["primitive"], r["kind"], r["init"], r["latent_dim"]),
         )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, f"reconstruction_{r['name']}")))
+    return drawn
+
+
+def draw_animations(out_dir: str | Path) -> list[Path]:
+    """One GIF per primitive (:func:`primspace.plots.draw_animation`, at most the results'
+    ``max_frames`` frames) from ``intra_animation``: recorded, generated and replayed frames
+    beside the joint trace."""
+    from primspace import plots
+
+    meta, arrays = read_results(out_dir, ANIMATION_RESULTS), read_arrays(out_dir, ANIMATION_RESULTS)
+    if meta is None or arrays is None:
+        return []
+    drawn = []
+    for k, a in enumerate(meta["animations"]):
+        motion = {key: arrays.get(f"{k}_{key}") for key in ("images", "generated_images", "replay_images")}
+        drawn.append(plots.draw_animation(
+            animation_file(out_dir, a["name"]), arrays[f"{k}_motor"], arrays[f"{k}_generated_motor"], **motion,
+            joint_names=a["joint_names"], dt=a["dt"], title=a["title"], max_frames=meta["max_frames"],
+            frame_ms=meta["frame_ms"],
+        ))
     return drawn
 
 

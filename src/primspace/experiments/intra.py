@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments import figures
+from primspace.experiments.animations import write_animations
 from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.results import LATENT_RESULTS
@@ -122,6 +123,7 @@ def run_intra(exp: ExperimentDir) -> dict:
         _write_latent_results(exp, results)
     run_appendix_a(exp)
     figures.draw_intra(exp.path)
+    write_animations(exp, results)
     return results
 
 

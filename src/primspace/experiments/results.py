@@ -10,13 +10,15 @@ Files of ``OUT``::
     experiment.json        preset, data file, backend, timings per stage, versions
     results/<name>.json    each experiment's numbers (intra, clustering, success, inter,
                            data, appendix_a)
-    results/<name>.npz     arrays the figures are drawn from (intra_latent: codes, reconstructions)
-    figures/<name>.png     each experiment's figures
+    results/<name>.npz     arrays the figures are drawn from (intra_latent: codes, reconstructions;
+                           intra_animation: each primitive's recorded, generated and replayed motion)
+    figures/<name>.png     each experiment's figures (figures/animation_<primitive>.gif: animations)
 """
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +29,13 @@ from primspace.errors import UserError, first_line
 __all__ = [
     "META_FILE",
     "LATENT_RESULTS",
+    "ANIMATION_RESULTS",
     "LEARNED_CODES",
     "INITIAL_CODES",
     "results_file",
     "arrays_file",
     "figure_file",
+    "animation_file",
     "read_results",
     "read_arrays",
     "read_meta",
@@ -48,6 +52,9 @@ META_FILE = "experiment.json"
 
 #: The results (JSON + arrays) the latent-space and reconstruction figures are drawn from.
 LATENT_RESULTS = "intra_latent"
+
+#: The results (JSON + arrays) the per-primitive animations are drawn from.
+ANIMATION_RESULTS = "intra_animation"
 
 # the "codes" of a latent clustering row: codes after training, or the projection before it
 LEARNED_CODES = "learned"
@@ -70,6 +77,13 @@ def arrays_file(out_dir: str | Path, name: str) -> Path:
 def figure_file(out_dir: str | Path, name: str) -> Path:
     """Where figure ``name`` is drawn: ``OUT/figures/<name>.png``."""
     return Path(out_dir) / "figures" / f"{name}.png"
+
+
+def animation_file(out_dir: str | Path, name: str) -> Path:
+    """Where the animation of ``name`` (a primitive) is drawn: ``OUT/figures/animation_<name>.gif``
+    (characters other than letters, digits, ``-``, ``_`` and ``.`` replaced by ``_``)."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(name))
+    return Path(out_dir) / "figures" / f"animation_{safe}.gif"
 
 
 def _read_json(path: Path, what: str) -> Any:

@@ -1,4 +1,5 @@
-"""Every figure primspace draws (matplotlib, Agg backend, written atomically as PNG).
+"""Every figure primspace draws (matplotlib, Agg backend, written atomically as PNG, or
+as an animated GIF by :mod:`~primspace.plots.animation`).
 
 Functions take arrays and results (never a model or a run directory) and return a
 :class:`matplotlib.figure.Figure`; :func:`save_figure` writes it and closes it. Figures
@@ -8,12 +9,14 @@ name the paper's figure they reproduce in their docstring.
 - :mod:`~primspace.plots.samples`: one motion (frames and joints), recorded against generated.
 - :mod:`~primspace.plots.clustering`: affinity and predicted labels, τ sweeps, accuracy per R².
 - :mod:`~primspace.plots.training`: loss curves, the convergence figures, the latent PCA.
+- :mod:`~primspace.plots.animation`: one motion as an animated GIF (Pillow), size-bounded.
 """
 
 import matplotlib
 
 matplotlib.use("Agg")  # headless: never needs a display; before any pyplot import below
 
+from primspace.plots.animation import animation_frames, draw_animation, save_gif  # noqa: E402
 from primspace.plots.base import INIT_COLORS, save_figure  # noqa: E402
 from primspace.plots.clustering import plot_accuracy_vs_r2, plot_clustering, plot_tau_sweep  # noqa: E402
 from primspace.plots.samples import (  # noqa: E402
@@ -37,4 +40,7 @@ __all__ = [
     "plot_loss_curves",
     "plot_intra_losses",
     "plot_latent_pca",
+    "animation_frames",
+    "save_gif",
+    "draw_animation",
 ]

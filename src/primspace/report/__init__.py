@@ -3,9 +3,10 @@
 ``primspace report DIR`` (and every experiment, when it ends) writes ``DIR/report.html``:
 a summary of the findings, then one section per experiment that has results in ``DIR``
 (intra-primitive generalisation, clustering, success rates, inter-primitive
-generalisation, latent-space figures, reconstructions, the Appendix A check), then the
-configuration, software versions and timings. PNG figures are embedded as base64, so the
-file can be mailed or attached to a paper's supplementary material as it is.
+generalisation, latent-space figures, reconstructions, animations, the Appendix A
+check), then the configuration, software versions and timings. PNG figures and the
+animated GIFs (one per primitive) are embedded as base64, so the file can be mailed or
+attached to a paper's supplementary material as it is.
 
 The report reads results and computes nothing; it imports no experiment (only the
 results readers :mod:`primspace.experiments.results` and :mod:`primspace.experiments.claims`).

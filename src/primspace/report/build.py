@@ -27,6 +27,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.success, "success"),
     (sections.inter, "inter"),
     (sections.latent_figures, "intra"),
+    (sections.animations, "intra_animation"),
     (sections.appendix_a, "appendix_a"),
 )
 

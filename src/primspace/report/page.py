@@ -1,4 +1,4 @@
-"""The HTML page: headings, paragraphs, notes, tables and embedded PNG figures.
+"""The HTML page: headings, paragraphs, notes, tables and embedded figures (PNG, animated GIF).
 
 :class:`HtmlReport` knows nothing of experiments; :mod:`primspace.report.sections` fills
 it from an experiment directory's results. (Named ``page``, not ``html``, so that it
@@ -15,6 +15,9 @@ from typing import Any, Sequence
 from primspace.files import atomic_write_text
 
 __all__ = ["HtmlReport"]
+
+# the figure files a report embeds, by suffix
+_MIME = {".png": "image/png", ".gif": "image/gif"}
 
 _CSS = """
 body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 0 auto;
@@ -37,7 +40,7 @@ nav a { margin-right: 1em; }
 
 
 class HtmlReport:
-    """Build an HTML page from headings, text, tables and PNG figures.
+    """Build an HTML page from headings, text, tables and PNG or GIF figures.
 
     Examples
     --------
@@ -76,15 +79,18 @@ class HtmlReport:
         cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
         self._parts.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
 
-    def figure(self, png: str | Path, caption: str = "") -> None:
-        """Embed a PNG file (skipped with a note if it does not exist)."""
-        png = Path(png)
-        if not png.exists():
-            self.note(f"figure missing: {png.name}", "warn")
+    def figure(self, image: str | Path, caption: str = "") -> None:
+        """Embed a PNG or (animated) GIF file (skipped with a note if it does not exist)."""
+        image = Path(image)
+        if not image.exists():
+            self.note(f"figure missing: {image.name}", "warn")
             return
-        data = base64.b64encode(png.read_bytes()).decode("ascii")
+        mime = _MIME.get(image.suffix.lower())
+        if mime is None:
+            raise ValueError(f"{image.name}: only {', '.join(_MIME)} figures can be embedded")
+        data = base64.b64encode(image.read_bytes()).decode("ascii")
         cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-        self._parts.append(f'<figure><img alt="{html.escape(png.stem)}" src="data:image/png;base64,{data}">{cap}</figure>')
+        self._parts.append(f'<figure><img alt="{html.escape(image.stem)}" src="data:{mime};base64,{data}">{cap}</figure>')
 
     def code(self, text: str) -> None:
         self._parts.append(f"<pre>{html.escape(text)}</pre>")

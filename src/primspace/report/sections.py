@@ -1,6 +1,6 @@
 """The report's sections, each written from an experiment directory's results files.
 
-A section reads ``OUT/experiment.json``, ``OUT/results/*.json`` and the PNGs of
+A section reads ``OUT/experiment.json``, ``OUT/results/*.json`` and the PNGs and GIFs of
 ``OUT/figures`` (through :mod:`primspace.experiments.results` and
 :mod:`primspace.experiments.claims`, which import no experiment) and computes nothing:
 no model is loaded, no data set is read, nothing is drawn or sampled. A section whose
@@ -15,7 +15,9 @@ from pathlib import Path
 
 from primspace.experiments.claims import check_claims, claims_table
 from primspace.experiments.results import (
+    ANIMATION_RESULTS,
     INITIAL_CODES,
+    animation_file,
     failed_criteria_table,
     final_loss_table,
     figure_file,
@@ -38,6 +40,7 @@ __all__ = [
     "success",
     "inter",
     "latent_figures",
+    "animations",
     "appendix_a",
     "environment",
 ]
@@ -211,6 +214,26 @@ def latent_figures(out_dir: Path, report: HtmlReport) -> None:
         else:
             caption = "Generated (dashed, lower frames) against recorded (solid, upper frames) — the paper's Appendix B."
         report.figure(fig, caption)
+
+
+def animations(out_dir: Path, report: HtmlReport) -> None:
+    """One animated GIF per primitive (``results/intra_animation.json`` names them), the
+    ones drawn; a missing GIF is left out."""
+    results = read_results(out_dir, ANIMATION_RESULTS)
+    shown = [a for a in (results or {}).get("animations", []) if animation_file(out_dir, a["name"]).exists()]
+    if not shown:
+        return
+    report.section("Motions, animated")
+    report.paragraph(
+        "One evaluation sample per primitive, from the run the reconstructions above come from. Camera panels "
+        "(left to right, where present): the recorded frames, the frames the code generates, and the simulator "
+        "replaying the generated joints (the block moved as the success judge sees it). Right: every joint, "
+        "recorded (solid) and generated (dashed), with a cursor at the frame's time. Time is subsampled to at most "
+        f"{results['max_frames']} frames, each shown for {results['frame_ms'] / 1000:g} s (not real time)."
+    )
+    for a in shown:
+        panels = ", ".join(a.get("panels", [])) or "no camera frames"
+        report.figure(animation_file(out_dir, a["name"]), f"{a['title']}. Panels: {panels}.")
 
 
 def appendix_a(out_dir: Path, report: HtmlReport) -> None:

@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 from primspace.errors import UserError, first_line  # noqa: E402
 from primspace.sim.scene import Scene  # noqa: E402
 
-__all__ = ["Camera", "MAX_IMAGE_SIZE"]
+__all__ = ["Camera", "MAX_IMAGE_SIZE", "replay_frames"]
 
 #: Largest (H, W) the offscreen buffer of the scene holds.
 MAX_IMAGE_SIZE = (480, 640)
@@ -83,3 +83,44 @@ class Camera:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def replay_frames(joints, params, primitive, height: int = 48, width: int = 64, scene: Scene | None = None) -> np.ndarray:
+    """The camera's view of a joint trajectory replayed in the simulator, e.g. a
+    generated motion: what :func:`primspace.sim.generate.simulate_sample` renders.
+
+    The block moves as the success judge sees it (:func:`primspace.sim.rollout.replay`
+    with the primitive's push axis and direction).
+
+    Parameters
+    ----------
+    joints : array-like, shape (T, 9)
+        7 arm angles (rad) and 2 finger positions (m) per step.
+    params : array-like, shape (3,)
+        ``block_x, block_y, block_size`` (m).
+    primitive : str or int
+        The primitive's name or label index (it says whether the fingers push the block).
+    height, width : int
+        Frame size in pixels.
+    scene : Scene, optional
+        A scene to reuse (building one takes ~0.7 s); a new one by default.
+
+    Returns
+    -------
+    ndarray, shape (T, height, width, 3), uint8
+    """
+    from primspace.sim.primitives import get_primitive
+    from primspace.sim.rollout import replay
+
+    scene = Scene() if scene is None else scene
+    joints = np.asarray(joints, dtype=float)
+    x, y, size = (float(v) for v in np.asarray(params, dtype=float).reshape(3))
+    prim = get_primitive(primitive)
+    rollout = replay(scene, joints, (x, y), size, prim.push_axis, prim.push_sign)
+    frames = np.empty((len(joints), height, width, 3), dtype=np.uint8)
+    with Camera(scene, height, width) as camera:
+        for t in range(len(joints)):
+            scene.set_joints(joints[t])
+            scene.data.mocap_pos[scene.block_mocap] = rollout.block[t]
+            camera.render(out=frames[t])
+    return frames
