@@ -146,7 +146,8 @@ def _write_latent_results(exp: ExperimentDir, results: dict) -> None:
     recons = _reconstructions(exp, intra_run_dir(exp.path, init, q, seed) / "infer", arrays)
     meta = {
         "latent_dim": q, "seed": seed, "inits": inits, "label_names": list(data.label_names),
-        "primitive": 0, "reconstructions": recons,
+        # the paper's figure shows one primitive's codes: the first label that has samples
+        "primitive": int(min((lab for lab in data.labels if lab >= 0), default=0)), "reconstructions": recons,
     }
     exp.write_results(LATENT_RESULTS, meta)
     exp.write_arrays(LATENT_RESULTS, arrays)
