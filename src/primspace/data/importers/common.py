@@ -75,3 +75,23 @@ def resampled_dt(dt_in: float, lengths: list[int], length: int) -> float:
 def natural_key(name: str, prefix: str) -> int:
     """The number of ``prefix_<n>`` (``demo_10`` -> 10), for natural numeric order."""
     return int(name[len(prefix) + 1 :])
+
+
+def demonstrations(sequences: list, length: int, frames, *, source: str, images: str | None, dt_in: float,
+                   where, **fields):
+    """The :class:`~primspace.data.MotionDataset` of imported demonstrations: joints resampled to
+    ``length`` steps, frames (an :class:`~primspace.data.importers.frames.AlignedFrames` or None)
+    stacked, the source text naming the image key and the frames' sizes; a :class:`DataError`
+    is located at ``where`` (the file or directory read). ``fields``: labels, names ..."""
+    from primspace.data.dataset import MotionDataset
+
+    try:
+        motor = resample_located(sequences, length)
+        if frames is not None:
+            source += f" images={images}; {frames.describe()}"
+        return MotionDataset(
+            motor=motor, images=None if frames is None else frames.stack(),
+            dt=resampled_dt(dt_in, [len(seq) for seq in sequences], length), source=source, **fields,
+        )
+    except DataError as exc:
+        raise exc.located(path=where) from None

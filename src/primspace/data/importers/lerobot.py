@@ -36,7 +36,7 @@ from typing import Sequence
 import numpy as np
 
 from primspace.data.dataset import MotionDataset
-from primspace.data.importers.common import resample_located, resampled_dt
+from primspace.data.importers.common import demonstrations
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames
 from primspace.errors import DataError, UserError, first_line
 
@@ -106,25 +106,16 @@ def import_lerobot(
 
 def _dataset(root, info, sequences, frames, episodes, length, *, joints, names, images) -> MotionDataset:
     """The :class:`MotionDataset` of the episodes read."""
+    fps = info.get("fps")
+    dt_in = 1.0 / float(fps) if isinstance(fps, (int, float)) and fps > 0 else 1.0
     try:
-        motor = resample_located(sequences, length)
-        fps = info.get("fps")
-        dt_in = 1.0 / float(fps) if isinstance(fps, (int, float)) and fps > 0 else 1.0
         labels, label_names = _labels(episodes)
-        source = f"lerobot:{root.resolve().name} joints={','.join(joints)}"
-        if frames is not None:
-            source += f" images={images}; {frames.describe()}"
-        return MotionDataset(
-            motor=motor,
-            images=None if frames is None else frames.stack(),
-            labels=labels,
-            label_names=label_names,
-            joint_names=names,
-            dt=resampled_dt(dt_in, [len(s) for s in sequences], length),
-            source=source,
-        )
     except DataError as exc:
         raise exc.located(path=root) from None
+    return demonstrations(
+        sequences, length, frames, source=f"lerobot:{root.resolve().name} joints={','.join(joints)}", images=images,
+        dt_in=dt_in, where=root, labels=labels, label_names=label_names, joint_names=names,
+    )
 
 
 def is_lerobot_dir(path: str | os.PathLike) -> bool:

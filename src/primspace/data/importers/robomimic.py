@@ -29,7 +29,7 @@ import h5py
 import numpy as np
 
 from primspace.data.dataset import MotionDataset
-from primspace.data.importers.common import natural_key, resample_located, resampled_dt
+from primspace.data.importers.common import demonstrations, natural_key
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, check_frames
 from primspace.errors import DataError, first_line
 
@@ -86,20 +86,10 @@ def import_robomimic(
                 check_frames(dataset, len(sequences[i]), path=path, field=images, index=i)
                 frames.add(len(sequences[i]), lambda idx, d=dataset, i=i: _read_frames(d, idx, path, images, i))
         dt_in = _control_dt(f)
-    try:
-        motor = resample_located(sequences, length)
-        source = f"robomimic:{path.name} joints={','.join(joints)}"
-        if frames is not None:
-            source += f" images={images}; {frames.describe()}"
-        return MotionDataset(
-            motor=motor,
-            images=None if frames is None else frames.stack(),
-            joint_names=names,
-            dt=resampled_dt(dt_in, [len(s) for s in sequences], length),
-            source=source,
-        )
-    except DataError as exc:
-        raise exc.located(path=path) from None
+    return demonstrations(
+        sequences, length, frames, source=f"robomimic:{path.name} joints={','.join(joints)}", images=images,
+        dt_in=dt_in, where=path, joint_names=names,
+    )
 
 
 def looks_like_robomimic(path: str | os.PathLike) -> bool:
