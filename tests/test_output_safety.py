@@ -352,3 +352,12 @@ def test_indices_out_of_range_name_the_index_file_and_the_data(run_cli, data_fil
 def test_generate_refuses_a_zero_frame_size_even_without_images(run_cli, tmp_path):
     assert_user_error(run_cli("generate", "--no-images", "--height", 0, "--out", tmp_path / "g.h5"), "height")
     assert not (tmp_path / "g.h5").exists()
+
+
+@pytest.mark.parametrize("command", ["reconstruct", "animate"])
+def test_drawing_a_run_never_writes_over_its_data_file(run_cli, fit_run, data_file, command):
+    """The run's data file is an input even when --data is not given (it comes from the run)."""
+    before = data_file.read_bytes()
+    result = run_cli(command, fit_run, "--sample", 0, "--out", data_file, "--overwrite")
+    assert_user_error(result, str(data_file), "is the input")
+    assert data_file.read_bytes() == before

@@ -196,13 +196,14 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     from primspace.files import output_file
     from primspace.train import check_run_data, load_run
 
-    out = output_file(out, inputs=(run, data), overwrite=overwrite)
     if frames < min_frames:
         raise UserError(f"--frames {frames}: must be at least {min_frames}")
     trained = load_run(run)
     path = data if data is not None else trained.data_path
     if path is None:
         raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
+    # the data file is an input even when it is the run's (not given as --data): never written over
+    out = output_file(out, inputs=(run, path), overwrite=overwrite)
     ds = MotionDataset.load(path)
     check_run_data(trained, ds)
     rows = np.flatnonzero(trained.indices == int(sample))
