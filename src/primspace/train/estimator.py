@@ -20,7 +20,6 @@ from sklearn.base import BaseEstimator
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
-from primspace.latent import INIT_METHODS
 from primspace.model import ModelConfig
 from primspace.train.api import evaluate, fit, infer, reconstruct
 from primspace.train.config import TrainConfig
@@ -92,8 +91,6 @@ class AutoDecoder(BaseEstimator):
 
         ``resume`` / ``overwrite`` apply to ``checkpoint_dir`` (as in :func:`~primspace.train.fit`).
         """
-        if self.init not in INIT_METHODS:
-            raise UserError(f"unknown latent init '{self.init}'; choose one of {', '.join(INIT_METHODS)}")
         self.run_ = fit(
             X, self.checkpoint_dir, model_config=self.model_config, train_config=self.train_config,
             init=self.init, images=self.images, resume=resume, overwrite=overwrite, progress=self.progress,

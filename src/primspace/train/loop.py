@@ -176,11 +176,9 @@ class Session:
         bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
         if bad:
             what = "loss" if bad[0] == "loss" else f"{bad[0]} loss"
-            kept = f"the last good checkpoint (epoch {self._last_checkpoint}) is kept" if self.store else "nothing was saved"
-            raise TrainingDivergedError(
-                f"{self.name}: the {what} became {values[bad[0]]} in epoch {self.epoch + 1}; "
-                f"stopped, {kept} (lower the learning rates, then resume)"
-            )
+            then = (f"the last good checkpoint (epoch {self._last_checkpoint}) is kept (lower the learning "
+                    "rates, then resume)") if self.store else "nothing was saved (lower the learning rates and run again)"
+            raise TrainingDivergedError(f"{self.name}: the {what} became {values[bad[0]]} in epoch {self.epoch + 1}; stopped, {then}")
 
     def _train_epoch(self) -> torch.Tensor:
         model, table, tc = self.model, self.table, self.tc
