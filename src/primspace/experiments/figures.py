@@ -12,6 +12,7 @@ from pathlib import Path
 
 from primspace.experiments.results import (
     ANIMATION_RESULTS,
+    IMAGE_STRIPS,
     LATENT_RESULTS,
     animation_file,
     figure_file,
@@ -69,7 +70,8 @@ def draw_latent(out_dir: str | Path) -> list[Path]:
 def draw_animations(out_dir: str | Path) -> list[Path]:
     """One GIF per primitive (:func:`primspace.plots.draw_animation`, at most the results'
     ``max_frames`` frames) from ``intra_animation``: recorded, generated and replayed frames
-    beside the joint trace."""
+    beside the joint trace; and, when the frames were generated, one still figure of
+    generated against recorded frames of every primitive (``figures/image_strips.png``)."""
     from primspace import plots
 
     meta, arrays = read_results(out_dir, ANIMATION_RESULTS), read_arrays(out_dir, ANIMATION_RESULTS)
@@ -83,6 +85,17 @@ def draw_animations(out_dir: str | Path) -> list[Path]:
             joint_names=a["joint_names"], dt=a["dt"], title=a["title"], max_frames=meta["max_frames"],
             frame_ms=meta["frame_ms"],
         ))
+    strips = [
+        (a["name"], arrays[f"{k}_images"], arrays[f"{k}_generated_images"]) for k, a in enumerate(meta["animations"])
+        if f"{k}_images" in arrays and f"{k}_generated_images" in arrays
+    ]
+    if strips:
+        a = meta["animations"][0]
+        fig = plots.plot_image_strips(
+            strips, title=f"Generated against recorded frames, one evaluation sample per primitive "
+            f"({a['kind']} run, init {a['init']}, q={a['latent_dim']})",
+        )
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, IMAGE_STRIPS)))
     return drawn
 
 

@@ -26,6 +26,7 @@ from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.results import LATENT_RESULTS
 from primspace.experiments.runs import (
+    all_frame_losses,
     curves,
     experiment_scaler,
     focus_runs,
@@ -35,7 +36,7 @@ from primspace.experiments.runs import (
     load_run_data,
     train_configs,
 )
-from primspace.experiments.sweep import GridPoint
+from primspace.experiments.sweep import GridPoint, complete_result
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = ["split_indices", "run_intra", "run_intra_point"]
@@ -91,6 +92,7 @@ def run_intra_point(
         "n_eval": len(eval_idx),
         "fit": curves(fitted.history),
         "infer": curves(inferred.history),
+        "final": all_frame_losses(fitted, inferred, data) if use_images else None,
         "fit_seconds": round(fit_seconds, 2),
         "seconds": round(time.perf_counter() - start, 2),
     }
@@ -111,6 +113,7 @@ def run_intra(exp: ExperimentDir) -> dict:
                 points.append(GridPoint(intra_key(init, q, seed), args))
     with exp.stage("intra"):
         grid = exp.grid(run_intra_point, points, "intra-primitive runs")
+    _complete_final_losses(exp, grid.results)
     runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
     results = {
         "runs": runs,
@@ -125,6 +128,22 @@ def run_intra(exp: ExperimentDir) -> dict:
     figures.draw_intra(exp.path)
     write_animations(exp, results)
     return results
+
+
+def _complete_final_losses(exp: ExperimentDir, results: dict) -> None:
+    """Give each finished run that lacks them (finished by primspace < 0.3.1) its
+    :func:`all_frame_losses`, stored in its result once."""
+    from primspace.train import load_run
+
+    missing = [key for key, result in results.items() if "final" not in result]
+    if not missing:
+        return
+    data, use_images = load_run_data(str(exp.data_path), exp.preset)
+    for key in missing:
+        r = results[key]
+        run_dir = intra_run_dir(exp.path, r["init"], r["latent_dim"], r["seed"])
+        final = all_frame_losses(load_run(run_dir / "fit"), load_run(run_dir / "infer"), data) if use_images else None
+        results[key] = complete_result(exp.path, key, {"final": final})
 
 
 # ----------------------------------------------------------- arrays of the figures

@@ -56,6 +56,9 @@ LATENT_RESULTS = "intra_latent"
 #: The results (JSON + arrays) the per-primitive animations are drawn from.
 ANIMATION_RESULTS = "intra_animation"
 
+#: The figure of generated against recorded frames per primitive (drawn with the animations).
+IMAGE_STRIPS = "image_strips"
+
 # the "codes" of a latent clustering row: codes after training, or the projection before it
 LEARNED_CODES = "learned"
 INITIAL_CODES = "initial (P m, untrained)"
@@ -134,13 +137,23 @@ def final(curve: list) -> float:
 
 
 def final_loss_table(results: dict) -> tuple[list[str], list[list]]:
-    """Intra: rows ``init, q, seed, fit loss, eval loss at epoch 0, eval loss at the end``."""
+    """Intra: rows ``init, q, seed, fit loss, eval loss at epoch 0, eval loss at the end``;
+    for runs with images also the final motor and vision losses recomputed on every frame
+    (the run's ``final``) and the vision loss as PSNR."""
+    with_images = any(r.get("final") for r in results["runs"])
     rows = []
     for r in sorted(results["runs"], key=lambda r: (r["latent_dim"], r["seed"], r["init"])):
         fit_loss = [h["loss"] for h in r["fit"]]
         eval_loss = [h["loss"] for h in r["infer"]]
-        rows.append([r["init"], r["latent_dim"], r["seed"], final(fit_loss), eval_loss[0], final(eval_loss)])
-    return ["init", "q", "seed", "final fit loss", "eval loss before inference", "final eval loss"], rows
+        row = [r["init"], r["latent_dim"], r["seed"], final(fit_loss), eval_loss[0], final(eval_loss)]
+        if with_images:
+            f = r.get("final") or {}
+            row += [(f.get(phase) or {}).get(k) for phase in ("fit", "infer") for k in ("motor", "vision", "psnr")]
+        rows.append(row)
+    columns = ["init", "q", "seed", "final fit loss", "eval loss before inference", "final eval loss"]
+    if with_images:
+        columns += [f"{phase} {k} (all frames)" for phase in ("fit", "eval") for k in ("motor", "vision", "PSNR dB")]
+    return columns, rows
 
 
 def qualitative_check(results: dict) -> tuple[bool | None, str]:

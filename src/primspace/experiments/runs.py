@@ -28,6 +28,8 @@ __all__ = [
     "focus_runs",
     "load_codes",
     "initial_codes",
+    "all_frame_losses",
+    "psnr",
 ]
 
 
@@ -120,3 +122,34 @@ def initial_codes(exp: ExperimentDir, init: str, latent_dim: int, seed: int) -> 
     z0 = np.empty((len(exp.dataset()), latent_dim))
     z0[fitted.indices], z0[inferred.indices] = fitted.initial_latents, inferred.initial_latents
     return z0
+
+
+def psnr(mse: float | None) -> float | None:
+    """Peak signal-to-noise ratio in dB of a per-pixel mean squared error of frames in
+    [0, 1]: ``10 log10(1 / MSE)`` (None for None)."""
+    return None if mse is None else float(10.0 * np.log10(1.0 / max(mse, 1e-12)))
+
+
+def all_frame_losses(fitted, inferred, data: MotionDataset) -> dict | None:
+    """The final losses of an intra run recomputed on *every* frame, for runs that
+    trained the vision loss (None otherwise).
+
+    A run with ``vision_frames = K`` logs a K-frame estimate of the vision loss at each
+    epoch; this is the exact loss of its final codes (:func:`primspace.train.evaluate`,
+    all T frames), with vision also as PSNR (:func:`psnr`).
+
+    Returns
+    -------
+    dict or None
+        ``{"fit": {...}, "infer": {...}}``, each with ``loss``, ``motor``, ``vision``
+        (per-pixel MSE of frames in [0, 1]) and ``psnr`` (dB).
+    """
+    from primspace.train import evaluate
+
+    out = {}
+    for phase, run in (("fit", fitted), ("infer", inferred)):
+        losses = evaluate(run, data, indices=run.indices, batch_size=256)
+        if losses["vision"] is None:
+            return None
+        out[phase] = losses | {"psnr": psnr(losses["vision"])}
+    return out

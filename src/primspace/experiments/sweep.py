@@ -21,7 +21,7 @@ from typing import Any, Callable, Sequence
 from primspace.files import atomic_write_json, atomic_write_text
 from primspace.parallel import run_jobs
 
-__all__ = ["GridPoint", "GridResult", "run_grid", "RESULT_FILE", "ERROR_FILE"]
+__all__ = ["GridPoint", "GridResult", "run_grid", "complete_result", "RESULT_FILE", "ERROR_FILE"]
 
 RESULT_FILE = "result.json"
 ERROR_FILE = "error.txt"
@@ -102,6 +102,16 @@ def run_grid(
             run_dir.mkdir(parents=True, exist_ok=True)
             atomic_write_text(run_dir / ERROR_FILE, (outcome.traceback or outcome.error) + "\n")
     return grid
+
+
+def complete_result(out_dir: str | Path, key: str, extra: dict) -> dict:
+    """Add ``extra`` to the stored result of the finished grid point ``key`` (written
+    atomically) and return the whole result: for values a later version computes
+    from a finished run, so that old runs are completed once instead of re-run."""
+    path = run_dir_of(out_dir, key) / RESULT_FILE
+    value = json.loads(path.read_text()) | extra
+    atomic_write_json(path, value)
+    return value
 
 
 def _run_point(fn: Callable[..., Any], run_dir: str, args: tuple) -> Any:

@@ -20,6 +20,7 @@ from primspace.plots.animation import animation_frames, draw_animation, save_gif
 from primspace.plots.base import INIT_COLORS, save_figure  # noqa: E402
 from primspace.plots.clustering import plot_accuracy_vs_r2, plot_clustering, plot_tau_sweep  # noqa: E402
 from primspace.plots.samples import (  # noqa: E402
+    plot_image_strips,
     plot_motion_sample,
     plot_reconstruction,
     plot_sim_sample,
@@ -33,6 +34,7 @@ __all__ = [
     "plot_motion_sample",
     "plot_sim_sample",
     "plot_reconstruction",
+    "plot_image_strips",
     "reconstruction_title",
     "plot_clustering",
     "plot_tau_sweep",

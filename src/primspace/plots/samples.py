@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["plot_motion_sample", "plot_sim_sample", "plot_reconstruction", "reconstruction_title"]
+__all__ = ["plot_motion_sample", "plot_sim_sample", "plot_reconstruction", "plot_image_strips", "reconstruction_title"]
 
 
 def plot_motion_sample(
@@ -162,6 +162,45 @@ def plot_reconstruction(
         motor, images, joint_names=joint_names, generated_motor=generated_motor,
         generated_images=None if images is None else generated_images, n_frames=n_frames, dt=dt, title=title,
     )
+
+
+def plot_image_strips(strips: Sequence[tuple[str, np.ndarray, np.ndarray]], n_frames: int = 8, title: str = "") -> Figure:
+    """Generated against recorded camera frames, one pair of rows per primitive.
+
+    Parameters
+    ----------
+    strips : sequence of (name, recorded, generated)
+        ``recorded`` and ``generated``: (T, H, W, 3) uint8 frames of one sample.
+    n_frames : int
+        Frames per row, evenly spaced in time (the same steps in every row).
+    title : str
+    """
+    if not strips:
+        raise ValueError("plot_image_strips needs at least one (name, recorded, generated) strip")
+    t_len = min(min(len(rec), len(gen)) for _, rec, gen in strips)
+    n_frames = min(n_frames, t_len)
+    steps = np.linspace(0, t_len - 1, n_frames).round().astype(int)
+    height, width = np.asarray(strips[0][1]).shape[1:3]
+    fig_height = 1.3 * 2 * len(strips) + 0.8
+    fig, axes = plt.subplots(
+        2 * len(strips), n_frames, squeeze=False, figsize=(1.3 * n_frames * width / height + 0.5, fig_height)
+    )
+    for k, (name, recorded, generated) in enumerate(strips):
+        for half, (frames, kind) in enumerate(((recorded, "recorded"), (generated, "generated"))):
+            row = 2 * k + half
+            for col, t in enumerate(steps):
+                ax = axes[row, col]
+                ax.imshow(np.asarray(frames[t]))
+                ax.set_xticks([])
+                ax.set_yticks([])
+                if row == 0:
+                    ax.set_title(f"t={t}", fontsize=8)
+                if col == 0:
+                    ax.set_ylabel(f"{name}\n{kind}", fontsize=7)
+    fig.subplots_adjust(wspace=0.03, hspace=0.08, left=0.07, right=0.99, bottom=0.01, top=1 - 0.7 / fig_height)
+    if title:
+        fig.suptitle(title, fontsize=10, y=1 - 0.1 / fig_height, va="top")
+    return fig
 
 
 def reconstruction_title(sample: int, primitive: str | None, kind: str, init: str, latent_dim: int) -> str:

@@ -16,6 +16,7 @@ from pathlib import Path
 from primspace.experiments.claims import check_claims, claims_table
 from primspace.experiments.results import (
     ANIMATION_RESULTS,
+    IMAGE_STRIPS,
     INITIAL_CODES,
     animation_file,
     failed_criteria_table,
@@ -234,6 +235,9 @@ def animations(out_dir: Path, report: HtmlReport) -> None:
     for a in shown:
         panels = ", ".join(a.get("panels", [])) or "no camera frames"
         report.figure(animation_file(out_dir, a["name"]), f"{a['title']}. Panels: {panels}.")
+    strips = figure_file(out_dir, IMAGE_STRIPS)
+    if strips.exists():
+        report.figure(strips, "The same samples as stills: generated frames under recorded frames, per primitive.")
 
 
 def appendix_a(out_dir: Path, report: HtmlReport) -> None:
