@@ -22,6 +22,12 @@ class ClusterAffinity(str, Enum):
     abs = "abs"
 
 
+class ClusterAutoCriterion(str, Enum):
+    relative_eigengap = "relative_eigengap"
+    eigengap = "eigengap"
+    stability = "stability"
+
+
 class ClusterSpectral(str, Enum):
     auto = "auto"
     dense = "dense"
@@ -39,8 +45,14 @@ def cluster_command(
     tau_relative: Optional[float] = typer.Option(
         None, "--tau-relative", help="Scale-free tau: tau = R / sigma_1^2 (keeps sigma_k / sigma_1 > 1/sqrt(R))."
     ),
-    r2: Optional[float] = typer.Option(
-        None, "--r2", help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1) (default 0.99)."
+    r2: Optional[str] = typer.Option(
+        None, "--r2", metavar="TARGET|auto", help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1) (default 0.99); "
+        "'auto': the target of the R^2 grid that --auto-criterion prefers, without labels."
+    ),
+    auto_criterion: ClusterAutoCriterion = typer.Option(
+        ClusterAutoCriterion.relative_eigengap, "--auto-criterion",
+        help="With --r2 auto: eigengap of the normalised affinity at k relative to 1 - lambda_{k+1} (default), "
+        "the plain eigengap, or label stability across subsamples.",
     ),
     linear: bool = typer.Option(False, "--linear", help="Linear subspaces (no ones row) instead of affine."),
     affinity: ClusterAffinity = typer.Option(ClusterAffinity.squared, help="W = Q*^2 (scales) or |Q*| (dense only)."),
@@ -63,13 +75,15 @@ def cluster_command(
 
     check_outside_inputs(out, (src, labels))
     check_output_directory(out, overwrite)
-    _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init)
+    r2_target = _parse_r2(r2)
+    _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
     points = load_points(src, labels)
     if k > points.X.shape[0]:
         raise UserError(f"--k {k} exceeds the {points.X.shape[0]} samples in {src}")
-    options = {"affine": not linear, "tau": tau, "tau_relative": tau_relative, "r2_target": r2, "affinity": affinity.value,
-               "ones_weight": ones_weight, "spectral": spectral.value, "n_init": n_init, "random_state": seed}
+    options = {"affine": not linear, "tau": tau, "tau_relative": tau_relative, "r2_target": r2_target,
+               "auto_criterion": auto_criterion.value, "affinity": affinity.value, "ones_weight": ones_weight,
+               "spectral": spectral.value, "n_init": n_init, "random_state": seed}
     result = _cluster(src, points, k, options, do_sweep, grid)
     record = {"input": str(src), "points": points.description, **result.to_dict()}
     _write_outputs(out, overwrite, src, result, record)
@@ -123,6 +137,10 @@ def _print_summary(out: Path, result) -> None:
         f"tau {result.tau:.4g} (relative {result.tau_relative:.4g}), R^2 {result.r2:.4f}, rank {result.rank}, "
         f"spectral {result.spectral_method}, {result.seconds:.2f} s"
     )
+    if result.auto is not None:
+        auto = result.auto
+        scores = ", ".join(f"{g:g}: " + ("-" if v is None else f"{v:.4g}") for g, v in zip(auto["grid"], auto["scores"]))
+        typer.echo(f"tau chosen without labels by {auto['criterion']}: R^2 target {auto['r2_target']:g} ({scores})")
     scores = result.scores
     if scores is not None:
         if scores["accuracy"] is None:
@@ -144,10 +162,20 @@ def _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init) -> Non
     for name, value in (("--tau", tau), ("--tau-relative", tau_relative), ("--ones-weight", ones_weight)):
         if value is not None and not (value > 0 and value != float("inf")):
             raise UserError(f"{name} must be a positive number, got {value}")
-    if r2 is not None and not 0 < r2 < 1:
+    if r2 is not None and r2 != "auto" and not 0 < r2 < 1:
         raise UserError(f"--r2 must lie in (0, 1), got {r2}")
     if n_init < 1:
         raise UserError(f"--n-init must be at least 1, got {n_init}")
+
+
+def _parse_r2(text: str | None) -> float | str | None:
+    """``--r2``: None, ``"auto"`` or a number (its range is checked with the other options)."""
+    if text is None or text.strip().lower() == "auto":
+        return None if text is None else "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise UserError(f"--r2 must be a number in (0, 1) or 'auto', got {text!r}") from None
 
 
 def _parse_float_list(text: str, option: str) -> list[float]:

@@ -8,6 +8,9 @@ Modules
     The Ng-Jordan-Weiss spectral step, dense or implicit (no n x n matrix).
 :mod:`~primspace.cluster.estimator`
     :class:`LowRankSubspaceClustering`, the scikit-learn estimator.
+:mod:`~primspace.cluster.auto`
+    Choosing tau without labels (``r2_target="auto"``): the relative eigengap, the eigengap
+    or the label stability of each R^2 target of the grid, on one SVD.
 :mod:`~primspace.cluster.sweep`
     R^2, rank and scores over a tau grid: clones of the estimator sharing one SVD; the one
     R^2 grid, :data:`R2_GRID`.
@@ -20,6 +23,7 @@ Modules
     The command's input files and output directory.
 """
 
+from primspace.cluster.auto import AUTO_CRITERIA, AutoTauChoice, choose_tau
 from primspace.cluster.estimator import DEFAULT_R2_TARGET, LowRankSubspaceClustering
 from primspace.cluster.lrsc import (
     SelfRepresentationSVD,
@@ -47,6 +51,9 @@ from primspace.cluster.sweep import DEFAULT_R2_GRID, R2_GRID, sweep, tau_sweep
 __all__ = [
     "LowRankSubspaceClustering",
     "DEFAULT_R2_TARGET",
+    "AUTO_CRITERIA",
+    "AutoTauChoice",
+    "choose_tau",
     "SelfRepresentationSVD",
     "self_representation_svd",
     "shrinkage",

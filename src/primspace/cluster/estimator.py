@@ -21,6 +21,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import validate_data
 from threadpoolctl import threadpool_limits
 
+from primspace.cluster.auto import AUTO_CRITERIA, DEFAULT_AUTO_CRITERION, choose_tau
 from primspace.cluster.lrsc import SelfRepresentationSVD, self_representation_svd
 from primspace.cluster.spectral import (
     choose_spectral_method,
@@ -62,11 +63,18 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         of ``Z~``). ``P`` depends on ``tau sigma^2`` only, so a component is kept iff
         ``sigma_k / sigma_1 > 1 / sqrt(tau_relative)``. In the affine case scaling the data by
         c keeps the result only if ``ones_weight`` is scaled by c too.
-    r2_target : float, optional
+    r2_target : float or "auto", optional
         Choose tau as the smallest one whose R^2 of ``Z ~ Z Q*`` reaches this value, in (0, 1)
         (how the paper chose tau). R^2 = 1 - ||Z - Z Q*||_F^2 / ||Z - mean||_F^2 over the data
-        rows (the ones row does not count); see :mod:`primspace.cluster.lrsc`. Give at most
+        rows (the ones row does not count); see :mod:`primspace.cluster.lrsc`. ``"auto"``:
+        choose the target of :data:`~primspace.cluster.auto.AUTO_R2_GRID` that scores best by
+        ``auto_criterion``, without labels (:mod:`primspace.cluster.auto`). Give at most
         one of tau, tau_relative, r2_target; with none, ``r2_target = 0.99``.
+    auto_criterion : {"relative_eigengap", "eigengap", "stability"}, default "relative_eigengap"
+        The label-free criterion of ``r2_target="auto"`` (ignored otherwise): the eigengap at
+        k of the normalised affinity relative to ``1 - lambda_{k+1}``, the plain eigengap
+        ``lambda_k - lambda_{k+1}``, or the stability of the labels across subsamples
+        (:mod:`primspace.cluster.auto`).
     affinity : {"squared", "abs"}, default "squared"
         ``W = Q* o Q*`` (low rank: scales to millions of points) or ``|Q*|`` (dense only).
     ones_weight : float, default 1.0
@@ -106,6 +114,11 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         :mod:`primspace.cluster.spectral`).
     spectral_method_ : str
         "dense", "gram" or "lobpcg" (the last two implicit: see :mod:`primspace.cluster.spectral`).
+    auto_choice_ : AutoTauChoice or None
+        With ``r2_target="auto"``: every candidate's R^2 target, tau, R^2, rank and score,
+        and the one chosen (:class:`~primspace.cluster.auto.AutoTauChoice`); else None.
+    auto_scores_ : ndarray of shape (n_candidates,) or None
+        ``auto_choice_.scores``: the criterion's score per candidate (NaN: ``Q* = 0``).
     n_features_in_ : int
 
     Examples
@@ -132,7 +145,8 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         "affine": ["boolean"],
         "tau": [Interval(Real, 0, None, closed="neither"), None],
         "tau_relative": [Interval(Real, 0, None, closed="neither"), None],
-        "r2_target": [Interval(Real, 0, 1, closed="neither"), None],
+        "r2_target": [Interval(Real, 0, 1, closed="neither"), StrOptions({"auto"}), None],
+        "auto_criterion": [StrOptions(set(AUTO_CRITERIA))],
         "affinity": [StrOptions({"squared", "abs"})],
         "ones_weight": [Interval(Real, 0, None, closed="neither")],
         "spectral": [StrOptions({"auto", "dense", "implicit"})],
@@ -148,6 +162,7 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         tau=None,
         tau_relative=None,
         r2_target=None,
+        auto_criterion=DEFAULT_AUTO_CRITERION,
         affinity="squared",
         ones_weight=1.0,
         spectral="auto",
@@ -159,6 +174,7 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         self.tau = tau
         self.tau_relative = tau_relative
         self.r2_target = r2_target
+        self.auto_criterion = auto_criterion
         self.affinity = affinity
         self.ones_weight = ones_weight
         self.spectral = spectral
@@ -201,9 +217,13 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
             else:
                 self._check_svd(svd, X.shape[0])
             del X
+            choice = None
+            if tau_option[1] == AUTO:
+                choice = choose_tau(svd, self.n_clusters, criterion=self.auto_criterion, affinity=self.affinity,
+                                    spectral=self.spectral, n_init=self.n_init, random_state=self.random_state)
             result = cluster_at_tau(
                 svd,
-                resolve_tau(svd, *tau_option),
+                resolve_tau(svd, *tau_option) if choice is None else choice.tau,
                 n_clusters=self.n_clusters,
                 affinity=self.affinity,
                 spectral=self.spectral,
@@ -220,6 +240,8 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         self.self_representation_ = result.self_representation
         self.eigenvalues_ = result.eigenvalues
         self.spectral_method_ = result.method
+        self.auto_choice_ = choice
+        self.auto_scores_ = None if choice is None else choice.scores
         return self
 
     def decompose(self, X) -> SelfRepresentationSVD:
@@ -300,12 +322,21 @@ def small_problem_threads(n_samples: int):
 
 
 
-def tau_option_from(tau, tau_relative, r2_target) -> tuple[str, float]:
-    """The one tau option given, as ``(kind, value)``; ``("r2_target", 0.99)`` if none."""
+#: The ``r2_target`` that chooses tau without labels (:mod:`primspace.cluster.auto`).
+AUTO = "auto"
+
+
+def tau_option_from(tau, tau_relative, r2_target) -> tuple[str, float | str]:
+    """The one tau option given, as ``(kind, value)``; ``("r2_target", 0.99)`` if none,
+    ``("r2_target", "auto")`` for the label-free choice."""
     given = [(k, v) for k, v in (("tau", tau), ("tau_relative", tau_relative), ("r2_target", r2_target)) if v is not None]
     if len(given) > 1:
         raise UserError(f"give at most one of tau, tau_relative, r2_target; got {', '.join(k for k, _ in given)}")
     kind, value = given[0] if given else ("r2_target", DEFAULT_R2_TARGET)
+    if kind == "r2_target" and isinstance(value, str):
+        if value != AUTO:
+            raise UserError(f"r2_target must be a number in (0, 1) or {AUTO!r}, got {value!r}")
+        return kind, AUTO
     if kind == "r2_target":
         if not 0 < value < 1:
             raise UserError(f"r2_target must lie in (0, 1), got {value}")

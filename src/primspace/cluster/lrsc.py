@@ -51,6 +51,7 @@ import numpy as np
 from primspace.errors import UserError
 
 __all__ = [
+    "R2_GRID",
     "SelfRepresentationSVD",
     "self_representation_svd",
     "shrinkage",
@@ -60,6 +61,12 @@ __all__ = [
 
 # Above this many matrix entries, a tall Z~ (n >= 10 p) is decomposed through its p x p Gram
 # matrix, without copying Z~: 0.75 s against 4.7 s for LAPACK's SVD at n = 1e6, p = 41.
+#: The R^2 grid, the one place it is written: R^2 targets (scale-free, and how the paper
+#: picked tau). ``primspace cluster --sweep`` and the clustering experiment sweep it
+#: (:mod:`primspace.cluster.sweep`); ``r2_target="auto"`` chooses among it
+#: (:mod:`primspace.cluster.auto`).
+R2_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.995, 0.999, 0.9999)
+
 _GRAM_SVD_MIN_ENTRIES = 2_000_000
 _GRAM_SVD_ROW_BLOCK = 65_536
 

@@ -57,7 +57,8 @@ class ClusteringResult:
     ones_weight : float
     tau_option : dict
         The tau option the fit was given, ``{"tau" | "tau_relative" | "r2_target": value}``
-        (``{"r2_target": 0.99}`` when none was).
+        (``{"r2_target": 0.99}`` when none was; ``{"r2_target": "auto"}`` for the label-free
+        choice).
     tau, tau_relative, r2 : float
         As the estimator's ``tau_``, ``tau_relative_``, ``r2_``.
     rank : int
@@ -82,6 +83,10 @@ class ClusteringResult:
     figure_factor : ndarray of shape (len(figure_indices), rank)
         Those rows of ``F`` (``Q* = F F^T``): the figure's affinity is
         ``affinity_from_factor(figure_factor, affinity)`` (:meth:`figure_affinity`).
+    auto : dict or None
+        With ``r2_target="auto"``: ``criterion``, the chosen ``r2_target``, the candidate
+        ``grid`` and the criterion's ``scores`` (:meth:`AutoTauChoice.to_dict
+        <primspace.cluster.auto.AutoTauChoice.to_dict>`); else None.
     """
 
     n_samples: int
@@ -108,6 +113,7 @@ class ClusteringResult:
     label_names: list[str] | None
     figure_indices: np.ndarray = field(repr=False)
     figure_factor: np.ndarray = field(repr=False)
+    auto: dict | None = None
 
     def to_dict(self, *, include_arrays: bool = False) -> dict:
         """JSON-ready summary (numpy converted, NaN as None).
@@ -116,7 +122,8 @@ class ClusteringResult:
         ``affinity``, ``ones_weight``, ``tau_option``, ``tau``, ``tau_relative``, ``r2``,
         ``rank``, ``spectral_method``, ``eigenvalues``, ``singular_values`` (the first
         :data:`SINGULAR_VALUES_SHOWN`), ``n_init``, ``seed``, ``seconds`` (rounded to ms),
-        ``scores``, ``sweep`` (rows without labels); with ``include_arrays`` also
+        ``scores``, ``sweep`` (rows without labels), and ``auto`` after ``tau_option`` when
+        tau was chosen without labels; with ``include_arrays`` also
         ``label_names`` and :meth:`arrays` as lists, enough for :meth:`from_dict`.
         """
         out = {
@@ -127,6 +134,7 @@ class ClusteringResult:
             "affinity": self.affinity,
             "ones_weight": self.ones_weight,
             "tau_option": self.tau_option,
+            **({} if self.auto is None else {"auto": self.auto}),
             "tau": self.tau,
             "tau_relative": self.tau_relative,
             "r2": self.r2,
@@ -147,9 +155,11 @@ class ClusteringResult:
 
     def summary(self) -> dict:
         """``tau``, ``r2``, ``rank``, ``accuracy``, ``nmi``, ``ari``: one row of a results table
-        (the scores None without true labels)."""
+        (the scores None without true labels); ``auto_criterion`` too when tau was chosen
+        without labels."""
         scores = self.scores or {}
-        return {"tau": self.tau, "r2": self.r2, "rank": self.rank} | {k: scores.get(k) for k in ("accuracy", "nmi", "ari")}
+        row = {"tau": self.tau, "r2": self.r2, "rank": self.rank} | {k: scores.get(k) for k in ("accuracy", "nmi", "ari")}
+        return row if self.auto is None else row | {"auto_criterion": self.auto["criterion"]}
 
     def arrays(self) -> dict:
         """The per-sample arrays (for ``np.savez``): labels, labels_true (if any), figure data."""
@@ -261,6 +271,7 @@ def _result(model, shape, seconds, labels_true, label_names, rows) -> Clustering
         label_names=None if label_names is None else list(label_names),
         figure_indices=shown,
         figure_factor=model.representation_factor_[shown],
+        auto=None if model.auto_choice_ is None else model.auto_choice_.to_dict(),
     )
 
 

@@ -19,15 +19,12 @@ from sklearn.base import clone
 from sklearn.utils import check_array
 
 from primspace.cluster.estimator import LowRankSubspaceClustering, resolve_tau, small_problem_threads, tau_option_from
-from primspace.cluster.lrsc import SelfRepresentationSVD
+from primspace.cluster.lrsc import R2_GRID, SelfRepresentationSVD
 from primspace.cluster.metrics import clustering_scores
 from primspace.errors import UserError
 
 __all__ = ["sweep", "tau_sweep", "R2_GRID", "DEFAULT_R2_GRID", "TAU_PARAMETERS"]
 
-#: The R^2 grid, the one place it is written: R^2 targets (scale-free, and how the paper
-#: picked tau). ``primspace cluster --sweep`` and the clustering experiment sweep it.
-R2_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.995, 0.999, 0.9999)
 
 #: Former name of :data:`R2_GRID` (the same tuple).
 DEFAULT_R2_GRID = R2_GRID
