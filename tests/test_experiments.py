@@ -391,3 +391,37 @@ def test_tiny_experiment_numbers_are_pinned(finished):
     })
     assert {i: g["overall"] for i, g in success["generated"].items()} == {"zero": 0.0, "projection": 0.0}
     assert success["recorded"]["overall"] == 1.0
+
+
+def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path):
+    """The intra-primitive protocol on LASA (issue 14): the preset imports the data itself
+    (offline), fits 2 of each shape's 7 demonstrations and infers the other 5."""
+    from primspace.experiments.presets import PRESETS
+
+    preset = PRESETS["lasa"].with_overrides(latent_dims=(4,), seeds=(0,), fit_epochs=2, infer_epochs=2, inits=("zero", "projection"))
+    preset = replace(preset, cluster_latent_dim=4)
+    exp = ExperimentDir(tmp_path / "lasa", preset, workers=1, progress=False)
+    results = run_intra(exp)
+    data = exp.dataset()
+    assert data.source.startswith("lasa:") and len(data) == 182 and len(data.label_names) == 26
+    assert results["splits"]["0"] == {"n_train": 52, "n_eval": 130}
+    assert {r["init"] for r in results["runs"]} == {"zero", "projection"}
+    clustering = run_clustering(exp)
+    assert {r["init"] for r in clustering["latent"]} >= {"zero", "projection"}
+
+
+def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tmp_path, run_cli):
+    from primspace.cli.experiments import _judgeable_steps
+    from primspace.data import import_lasa
+    from primspace.errors import DataError
+    from primspace.experiments.presets import PRESETS
+
+    lasa = tmp_path / "lasa.h5"
+    import_lasa(length=20, shapes=["Angle", "Sine"]).save(lasa)
+    exp = ExperimentDir(tmp_path / "out", PRESETS["lasa"], data=lasa, workers=1, progress=False)
+    steps = ("intra:run_intra", "success:run_success", "inter:run_inter")
+    assert _judgeable_steps(exp, "all", steps) == ("intra:run_intra", "inter:run_inter")
+    with pytest.raises(DataError):
+        _judgeable_steps(exp, "success", steps)
+    res = run_cli("experiment", "success", "--preset", "lasa", "--data", lasa, "--out", tmp_path / "out2")
+    assert res.code == 2 and "judging needs" in res.err and len(res.err.strip().splitlines()) == 1

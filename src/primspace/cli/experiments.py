@@ -57,13 +57,32 @@ def _finish(exp, report: bool) -> None:
         )
 
 
+def _judgeable_steps(exp, name: str, steps: tuple[str, ...]) -> tuple[str, ...]:
+    """``steps``, checked up front (before hours of training) that the simulator can judge
+    the data when success is one of them. ``experiment all`` on data it cannot judge (LASA,
+    imported demonstrations) leaves the success step out, with a note, instead of failing."""
+    if "success:run_success" not in steps:
+        return steps
+    from primspace.errors import DataError
+    from primspace.sim.success import check_judgeable
+
+    try:
+        check_judgeable(exp.dataset())
+    except DataError as exc:
+        if name != "all":
+            raise
+        typer.echo(f"success: skipped, the simulator cannot judge these data ({exc})")
+        return tuple(s for s in steps if s != "success:run_success")
+    return steps
+
+
 def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
     then print ``table`` (a function of :mod:`primspace.experiments.results`) of the first step's results."""
 
     def command(
         preset: Optional[str] = typer.Option(
-            None, "--preset", help="Experiment preset: demo (CPU, minutes; the default) or paper (GPU recommended)."
+            None, "--preset", help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU).",
         ),
         data: Optional[Path] = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."),
         out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
@@ -94,12 +113,8 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]
             overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
         exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
-        if "success:run_success" in steps and data is not None:
-            from primspace.sim.success import check_judgeable
-
-            check_judgeable(exp.dataset())  # up front: before hours of training, not after
         results = []
-        for step in steps:
+        for step in _judgeable_steps(exp, name, steps):
             module, function = step.split(":")
             results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
         if table is not None:

@@ -22,10 +22,15 @@ from primspace.errors import UserError, config_from_dict
 from primspace.model import ModelConfig
 from primspace.train import TrainConfig
 
-__all__ = ["ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "default_model", "default_train", "resolve_preset"]
+__all__ = [
+    "ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "LASA_DATA", "default_model", "default_train", "resolve_preset",
+]
 
 #: The preset ``primspace experiment`` runs without ``--preset``.
 DEFAULT_PRESET = "demo"
+
+#: The ``data_preset`` that imports the LASA handwriting set instead of simulating.
+LASA_DATA = "lasa"
 
 # Fields of the presets written before they held a ModelConfig and a TrainConfig
 # (experiment.json of older experiment directories): where each one lives now.
@@ -61,7 +66,9 @@ class ExperimentPreset:
     ----------
     name : str
     data_preset : str
-        The simulator preset generated when no ``--data`` is given.
+        The simulator preset generated when no ``--data`` is given, or ``"lasa"``
+        (:data:`LASA_DATA`): the LASA handwriting demonstrations imported (offline,
+        resampled to ``lasa_length``).
     train_fraction : float
         Share of samples that fit θ and Z (the paper: 20%), drawn per primitive.
     inits : tuple of str
@@ -219,6 +226,24 @@ PRESETS: dict[str, ExperimentPreset] = {
         infer_epochs=250,
         train=replace(default_train(), batch_size=16, lr=3e-3, latent_lr=3e-2),
         inter_epochs=(100, 100),
+    ),
+    # The intra-primitive protocol on real demonstrations (issue 14): LASA's 26 shapes x 7
+    # human demonstrations; 2 per shape fit θ and Z, the other 5 are inferred with θ frozen.
+    # Motor only (LASA has no camera); the demo's optimiser (a small data set, like the demo's).
+    "lasa": ExperimentPreset(
+        name="lasa",
+        data_preset=LASA_DATA,
+        train_fraction=0.3,
+        latent_dims=(8, 16),
+        seeds=(0, 1, 2),
+        images=False,
+        fit_epochs=800,
+        infer_epochs=600,
+        train=replace(default_train(), batch_size=16, lr=3e-3, latent_lr=3e-2),
+        cluster_latent_dim=16,
+        lasa_length=61,
+        inter_latent_dim=8,
+        inter_epochs=(200, 200),
     ),
 }
 

