@@ -287,9 +287,14 @@ def test_success_on_data_not_from_the_simulator_fails_before_training(run_cli, d
     res = run_cli("experiment", "success", "--data", data_file, "--out", out)
     assert_user_error(res, str(data_file), "label")
     assert not (out / "runs").exists()
-    res = run_cli("experiment", "all", "--data", data_file, "--out", tmp_path / "exp2")
-    assert_user_error(res, str(data_file))
-    assert not (tmp_path / "exp2" / "runs").exists()
+    # `all` runs what these data allow: the success step is left out, with a note
+    res = run_cli("experiment", "all", "--data", data_file, "--out", tmp_path / "exp2", "--epochs", "2,1",
+                  "--latent-dims", "2", "--inits", "zero")
+    assert res.code == 0, res.err
+    assert f"success: skipped, the simulator cannot judge these data ({data_file}" in res.out
+    assert (tmp_path / "exp2" / "results" / "intra.json").exists()
+    assert not (tmp_path / "exp2" / "results" / "success.json").exists()
+    assert not list((tmp_path / "exp2" / "runs").glob("success*"))
 
 
 def test_experiment_refuses_data_inside_its_output(run_cli, data_file, tmp_path):
