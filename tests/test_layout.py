@@ -28,6 +28,7 @@ FORBIDDEN = {
     "data": ("sim", "latent", "model", "model_config", "train", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "sim": ("latent", "model", "model_config", "train", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "cluster": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    "probe": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "model_config": ("model", "latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "model": ("latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "latent": ("model", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),

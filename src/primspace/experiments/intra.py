@@ -24,6 +24,7 @@ from primspace.experiments import figures
 from primspace.experiments.animations import write_animations
 from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.probe import run_probe
 from primspace.experiments.results import LATENT_RESULTS
 from primspace.experiments.runs import (
     all_frame_losses,
@@ -124,6 +125,7 @@ def run_intra(exp: ExperimentDir) -> dict:
     exp.write_results("intra", results)
     if runs:
         _write_latent_results(exp, results)
+        run_probe(exp, results)
     run_appendix_a(exp)
     figures.draw_intra(exp.path)
     write_animations(exp, results)

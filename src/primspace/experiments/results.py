@@ -30,6 +30,8 @@ __all__ = [
     "META_FILE",
     "LATENT_RESULTS",
     "ANIMATION_RESULTS",
+    "PROBE_RESULTS",
+    "IMAGE_STRIPS",
     "LEARNED_CODES",
     "INITIAL_CODES",
     "results_file",
@@ -43,6 +45,7 @@ __all__ = [
     "final_loss_table",
     "qualitative_check",
     "latent_table",
+    "probe_table",
     "success_table",
     "failed_criteria_table",
     "inter_table",
@@ -55,6 +58,9 @@ LATENT_RESULTS = "intra_latent"
 
 #: The results (JSON + arrays) the per-primitive animations are drawn from.
 ANIMATION_RESULTS = "intra_animation"
+
+#: The linear probe of the codes (:mod:`primspace.experiments.probe`).
+PROBE_RESULTS = "probe"
 
 #: The figure of generated against recorded frames per primitive (drawn with the animations).
 IMAGE_STRIPS = "image_strips"
@@ -174,6 +180,18 @@ def qualitative_check(results: dict) -> tuple[bool | None, str]:
     if not verdicts:
         return None, "not enough runs to compare projection with zero and random"
     return all(verdicts), "; ".join(lines)
+
+
+def probe_table(results: dict) -> tuple[list[str], list[list]]:
+    """Probe: one row per run and set of codes (fitted, inferred, initial): the
+    within-primitive cross-validated R² per factor and their mean."""
+    names = results["factor_names"]
+    rows = []
+    for r in results["runs"]:
+        for codes in ("fitted", "inferred", "initial"):
+            p = r[codes]
+            rows.append([r["init"], r["latent_dim"], r["seed"], codes, *[p["r2"].get(n) for n in names], p["mean_r2"]])
+    return ["init", "q", "seed", "codes", *[f"R² {n}" for n in names], "mean R²"], rows
 
 
 def latent_table(results: dict) -> tuple[list[str], list[list]]:

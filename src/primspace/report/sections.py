@@ -18,12 +18,14 @@ from primspace.experiments.results import (
     ANIMATION_RESULTS,
     IMAGE_STRIPS,
     INITIAL_CODES,
+    PROBE_RESULTS,
     animation_file,
     failed_criteria_table,
     final_loss_table,
     figure_file,
     inter_table,
     latent_table,
+    probe_table,
     qualitative_check,
     read_meta,
     read_results,
@@ -215,6 +217,24 @@ def latent_figures(out_dir: Path, report: HtmlReport) -> None:
         else:
             caption = "Generated (dashed, lower frames) against recorded (solid, upper frames) — the paper's Appendix B."
         report.figure(fig, caption)
+        if fig.name == "latent_pca2d.png":
+            _probe(out_dir, report)
+
+
+def _probe(out_dir: Path, report: HtmlReport) -> None:
+    """The latent-encoding figure as numbers: the linear probe's table (``results/probe.json``)."""
+    results = read_results(out_dir, PROBE_RESULTS)
+    if results is None:
+        return
+    report.paragraph(
+        "The same structure as a number: the cross-validated R² of a ridge regression from the codes to the "
+        f"factors that generated each motion ({', '.join(results['factor_names'])}), fitted within each primitive "
+        "and averaged over primitives (weighted by samples); for the fitted codes (train part), the inferred codes "
+        "(eval part, θ frozen) and the initial codes before any training (P m for projection). 1: the factors are a "
+        "linear function of the codes; 0: no better than each primitive's mean (primspace.probe)."
+    )
+    columns, rows = probe_table(results)
+    report.table(columns, rows, "Linear probe of the codes.")
 
 
 def animations(out_dir: Path, report: HtmlReport) -> None:
