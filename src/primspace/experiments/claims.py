@@ -181,6 +181,33 @@ CLAIMS: tuple[Claim, ...] = (
 )
 
 
+_VERDICTS = {True: "holds", False: "does not hold", None: "cannot be checked"}
+
+
+def _verdict(claim: Claim, results: dict) -> tuple[str, str]:
+    """The verdict and numbers of one claim. Intra results with several seeds are checked
+    seed by seed (each seed its own split, weights and projection): "holds in k of n
+    seeds" and each seed's numbers; with one seed, as the rule says."""
+    seeds = sorted({r["seed"] for r in results.get("runs", [])}) if claim.experiment == "intra" else []
+    if len(seeds) < 2:
+        ok, numbers = claim.check(results)
+        return _VERDICTS[ok], numbers
+    per_seed = {s: claim.check(results | {"runs": [r for r in results["runs"] if r["seed"] == s]}) for s in seeds}
+    judged = {s: ok for s, (ok, _) in per_seed.items() if ok is not None}
+    numbers = "; ".join(f"seed {s}: {text}" for s, (_, text) in per_seed.items())
+    if not judged:
+        return _VERDICTS[None], numbers
+    held = [s for s, ok in judged.items() if ok]
+    if len(held) == len(judged):
+        verdict = f"holds in every seed ({len(held)} of {len(judged)})"
+    elif not held:
+        verdict = f"does not hold in any seed (0 of {len(judged)})"
+    else:
+        failed = ", ".join(str(s) for s in judged if s not in held)
+        verdict = f"holds in {len(held)} of {len(judged)} seeds (not in seed {failed})"
+    return verdict, numbers
+
+
 def check_claims(out_dir: str | Path) -> list[dict]:
     """Each claim with its verdict on ``out_dir``'s results: ``holds`` / ``does not hold`` /
     ``not run`` (or ``cannot be checked``), and the numbers behind it."""
@@ -193,8 +220,7 @@ def check_claims(out_dir: str | Path) -> list[dict]:
         if results is None:
             verdict, numbers = "not run", ""
         else:
-            ok, numbers = claim.check(results)
-            verdict = {True: "holds", False: "does not hold", None: "cannot be checked"}[ok]
+            verdict, numbers = _verdict(claim, results)
         rows.append({"key": claim.key, "where": claim.where, "quote": claim.quote, "test": claim.test,
                      "verdict": verdict, "ours": numbers})
     return rows

@@ -1,0 +1,41 @@
+"""The paper's claims checked seed by seed (issue 14, "say for each of the paper's claims
+whether it holds in every seed"), on synthetic intra results whose numbers we choose."""
+
+import json
+
+from primspace.experiments.claims import check_claims
+
+
+def _run(init, seed, fit, start, end, q=10):
+    return {"init": init, "latent_dim": q, "seed": seed,
+            "fit": [{"epoch": 0, "loss": 1.0}, {"epoch": 1, "loss": fit}],
+            "infer": [{"epoch": 0, "loss": start}, {"epoch": 1, "loss": end}]}
+
+
+def _write(tmp_path, runs):
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "intra.json").write_text(json.dumps({"runs": runs}))
+    return {r["key"]: r for r in check_claims(tmp_path)}
+
+
+def test_a_claim_holding_in_one_seed_of_two_says_which(tmp_path):
+    # "did not converge at all": random's final eval loss >= 10x projection's; seed 1 breaks it
+    runs = [_run("projection", 0, 1e-4, 1e-2, 1e-4), _run("random", 0, 1e-3, 0.3, 1e-2),
+            _run("projection", 1, 1e-4, 1e-2, 1e-4), _run("random", 1, 1e-3, 0.3, 5e-4)]
+    rows = _write(tmp_path, runs)
+    assert rows["infer_random"]["verdict"] == "holds in 1 of 2 seeds (not in seed 1)"
+    assert rows["infer_random"]["ours"].startswith("seed 0: random / projection final eval loss: q = 10: 100x")
+    assert "; seed 1: random / projection final eval loss: q = 10: 5x" in rows["infer_random"]["ours"]
+    assert rows["fit_random"]["verdict"] == "holds in every seed (2 of 2)"  # 10x in both
+    assert rows["fit_zero"]["verdict"] == "cannot be checked"  # no zero runs
+
+
+def test_one_seed_reads_as_before(tmp_path):
+    rows = _write(tmp_path, [_run("projection", 0, 1e-4, 1e-2, 1e-4), _run("random", 0, 1e-3, 0.3, 1e-2)])
+    assert rows["infer_random"]["verdict"] == "holds"
+    assert rows["infer_random"]["ours"].startswith("random / projection final eval loss: q = 10: 100x")
+
+
+def test_no_seed_holding_is_said(tmp_path):
+    runs = [_run("projection", s, 1e-4, 1e-2, 1e-4) for s in (0, 1)] + [_run("random", s, 2e-4, 0.3, 2e-4) for s in (0, 1)]
+    assert _write(tmp_path, runs)["infer_random"]["verdict"] == "does not hold in any seed (0 of 2)"
