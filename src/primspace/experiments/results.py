@@ -46,6 +46,7 @@ __all__ = [
     "qualitative_check",
     "latent_table",
     "probe_table",
+    "spread_table",
     "success_table",
     "failed_criteria_table",
     "inter_table",
@@ -192,6 +193,33 @@ def probe_table(results: dict) -> tuple[list[str], list[list]]:
             p = r[codes]
             rows.append([r["init"], r["latent_dim"], r["seed"], codes, *[p["r2"].get(n) for n in names], p["mean_r2"]])
     return ["init", "q", "seed", "codes", *[f"R² {n}" for n in names], "mean R²"], rows
+
+
+def _mean_std(values: list) -> str:
+    """``mean ± std`` (population std over seeds) of the values that are not None."""
+    v = np.asarray([x for x in values if x is not None], dtype=float)
+    return "—" if v.size == 0 else f"{v.mean():.3g} ± {v.std():.2g}"
+
+
+def spread_table(results: dict, probe: dict | None = None) -> tuple[list[str], list[list]] | None:
+    """Intra over seeds: per (q, init), mean ± std over the seeds of the final fit loss, the
+    eval loss before inference and after it, and (with the probe's results) the mean
+    probe R² of the inferred codes. None with fewer than two seeds of any (q, init)."""
+    groups: dict = {}
+    for r in results["runs"]:
+        groups.setdefault((r["latent_dim"], r["init"]), []).append(r)
+    if not groups or max(len(g) for g in groups.values()) < 2:
+        return None
+    probes = {(p["latent_dim"], p["init"], p["seed"]): p["inferred"]["mean_r2"] for p in (probe or {}).get("runs", [])}
+    rows = []
+    for (q, init), runs in sorted(groups.items()):
+        row = [init, q, len(runs), _mean_std([final([h["loss"] for h in r["fit"]]) for r in runs]),
+               _mean_std([r["infer"][0]["loss"] for r in runs]), _mean_std([final([h["loss"] for h in r["infer"]]) for r in runs])]
+        if probe is not None:
+            row.append(_mean_std([probes.get((q, init, r["seed"])) for r in runs]))
+        rows.append(row)
+    columns = ["init", "q", "seeds", "final fit loss", "eval loss before inference", "final eval loss"]
+    return columns + (["probe R² (inferred codes)"] if probe is not None else []), rows
 
 
 def latent_table(results: dict) -> tuple[list[str], list[list]]:

@@ -27,6 +27,7 @@ from primspace.experiments.results import (
     latent_table,
     probe_table,
     qualitative_check,
+    spread_table,
     read_meta,
     read_results,
     results_file,
@@ -134,6 +135,9 @@ def intra(out_dir: Path, report: HtmlReport) -> None:
     report.figure(figure_file(out_dir, "intra_loss_infer"), "Loss while inferring Z with θ frozen (the paper's second convergence figure).")
     columns, rows = final_loss_table(results)
     report.table(columns, rows, "Final losses per run.")
+    spread = spread_table(results, read_results(out_dir, PROBE_RESULTS))
+    if spread is not None:
+        report.table(*spread, "Spread over seeds (each seed its own split, weights and projection): mean ± std.")
 
 
 def clustering(out_dir: Path, report: HtmlReport) -> None:

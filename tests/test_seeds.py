@@ -1,5 +1,6 @@
-"""The paper's claims checked seed by seed (issue 14, "say for each of the paper's claims
-whether it holds in every seed"), on synthetic intra results whose numbers we choose."""
+"""Results over seeds (issue 14, "say for each of the paper's claims whether it holds in
+every seed"): the claims checked seed by seed, and the mean ± std table, on synthetic
+intra results whose numbers we choose."""
 
 import json
 
@@ -39,3 +40,19 @@ def test_one_seed_reads_as_before(tmp_path):
 def test_no_seed_holding_is_said(tmp_path):
     runs = [_run("projection", s, 1e-4, 1e-2, 1e-4) for s in (0, 1)] + [_run("random", s, 2e-4, 0.3, 2e-4) for s in (0, 1)]
     assert _write(tmp_path, runs)["infer_random"]["verdict"] == "does not hold in any seed (0 of 2)"
+
+
+def test_spread_table_is_mean_and_std_over_seeds():
+    import numpy as np
+
+    from primspace.experiments.results import spread_table
+
+    runs = [_run("projection", s, fit, 1e-2, end) for s, fit, end in ((0, 1e-4, 2e-4), (1, 3e-4, 4e-4), (2, 2e-4, 9e-4))]
+    probe = {"runs": [{"init": "projection", "latent_dim": 10, "seed": s, "inferred": {"mean_r2": v}}
+                      for s, v in ((0, 0.9), (1, 0.8), (2, None))]}
+    columns, rows = spread_table({"runs": runs}, probe)
+    assert columns[-1] == "probe R² (inferred codes)"
+    fit, end = np.array([1e-4, 3e-4, 2e-4]), np.array([2e-4, 4e-4, 9e-4])
+    assert rows == [["projection", 10, 3, f"{fit.mean():.3g} ± {fit.std():.2g}", "0.01 ± 0",
+                     f"{end.mean():.3g} ± {end.std():.2g}", "0.85 ± 0.05"]]
+    assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
