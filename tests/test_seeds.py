@@ -56,3 +56,35 @@ def test_spread_table_is_mean_and_std_over_seeds():
     assert rows == [["projection", 10, 3, f"{fit.mean():.3g} ± {fit.std():.2g}", "0.01 ± 0",
                      f"{end.mean():.3g} ± {end.std():.2g}", "0.85 ± 0.05"]]
     assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
+
+
+def test_clustering_and_success_over_seeds(tmp_path):
+    """Two seeds: the first seed's results are those of a one-seed experiment, bit for
+    bit; the second's are under ``by_seed``; the outcome table averages both."""
+    from dataclasses import replace
+
+    import numpy as np
+    from test_experiments import TINY
+
+    from primspace.experiments.clustering import run_clustering
+    from primspace.experiments.results import outcome_spread_table
+    from primspace.experiments.success import run_success
+    from primspace.experiments.workspace import ExperimentDir
+    from primspace.sim.generate import GenerationConfig, generate_dataset
+
+    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
+    data = tmp_path / "tiny.h5"
+    generate_dataset(config, seed=0, out=data, progress=False)
+    one = ExperimentDir(tmp_path / "one", TINY, data=data, workers=1, progress=False)
+    two = ExperimentDir(tmp_path / "two", replace(TINY, seeds=(0, 1)), data=data, workers=1, progress=False)
+    (c1, s1), (c2, s2) = [(run_clustering(e), run_success(e)) for e in (one, two)]
+    assert c2["latent"] == c1["latent"] and s2["generated"] == s1["generated"]
+    assert c1["by_seed"] == {} and s1["by_seed"] == {}
+    assert {r["init"] for r in c2["by_seed"]["1"]} == {"zero", "projection"} and len(c2["by_seed"]["1"]) == 3
+    assert set(s2["by_seed"]["1"]) == {"zero", "projection"}
+    assert outcome_spread_table(c1, s1) is None
+    columns, rows = outcome_spread_table(c2, s2)
+    row = next(r for r in rows if r[0] == "projection")
+    rates = [s2["generated"]["projection"]["overall"], s2["by_seed"]["1"]["projection"]["overall"]]
+    assert row[1] == 2 and row[2] == f"{np.mean(rates):.3g} ± {np.std(rates):.2g}"
+    assert any(r[0] == "untrained P m" for r in rows)

@@ -62,6 +62,26 @@ def _trajectories(exp: ExperimentDir, name: str, motor, labels, label_names, r2_
             "r2_target": r2_target, "chosen": chosen, "sweep": result.to_dict()["sweep"]}
 
 
+def _other_seeds(exp: ExperimentDir, intra: dict, q: int, focus_seed: int) -> dict:
+    """The learned codes (and P m) of the other seeds at q, clustered as the focus seed's
+    (no figures): ``{seed: [row, ...]}``, for the spread over seeds."""
+    data = exp.dataset()
+    r2 = exp.preset.cluster_r2
+    out: dict = {}
+    for run in sorted(intra["runs"], key=lambda r: (r["seed"], r["init"])):
+        if run["latent_dim"] != q or run["seed"] == focus_seed:
+            continue
+        z, _ = load_codes(exp, run["init"], q, run["seed"])
+        row = _clustered(z.astype(np.float64), data.labels, data.label_names, r2).summary()
+        rows = out.setdefault(str(run["seed"]), [])
+        rows.append({"init": run["init"], "codes": LEARNED_CODES} | row)
+        if run["init"] == "projection":
+            z0 = initial_codes(exp, "projection", q, run["seed"])
+            rows.append({"init": "projection", "codes": INITIAL_CODES}
+                        | _clustered(z0, data.labels, data.label_names, r2).summary())
+    return out
+
+
 def run_clustering(exp: ExperimentDir) -> dict:
     """Cluster the codes of every init at the preset's q, and the raw trajectories (data, LASA)."""
     from primspace.data import import_lasa
@@ -88,6 +108,7 @@ def run_clustering(exp: ExperimentDir) -> dict:
             results["latent_sweep"]["projection, initial P m"] = result.to_dict()["sweep"]
             _figure(exp, "latent_clustering_projection_initial", result,
                     f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}")
+        results["by_seed"] = _other_seeds(exp, intra, q, seed)
         results["trajectory"]["data"] = _trajectories(
             exp, "data", data.motor, data.labels, data.label_names, preset.trajectory_r2
         )

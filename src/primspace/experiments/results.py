@@ -47,6 +47,7 @@ __all__ = [
     "latent_table",
     "probe_table",
     "spread_table",
+    "outcome_spread_table",
     "success_table",
     "failed_criteria_table",
     "inter_table",
@@ -220,6 +221,32 @@ def spread_table(results: dict, probe: dict | None = None) -> tuple[list[str], l
         rows.append(row)
     columns = ["init", "q", "seeds", "final fit loss", "eval loss before inference", "final eval loss"]
     return columns + (["probe R² (inferred codes)"] if probe is not None else []), rows
+
+
+def outcome_spread_table(clustering: dict | None, success: dict | None) -> tuple[list[str], list[list]] | None:
+    """Success rates (all primitives, grasp) and latent clustering accuracy per init:
+    mean ± std over the focus seed and the others (``by_seed``). None with one seed."""
+    acc: dict = {}
+    if clustering is not None:
+        per_seed = [clustering["latent"]] + list(clustering.get("by_seed", {}).values())
+        for rows in per_seed:
+            for r in rows:
+                key = r["init"] if r["codes"] == LEARNED_CODES else "untrained P m"
+                acc.setdefault(key, []).append(r["accuracy"])
+    rates: dict = {}
+    if success is not None:
+        for gen in [success.get("generated", {})] + list(success.get("by_seed", {}).values()):
+            for init, res in gen.items():
+                rates.setdefault(init, []).append((res["overall"], res["rates"].get("grasp")))
+    n_seeds = max([len(v) for v in acc.values()] + [len(v) for v in rates.values()] + [0])
+    if n_seeds < 2:
+        return None
+    rows = []
+    for init in list(dict.fromkeys([*rates, *acc])):
+        r = rates.get(init, [])
+        rows.append([init, max(len(r), len(acc.get(init, []))), _mean_std([x for x, _ in r]),
+                     _mean_std([g for _, g in r]), _mean_std(acc.get(init, []))])
+    return ["init", "seeds", "success, all primitives", "success, grasp", "latent clustering accuracy"], rows
 
 
 def latent_table(results: dict) -> tuple[list[str], list[list]]:

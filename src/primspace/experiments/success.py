@@ -61,9 +61,12 @@ def run_success(exp: ExperimentDir) -> dict:
     q, seed, inits = focus_runs(exp, intra)
     judge = f"success/judge{JUDGE_VERSION}"  # verdicts of an older judge are not reused
     points = [GridPoint(f"{judge}/recorded", (str(exp.data_path), None))]
-    for init in inits:
-        infer_dir = intra_run_dir(exp.path, init, q, seed) / "infer"
-        points.append(GridPoint(f"{judge}/{init}-q{q}-s{seed}", (str(exp.data_path), str(infer_dir))))
+    seeds = sorted({r["seed"] for r in intra["runs"] if r["latent_dim"] == q})
+    done = {(r["init"], r["seed"]) for r in intra["runs"] if r["latent_dim"] == q}
+    for s in [seed] + [s for s in seeds if s != seed]:  # the focus seed's points first, as before
+        for init in [i for i in exp.preset.inits if (i, s) in done]:
+            infer_dir = intra_run_dir(exp.path, init, q, s) / "infer"
+            points.append(GridPoint(f"{judge}/{init}-q{q}-s{s}", (str(exp.data_path), str(infer_dir))))
     with exp.stage("success"):
         grid = exp.grid(run_success_point, points, "success judging")
     results = {
@@ -72,6 +75,10 @@ def run_success(exp: ExperimentDir) -> dict:
         "judge_version": JUDGE_VERSION,
         "recorded": grid.results.get(f"{judge}/recorded"),
         "generated": {init: grid.results[f"{judge}/{init}-q{q}-s{seed}"] for init in inits if f"{judge}/{init}-q{q}-s{seed}" in grid.results},
+        "by_seed": {  # the other seeds' verdicts, for the spread over seeds
+            str(s): {i: grid.results[f"{judge}/{i}-q{q}-s{s}"] for i in exp.preset.inits if f"{judge}/{i}-q{q}-s{s}" in grid.results}
+            for s in seeds if s != seed
+        },
         "failures": grid.failures,
         "label_names": list(exp.dataset().label_names),
     }

@@ -28,6 +28,7 @@ from primspace.experiments.results import (
     probe_table,
     qualitative_check,
     spread_table,
+    outcome_spread_table,
     read_meta,
     read_results,
     results_file,
@@ -138,6 +139,9 @@ def intra(out_dir: Path, report: HtmlReport) -> None:
     spread = spread_table(results, read_results(out_dir, PROBE_RESULTS))
     if spread is not None:
         report.table(*spread, "Spread over seeds (each seed its own split, weights and projection): mean ± std.")
+    outcomes = outcome_spread_table(read_results(out_dir, "clustering"), read_results(out_dir, "success"))
+    if outcomes is not None:
+        report.table(*outcomes, "Success rates and latent clustering over seeds (at the clustered q): mean ± std.")
 
 
 def clustering(out_dir: Path, report: HtmlReport) -> None:
