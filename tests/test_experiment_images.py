@@ -8,30 +8,17 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_experiments import TINY
 
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
-from primspace.experiments.presets import ExperimentPreset, default_train
 from primspace.experiments.results import final_loss_table
 from primspace.experiments.runs import intra_run_dir, psnr
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
 
-TINY_IMAGES = ExperimentPreset(
-    name="tiny-images",
-    data_preset="demo",
-    train_fraction=0.5,
-    inits=("zero", "projection"),
-    latent_dims=(4,),
-    fit_epochs=2,
-    infer_epochs=2,
-    train=replace(default_train(), batch_size=8, vision_frames=3),
-    images=True,
-    cluster_latent_dim=4,
-    cluster_r2=0.99,
-    inter_inits=("projection",),
-    inter_epochs=(2, 2),
-    lasa_length=20,
+TINY_IMAGES = replace(
+    TINY, name="tiny-images", fit_epochs=2, infer_epochs=2, images=True, train=replace(TINY.train, vision_frames=3)
 )
 
 
