@@ -37,6 +37,13 @@ def test_one_seed_reads_as_before(tmp_path):
     assert rows["infer_random"]["ours"].startswith("random / projection final eval loss: q = 10: 100x")
 
 
+def test_random_fit_claim_needs_a_low_dimensional_latent_size(tmp_path):
+    # "performs very badly for low-dimensional latent space": a q = 40-only grid cannot say
+    rows = _write(tmp_path, [_run("projection", 0, 1e-4, 1e-2, 1e-4, q=40), _run("random", 0, 1e-3, 0.3, 1e-2, q=40)])
+    assert rows["fit_random"]["verdict"] == "cannot be checked"
+    assert rows["fit_random"]["ours"].startswith("needs runs at a low-dimensional latent size (q <= 20)")
+
+
 def test_no_seed_holding_is_said(tmp_path):
     runs = [_run("projection", s, 1e-4, 1e-2, 1e-4) for s in (0, 1)] + [_run("random", s, 2e-4, 0.3, 2e-4) for s in (0, 1)]
     assert _write(tmp_path, runs)["infer_random"]["verdict"] == "does not hold in any seed (0 of 2)"
