@@ -33,7 +33,8 @@ def test_a_saved_file_has_what_the_table_says(tmp_path):
     rng = np.random.default_rng(0)
     ds = MotionDataset(
         rng.normal(size=(n, t, j)), images=rng.integers(0, 255, (n, t, h, w, 3), dtype=np.uint8),
-        labels=[0, 1, -1], params=np.ones((n, 2)),
+        labels=[0, 1, -1], params=np.ones((n, 2)), lengths=[4, 3, 2],
+        step_labels=[[0, 0, 1, 1], [1, 1, 1, -1], [0, 0, -1, -1]], step_segments=[[0, 0, 1, 1], [0, 0, 0, -1], [0, 0, -1, -1]],
     )
     dims = {"N": n, "T": t, "J": j, "H": h, "W": w, "P": 2}
     with h5py.File(ds.save(tmp_path / "d.h5", compression_level=6)) as f:
@@ -53,17 +54,19 @@ def test_field_lookup_shapes_and_buffers():
     assert field("images").file_shape({"N": 2, "T": 5, "H": 48, "W": 64}) == (2, 5, 48, 64, 3)
     with pytest.raises(KeyError):
         field("depth")
-    buf = empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3})
+    assert list(empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3})) == [
+        "motor", "labels", "params", "lengths", "step_labels", "step_segments"]
+    buf = empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3}, ["motor", "labels", "params"])
     assert list(buf) == ["motor", "labels", "params"]
     assert buf["motor"].dtype == np.float32 and buf["labels"].shape == (4,) and buf["params"].shape == (4, 3)
     assert dims_of(buf) == {"N": 4, "T": 3, "J": 9, "P": 3}
     shard = dict(buf, ik_error=np.zeros(4), start=0)
-    assert list(arrays_of(shard)) == ["motor", "images", "labels", "params"]
+    assert list(arrays_of(shard)) == ["motor", "images", "labels", "params", "lengths", "step_labels", "step_segments"]
     assert arrays_of(shard)["images"] is None
 
 
 def test_a_shard_dict_writes_through_arrays_of(tmp_path):
-    buf = empty_arrays({"N": 2, "T": 3, "J": 1})
+    buf = empty_arrays({"N": 2, "T": 3, "J": 1}, ["motor", "labels"])
     buf["motor"][:] = 1.0
     buf["labels"][:] = [0, -1]
     with DatasetWriter(tmp_path / "s.h5", n_samples=2, length=3, joint_names=["a"], label_names=["x"]) as w:

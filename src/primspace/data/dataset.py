@@ -54,6 +54,11 @@ class MotionDataset:
         Primitive index per sample, ``-1`` for unknown.
     params : array-like, shape (N, P), optional
         Generative factors (block x, y, size ...).
+    lengths, step_labels, step_segments : array-like of int, optional (all or none)
+        Demonstrations of different lengths made of several primitives: ``lengths``
+        (N,) valid steps per sample (the motor after them is padding), ``step_labels``
+        (N, T) the primitive of each step and ``step_segments`` (N, T) its segment
+        index (0, 1, ...), both -1 exactly at the padding.
     joint_names, label_names, param_names : list of str, optional
         Names; defaults are ``j0..``, ``0..`` (one per label value), ``p0..``.
     dt : float, default 1.0
@@ -78,6 +83,9 @@ class MotionDataset:
     images: Any = None
     labels: np.ndarray | None = None
     params: np.ndarray | None = None
+    lengths: np.ndarray | None = None
+    step_labels: np.ndarray | None = None
+    step_segments: np.ndarray | None = None
     joint_names: list[str] | None = None
     label_names: list[str] | None = None
     param_names: list[str] | None = None

@@ -221,6 +221,8 @@ class DatasetWriter:
     label_names, param_names : list of str
     with_labels, with_params : bool, optional
         Whether the file holds labels / params (default: names were given).
+    with_steps : bool
+        Whether the file holds ``lengths``, ``step_labels`` and ``step_segments``.
     dt : float
     source : str
     overwrite : bool
@@ -252,6 +254,7 @@ class DatasetWriter:
         param_names: Sequence[str] = (),
         with_labels: bool | None = None,
         with_params: bool | None = None,
+        with_steps: bool = False,
         dt: float = 1.0,
         source: str = "",
         overwrite: bool = False,
@@ -265,6 +268,7 @@ class DatasetWriter:
         self.param_names = [str(s) for s in param_names]
         self.with_labels = bool(self.label_names) if with_labels is None else with_labels
         self.with_params = bool(self.param_names) if with_params is None else with_params
+        self.with_steps = bool(with_steps)
         self.dt, self.source = float(dt), str(source)
         self.overwrite = overwrite
         self.compression_level = compression_level
@@ -314,9 +318,11 @@ class DatasetWriter:
         return getattr(self, attr.name)
 
     # -- blocks
-    def write(self, start: int, *, motor, images=None, labels=None, params=None) -> None:
+    def write(self, start: int, *, motor, images=None, labels=None, params=None, lengths=None, step_labels=None,
+              step_segments=None) -> None:
         """Validate and store samples ``start .. start + len(motor) - 1``."""
-        block, sl = self._check_block(start, dict(motor=motor, images=images, labels=labels, params=params))
+        block, sl = self._check_block(start, dict(motor=motor, images=images, labels=labels, params=params, lengths=lengths,
+                                                  step_labels=step_labels, step_segments=step_segments))
         for array in _LAZY:
             value = getattr(block, array.name)
             if value is not None:
@@ -424,7 +430,7 @@ class DatasetWriter:
         return block, slice(start, start + k)
 
     def _store(self, block: "MotionDataset", sl: slice) -> None:
-        """Store a checked block's in-memory arrays (motor, labels, params); mark its samples written."""
+        """Store a checked block's in-memory arrays (all but the images); mark its samples written."""
         for array in _EAGER:
             value = getattr(block, array.name)
             if value is not None:

@@ -340,9 +340,11 @@ def _buffers(config: GenerationConfig, n: int) -> dict:
     """Empty arrays of the data set's fields (:mod:`primspace.data.schema`) for ``n`` motions
     of 9 joints and 3 generative factors (``images`` None without frames)."""
     dims = {"N": n, "T": config.length, "J": 9, "P": 3}
+    names = ["motor", "labels", "params"]
     if config.images:
         dims |= {"H": config.height, "W": config.width}
-    return {"images": None, **empty_arrays(dims)}
+        names.append("images")
+    return {"images": None, **empty_arrays(dims, names)}
 
 
 def _finished(jobs):
