@@ -29,6 +29,7 @@ FORBIDDEN = {
     "sim": ("latent", "model", "model_config", "train", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "cluster": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "probe": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    "segmentation": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "model_config": ("model", "latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "model": ("latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "latent": ("model", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),

@@ -15,6 +15,16 @@ Paper, *Initialization of Latent Vectors*. Each demonstration ``i`` has its own 
 and we add ``pca``, the data-dependent linear baseline: the centred sequence projected
 on the top q principal directions of the training sequences.
 
+**Sequences of codes** (``window = W``; the paper's *Summary and Discussion*: "extend
+latent variable initialization by random linear projections to a sequence of latent
+vectors ... via one-dimensional convolution through time of a random linear projection
+with long motor sequence"). The motor sequence is cut into K = ceil(T / W) windows of W
+steps (the last one padded with the last step) and the same ``P`` (q x W·J,
+``P_jk ~ N(0, 1/q)``) projects every window: ``z_k = P m_{kW+1:(k+1)W}``, a convolution
+with kernel length and stride W. Appendix A then holds window by window:
+``E[z_k(a)·z_k(b)] = a_k·b_k``. ``pca`` uses the principal directions of all training
+windows pooled; ``zero`` and ``random`` fill the K codes alike.
+
 :class:`LatentInitializer` holds the strategy and its fitted state (``P``, or the PCA
 mean and components), which is saved with a run and reused for new data.
 :class:`LatentTable` holds the codes of one data set together with their optimiser.
@@ -51,11 +61,14 @@ class LatentInitializer:
         q.
     random_state : int
         Seed of ``P`` (projection) and of the draws (random).
+    window : int, optional
+        W: one code per window of W steps (codes ``(n, K·q)``, window-major); None: one
+        code per sequence.
 
     Attributes
     ----------
     n_features_ : int
-        T·J, the length of a flattened sequence (set by :meth:`fit`).
+        T·J, the length of a flattened sequence, or W·J with a window (set by :meth:`fit`).
     projection_ : ndarray of shape (q, T·J)
         ``P`` (method ``projection``) or the principal directions as rows (``pca``; rows
         past the data's rank are zero).
@@ -75,19 +88,24 @@ class LatentInitializer:
     (3, 4)
     """
 
-    def __init__(self, method: str = "projection", latent_dim: int = 20, random_state: int = 0) -> None:
+    def __init__(self, method: str = "projection", latent_dim: int = 20, random_state: int = 0,
+                 window: int | None = None) -> None:
         self.method = method
         self.latent_dim = latent_dim
         self.random_state = random_state
+        self.window = window
 
     def _validate_params(self) -> None:
         if self.method not in INIT_METHODS:
             raise UserError(f"unknown latent init '{self.method}'; choose one of {', '.join(INIT_METHODS)}")
         if not isinstance(self.latent_dim, (int, np.integer)) or self.latent_dim < 1:
             raise UserError(f"latent size (latent_dim, --latent-dim) must be at least 1, got {self.latent_dim}")
+        if self.window is not None and (not isinstance(self.window, (int, np.integer)) or self.window < 1):
+            raise UserError(f"code window (window, --code-window) must be at least 1 step, got {self.window}")
 
     def get_params(self, deep: bool = True) -> dict:
-        return {"method": self.method, "latent_dim": self.latent_dim, "random_state": self.random_state}
+        return {"method": self.method, "latent_dim": self.latent_dim, "random_state": self.random_state,
+                "window": self.window}
 
     # --------------------------------------------------------------------------- fit
     def fit(self, scaled_motor) -> "LatentInitializer":
@@ -99,7 +117,7 @@ class LatentInitializer:
             Training sequences, joints scaled to [-1, 1].
         """
         self._validate_params()
-        x = _flatten(scaled_motor)
+        x = self._rows(scaled_motor)
         q, k = int(self.latent_dim), x.shape[1]
         self.n_features_ = k
         self.mean_ = np.zeros(k)
@@ -129,20 +147,31 @@ class LatentInitializer:
             Give a different one for a new data set so its codes are fresh draws.
         """
         self._check_fitted()
-        x = _flatten(scaled_motor)
+        x = self._rows(scaled_motor)
         if x.shape[1] != self.n_features_:
+            what = "W*J" if self.window is not None else "T*J"
             raise UserError(
-                f"motor sequences have T*J = {x.shape[1]} values, the latent initialiser was fitted on {self.n_features_}"
+                f"motor sequences have {what} = {x.shape[1]} values, the latent initialiser was fitted on {self.n_features_}"
             )
-        n, q = x.shape[0], int(self.latent_dim)
+        n, q = len(scaled_motor), int(self.latent_dim) * (len(x) // len(scaled_motor))
         if self.method == "zero":
             z = np.zeros((n, q))
         elif self.method == "random":
             seed = self.random_state if random_state is None else random_state
             z = np.random.default_rng(seed).standard_normal((n, q))
-        else:
-            z = (x - self.mean_) @ self.projection_.T
+        else:  # with a window: each window's code, window-major per sample
+            z = ((x - self.mean_) @ self.projection_.T).reshape(n, q)
         return z.astype(np.float32)
+
+    def _rows(self, scaled_motor) -> np.ndarray:
+        """What ``P`` multiplies: flattened sequences (n, T·J), or windows (n·K, W·J)."""
+        x = np.asarray(scaled_motor, dtype=np.float64)
+        if self.window is None or x.ndim != 3:
+            return _flatten(x)
+        w = int(self.window)
+        k = -(-x.shape[1] // w)
+        padded = np.concatenate([x, np.repeat(x[:, -1:], k * w - x.shape[1], axis=1)], axis=1)
+        return padded.reshape(x.shape[0] * k, w * x.shape[2])
 
     def fit_transform(self, scaled_motor, *, random_state: int | None = None) -> np.ndarray:
         return self.fit(scaled_motor).transform(scaled_motor, random_state=random_state)
@@ -159,6 +188,7 @@ class LatentInitializer:
             "method": self.method,
             "latent_dim": int(self.latent_dim),
             "random_state": int(self.random_state),
+            "window": None if self.window is None else int(self.window),
             "n_features": int(self.n_features_),
             "projection": None if self.projection_ is None else torch.from_numpy(np.ascontiguousarray(self.projection_)),
             "mean": torch.from_numpy(np.ascontiguousarray(self.mean_)),
@@ -167,7 +197,9 @@ class LatentInitializer:
     @classmethod
     def from_state_dict(cls, state: dict) -> "LatentInitializer":
         try:
-            init = cls(state["method"], int(state["latent_dim"]), int(state["random_state"]))
+            window = state.get("window")  # runs saved before code windows have none
+            init = cls(state["method"], int(state["latent_dim"]), int(state["random_state"]),
+                       None if window is None else int(window))
             init._validate_params()
             init.n_features_ = int(state["n_features"])
             proj = state["projection"]
@@ -178,7 +210,8 @@ class LatentInitializer:
         return init
 
     def __repr__(self) -> str:
-        return f"LatentInitializer(method={self.method!r}, latent_dim={self.latent_dim}, random_state={self.random_state})"
+        window = "" if self.window is None else f", window={self.window}"
+        return f"LatentInitializer(method={self.method!r}, latent_dim={self.latent_dim}, random_state={self.random_state}{window})"
 
 
 def _flatten(scaled_motor) -> np.ndarray:

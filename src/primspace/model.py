@@ -16,6 +16,14 @@ command ``m_t`` is an MLP of the fastest layer ``d_t^(1)``; the image ``s_t`` is
 deconvolution stack of ``d_t^(1)`` (eq. 1c-1d). All ``T`` steps' outputs are decoded in
 one batched call of each head.
 
+**A sequence of codes** (``ModelConfig.code_window = W``; the paper's *Summary and
+Discussion*: "To model more complex behaviours composed of many consecutive primitives
+... a sequence of such vectors is used"). A sample's codes are ``z_1..z_K``, one per
+window of W steps; the top layer's input becomes ``u_t = p(z(t))`` with ``z(t)`` the
+linear interpolation of the codes between window centres (constant before the first and
+after the last), so the "infinitely slow layer" varies slowly; ``d_0 = g(z_1)``. The
+layers below are unchanged. With one code (the default) this is the paper's model.
+
 Choices the paper leaves open (documented in ``docs/model.md``):
 
 * layers update top-down within a step, so ``u`` for layer ``i`` is ``d_t^(i+1)``, the
@@ -41,7 +49,7 @@ from torch import nn
 
 from primspace.model_config import ModelConfig, check_image_size
 
-__all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput"]
+__all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput", "code_interpolation"]
 
 
 # ----------------------------------------------------------------------------- config
@@ -232,6 +240,29 @@ class DecoderOutput(NamedTuple):
 # ---------------------------------------------------------------------------- decoder
 
 
+def code_interpolation(length: int, window: int) -> torch.Tensor:
+    """``Φ`` (T, K): ``z(t) = Σ_k Φ[t, k] z_k``, linear between window centres.
+
+    Window ``k`` covers steps ``[kW, (k+1)W)``; its code sits at the centre
+    ``kW + (W - 1) / 2``. Steps before the first centre take ``z_1``, after the last
+    ``z_K``. Each row sums to 1 and has at most two non-zero entries.
+    """
+    k = -(-length // window)
+    if k == 1:
+        return torch.ones(length, 1)
+    centres = torch.arange(k, dtype=torch.float64) * window + (window - 1) / 2
+    t = torch.arange(length, dtype=torch.float64).clamp(centres[0], centres[-1])
+    right = torch.searchsorted(centres, t, right=True).clamp(1, k - 1)
+    phi = torch.zeros(length, k, dtype=torch.float64)
+    left = right - 1
+    w = ((t - centres[left]) / window).clamp(0.0, 1.0)
+    rows = torch.arange(length)
+    phi[rows, left] = 1.0 - w
+    phi[rows, right] += w
+    return phi.float()
+
+
+
 class MTRNNDecoder(nn.Module):
     """The decoder ``d(θ, z) = (m_{1:T}, s_{1:T})`` of the paper (eq. 1a-1d).
 
@@ -266,6 +297,8 @@ class MTRNNDecoder(nn.Module):
         self.image_head = (
             ImageDecoder(sizes[0], config.image_size, config.image_channels) if config.has_images else None
         )
+        if config.code_window is not None:  # derived from the config: not saved with the weights
+            self.register_buffer("interpolation", code_interpolation(config.length, config.code_window), persistent=False)
 
     def initial_states(self, z: torch.Tensor) -> list[torch.Tensor]:
         """``d_0 = g(z)``: one state per layer, each layer-normalised."""
@@ -279,8 +312,12 @@ class MTRNNDecoder(nn.Module):
         step), so the layers run one after the other, top first, each over all T steps
         (:meth:`MTRNNLayer.run`).
         """
-        states0 = self.initial_states(z)
-        u = self.p(z)
+        if self.config.code_window is None:
+            states0, u = self.initial_states(z), self.p(z)
+        else:  # (B, K*q) -> (B, K, q); u_t = p(z(t)), d_0 = g(z_1)
+            codes = z.view(z.shape[0], self.config.n_codes, self.config.latent_dim)
+            states0 = self.initial_states(codes[:, 0])
+            u = self.p(torch.einsum("tk,bkq->btq", self.interpolation.to(codes.dtype), codes))
         for i in range(len(self.layers) - 1, -1, -1):
             u = self.layers[i].run(states0[i], u, self.config.length)
         return u
@@ -290,7 +327,7 @@ class MTRNNDecoder(nn.Module):
 
         Parameters
         ----------
-        z : Tensor (B, q)
+        z : Tensor (B, q), or (B, K*q) with a code window (K codes per sample, in order)
         images : bool
             Run the image head (if the model has one). False skips it (motor only).
         frame_steps : LongTensor (B, K), optional
@@ -327,8 +364,12 @@ class MTRNNDecoder(nn.Module):
         q, sizes = cfg.latent_dim, cfg.layer_sizes
         macs = q * cfg.p_hidden + cfg.p_hidden * cfg.u_size + q * sum(sizes)
         k_top = sizes[-1]
-        macs += k_top * k_top * cfg.u_size + k_top * cfg.u_size  # the top layer's M and c
-        per_step = k_top * k_top
+        if cfg.code_window is None:
+            macs += k_top * k_top * cfg.u_size + k_top * cfg.u_size  # the top layer's M and c
+            per_step = k_top * k_top
+        else:  # p(z(t)) and the top layer's A'(d, u'_t), U u_t at every step
+            per_step = cfg.n_codes * q + q * cfg.p_hidden + cfg.p_hidden * cfg.u_size
+            per_step += k_top * k_top * (cfg.u_size + 1) + k_top * cfg.u_size
         for k, l_ in zip(sizes[:-1], sizes[1:]):
             per_step += k * k * (l_ + 1) + k * l_
         per_step += sizes[0] * cfg.motor_hidden + cfg.motor_hidden * cfg.n_joints

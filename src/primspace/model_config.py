@@ -41,6 +41,10 @@ class ModelConfig:
         J, joint values per step (filled in from the data set).
     length : int
         T, steps per sequence (filled in from the data set).
+    code_window : int or None
+        None: one code per sequence (the paper). W: a sequence of codes ``z_1..z_K``,
+        one per window of W steps (``K = ceil(T / W)``), for long demonstrations made of
+        several primitives (the paper's *Summary and Discussion*; docs/sequences.md).
     """
 
     latent_dim: int = 20
@@ -53,6 +57,7 @@ class ModelConfig:
     image_channels: tuple[int, ...] = (64, 32, 16)
     n_joints: int = 0
     length: int = 0
+    code_window: int | None = None
 
     def __post_init__(self) -> None:
         self.layer_sizes = tuple(int(s) for s in self.layer_sizes)
@@ -69,6 +74,16 @@ class ModelConfig:
     def u_size(self) -> int:
         """Size of ``p(z)``, the top layer's input."""
         return self.top_input_size if self.top_input_size is not None else self.layer_sizes[-1]
+
+    @property
+    def n_codes(self) -> int:
+        """K, the codes per sequence: ``ceil(T / code_window)``, or 1."""
+        return 1 if self.code_window is None else -(-self.length // self.code_window)
+
+    @property
+    def code_size(self) -> int:
+        """The values of one sample's codes, ``K * q`` (a row of the code table)."""
+        return self.n_codes * self.latent_dim
 
     def validate(self) -> "ModelConfig":
         """Check every field; raise :class:`UserError` naming the field."""
@@ -89,6 +104,8 @@ class ModelConfig:
             raise UserError(f"n_joints must be at least 1, got {self.n_joints}")
         if self.length < 1:
             raise UserError(f"length (T) must be at least 1, got {self.length}")
+        if self.code_window is not None and (not isinstance(self.code_window, int) or self.code_window < 1):
+            raise UserError(f"code window (code_window, --code-window) must be at least 1 step, got {self.code_window}")
         if self.image_size is not None:
             check_image_size(self.image_size, self.image_channels)
         return self

@@ -38,6 +38,7 @@ from typing import Any, Callable, Literal, Mapping
 import numpy as np
 
 from primspace.data.images import LazyImages
+from primspace.data.steps import coerce_steps, validate_lengths, validate_step_labels, validate_step_segments
 from primspace.data.values import as_float32, check_finite, check_int32_labels
 from primspace.errors import DataError
 
@@ -213,16 +214,6 @@ def _default_names(names, ds, *, prefix: str, array: str, ndim: int) -> list[str
     return [str(s) for s in names]
 
 
-def _coerce_steps(name: str, value, path) -> np.ndarray:
-    """An integer array of the step fields (``lengths``, ``step_labels``, ``step_segments``) as int32."""
-    value = np.asarray(value)
-    if value.size and value.dtype.kind not in "iu":
-        raise DataError(f"must be integers, got {value.dtype}", path=path, field=name)
-    if value.size and (value.min() < np.iinfo(np.int32).min or value.max() > np.iinfo(np.int32).max):
-        raise DataError("values do not fit in int32", path=path, field=name)
-    return value.astype(np.int32)
-
-
 def _number(value, ds) -> float:
     return float(value)
 
@@ -306,61 +297,6 @@ def _validate_param_names(ds) -> None:
         raise DataError(f"{len(ds.param_names)} names for P={n_params} params", path=ds.path, field="param_names")
 
 
-_STEP_FIELDS = ("lengths", "step_labels", "step_segments")
-
-
-def _validate_lengths(ds) -> None:
-    p, (n, t, _) = ds.path, ds.motor.shape
-    absent = [name for name in _STEP_FIELDS if getattr(ds, name) is None]
-    if absent:
-        raise DataError(f"given without {', '.join(absent)} (the step fields go together)", path=p, field="lengths")
-    if ds.lengths.shape != (n,):
-        raise DataError(f"must have shape ({n},) to match motor, got {ds.lengths.shape}", path=p, field="lengths")
-    bad = np.flatnonzero((ds.lengths < 2) | (ds.lengths > t))
-    if bad.size:
-        i = int(bad[0])
-        raise DataError(f"length {int(ds.lengths[i])} out of range [2, T={t}]", path=p, field="lengths", index=i)
-
-
-def _step_shape(ds, name: str) -> np.ndarray:
-    """The (N, T) array ``name`` after its shape check; -1 exactly at the padding steps."""
-    p, (n, t, _), value = ds.path, ds.motor.shape, getattr(ds, name)
-    if ds.lengths is None:
-        raise DataError("given without lengths (the step fields go together)", path=p, field=name)
-    if value.shape != (n, t):
-        raise DataError(f"must have shape ({n}, {t}) to match motor, got {value.shape}", path=p, field=name)
-    valid = np.arange(t)[None, :] < ds.lengths[:, None]
-    wrong = np.flatnonzero(((value == -1) == valid).any(axis=1))
-    if wrong.size:
-        i = int(wrong[0])
-        step = int(np.flatnonzero((value[i] == -1) == valid[i])[0])
-        raise DataError(f"step {step}: -1 must mark exactly the steps from lengths[{i}] = {int(ds.lengths[i])} on",
-                        path=p, field=name, index=i)
-    return valid
-
-
-def _validate_step_labels(ds) -> None:
-    valid = _step_shape(ds, "step_labels")
-    k = len(ds.label_names)
-    bad = np.flatnonzero((valid & ((ds.step_labels < 0) | (ds.step_labels >= k))).any(axis=1))
-    if bad.size:
-        i = int(bad[0])
-        value = int(ds.step_labels[i][valid[i] & ((ds.step_labels[i] < 0) | (ds.step_labels[i] >= k))][0])
-        raise DataError(f"label {value} out of range [0, {k - 1}] ({k} label names)", path=ds.path, field="step_labels", index=i)
-
-
-def _validate_step_segments(ds) -> None:
-    valid = _step_shape(ds, "step_segments")
-    seg = ds.step_segments
-    steps = np.diff(seg, axis=1)
-    jumps = valid[:, 1:] & ~np.isin(steps, (0, 1))
-    bad = np.flatnonzero((seg[:, 0] != 0) | jumps.any(axis=1))
-    if bad.size:
-        i = int(bad[0])
-        raise DataError("segment indices must start at 0 and grow by 0 or 1 per step", path=ds.path,
-                        field="step_segments", index=i)
-
-
 def _validate_dt(ds) -> None:
     if not np.isfinite(ds.dt) or ds.dt <= 0:
         raise DataError(f"must be a positive number, got {ds.dt}", path=ds.path, field="dt")
@@ -405,17 +341,17 @@ FIELDS: tuple[Field, ...] = (
     Field(
         "lengths", "dataset", "int32, valid steps per sample (later steps are padding)",
         dtype=np.dtype(np.int32), shape=("N",), writer_option="with_steps",
-        coerce=partial(_coerce_steps, "lengths"), validate=_validate_lengths,
+        coerce=partial(coerce_steps, "lengths"), validate=validate_lengths,
     ),
     Field(
         "step_labels", "dataset", "int32, primitive index per step, -1 = padding",
         dtype=np.dtype(np.int32), shape=("N", "T"), fillvalue=-1, writer_option="with_steps",
-        coerce=partial(_coerce_steps, "step_labels"), validate=_validate_step_labels,
+        coerce=partial(coerce_steps, "step_labels"), validate=validate_step_labels,
     ),
     Field(
         "step_segments", "dataset", "int32, segment index per step (0, 1, ...), -1 = padding",
         dtype=np.dtype(np.int32), shape=("N", "T"), fillvalue=-1, writer_option="with_steps",
-        coerce=partial(_coerce_steps, "step_segments"), validate=_validate_step_segments,
+        coerce=partial(coerce_steps, "step_segments"), validate=validate_step_segments,
     ),
     Field("schema_version", "attribute", "layout version of the file", codec="version", default=None),
     Field(

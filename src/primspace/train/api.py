@@ -124,7 +124,7 @@ def fit(
     _check_scaler(scaler, parent, data)
     mc = _fit_model_config(model_config, parent, data, images)
     use_images = uses_images(mc, data, tc, images, where=None if parent is None else _run_name(parent))
-    initial_latents = _check_initial_latents(initial_latents, len(data), mc.latent_dim)
+    initial_latents = _check_initial_latents(initial_latents, len(data), mc.code_size)
     config = run_config("fit", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config["scaler"] = None if scaler is None else scaler.to_dict()
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
@@ -142,7 +142,7 @@ def fit(
         scaler = parent.scaler if parent is not None else scaler or JointScaler().fit(data.motor)
         model = _new_model(mc, seeds["model"], None if parent is None else parent.model.state_dict())
         scaled = scaler.transform(data.motor)
-        initializer = _initializer(init, parent, mc.latent_dim, scaled, seeds)
+        initializer = _initializer(init, parent, mc, scaled, seeds)
         model.to(device)
         theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
         codes = initializer.transform(scaled, random_state=seeds["codes_fit"]).astype(np.float64)
@@ -226,7 +226,7 @@ def infer(
         table = LatentTable.from_state_dict(parts.latents, device)
     else:
         scaled = parent.scaler.transform(data.motor)
-        initializer = _initializer(init, parent, mc.latent_dim, scaled, seeds)
+        initializer = _initializer(init, parent, mc, scaled, seeds)
         codes = initializer.transform(scaled, random_state=seeds["codes_infer"])
         table = LatentTable(torch.from_numpy(codes).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
@@ -270,7 +270,7 @@ def reconstruct(
     """
     run = as_run(run)
     z_all = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
-    q = run.model_config.latent_dim
+    q = run.model_config.code_size
     if z_all.ndim != 2 or z_all.shape[1] != q:
         raise UserError(f"latents must have shape (n, {q}), got {z_all.shape}")
     if not np.isfinite(z_all).all():
@@ -317,8 +317,8 @@ def evaluate(
     run = as_run(run)
     data, _ = _select(dataset, indices)
     z = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
-    if z.shape != (len(data), run.model_config.latent_dim):
-        raise UserError(f"latents must have shape ({len(data)}, {run.model_config.latent_dim}), got {z.shape}")
+    if z.shape != (len(data), run.model_config.code_size):
+        raise UserError(f"latents must have shape ({len(data)}, {run.model_config.code_size}), got {z.shape}")
     tc = replace(run.train_config, batch_size=batch_size, device=device, amp=False)
     use_images = uses_images(run.model_config, data, tc)
     dev = resolve_device(device)
@@ -409,11 +409,12 @@ def _check_initial_latents(initial_latents, n: int, q: int) -> np.ndarray | None
     return initial_latents
 
 
-def _initializer(init: str, parent: TrainedRun | None, q: int, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
-    """The parent's initialiser for the same init (its ``P``); otherwise one fitted here."""
+def _initializer(init: str, parent: TrainedRun | None, mc: ModelConfig, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
+    """The parent's initialiser for the same init (its ``P``); otherwise one fitted here
+    (one code per window of ``mc.code_window`` steps when set)."""
     if parent is not None and init == parent.init:
         return parent.initializer
-    return LatentInitializer(init, q, random_state=seeds["projection"]).fit(scaled)
+    return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
 
 
 def _select(dataset: MotionDataset, indices) -> tuple[MotionDataset, np.ndarray]:

@@ -3,7 +3,10 @@ frozen) and the codes, logs every epoch and checkpoints through an optional
 :class:`~primspace.train.rundir.RunDirectory` (None: the run lives in memory only).
 
 The loss (paper, *Main Results*: ``L(θ, z_1..z_n) = Σ_i ‖d(θ, z_i) − o_i‖²``) is taken here
-as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`).
+as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`). For data
+of different lengths (``MotionDataset.lengths``) each sample's loss is its mean over its
+own valid steps and the batch loss the mean over samples, so padding never counts and a
+code's gradient does not depend on the other samples of its batch.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import torch
 import torch.nn.functional as F
 
 from primspace.data import JointScaler, MotionDataset
+from primspace.data.steps import valid_steps
 from primspace.latent import LatentInitializer, LatentTable
 from primspace.model import MTRNNDecoder
 from primspace.progress import progress_bar
@@ -33,6 +37,7 @@ class DataTensors:
 
     motor: torch.Tensor  # (N, T, J) float32, scaled to [-1, 1]
     images: torch.Tensor | None  # (N, T, H, W, 3) uint8
+    mask: torch.Tensor | None = None  # (N, T) float32, 1 at valid steps; None: every step
 
     @classmethod
     def build(cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device) -> "DataTensors":
@@ -41,7 +46,19 @@ class DataTensors:
         if use_images:
             loaded = data.load_images().images
             images = torch.from_numpy(np.ascontiguousarray(loaded)).to(device)
-        return cls(motor, images)
+        mask = None
+        if data.lengths is not None:
+            mask = torch.from_numpy(valid_steps(data.lengths, data.length).astype(np.float32)).to(device)
+        return cls(motor, images, mask)
+
+
+def _mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean squared error; with ``mask`` (B, K) over the first two axes, each sample's mean
+    over its valid entries, then the mean over samples."""
+    if mask is None:
+        return F.mse_loss(pred, target)
+    per_step = (pred - target).pow(2).flatten(2).mean(dim=2)
+    return ((per_step * mask).sum(dim=1) / mask.sum(dim=1).clamp_min(1.0)).mean()
 
 
 def batch_loss(
@@ -53,19 +70,22 @@ def batch_loss(
     frame when None).
     """
     use_images = tensors.images is not None
+    mask = None if tensors.mask is None else tensors.mask.index_select(0, idx)
     with autocast:
         out = model(z, images=use_images, frame_steps=steps if use_images else None)
-    motor = F.mse_loss(out.motor.float(), tensors.motor.index_select(0, idx))
+    motor = _mse(out.motor.float(), tensors.motor.index_select(0, idx), mask)
     if use_images:
+        frame_mask = mask
         if steps is None:
             target = tensors.images.index_select(0, idx)
         else:
+            frame_mask = None if mask is None else mask.gather(1, steps)
             n, t = tensors.images.shape[:2]
             rows = (idx.unsqueeze(1) * t + steps).reshape(-1)
             target = tensors.images.view(n * t, *tensors.images.shape[2:]).index_select(0, rows)
             target = target.view(*steps.shape, *tensors.images.shape[2:])
         target = target.to(torch.float32).div_(255.0)
-        vision = F.mse_loss(out.images.float(), target)
+        vision = _mse(out.images.float(), target, frame_mask)
         loss = tc.motor_weight * motor + tc.vision_weight * vision
     else:
         vision = torch.zeros((), device=motor.device)
