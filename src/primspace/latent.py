@@ -16,9 +16,9 @@ and we add ``pca``, the data-dependent linear baseline: the centred sequence pro
 on the top q principal directions of the training sequences.
 
 **Sequences of codes** (``window = W``; the paper's *Summary and Discussion*: "extend
-latent variable initialization by random linear projections to a sequence of latent
-vectors ... via one-dimensional convolution through time of a random linear projection
-with long motor sequence"). The motor sequence is cut into K = ceil(T / W) windows of W
+latent variable initialization algorithm by random linear projections to a sequence of
+latent vectors. It can be done via one-dimensional convolution through time of a random
+linear projection with long motor sequence."). The motor sequence is cut into K = ceil(T / W) windows of W
 steps (the last one padded with the last step) and the same ``P`` (q x W·J,
 ``P_jk ~ N(0, 1/q)``) projects every window: ``z_k = P m_{kW+1:(k+1)W}``, a convolution
 with kernel length and stride W. Appendix A then holds window by window:
