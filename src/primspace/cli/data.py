@@ -193,7 +193,10 @@ def _format_summary(s: dict) -> str:
 @app.command("generate")
 def generate_command(
     out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
-    preset: str = typer.Option("demo", "--preset", "-p", help="demo (126 motions) or paper (1715 motions, as in the paper)."),
+    preset: str = typer.Option(
+        "demo", "--preset", "-p", help="demo (126 motions) or paper (1715 motions, as in the paper); composite-demo "
+        "or composite: long demonstrations of 2-4 primitives in a row, with per-step labels (joints only by default).",
+    ),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray (identical data)."),
     address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray instance)."),
@@ -215,33 +218,20 @@ def generate_command(
     appears, atomically, when complete); a re-run after a failure or an interruption
     generates only the missing shards.
     """
-    import dataclasses
     import time
 
     from primspace.files import output_file
-    from primspace.sim.generate import GenerationConfig, generate_dataset, resolve_config
+    from primspace.sim import generate
+    from primspace.sim.composite import COMPOSITE_PRESETS
+    from primspace.sim.generate import generate_dataset
 
     out = output_file(out, inputs=(config_file,), overwrite=overwrite)
-    config = resolve_config(preset)
-    if config_file is not None:
-        try:
-            settings = json.loads(config_file.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise UserError(f"{config_file}: cannot read a JSON object of settings ({exc})") from None
-        try:
-            config = GenerationConfig.from_dict(settings, base=config)
-        except UserError as exc:
-            raise UserError(f"{config_file}: {exc}") from None
-    changes = {"images": False} if no_images else {}
-    if height is not None:
-        changes["height"] = height
-    if width is not None:
-        changes["width"] = width
-    config = dataclasses.replace(config, **changes)
-    try:
-        config = resolve_config(config)
-    except UserError as exc:
-        raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
+    if preset in COMPOSITE_PRESETS:
+        _generate_composite(out, preset, config_file, (height, width, no_images), workers, backend, address, seed, overwrite)
+        return
+    if preset not in generate.PRESETS:
+        raise UserError(f"unknown preset {preset!r}; choose from {', '.join([*generate.PRESETS, *COMPOSITE_PRESETS])}")
+    config = _generation_config(preset, config_file, height, width, no_images)
     check_workers(workers)
     start = time.perf_counter()
     shards = []
@@ -255,6 +245,73 @@ def generate_command(
         f"wrote {out}: {len(ds)} motions x {ds.length} steps x {ds.n_joints} joints, {frames} "
         f"({took:.1f} s, {len(ds) / took:.1f} motions/s{resumed})"
     )
+
+
+def _generation_config(preset: str, config_file, height, width, no_images: bool):
+    """The validated ``GenerationConfig`` of a single-primitive preset with --config and the frame flags over it."""
+    import dataclasses
+
+    from primspace.sim.generate import GenerationConfig, resolve_config
+
+    config = resolve_config(preset)
+    if config_file is not None:
+        settings = _settings_file(config_file)
+        try:
+            config = GenerationConfig.from_dict(settings, base=config)
+        except UserError as exc:
+            raise UserError(f"{config_file}: {exc}") from None
+    changes = {"images": False} if no_images else {}
+    if height is not None:
+        changes["height"] = height
+    if width is not None:
+        changes["width"] = width
+    config = dataclasses.replace(config, **changes)
+    try:
+        return resolve_config(config)
+    except UserError as exc:
+        raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
+
+
+def _settings_file(config_file: Path) -> dict:
+    """The JSON object of generation settings in ``config_file`` (one-line error otherwise)."""
+    try:
+        return json.loads(config_file.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise UserError(f"{config_file}: cannot read a JSON object of settings ({exc})") from None
+
+
+def _generate_composite(out: Path, preset: str, config_file, frames, workers, backend, address, seed, overwrite) -> None:
+    """``generate`` for a composite preset (:mod:`primspace.sim.composite`): --config takes
+    ``CompositeConfig`` fields over the preset's; --height/--width turn frames on."""
+    import time
+
+    from primspace.sim.composite import COMPOSITE_PRESETS, generate_composite, resolve_composite
+
+    if backend != "local" or address is not None:
+        raise UserError(f"--preset {preset}: long demonstrations are generated locally (no --backend ray or --address)")
+    settings = COMPOSITE_PRESETS[preset].to_dict()
+    if config_file is not None:
+        extra = _settings_file(config_file)
+        if not isinstance(extra, dict):
+            raise UserError(f"{config_file}: composite settings must be a JSON object")
+        settings |= extra
+    height, width, no_images = frames
+    if no_images:
+        settings["image_size"] = None
+    elif height is not None or width is not None:
+        h, w = settings["image_size"] or (48, 64)
+        settings["image_size"] = (h if height is None else height, w if width is None else width)
+    try:
+        config = resolve_composite(settings)
+    except UserError as exc:
+        raise UserError(f"{config_file}: {exc}" if config_file is not None else str(exc)) from None
+    check_workers(workers)
+    start = time.perf_counter()
+    generate_composite(config, seed=seed, out=out, overwrite=overwrite, workers=workers)
+    took = time.perf_counter() - start
+    frames_text = f"images {config.image_size[0]}x{config.image_size[1]}" if config.image_size else "no images"
+    typer.echo(f"wrote {out}: {config.n_sequences} long demonstrations of {config.min_primitives}-{config.max_primitives} "
+               f"primitives, T = {config.length} steps x 9 joints, {frames_text} ({took:.1f} s)")
 
 
 @app.command("show")

@@ -62,7 +62,7 @@ class Primitive:
 
     # ------------------------------------------------------------------ script
     def script(self, scene: "Scene", block_x: float, block_y: float, size: float, n_steps: int,
-               c: ScriptConstants = SCRIPT) -> Script:
+               c: ScriptConstants = SCRIPT, start=None) -> Script:
         """The scripted path of this primitive for a block at (x, y) of edge ``size``.
 
         Parameters
@@ -74,6 +74,10 @@ class Primitive:
         n_steps : int
             T, the number of time steps (the motion lasts T - 1 steps of dt).
         c : ScriptConstants
+        start : array-like, shape (3,), optional
+            Where the TCP starts (m; fingers closed); default the home TCP
+            ``c.home_tcp``. A long demonstration (:mod:`primspace.sim.composite`) starts
+            each later primitive where the one before left the hand.
 
         Returns
         -------
@@ -81,7 +85,7 @@ class Primitive:
         """
         geo = finger_geometry(scene)
         x, y, s = float(block_x), float(block_y), float(size)
-        path = KeyPath(c.home_tcp, 0.0)
+        path = KeyPath(c.home_tcp if start is None else start, 0.0)
         contact_start = self.key_poses(path, geo, x, y, s, c)
         tcp, fingers = path.sample(n_steps)
         return Script(self.name, tcp, fingers, np.array([x, y]), s, contact_start, self.push_axis, self.push_sign)
