@@ -241,3 +241,12 @@ def test_non_finite_codes_are_refused_but_padding_may_hold_anything():
     assert len(segment_sequences(z, W, [50, 70], 1).step_labels[1]) == 70  # window 7 is padding
     with pytest.raises(UserError, match="codes of sequence 1 are not finite"):
         segment_sequences(z, W, [50, 80], 1)
+
+
+def test_identical_codes_get_one_label_and_a_note():
+    from primspace.segmentation import segment_sequences
+
+    result = segment_sequences(np.zeros((4, 6, 3)), 5, [30, 30, 25, 20], 3)
+    assert all(len(b) == 0 for b in result.boundaries)
+    assert all((labels == 0).all() for labels in result.step_labels)
+    assert result.note is not None and "identical" in result.note

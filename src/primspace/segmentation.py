@@ -327,6 +327,9 @@ def _cluster_segments(codes, n_primitives, r2_target, random_state):
     if n <= n_primitives:
         note = f"only {n} segment(s) for {n_primitives} primitive(s): not clustered, each segment is its own label"
         return np.arange(n, dtype=np.int64), note
+    distinct = len(np.unique(np.round(codes, 12), axis=0))
+    if distinct < 2:  # e.g. untrained zero codes: there is nothing to tell apart
+        return np.zeros(n, dtype=np.int64), f"all {n} segment codes are identical: one label"
     model = LowRankSubspaceClustering(n_primitives, affine=True, r2_target=r2_target, random_state=random_state)
     return model.fit(codes).labels_.astype(np.int64), None
 

@@ -203,3 +203,99 @@ def _format_sweep(rows: list[dict]) -> str:
             f"{f(r.get('nmi'), '7.4f')} {f(r.get('ari'), '7.4f')}"
         )
     return "\n".join(lines)
+
+
+# ===================================================================== segmentation
+
+#: ``primspace segment``'s output directory.
+SEGMENT_FILES = ("segments.csv", "step_labels.npy", "result.json", "timeline.png")
+
+
+@app.command("segment")
+def segment_command(
+    run: Path = typer.Argument(..., help="A run trained with --code-window (fit or infer)."),
+    data: Path = typer.Argument(..., help="The run's data file (long demonstrations with lengths)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."),
+    primitives: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives (default: the data's label names)."),
+    tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
+) -> None:
+    """Find the primitives in long demonstrations from a run's code sequences: boundaries
+    (change points of the codes) and labels (affine subspace clustering of segment codes);
+    scored against the data's step_segments / step_labels when it has them."""
+    import numpy as np
+
+    from primspace.cluster.outputs import OutputKind, atomic_directory, check_output_directory, write_json
+    from primspace.data import MotionDataset
+    from primspace.experiments.composite import segment_codes
+    from primspace.files import check_outside_inputs
+    from primspace.train import check_run_data, load_run
+
+    kind = OutputKind("primspace segment", SEGMENT_FILES, frozenset({"window", "boundaries", "scores"}))
+    check_outside_inputs(out, (run, data))
+    check_output_directory(out, overwrite, kind)
+    trained = load_run(run)
+    window = trained.model_config.code_window
+    if window is None:
+        raise UserError(f"{run}: the run has one code per sequence; segment needs a run trained with --code-window")
+    ds = MotionDataset.load(data)
+    check_run_data(trained, ds)
+    held = ds.subset(trained.indices)
+    if primitives is None and not held.label_names:
+        raise UserError(f"{data}: no label names to count the primitives; pass --primitives K")
+    if primitives is not None and primitives < 1:
+        raise UserError(f"--primitives {primitives}: must be at least 1")
+    k = primitives or len(held.label_names)
+    result, scores = segment_codes(trained.latents, held, window, trained.model_config.latent_dim, tolerance=tolerance,
+                                   n_primitives=k)
+    record = {"run": str(run), "data": str(data), "window": window, "n_primitives": k,
+              "samples": trained.indices.tolist(), "boundaries": [b.tolist() for b in result.boundaries],
+              "scores": scores, "note": result.note}
+    with atomic_directory(out, overwrite, kind) as tmp:
+        _write_segments(tmp / "segments.csv", trained.indices, result)
+        np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
+        _timeline(tmp / "timeline.png", trained, held, result, window)
+        write_json(tmp / "result.json", record)
+    typer.echo(_segment_summary(scores, len(held)))
+    typer.echo(f"wrote {out}")
+
+
+def _write_segments(path: Path, samples, result) -> None:
+    """One row per segment: the sample (data index), its segment number, steps, label."""
+    import numpy as np
+
+    from primspace.files import atomic_write_text
+
+    lines = ["sample,segment,start,stop,label"]
+    for i, a, b, lab in zip(result.segment_sample, result.segment_start, result.segment_stop, result.segment_labels):
+        number = int(np.sum(result.segment_sample[: len(lines) - 1] == i))
+        lines.append(f"{int(samples[i])},{number},{int(a)},{int(b)},{int(lab)}")
+    atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def _timeline(path: Path, trained, held, result, window: int, shown: int = 4) -> None:
+    """The first ``shown`` demonstrations' code sequences with true and found boundaries."""
+    import numpy as np
+
+    from primspace.plots import save_figure
+    from primspace.plots.sequences import plot_code_timeline
+    from primspace.segmentation import boundaries_from_segments
+
+    n = min(shown, len(held))
+    codes = trained.latents[:n].reshape(n, -1, trained.model_config.latent_dim)
+    lengths = held.lengths[:n] if held.lengths is not None else np.full(n, held.length)
+    truth = held.step_labels[:n] if held.step_labels is not None else np.full((n, held.length), -1)
+    true_bounds = boundaries_from_segments(held.step_segments[:n], lengths) if held.step_segments is not None else [[]] * n
+    fig = plot_code_timeline(codes, window, lengths, truth, result.padded_step_labels(held.length)[:n], true_bounds,
+                             result.boundaries[:n], label_names=list(held.label_names),
+                             title=f"{trained.init}: code sequences (q = {trained.model_config.latent_dim}, W = {window})")
+    save_figure(fig, path)
+
+
+def _segment_summary(scores: dict, n: int) -> str:
+    if "boundary" not in scores:
+        return f"{n} demonstrations: {scores['segments_found']} segments found"
+    b = scores["boundary"]
+    return (f"{n} demonstrations: {scores['segments_found']} segments found, {scores['segments_true']} true; "
+            f"boundary F1 {b['f1']:.3f} (precision {b['precision']:.3f}, recall {b['recall']:.3f}, "
+            f"within {scores['tolerance']} steps); step labelling accuracy {scores['accuracy']:.3f}")

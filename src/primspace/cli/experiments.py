@@ -112,6 +112,10 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         if epochs is not None:
             fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]
             overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
+        if name == "composite":  # --preset demo / paper name the composite experiment's own presets
+            from primspace.experiments.presets import COMPOSITE_PRESET_OF, DEFAULT_PRESET
+
+            preset = COMPOSITE_PRESET_OF.get(preset or DEFAULT_PRESET, preset)
         exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
         results = []
         for step in _judgeable_steps(exp, name, steps):
@@ -142,6 +146,11 @@ _experiment_command(
 _experiment_command(
     "inter", "Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay.",
     ("inter:run_inter",), "inter_table",
+)
+_experiment_command(
+    "composite", "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
+    "segmented and labelled without labels (--preset demo or paper; docs/sequences.md).",
+    ("composite:run_composite",), "composite_table",
 )
 _experiment_command(
     "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",

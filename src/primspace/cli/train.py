@@ -81,6 +81,10 @@ def train_command(
         _TC.vision_frames, "--vision-frames",
         help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
     ),
+    code_window: Optional[int] = typer.Option(
+        None, "--code-window",
+        help="One code per window of W steps (a sequence of codes, for long demonstrations of several primitives).",
+    ),
     layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
     taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
     image_channels: str = typer.Option(_csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."),
@@ -102,7 +106,7 @@ def train_command(
 
     mc = replace(
         _MC, latent_dim=latent_dim, layer_sizes=int_list(layers, "--layers"), taus=float_list(taus, "--taus"),
-        image_channels=int_list(image_channels, "--image-channels"),
+        image_channels=int_list(image_channels, "--image-channels"), code_window=code_window,
     )
     tc = replace(
         _TC, epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,

@@ -24,6 +24,7 @@ import json
 import os
 import shutil
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
@@ -33,9 +34,12 @@ from primspace.errors import OutputExistsError, UserError
 from primspace.files import atomic_write_json, atomic_write_text, os_error, remove_stale_temporaries, temp_prefix, umask_mode
 
 __all__ = [
+    "OutputKind",
+    "CLUSTER_OUTPUT",
     "atomic_directory",
     "check_output_directory",
     "is_cluster_output",
+    "is_output_of",
     "OUTPUT_FILES",
     "figure_indices",
     "write_labels_csv",
@@ -48,13 +52,28 @@ __all__ = [
 FIGURE_MAX_POINTS = 2000
 #: Every file ``primspace cluster`` writes into its output directory.
 OUTPUT_FILES = ("labels.csv", "result.json", "clustering.png", "sweep.csv", "sweep.json", "sweep.png")
+
+
+@dataclass(frozen=True)
+class OutputKind:
+    """A command's output directory: the command, the files it writes, and the keys its
+    ``result.json`` always holds (how an earlier output of it is recognised)."""
+
+    command: str
+    files: tuple[str, ...]
+    result_keys: frozenset
+
+
+#: ``primspace cluster``'s output directory.
+CLUSTER_OUTPUT = OutputKind("primspace cluster", OUTPUT_FILES, frozenset({"n_clusters", "tau_option", "rank"}))
+
 SWEEP_COLUMNS = ("grid", "value", "tau", "tau_relative", "r2", "rank", "accuracy", "nmi", "ari", "note")
 
 
-def check_output_directory(path: str | os.PathLike, overwrite: bool = False) -> Path:
+def check_output_directory(path: str | os.PathLike, overwrite: bool = False, kind: OutputKind = CLUSTER_OUTPUT) -> Path:
     """Refuse a file, a non-empty directory unless ``overwrite``, and (even with
-    ``overwrite``) a non-empty directory that is not the output of ``primspace cluster``;
-    return the path."""
+    ``overwrite``) a non-empty directory that is not an earlier output of ``kind``'s
+    command; return the path."""
     path = Path(path)
     if path.exists():
         if not path.is_dir():
@@ -62,25 +81,30 @@ def check_output_directory(path: str | os.PathLike, overwrite: bool = False) -> 
         if any(path.iterdir()):
             if not overwrite:
                 raise OutputExistsError(path)
-            if not is_cluster_output(path):
+            if not is_output_of(path, kind):
                 raise UserError(
-                    f"{path}: exists and is not a primspace cluster output (no cluster result.json); "
-                    "--overwrite only replaces an earlier cluster output: choose another --out"
+                    f"{path}: exists and is not a {kind.command} output (no such result.json); "
+                    f"--overwrite only replaces an earlier {kind.command} output: choose another --out"
                 )
     return path
 
 
-def is_cluster_output(path: Path) -> bool:
-    """Whether ``path`` holds a ``result.json`` written by ``primspace cluster``."""
+def is_output_of(path: Path, kind: OutputKind) -> bool:
+    """Whether ``path`` holds a ``result.json`` written by ``kind``'s command."""
     try:
         result = json.loads((Path(path) / "result.json").read_text(encoding="utf-8"))
     except (OSError, ValueError, UnicodeDecodeError):
         return False
-    return isinstance(result, dict) and {"n_clusters", "tau_option", "rank"} <= set(result)
+    return isinstance(result, dict) and kind.result_keys <= set(result)
+
+
+def is_cluster_output(path: Path) -> bool:
+    """Whether ``path`` holds a ``result.json`` written by ``primspace cluster``."""
+    return is_output_of(path, CLUSTER_OUTPUT)
 
 
 @contextlib.contextmanager
-def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
+def atomic_directory(path: str | os.PathLike, overwrite: bool = False, kind: OutputKind = CLUSTER_OUTPUT) -> Iterator[Path]:
     """Yield a temporary directory beside ``path``; on success its files land in ``path``.
 
     A new (or empty) ``path`` is the temporary directory renamed. An earlier cluster
@@ -89,7 +113,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     removed; any other file in it is left alone. On failure the temporary directory is
     removed and ``path`` is untouched.
     """
-    path = check_output_directory(path, overwrite)
+    path = check_output_directory(path, overwrite, kind)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(path)
@@ -101,7 +125,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
         yield tmp
         if path.is_dir() and any(path.iterdir()):
             written = {p.name for p in tmp.iterdir()}
-            for name in OUTPUT_FILES:
+            for name in kind.files:
                 if name not in written:
                     with contextlib.suppress(FileNotFoundError):
                         (path / name).unlink()

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from primspace.experiments.results import (
     ANIMATION_RESULTS,
     IMAGE_STRIPS,
@@ -20,7 +22,7 @@ from primspace.experiments.results import (
     read_results,
 )
 
-__all__ = ["draw_intra", "draw_latent", "draw_animations", "draw_inter", "draw_latent_accuracy"]
+__all__ = ["draw_intra", "draw_latent", "draw_animations", "draw_inter", "draw_latent_accuracy", "draw_composite"]
 
 
 def draw_intra(out_dir: str | Path) -> list[Path]:
@@ -127,3 +129,32 @@ def draw_latent_accuracy(out_dir: str | Path) -> list[Path]:
         results["latent_sweep"], title=f"Clustering the codes (q = {results['latent_dim']}): accuracy per R² target"
     )
     return [plots.save_figure(fig, figure_file(out_dir, "latent_accuracy_vs_r2"))]
+
+
+def draw_composite(out_dir: str | Path) -> list[Path]:
+    """Long demonstrations: the fit and inference losses per init, and per init the
+    timeline of a few held-out demonstrations' codes with true and found boundaries."""
+    from primspace import plots
+    from primspace.plots.sequences import plot_code_timeline
+
+    results = read_results(out_dir, "composite")
+    if results is None or not results["runs"]:
+        return []
+    drawn = []
+    for phase, title in (("fit", "fit θ and the code sequences"), ("infer", "infer the code sequences, θ frozen")):
+        fig = plots.plot_intra_losses(results["runs"], phase=phase, title=f"Long demonstrations: {title}")
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_loss_{phase}")))
+    meta, arrays = read_results(out_dir, "composite_timeline"), read_arrays(out_dir, "composite")
+    if meta is None or arrays is None:
+        return drawn
+    true_bounds = [np.flatnonzero(np.diff(s[:n]) > 0) + 1 for s, n in zip(arrays["step_segments"], arrays["lengths"])]
+    for init in meta["inits"]:
+        found = [b[b >= 0] for b in arrays[f"bounds_{init}"]]
+        fig = plot_code_timeline(
+            arrays[f"codes_{init}"], meta["window"], arrays["lengths"], arrays["step_labels"], arrays[f"found_{init}"],
+            true_bounds, found, label_names=meta["label_names"],
+            title=f"{init}: inferred code sequences (q = {meta['latent_dim']}, W = {meta['window']}), held-out demonstrations",
+        )
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{init}")))
+    return drawn
+

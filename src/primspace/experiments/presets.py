@@ -23,7 +23,8 @@ from primspace.model import ModelConfig
 from primspace.train import TrainConfig
 
 __all__ = [
-    "ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "LASA_DATA", "default_model", "default_train", "resolve_preset",
+    "ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "LASA_DATA", "COMPOSITE_PRESET_OF", "default_model", "default_train",
+    "resolve_preset",
 ]
 
 #: The preset ``primspace experiment`` runs without ``--preset``.
@@ -246,6 +247,26 @@ PRESETS: dict[str, ExperimentPreset] = {
         inter_epochs=(200, 200),
     ),
 }
+
+
+_DEMO_TRAIN = dict(batch_size=16, lr=3e-3, latent_lr=3e-2)
+# Long demonstrations made of several primitives (issue 15; docs/sequences.md): one code of
+# q per window of W steps, the simulator's composite presets (joints only), held-out
+# demonstrations inferred with θ frozen and segmented. `experiment composite --preset demo`
+# runs "composite-demo", `--preset paper` runs "composite" (COMPOSITE_PRESET_OF).
+PRESETS["composite-demo"] = ExperimentPreset(
+    name="composite-demo", data_preset="composite-demo", train_fraction=0.3, latent_dims=(8,), images=False,
+    fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
+    train=replace(default_train(), **_DEMO_TRAIN),
+)
+PRESETS["composite"] = ExperimentPreset(
+    name="composite", data_preset="composite", train_fraction=0.2, inits=("zero", "random", "projection"),
+    latent_dims=(8,), images=False, model=replace(default_model(), code_window=10),
+    train=replace(default_train(), **_DEMO_TRAIN),
+)
+
+#: The experiment preset ``primspace experiment composite --preset NAME`` runs.
+COMPOSITE_PRESET_OF = {"demo": "composite-demo", "paper": "composite"}
 
 
 def resolve_preset(name: str) -> ExperimentPreset:

@@ -149,8 +149,9 @@ class ExperimentDir:
                     raise UserError(f"{self.data_path}: the experiment's data file is gone")
                 self._make_data()
             self._dataset = MotionDataset.load(self.data_path)
-            if self._dataset.labels is None or (self._dataset.labels < 0).any():
-                raise UserError(f"{self.data_path}: experiments need a primitive label for every sample")
+            labelled = self._dataset.labels is not None and not (self._dataset.labels < 0).any()
+            if not labelled and self._dataset.step_labels is None:
+                raise UserError(f"{self.data_path}: experiments need a primitive label for every sample (or every step)")
             if not self.results_file("data").exists():  # what the report's Data section shows
                 self.write_results("data", _plain(self._dataset.summary()))
         return self._dataset
@@ -165,8 +166,14 @@ class ExperimentDir:
             with self.stage("import LASA"):
                 import_lasa(length=self.preset.lasa_length).save(self.data_path)
             return
+        from primspace.sim.composite import COMPOSITE_PRESETS, generate_composite
         from primspace.sim.generate import generate_dataset
 
+        if self.preset.data_preset in COMPOSITE_PRESETS:
+            with self.stage("generate data"):
+                generate_composite(self.preset.data_preset, seed=self.seed, out=self.data_path, progress=self.progress,
+                                   workers=self.workers)
+            return
         with self.stage("generate data"):
             generate_dataset(
                 self.preset.data_preset, seed=self.seed, workers=self.workers, backend=self.backend,

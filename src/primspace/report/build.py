@@ -26,6 +26,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.clustering, "clustering"),
     (sections.success, "success"),
     (sections.inter, "inter"),
+    (sections.composite, "composite"),
     (sections.latent_figures, "intra"),
     (sections.animations, "intra_animation"),
     (sections.appendix_a, "appendix_a"),

@@ -20,6 +20,7 @@ from primspace.experiments.results import (
     INITIAL_CODES,
     PROBE_RESULTS,
     animation_file,
+    composite_table,
     failed_criteria_table,
     final_loss_table,
     figure_file,
@@ -208,6 +209,30 @@ def inter(out_dir: Path, report: HtmlReport) -> None:
     report.table(columns, rows)
     if results["failures"]:
         report.note(f"{len(results['failures'])} fold run(s) failed: " + "; ".join(results["failures"]), "warn")
+
+
+def composite(out_dir: Path, report: HtmlReport) -> None:
+    """Long demonstrations: held-out loss, boundaries and labels found from code sequences."""
+    results = read_results(out_dir, "composite")
+    if results is None:
+        return
+    report.section("Long demonstrations: sequences of codes")
+    report.paragraph(
+        "The paper's next step: “To model more complex behaviours composed of many consecutive primitives, instead of "
+        "using a single latent vector z of fixed dimension usually a sequence of such vectors is used.” One code per "
+        f"window of {results['window']} steps; the codes of held-out demonstrations are inferred with θ frozen, then "
+        "segmented (change points) and labelled (affine subspace clustering of segment codes) without labels "
+        "(docs/sequences.md)."
+    )
+    columns, rows = composite_table(results)
+    report.table(columns, rows)
+    for phase in ("fit", "infer"):
+        report.figure(figure_file(out_dir, f"composite_loss_{phase}"), f"Loss per epoch ({phase}), per init.")
+    for path in sorted((out_dir / "figures").glob("composite_timeline_*.png")):
+        report.figure(path, "Code sequences of held-out demonstrations (heat map: code values per window), true "
+                      "(solid) and found (dashed) boundaries, true and found labels (found colours are cluster ids).")
+    if results["failures"]:
+        report.note(f"{len(results['failures'])} run(s) failed: " + "; ".join(results["failures"]), "warn")
 
 
 def latent_figures(out_dir: Path, report: HtmlReport) -> None:

@@ -1,0 +1,209 @@
+"""Long demonstrations made of several primitives: a sequence of codes per demonstration.
+
+The paper's next step (*Summary and Discussion*): "To model more complex behaviours
+composed of many consecutive primitives, instead of using a single latent vector
+$\\mathbf{z}$ of fixed dimension usually a sequence of such vectors is used." Each run of
+the grid ``composite/<init>-q<q>-s<seed>`` fits the decoder (one code per window of
+``model.code_window`` steps, :class:`~primspace.model.MTRNNDecoder`) and the codes of a
+random ``train_fraction`` of the long demonstrations, then infers the codes of the others
+with θ frozen, starting from the convolutional random projection (``projection``), zero,
+random or PCA codes. The inferred code sequences are then segmented and labelled without
+labels (:mod:`primspace.segmentation`) and scored against the simulator's ground truth:
+boundary F1 within one window, per-step labelling accuracy (Hungarian) and the held-out
+loss. The untrained codes of each init are segmented and scored too (the projection's
+``P m`` windows need no training at all).
+
+Results: ``results/composite.json`` (one row per run) and ``results/composite.npz``
+(the code sequences and boundaries of a few held-out demonstrations of the first seed's
+runs, for the timeline figure).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from primspace.data import MotionDataset
+from primspace.experiments import figures
+from primspace.experiments.presets import ExperimentPreset
+from primspace.experiments.runs import curves, experiment_scaler, load_run_data, train_configs
+from primspace.experiments.sweep import GridPoint, run_dir_of
+from primspace.experiments.workspace import ExperimentDir
+
+__all__ = ["composite_key", "split_sequences", "segment_codes", "run_composite_point", "run_composite",
+           "TIMELINE_SAMPLES"]
+
+#: Held-out demonstrations shown in the timeline figure.
+TIMELINE_SAMPLES = 4
+
+
+def composite_key(init: str, latent_dim: int, seed: int) -> str:
+    """The grid key (and ``OUT/runs/`` folder) of one composite run."""
+    return f"composite/{init}-q{latent_dim}-s{seed}"
+
+
+def split_sequences(n: int, train_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A random ``train_fraction`` of ``n`` demonstrations (at least one on each side),
+    sorted ``(train, eval)`` index arrays."""
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 15]))
+    order = rng.permutation(n)
+    k = min(max(int(round(train_fraction * n)), 1), max(n - 1, 1))
+    return np.sort(order[:k]), np.sort(order[k:])
+
+
+def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_dim: int, *,
+                  tolerance: int | None = None, n_primitives: int | None = None):
+    """Segment and label code sequences; score them when ``data`` has the ground truth.
+
+    Parameters
+    ----------
+    codes : ndarray (n, K*q)
+        One row per demonstration of ``data`` (a run's ``latents``), window-major.
+    data : MotionDataset
+        The same demonstrations, with ``lengths`` (and, to score, ``step_segments`` and
+        ``step_labels``).
+    window, latent_dim : int
+        W and q of the run.
+    tolerance : int, optional
+        Steps within which a found boundary matches a true one (default: one window, W).
+    n_primitives : int, optional
+        Clusters of segment codes (default: the data's label names).
+
+    Returns
+    -------
+    (SegmentationResult, dict)
+        The segmentation and its scores: ``boundary`` (precision, recall, f1, tp, fp, fn),
+        ``accuracy`` (per step), ``tolerance``, ``segments_true``, ``segments_found``.
+    """
+    from primspace.segmentation import (
+        boundaries_from_segments,
+        boundary_f1,
+        segment_sequences,
+        step_labelling_accuracy,
+    )
+
+    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    sequences = np.asarray(codes, dtype=np.float64).reshape(len(data), -1, latent_dim)
+    n_primitives = n_primitives or max(len(data.label_names), 1)
+    result = segment_sequences(sequences, window, lengths, n_primitives)
+    scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
+    if data.step_segments is not None:
+        tol = window if tolerance is None else int(tolerance)
+        if tol < 0:
+            from primspace.errors import UserError
+
+            raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tol}")
+        truth = boundaries_from_segments(data.step_segments, lengths)
+        scores |= {
+            "boundary": boundary_f1(truth, result.boundaries, tol),
+            "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)),
+            "tolerance": tol,
+            "segments_true": int(sum(len(b) + 1 for b in truth)),
+        }
+    return result, scores
+
+
+def run_composite_point(
+    run_dir: Path, data_path: str, train_idx: list, eval_idx: list, init: str, latent_dim: int, seed: int, preset: dict
+) -> dict:
+    """One grid point: fit θ and the code sequences on the train part, infer the eval
+    part's code sequences with θ frozen, segment and score them (and the untrained ones)."""
+    from primspace.train import configure_process, fit, infer
+
+    preset_obj = ExperimentPreset.from_dict(preset)
+    data, use_images = load_run_data(data_path, preset_obj)
+    start = time.perf_counter()
+    model_config, train_config = train_configs(preset_obj, latent_dim, seed, preset_obj.fit_epochs)
+    configure_process(train_config)
+    fitted = fit(
+        data, run_dir / "fit", model_config=model_config, train_config=train_config, init=init,
+        indices=np.asarray(train_idx), resume=True, images=use_images, scaler=experiment_scaler(data), progress=False,
+    )
+    inferred = infer(
+        run_dir / "fit", data, run_dir / "infer", epochs=preset_obj.infer_epochs, init=init,
+        indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset_obj.infer_batch_size,
+    )
+    held_out = data.subset(np.asarray(eval_idx))
+    window = model_config.code_window
+    _, scores = segment_codes(inferred.latents, held_out, window, latent_dim)
+    _, untrained = segment_codes(inferred.initial_latents, held_out, window, latent_dim)
+    return {
+        "init": init, "latent_dim": latent_dim, "seed": seed, "window": window,
+        "n_train": len(train_idx), "n_eval": len(eval_idx),
+        "fit": curves(fitted.history), "infer": curves(inferred.history),
+        "segmentation": scores, "segmentation_untrained": untrained,
+        "seconds": round(time.perf_counter() - start, 2),
+    }
+
+
+def run_composite(exp: ExperimentDir) -> dict:
+    """Run (or finish) the composite grid; write results/composite.json, the timeline
+    arrays and the figures."""
+    preset = exp.preset
+    if preset.model.code_window is None:
+        from primspace.errors import UserError
+
+        raise UserError(f"preset {preset.name!r} has no code window (model.code_window); use --preset demo or paper")
+    data = exp.dataset()
+    if data.step_segments is None:
+        from primspace.errors import UserError
+
+        raise UserError(f"{exp.data_path}: the composite experiment needs long demonstrations with step_segments "
+                        "(primspace generate --preset composite-demo)")
+    points, splits = [], {}
+    for seed in preset.seeds:
+        train, evaluation = split_sequences(len(data), preset.train_fraction, seed)
+        splits[str(seed)] = {"n_train": len(train), "n_eval": len(evaluation)}
+        for q in preset.latent_dims:
+            for init in preset.inits:
+                args = (str(exp.data_path), train.tolist(), evaluation.tolist(), init, q, seed, preset.to_dict())
+                points.append(GridPoint(composite_key(init, q, seed), args))
+    with exp.stage("composite"):
+        grid = exp.grid(run_composite_point, points, "composite runs")
+    runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
+    results = {"runs": runs, "failures": grid.failures, "splits": splits, "window": preset.model.code_window,
+               "label_names": list(data.label_names)}
+    exp.write_results("composite", results)
+    if runs:
+        _write_timelines(exp, runs)
+    figures.draw_composite(exp.path)
+    return results
+
+
+def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
+    """The code sequences, true and found boundaries and labels of the first
+    :data:`TIMELINE_SAMPLES` held-out demonstrations, per init of the first seed and q."""
+    from primspace.train import load_run
+
+    data = exp.dataset()
+    first = runs[0]
+    chosen = [r for r in runs if (r["seed"], r["latent_dim"]) == (first["seed"], first["latent_dim"])]
+    arrays: dict[str, np.ndarray] = {}
+    inits = []
+    for r in chosen:
+        run = load_run(run_dir_of(exp.path, r["key"]) / "infer")
+        show = run.indices[:TIMELINE_SAMPLES]
+        held_out = data.subset(show)
+        result, _ = segment_codes(run.latents[:len(show)], held_out, r["window"], r["latent_dim"])
+        arrays[f"codes_{r['init']}"] = run.latents[:len(show)].reshape(len(show), -1, r["latent_dim"])
+        arrays[f"found_{r['init']}"] = result.padded_step_labels(data.length)
+        arrays[f"bounds_{r['init']}"] = _padded(result.boundaries)
+        inits.append(r["init"])
+    arrays["samples"] = np.asarray(show)
+    arrays["lengths"] = held_out.lengths
+    arrays["step_labels"] = held_out.step_labels
+    arrays["step_segments"] = held_out.step_segments
+    exp.write_arrays("composite", arrays)
+    exp.write_results("composite_timeline", {"inits": inits, "window": first["window"], "latent_dim": first["latent_dim"],
+                                             "seed": first["seed"], "label_names": list(data.label_names)})
+
+
+def _padded(boundaries: list[np.ndarray]) -> np.ndarray:
+    """Ragged boundary lists as one (n, m) int array, -1 padded."""
+    width = max((len(b) for b in boundaries), default=0)
+    out = np.full((len(boundaries), max(width, 1)), -1, dtype=np.int64)
+    for i, b in enumerate(boundaries):
+        out[i, : len(b)] = b
+    return out
