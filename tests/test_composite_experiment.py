@@ -1,0 +1,120 @@
+"""The composite experiment (issue 15) on tiny long demonstrations: code sequences fitted
+and inferred, segmented and scored, resumable, reported; and ``primspace segment``."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from primspace.experiments import presets as experiment_presets
+from primspace.experiments.composite import run_composite, segment_codes, split_sequences
+from primspace.experiments.presets import ExperimentPreset, default_model, default_train
+from primspace.experiments.workspace import ExperimentDir
+from primspace.sim.composite import CompositeConfig, generate_composite
+
+from conftest import assert_user_error
+
+TINY = ExperimentPreset(
+    name="composite-tiny", data_preset="composite-demo", train_fraction=0.5, inits=("zero", "projection"),
+    latent_dims=(4,), fit_epochs=3, infer_epochs=2, images=False,
+    model=replace(default_model(), layer_sizes=(12, 6), code_window=8), train=replace(default_train(), batch_size=4),
+)
+
+
+@pytest.fixture(scope="module")
+def long_data(tmp_path_factory):
+    """Eight long demonstrations of two primitives (seconds)."""
+    config = CompositeConfig(n_sequences=8, max_primitives=2, duration=(31, 34), transition_steps=4)
+    return generate_composite(config, seed=0, out=tmp_path_factory.mktemp("data") / "long.h5", progress=False)
+
+
+@pytest.fixture(scope="module")
+def finished(long_data, tmp_path_factory):
+    exp = ExperimentDir(tmp_path_factory.mktemp("exp") / "out", TINY, data=long_data, workers=1, progress=False)
+    return exp, run_composite(exp)
+
+
+def test_split_is_seeded_and_keeps_both_sides():
+    train, evaluation = split_sequences(10, 0.3, seed=0)
+    assert len(train) == 3 and len(evaluation) == 7 and not set(train) & set(evaluation)
+    np.testing.assert_array_equal(train, split_sequences(10, 0.3, seed=0)[0])
+    assert not np.array_equal(train, split_sequences(10, 0.3, seed=1)[0])
+    assert len(split_sequences(2, 0.01, seed=0)[0]) == 1
+
+
+def test_runs_are_segmented_and_scored(finished):
+    exp, results = finished
+    assert [r["init"] for r in results["runs"]] == ["zero", "projection"]
+    for r in results["runs"]:
+        assert (r["window"], r["n_train"], r["n_eval"]) == (8, 4, 4)
+        seg = r["segmentation"]
+        assert seg["tolerance"] == 8 and seg["segments_true"] == 8  # two primitives in each of 4 held-out demonstrations
+        assert 0 <= seg["boundary"]["f1"] <= 1 and 0 < seg["accuracy"] <= 1
+        assert len(r["infer"]) == 3  # epoch 0 and two inference epochs
+    zero = results["runs"][0]["segmentation_untrained"]
+    assert zero["segments_found"] == 4  # identical zero codes: no boundary anywhere
+    for name in ("composite_loss_fit", "composite_loss_infer", "composite_timeline_projection"):
+        assert (exp.path / "figures" / f"{name}.png").stat().st_size > 1000
+
+
+def test_rerun_skips_finished_runs_and_the_report_shows_them(finished):
+    from primspace.report import build_report
+
+    exp, results = finished
+    again = run_composite(ExperimentDir(exp.path, TINY, data=exp.data_path, progress=False))
+    assert again["runs"] == results["runs"]
+    html = build_report(exp.path).read_text()
+    assert "Long demonstrations: sequences of codes" in html and "composite_timeline_projection" in html
+
+
+def test_segment_codes_scores_planted_sequences(long_data):
+    from primspace.data import MotionDataset
+
+    data = MotionDataset.load(long_data)
+    # a code per window that is its primitive's own direction: boundaries and labels are found
+    windows = -(-data.length // 8)
+    codes = np.zeros((len(data), windows, 16))
+    rng = np.random.default_rng(0)
+    centres = 5 * np.eye(len(data.label_names), 16)
+    for i in range(len(data)):
+        for k in range(windows):
+            step = min(k * 8, int(data.lengths[i]) - 1)
+            codes[i, k] = centres[data.step_labels[i, step]] + rng.normal(scale=0.01, size=16)
+    result, scores = segment_codes(codes.reshape(len(data), -1), data, 8, 16)
+    assert scores["boundary"]["f1"] == 1.0 and scores["accuracy"] > 0.9
+
+
+def test_segment_command(finished, tmp_path, run_cli):
+    exp, _ = finished
+    run = exp.path / "runs" / "composite" / "projection-q4-s0" / "infer"
+    out = tmp_path / "seg"
+    result = run_cli("segment", run, exp.data_path, "--out", out)
+    assert result.code == 0, result.err
+    assert "boundary F1" in result.out
+    record = json.loads((out / "result.json").read_text())
+    assert record["window"] == 8 and len(record["boundaries"]) == 4
+    rows = (out / "segments.csv").read_text().splitlines()
+    assert rows[0] == "sample,segment,start,stop,label" and len(rows) == 1 + record["scores"]["segments_found"]
+    assert np.load(out / "step_labels.npy").shape == (4, exp.dataset().length)
+    assert_user_error(run_cli("segment", run, exp.data_path, "--out", out), "output exists")
+    assert run_cli("segment", run, exp.data_path, "--out", out, "--overwrite").code == 0
+    assert_user_error(run_cli("segment", run, exp.data_path, "--out", exp.data_path), "is the input")
+
+
+def test_segment_refuses_a_run_with_one_code_per_sequence(long_data, tmp_path, run_cli):
+    from primspace.data import MotionDataset
+    from primspace.model import ModelConfig
+    from primspace.train import TrainConfig, fit
+
+    data = MotionDataset.load(long_data)
+    fit(data, tmp_path / "run", model_config=ModelConfig(latent_dim=3, layer_sizes=(8, 4)),
+        train_config=TrainConfig(epochs=1, batch_size=4), progress=False)
+    assert_user_error(run_cli("segment", tmp_path / "run", long_data, "--out", tmp_path / "seg"),
+                      "one code per sequence", "--code-window")
+
+
+def test_composite_presets_are_named_by_demo_and_paper():
+    for name in experiment_presets.COMPOSITE_PRESET_OF.values():
+        preset = experiment_presets.resolve_preset(name)
+        assert preset.model.code_window is not None and preset.data_preset == name
