@@ -118,3 +118,22 @@ def test_composite_presets_are_named_by_demo_and_paper():
     for name in experiment_presets.COMPOSITE_PRESET_OF.values():
         preset = experiment_presets.resolve_preset(name)
         assert preset.model.code_window is not None and preset.data_preset == name
+
+
+def test_lasa_chains_are_continuous_real_shapes_with_their_steps_labelled():
+    from primspace.data.importers import CHAIN_SHAPES, chain_lasa
+
+    data = chain_lasa(6, n_shapes=(2, 3), duration=(30, 40), seed=1)
+    assert data.label_names == list(CHAIN_SHAPES) and data.length == 120
+    for i in range(len(data)):
+        n = int(data.lengths[i])
+        assert 60 <= n <= 120 and (data.step_labels[i, n:] == -1).all() and (data.motor[i, n:] == data.motor[i, n - 1]).all()
+        steps = np.abs(np.diff(data.motor[i, :n], axis=0)).max(axis=1)
+        junctions = np.flatnonzero(np.diff(data.step_segments[i, :n])) + 1
+        assert len(junctions) in (1, 2) and (steps[junctions - 1] <= steps.max()).all()
+        assert steps[junctions - 1].max() < 1e-9  # each shape starts where the one before ended
+        labels = data.step_labels[i, :n]
+        assert (labels[junctions] != labels[junctions - 1]).all()  # no shape twice in a row
+    again = chain_lasa(6, n_shapes=(2, 3), duration=(30, 40), seed=1)
+    np.testing.assert_array_equal(again.motor, data.motor)
+    assert not np.array_equal(chain_lasa(6, n_shapes=(2, 3), duration=(30, 40), seed=2).step_labels, data.step_labels)

@@ -82,7 +82,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
 
     def command(
         preset: Optional[str] = typer.Option(
-            None, "--preset", help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU).",
+            None, "--preset", help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU); composite takes demo, paper or lasa too.",
         ),
         data: Optional[Path] = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."),
         out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),

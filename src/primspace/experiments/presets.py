@@ -23,7 +23,7 @@ from primspace.model import ModelConfig
 from primspace.train import TrainConfig
 
 __all__ = [
-    "ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "LASA_DATA", "COMPOSITE_PRESET_OF", "default_model", "default_train",
+    "ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "LASA_DATA", "LASA_CHAINS", "COMPOSITE_PRESET_OF", "default_model", "default_train",
     "resolve_preset",
 ]
 
@@ -32,6 +32,10 @@ DEFAULT_PRESET = "demo"
 
 #: The ``data_preset`` that imports the LASA handwriting set instead of simulating.
 LASA_DATA = "lasa"
+#: The ``data_preset`` of long demonstrations chained from LASA's real ones
+#: (:func:`primspace.data.importers.chain_lasa`, this many sequences, seeded by ``--seed``).
+LASA_CHAINS = "lasa-chains"
+LASA_CHAIN_SEQUENCES = 120
 
 # Fields of the presets written before they held a ModelConfig and a TrainConfig
 # (experiment.json of older experiment directories): where each one lives now.
@@ -265,8 +269,14 @@ PRESETS["composite"] = ExperimentPreset(
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 
+PRESETS["composite-lasa"] = ExperimentPreset(
+    name="composite-lasa", data_preset=LASA_CHAINS, train_fraction=0.3, latent_dims=(8,), images=False,
+    fit_epochs=800, infer_epochs=600, model=replace(default_model(), code_window=8),
+    train=replace(default_train(), **_DEMO_TRAIN),
+)
+
 #: The experiment preset ``primspace experiment composite --preset NAME`` runs.
-COMPOSITE_PRESET_OF = {"demo": "composite-demo", "paper": "composite"}
+COMPOSITE_PRESET_OF = {"demo": "composite-demo", "paper": "composite", "lasa": "composite-lasa"}
 
 
 def resolve_preset(name: str) -> ExperimentPreset:

@@ -30,7 +30,7 @@ import numpy as np
 from primspace import __version__
 from primspace.data import MotionDataset
 from primspace.errors import UserError
-from primspace.experiments.presets import LASA_DATA, ExperimentPreset
+from primspace.experiments.presets import LASA_CHAIN_SEQUENCES, LASA_CHAINS, LASA_DATA, ExperimentPreset
 from primspace.experiments.results import (
     META_FILE,
     arrays_file,
@@ -165,6 +165,12 @@ class ExperimentDir:
 
             with self.stage("import LASA"):
                 import_lasa(length=self.preset.lasa_length).save(self.data_path)
+            return
+        if self.preset.data_preset == LASA_CHAINS:
+            from primspace.data.importers import chain_lasa
+
+            with self.stage("chain LASA"):
+                chain_lasa(LASA_CHAIN_SEQUENCES, seed=self.seed).save(self.data_path)
             return
         from primspace.sim.composite import COMPOSITE_PRESETS, generate_composite
         from primspace.sim.generate import generate_dataset

@@ -28,7 +28,7 @@ Frames (:mod:`~primspace.data.importers.frames`) are aligned with the resampled 
 
 from primspace.data.importers.csv_folder import import_csv_folder
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, frame_steps
-from primspace.data.importers.lasa import import_lasa, lasa_shape_names
+from primspace.data.importers.lasa import CHAIN_SHAPES, chain_lasa, import_lasa, lasa_shape_names
 from primspace.data.importers.lerobot import import_lerobot, is_lerobot_dir
 from primspace.data.importers.npz import import_npz
 from primspace.data.importers.robomimic import import_robomimic, looks_like_robomimic
@@ -37,6 +37,8 @@ __all__ = [
     "import_npz",
     "import_csv_folder",
     "import_lasa",
+    "chain_lasa",
+    "CHAIN_SHAPES",
     "import_robomimic",
     "import_lerobot",
     "lasa_shape_names",

