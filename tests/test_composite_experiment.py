@@ -114,10 +114,14 @@ def test_segment_refuses_a_run_with_one_code_per_sequence(long_data, tmp_path, r
                       "one code per sequence", "--code-window")
 
 
-def test_composite_presets_are_named_by_demo_and_paper():
-    for name in experiment_presets.COMPOSITE_PRESET_OF.values():
+def test_composite_presets_are_named_by_demo_paper_and_lasa():
+    from primspace.sim.composite import COMPOSITE_PRESETS
+
+    data = {"demo": "composite-demo", "paper": "composite", "lasa": experiment_presets.LASA_CHAINS}
+    for short, name in experiment_presets.COMPOSITE_PRESET_OF.items():
         preset = experiment_presets.resolve_preset(name)
-        assert preset.model.code_window is not None and preset.data_preset == name
+        assert preset.model.code_window is not None and preset.data_preset == data[short]
+    assert set(COMPOSITE_PRESETS) == {"composite-demo", "composite"}
 
 
 def test_lasa_chains_are_continuous_real_shapes_with_their_steps_labelled():

@@ -152,3 +152,28 @@ def test_fit_and_infer_with_code_windows_resume_exactly(tmp_path):
     b = infer(tmp_path / "straight", data, tmp_path / "b", epochs=3, resume=True, progress=False)
     np.testing.assert_array_equal(a.latents, b.latents)
     assert a.initializer.window == 6
+
+
+def test_code_smoothness_is_the_total_variation_of_valid_windows():
+    from primspace.train.loop import code_variation
+
+    mc = ModelConfig(latent_dim=2, n_joints=1, length=9, code_window=3).validate()  # K = 3
+    z = torch.tensor([[0.0, 0.0, 3.0, 4.0, 3.0, 4.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+    assert code_variation(z, mc, None).item() == pytest.approx((5.0 + 1.0) / 2)
+    mask = torch.ones(2, 9)
+    mask[1, 6:] = 0  # sample 1's last window is padding: its jump does not count
+    assert code_variation(z, mc, mask).item() == pytest.approx(5.0 / 2)
+    with pytest.raises(UserError, match="code_smoothness"):
+        TrainConfig(code_smoothness=-1.0).validate()
+
+
+def test_code_smoothness_makes_codes_change_less(tmp_path):
+    data = _long_demos()
+    mc = ModelConfig(latent_dim=3, code_window=6, **SMALL)
+    from primspace.train.loop import code_variation
+
+    plain = fit(data, model_config=mc, train_config=_tc(epochs=10, latent_lr=0.05), progress=False)
+    smooth = fit(data, model_config=mc, train_config=_tc(epochs=10, latent_lr=0.05, code_smoothness=5.0), progress=False)
+    tv = [code_variation(torch.from_numpy(r.latents), r.model_config.fitted_to(data), None).item() for r in (plain, smooth)]
+    assert tv[1] < 0.8 * tv[0]
+    assert smooth.history[-1]["loss"] > smooth.history[-1]["motor"]  # the logged loss includes the penalty

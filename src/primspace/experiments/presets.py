@@ -271,7 +271,7 @@ PRESETS["composite"] = ExperimentPreset(
 
 PRESETS["composite-lasa"] = ExperimentPreset(
     name="composite-lasa", data_preset=LASA_CHAINS, train_fraction=0.3, latent_dims=(8,), images=False,
-    fit_epochs=800, infer_epochs=600, model=replace(default_model(), code_window=8),
+    fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 

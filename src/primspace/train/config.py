@@ -50,6 +50,11 @@ class TrainConfig:
         at about ``K / T`` of the image head's cost. None (default) or ``>= T``: every
         frame, the exact loss. Epoch 0 and :func:`~primspace.train.evaluate` always use
         every frame; logged training epochs report the estimate.
+    code_smoothness : float
+        λ ≥ 0 of a total-variation penalty ``λ Σ_k ‖z_{k+1} − z_k‖₂`` on each sample's
+        sequence of codes (models with a code window; valid windows only), added to its
+        loss: codes that change seldom and then at once, piecewise constant as
+        primitives are (docs/sequences.md). 0 (default): none.
     seed : int
         Seeds the weights, ``P``, random codes and the batch order.
     device : str
@@ -83,6 +88,7 @@ class TrainConfig:
     motor_weight: float = 1.0
     vision_weight: float = 1.0
     vision_frames: int | None = None
+    code_smoothness: float = 0.0
     seed: int = 0
     device: str = "auto"
     amp: bool = False
@@ -108,6 +114,8 @@ class TrainConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise UserError(f"{name} must be a finite number >= 0, got {v}")
+        if not (self.code_smoothness >= 0 and math.isfinite(self.code_smoothness)):
+            raise UserError(f"code_smoothness must be a finite number >= 0, got {self.code_smoothness}")
         if self.vision_frames is not None and (not isinstance(self.vision_frames, int) or self.vision_frames < 1):
             raise UserError(f"vision_frames must be a whole number >= 1 (or None: every frame), got {self.vision_frames}")
         if self.motor_weight == 0 and self.vision_weight == 0:

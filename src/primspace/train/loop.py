@@ -90,7 +90,20 @@ def batch_loss(
     else:
         vision = torch.zeros((), device=motor.device)
         loss = tc.motor_weight * motor
+    if tc.code_smoothness > 0 and model.config.code_window is not None:
+        loss = loss + tc.code_smoothness * code_variation(z, model.config, mask)
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
+
+
+def code_variation(z: torch.Tensor, config, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean over samples of ``Σ_k ‖z_{k+1} − z_k‖₂`` over each sample's valid windows
+    (a window is valid when its first step is; :class:`~primspace.train.TrainConfig`
+    ``code_smoothness``)."""
+    codes = z.view(z.shape[0], config.n_codes, config.latent_dim)
+    steps = torch.sqrt(codes.diff(dim=1).pow(2).sum(dim=2) + 1e-12)  # (B, K-1); smooth at 0
+    if mask is not None:
+        steps = steps * mask[:, :: config.code_window][:, 1:]
+    return steps.sum(dim=1).mean()
 
 
 def autocast_for(tc: TrainConfig, device: torch.device):
