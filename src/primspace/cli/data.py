@@ -178,6 +178,12 @@ def _format_summary(s: dict) -> str:
     else:
         counts = ", ".join(f"{k} {v}" for k, v in s["label_counts"].items())
         lines.append(f"  labels   {len(s['label_counts'])} classes: {counts}")
+    steps = s.get("steps")
+    if steps is not None:
+        lo, hi = steps["lengths"]
+        lines.append(f"  long     valid steps {lo}..{hi} (padded to T), {steps['segments'][0]}..{steps['segments'][1]} "
+                     f"primitives each, {steps['n_segments']} segments in all")
+        lines.append("  steps    " + ", ".join(f"{k} {v}" for k, v in steps["steps_per_label"].items()))
     lines.append("  joint ranges (physical units):")
     width = max(len(n) for n in s["joint_ranges"])
     for name, (lo, hi) in s["joint_ranges"].items():

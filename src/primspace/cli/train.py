@@ -85,6 +85,10 @@ def train_command(
         None, "--code-window",
         help="One code per window of W steps (a sequence of codes, for long demonstrations of several primitives).",
     ),
+    code_smoothness: float = typer.Option(
+        _TC.code_smoothness, "--code-smoothness",
+        help="With --code-window: weight of the total variation of consecutive codes (piecewise-constant codes).",
+    ),
     layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
     taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
     image_channels: str = typer.Option(_csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."),
@@ -110,7 +114,7 @@ def train_command(
     )
     tc = replace(
         _TC, epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
-        motor_weight=motor_weight, vision_weight=vision_weight, vision_frames=vision_frames, seed=seed, device=device, amp=amp, threads=threads,
+        motor_weight=motor_weight, vision_weight=vision_weight, vision_frames=vision_frames, code_smoothness=code_smoothness, seed=seed, device=device, amp=amp, threads=threads,
         checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
     ).validate()
     ds, idx = _inputs(out, file, indices, weights_from)

@@ -218,6 +218,18 @@ class MotionDataset:
         out.images = np.asarray(self.images)
         return out
 
+    def _steps_summary(self) -> dict | None:
+        """Demonstrations of several primitives: valid lengths, segments, steps per primitive."""
+        if self.lengths is None:
+            return None
+        segments = self.step_segments.max(axis=1) + 1
+        counts = Counter(int(v) for v in self.step_labels[self.step_labels >= 0])
+        return {
+            "lengths": [int(self.lengths.min()), int(self.lengths.max())],
+            "segments": [int(segments.min()), int(segments.max())], "n_segments": int(segments.sum()),
+            "steps_per_label": {name: counts.get(i, 0) for i, name in enumerate(self.label_names)},
+        }
+
     def summary(self) -> dict:
         """What ``primspace info`` prints: sizes, names, label counts, per-joint ranges."""
         counts = Counter(int(v) for v in self.labels) if self.labels is not None else Counter()
@@ -234,6 +246,7 @@ class MotionDataset:
             "source": self.source,
             "label_counts": label_counts if self.labels is not None else None,
             "image_shape": None if self.images is None else list(self.images.shape[1:]),
+            "steps": self._steps_summary(),
         }
         for array in ARRAYS:  # [min, max] per name of each named numeric array
             value = getattr(self, array.name)
