@@ -3,7 +3,9 @@
 The constants in ``test_cluster_pinned.json`` were recorded from the code as it was before the cluster
 package was reshaped (issue 12: one R^2 grid, ``sweep`` built on the estimator, one pipeline
 for the command and the experiment). A refactor must leave every one of them unchanged:
-labels exactly, every float to 1e-12 relative. To re-record after a deliberate change of
+labels exactly, every float to 1e-9 relative (a real change moves them far more; the BLAS
+kernels of different CPUs move them in the last bits: 1.1e-12 relative was seen on the
+root-found R^2 of a sweep). To re-record after a deliberate change of
 results (say why in the commit)::
 
     .venv/bin/python tests/test_cluster_pinned.py > tests/test_cluster_pinned.json
@@ -27,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-REL = 1e-12
+REL = 1e-9
 #: The R^2 grid of the clustering experiment (experiments/clustering.py) when pinned; the
 #: command's default grid adds 0.995. Rows are independent of the grid they sit in.
 EXPERIMENT_GRID = (0.5, 0.7, 0.8, 0.85, 0.9, 0.95, 0.99, 0.999, 0.9999)
@@ -291,7 +293,7 @@ def record_all(tmp: Path) -> dict:
 
 
 def assert_same(actual, expected, where="") -> None:
-    """Exact for str/int/bool/None and structure; floats to 1e-12 relative."""
+    """Exact for str/int/bool/None and structure; floats to REL relative."""
     if isinstance(expected, dict):
         assert isinstance(actual, dict), where
         assert list(actual) == list(expected), (where, list(actual), list(expected))
@@ -307,9 +309,24 @@ def assert_same(actual, expected, where="") -> None:
             assert math.isnan(actual), (where, actual)
         else:
             assert actual == pytest.approx(expected, rel=REL, abs=1e-300), (where, actual, expected)
+    elif isinstance(expected, str) and "," in expected and "\n" in expected:  # a CSV file: cell by cell
+        assert isinstance(actual, str), (where, actual)
+        rows = [line.split(",") for line in actual.splitlines()], [line.split(",") for line in expected.splitlines()]
+        assert [len(r) for r in rows[0]] == [len(r) for r in rows[1]], (where, actual, expected)
+        for i, (a_row, e_row) in enumerate(zip(*rows)):
+            for j, (a, e) in enumerate(zip(a_row, e_row)):
+                assert_same(_cell(a), _cell(e), f"{where}[{i},{j}]")
     else:
         assert type(actual) is type(expected) or (isinstance(actual, int) and isinstance(expected, int)), (where, actual, expected)
         assert actual == expected, (where, actual, expected)
+
+
+def _cell(text: str):
+    """A CSV cell as a float when it is one written with a decimal point, else the text."""
+    try:
+        return float(text) if "." in text or "e" in text else text
+    except ValueError:
+        return text
 
 
 # ---------------------------------------------------------------------------- tests
