@@ -107,3 +107,29 @@ def assert_figure(path, *, height=(200, 1500), width=(300, 2500), min_ink: float
         n = colour_pixels(rgb, colour)
         assert n >= min_colour_pixels, (str(path), colour, n)
     return rgb
+
+
+def cpu_class() -> str:
+    """The widest SIMD set NumPy dispatches to on this CPU: "avx512", "avx2" or "other".
+
+    NumPy's transcendental functions (sin, cos, ...) and the BLAS kernels round in the last
+    bit differently per SIMD set, so numbers pinned bit for bit (hashes of generated data,
+    losses after hundreds of epochs) are recorded per class: the same code gives the same
+    bits on every CPU of a class, not across classes.
+    """
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # NumPy 1
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+    if features.get("AVX512F") and features.get("AVX512_SKX"):
+        return "avx512"
+    return "avx2" if features.get("AVX2") else "other"
+
+
+def pinned_for_this_cpu(table: dict, what: str):
+    """``table[cpu_class()]``; a skip naming the classes pinned when this CPU's is not one."""
+    cls = cpu_class()
+    if cls not in table:
+        pytest.skip(f"{what}: pinned on {', '.join(sorted(table))} CPUs; this one is {cls}")
+    return table[cls]
+

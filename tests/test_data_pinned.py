@@ -130,6 +130,7 @@ def memory_digest(ds: MotionDataset) -> str:
 def summary_digest(ds: MotionDataset) -> str:
     s = ds.summary()
     s["path"] = None if s["path"] is None else os.path.basename(s["path"])
+    assert s.pop("steps") is None  # new in 0.4: the step fields' summary; these files have none
     return hashlib.sha1(json.dumps(s, sort_keys=True).encode()).hexdigest()
 
 

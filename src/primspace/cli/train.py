@@ -59,6 +59,12 @@ def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path
     return ds, (read_indices(indices, ds) if indices is not None else None)
 
 
+#: The train command's arguments that are TrainConfig fields of the same name.
+_TRAIN_FLAGS = ("epochs", "batch_size", "lr", "latent_lr", "final_lr_fraction", "motor_weight", "vision_weight",
+                "vision_frames", "code_smoothness", "seed", "device", "amp", "threads", "checkpoint_every",
+                "checkpoint_seconds")
+
+
 @app.command("train")
 def train_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
@@ -108,15 +114,10 @@ def train_command(
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
     from primspace.train import configure_process, fit
 
-    mc = replace(
-        _MC, latent_dim=latent_dim, layer_sizes=int_list(layers, "--layers"), taus=float_list(taus, "--taus"),
-        image_channels=int_list(image_channels, "--image-channels"), code_window=code_window,
-    )
-    tc = replace(
-        _TC, epochs=epochs, batch_size=batch_size, lr=lr, latent_lr=latent_lr, final_lr_fraction=final_lr_fraction,
-        motor_weight=motor_weight, vision_weight=vision_weight, vision_frames=vision_frames, code_smoothness=code_smoothness, seed=seed, device=device, amp=amp, threads=threads,
-        checkpoint_every=checkpoint_every, checkpoint_seconds=checkpoint_seconds,
-    ).validate()
+    given = dict(locals())
+    mc = replace(_MC, **{k: given[k] for k in ("latent_dim", "code_window")}, layer_sizes=int_list(layers, "--layers"),
+                 taus=float_list(taus, "--taus"), image_channels=int_list(image_channels, "--image-channels"))
+    tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
     ds, idx = _inputs(out, file, indices, weights_from)
     configure_process(tc)
     run = fit(
