@@ -28,7 +28,7 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.experiments import figures
 from primspace.experiments.presets import ExperimentPreset
-from primspace.experiments.runs import curves, experiment_scaler, load_run_data, train_configs
+from primspace.experiments.runs import curves, fit_and_infer, load_run_data
 from primspace.experiments.sweep import GridPoint, run_dir_of
 from primspace.experiments.workspace import ExperimentDir
 
@@ -135,23 +135,12 @@ def run_composite_point(
 ) -> dict:
     """One grid point: fit θ and the code sequences on the train part, infer the eval
     part's code sequences with θ frozen, segment and score them (and the untrained ones)."""
-    from primspace.train import configure_process, fit, infer
-
     preset_obj = ExperimentPreset.from_dict(preset)
     data, use_images = load_run_data(data_path, preset_obj)
     start = time.perf_counter()
-    model_config, train_config = train_configs(preset_obj, latent_dim, seed, preset_obj.fit_epochs)
-    configure_process(train_config)
-    fitted = fit(
-        data, run_dir / "fit", model_config=model_config, train_config=train_config, init=init,
-        indices=np.asarray(train_idx), resume=True, images=use_images, scaler=experiment_scaler(data), progress=False,
-    )
-    inferred = infer(
-        run_dir / "fit", data, run_dir / "infer", epochs=preset_obj.infer_epochs, init=init,
-        indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset_obj.infer_batch_size,
-    )
+    fitted, inferred, _ = fit_and_infer(run_dir, data, preset_obj, init, latent_dim, seed, train_idx, eval_idx, use_images)
     held_out = data.subset(np.asarray(eval_idx))
-    window = model_config.code_window
+    window = preset_obj.model.code_window
     _, scores = segment_codes(inferred.latents, held_out, window, latent_dim)
     _, untrained = segment_codes(inferred.initial_latents, held_out, window, latent_dim)
     return {

@@ -29,13 +29,12 @@ from primspace.experiments.results import LATENT_RESULTS
 from primspace.experiments.runs import (
     all_frame_losses,
     curves,
-    experiment_scaler,
+    fit_and_infer,
     focus_runs,
     intra_key,
     intra_run_dir,
     load_codes,
     load_run_data,
-    train_configs,
 )
 from primspace.experiments.sweep import GridPoint, complete_result
 from primspace.experiments.workspace import ExperimentDir
@@ -69,22 +68,11 @@ def run_intra_point(
 
     Both phases resume from their checkpoints if the point was interrupted.
     """
-    from primspace.train import configure_process, fit, infer
-
     preset_obj = ExperimentPreset.from_dict(preset)
     data, use_images = load_run_data(data_path, preset_obj)
     start = time.perf_counter()
-    model_config, train_config = train_configs(preset_obj, latent_dim, seed, preset_obj.fit_epochs)
-    configure_process(train_config)  # one thread per run (the preset's threads), as every backend
-    fitted = fit(
-        data, run_dir / "fit", model_config=model_config, train_config=train_config, init=init,
-        indices=np.asarray(train_idx), resume=True, images=use_images, scaler=experiment_scaler(data), progress=False,
-    )
-    fit_seconds = time.perf_counter() - start
-    inferred = infer(
-        run_dir / "fit", data, run_dir / "infer", epochs=preset_obj.infer_epochs, init=init,
-        indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset_obj.infer_batch_size,
-    )
+    fitted, inferred, fit_seconds = fit_and_infer(run_dir, data, preset_obj, init, latent_dim, seed, train_idx, eval_idx,
+                                                  use_images)
     return {
         "init": init,
         "latent_dim": latent_dim,

@@ -30,6 +30,7 @@ __all__ = [
     "initial_codes",
     "all_frame_losses",
     "psnr",
+    "fit_and_infer",
 ]
 
 
@@ -153,3 +154,34 @@ def all_frame_losses(fitted, inferred, data: MotionDataset) -> dict | None:
             return None
         out[phase] = losses | {"psnr": psnr(losses["vision"])}
     return out
+
+
+def fit_and_infer(run_dir: Path, data: MotionDataset, preset: ExperimentPreset, init: str, latent_dim: int, seed: int,
+                  train_idx, eval_idx, use_images: bool):
+    """One grid point's two phases: fit θ and the codes on ``train_idx``, then infer the
+    codes of ``eval_idx`` with θ frozen, into ``run_dir/fit`` and ``run_dir/infer`` (each
+    resumes from its checkpoint when the point was interrupted).
+
+    Returns
+    -------
+    (TrainedRun, TrainedRun, float)
+        The fitted and the inferred runs, and the fit's wall-clock seconds.
+    """
+    import time
+
+    from primspace.train import configure_process, fit, infer
+
+    start = time.perf_counter()
+    model_config, train_config = train_configs(preset, latent_dim, seed, preset.fit_epochs)
+    configure_process(train_config)  # one thread per run (the preset's threads), as every backend
+    fitted = fit(
+        data, run_dir / "fit", model_config=model_config, train_config=train_config, init=init,
+        indices=np.asarray(train_idx), resume=True, images=use_images, scaler=experiment_scaler(data), progress=False,
+    )
+    fit_seconds = time.perf_counter() - start
+    inferred = infer(
+        run_dir / "fit", data, run_dir / "infer", epochs=preset.infer_epochs, init=init,
+        indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset.infer_batch_size,
+    )
+    return fitted, inferred, fit_seconds
+
