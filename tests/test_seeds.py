@@ -95,3 +95,22 @@ def test_clustering_and_success_over_seeds(tmp_path):
     rates = [s2["generated"]["projection"]["overall"], s2["by_seed"]["1"]["projection"]["overall"]]
     assert row[1] == 2 and row[2] == f"{np.mean(rates):.3g} ± {np.std(rates):.2g}"
     assert any(r[0] == "untrained P m" for r in rows)
+
+
+def test_success_and_clustering_claims_are_checked_in_every_seed(tmp_path):
+    def rates(zero_grasp, projection_grasp):
+        return {"zero": {"rates": {"pull": 1.0, "push": 1.0, "grasp": zero_grasp}},
+                "projection": {"rates": {"pull": 1.0, "push": 1.0, "grasp": projection_grasp}}}
+
+    def latent(zero, projection):
+        return [{"init": "zero", "codes": "learned", "accuracy": zero}, {"init": "projection", "codes": "learned", "accuracy": projection}]
+
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "success.json").write_text(json.dumps(
+        {"seed": 0, "generated": rates(0.2, 0.9), "by_seed": {"1": rates(0.95, 0.9), "2": rates(0.3, 1.0)}}))
+    (tmp_path / "results" / "clustering.json").write_text(json.dumps(
+        {"seed": 0, "latent_dim": 40, "latent": latent(0.5, 0.9), "by_seed": {"1": latent(0.8, 0.85)}}))
+    rows = {r["key"]: r for r in check_claims(tmp_path)}
+    assert rows["success"]["verdict"] == "holds in 2 of 3 seeds (not in seed 1)"
+    assert "seed 1: zero / projection success: pull 1.00 / 1.00, push 1.00 / 1.00, grasp 0.95 / 0.90" in rows["success"]["ours"]
+    assert rows["clustering"]["verdict"] == "holds in 1 of 2 seeds (not in seed 0)"

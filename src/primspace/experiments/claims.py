@@ -192,15 +192,31 @@ CLAIMS: tuple[Claim, ...] = (
 _VERDICTS = {True: "holds", False: "does not hold", None: "cannot be checked"}
 
 
+def _seed_views(claim: Claim, results: dict) -> dict:
+    """``{seed: results as one seed's}``: intra runs filtered by seed; success and
+    clustering results with their focus seed's entries replaced by each seed's
+    (``by_seed``); empty for anything else."""
+    if claim.experiment == "intra":
+        seeds = sorted({r["seed"] for r in results.get("runs", [])})
+        return {s: results | {"runs": [r for r in results["runs"] if r["seed"] == s]} for s in seeds}
+    field = {"success": "generated", "clustering": "latent"}.get(claim.experiment)
+    if field is None or not results.get("by_seed"):
+        return {}
+    views = {results.get("seed", 0): results}
+    views |= {int(s): results | {field: v} for s, v in results["by_seed"].items()}
+    return dict(sorted(views.items()))
+
+
 def _verdict(claim: Claim, results: dict) -> tuple[str, str]:
-    """The verdict and numbers of one claim. Intra results with several seeds are checked
-    seed by seed (each seed its own split, weights and projection): "holds in k of n
-    seeds" and each seed's numbers; with one seed, as the rule says."""
-    seeds = sorted({r["seed"] for r in results.get("runs", [])}) if claim.experiment == "intra" else []
-    if len(seeds) < 2:
+    """The verdict and numbers of one claim. Results with several seeds (intra runs, and
+    success and clustering over every seed) are checked seed by seed (each seed its own
+    split, weights and projection): "holds in k of n seeds" and each seed's numbers; with
+    one seed, as the rule says."""
+    views = _seed_views(claim, results)
+    if len(views) < 2:
         ok, numbers = claim.check(results)
         return _VERDICTS[ok], numbers
-    per_seed = {s: claim.check(results | {"runs": [r for r in results["runs"] if r["seed"] == s]}) for s in seeds}
+    per_seed = {s: claim.check(view) for s, view in views.items()}
     judged = {s: ok for s, (ok, _) in per_seed.items() if ok is not None}
     numbers = "; ".join(f"seed {s}: {text}" for s, (_, text) in per_seed.items())
     if not judged:
