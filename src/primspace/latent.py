@@ -153,7 +153,8 @@ class LatentInitializer:
             raise UserError(
                 f"motor sequences have {what} = {x.shape[1]} values, the latent initialiser was fitted on {self.n_features_}"
             )
-        n, q = len(scaled_motor), int(self.latent_dim) * (len(x) // len(scaled_motor))
+        n = len(scaled_motor)
+        q = int(self.latent_dim) * (len(x) // n)  # a code per window (rows of x per sample), or one
         if self.method == "zero":
             z = np.zeros((n, q))
         elif self.method == "random":

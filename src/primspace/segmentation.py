@@ -48,7 +48,7 @@ from primspace.errors import UserError
 __all__ = [
     "AUTO_PENALTY_FACTOR", "DEFAULT_MIN_SIZE", "SEGMENT_R2_TARGET", "SegmentationResult", "auto_penalty",
     "boundaries_from_segments", "boundary_f1", "change_points", "noise_variances", "segment_sequences",
-    "step_labelling_accuracy",
+    "step_labelling_accuracy", "label_segments",
 ]
 
 #: ``c`` of the automatic penalty (module docstring: why 2).
@@ -292,7 +292,7 @@ def segment_sequences(
     codes = np.concatenate([t[0] for t in table], axis=0)
     sample = np.concatenate([np.full(len(t[0]), i, dtype=np.int64) for i, t in enumerate(table)])
     start, stop = (np.concatenate([t[j] for t in table]) for j in (1, 2))
-    labels, note = _cluster_segments(codes, n_primitives, r2_target, random_state)
+    labels, note = label_segments(codes, n_primitives, r2_target, random_state)
     return SegmentationResult(
         boundaries=[t[1][1:] for t in table],
         step_labels=[np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(valid))],
@@ -321,8 +321,9 @@ def _sequence_segments(z, points, flags, window: int, length: int):
     return codes, np.asarray(steps[:-1], dtype=np.int64), np.asarray(steps[1:], dtype=np.int64)
 
 
-def _cluster_segments(codes, n_primitives, r2_target, random_state):
-    """Cluster labels of the segment codes, and a note when there are too few to cluster."""
+def label_segments(codes, n_primitives: int, r2_target=SEGMENT_R2_TARGET, random_state=0):
+    """Cluster labels of segment codes (affine LRSC), and a note when there is nothing to
+    cluster (too few segments, or all codes identical; the note says which)."""
     n = len(codes)
     if n <= n_primitives:
         note = f"only {n} segment(s) for {n_primitives} primitive(s): not clustered, each segment is its own label"

@@ -262,14 +262,14 @@ def segment_command(
 
 def _write_segments(path: Path, samples, result) -> None:
     """One row per segment: the sample (data index), its segment number, steps, label."""
-    import numpy as np
+    from collections import Counter
 
     from primspace.files import atomic_write_text
 
-    lines = ["sample,segment,start,stop,label"]
+    lines, seen = ["sample,segment,start,stop,label"], Counter()
     for i, a, b, lab in zip(result.segment_sample, result.segment_start, result.segment_stop, result.segment_labels):
-        number = int(np.sum(result.segment_sample[: len(lines) - 1] == i))
-        lines.append(f"{int(samples[i])},{number},{int(a)},{int(b)},{int(lab)}")
+        lines.append(f"{int(samples[i])},{seen[int(i)]},{int(a)},{int(b)},{int(lab)}")
+        seen[int(i)] += 1
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 

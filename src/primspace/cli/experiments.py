@@ -76,9 +76,14 @@ def _judgeable_steps(exp, name: str, steps: tuple[str, ...]) -> tuple[str, ...]:
     return steps
 
 
-def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None) -> None:
+def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None,
+                        preset_names: str | None = None) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
-    then print ``table`` (a function of :mod:`primspace.experiments.results`) of the first step's results."""
+    then print ``table`` (a function of :mod:`primspace.experiments.results`) of the first step's results.
+    ``preset_names`` names the map in :mod:`primspace.experiments.presets` from the
+    ``--preset`` a user gives to the preset this experiment runs (composite:
+    ``COMPOSITE_PRESET_OF``, ``demo`` -> ``composite-demo``; read when the command runs, so
+    the CLI starts without importing torch)."""
 
     def command(
         preset: Optional[str] = typer.Option(
@@ -112,10 +117,11 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         if epochs is not None:
             fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]
             overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
-        if name == "composite":  # --preset demo / paper name the composite experiment's own presets
-            from primspace.experiments.presets import COMPOSITE_PRESET_OF, DEFAULT_PRESET
+        if preset_names is not None:
+            from primspace.experiments import presets as experiment_presets
 
-            preset = COMPOSITE_PRESET_OF.get(preset or DEFAULT_PRESET, preset)
+            names = getattr(experiment_presets, preset_names)
+            preset = names.get(preset or experiment_presets.DEFAULT_PRESET, preset)
         exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
         results = []
         for step in _judgeable_steps(exp, name, steps):
@@ -150,7 +156,7 @@ _experiment_command(
 _experiment_command(
     "composite", "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
     "segmented and labelled without labels (--preset demo or paper; docs/sequences.md).",
-    ("composite:run_composite",), "composite_table",
+    ("composite:run_composite",), "composite_table", preset_names="COMPOSITE_PRESET_OF",
 )
 _experiment_command(
     "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",

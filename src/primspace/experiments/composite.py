@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
+from primspace.errors import UserError
 from primspace.experiments import figures
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.runs import curves, fit_and_infer, load_run_data
@@ -92,8 +93,6 @@ def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_di
     if data.step_segments is not None:
         tol = window if tolerance is None else int(tolerance)
         if tol < 0:
-            from primspace.errors import UserError
-
             raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tol}")
         truth = boundaries_from_segments(data.step_segments, lengths)
         scores |= {
@@ -110,8 +109,7 @@ def _accuracy_given_boundaries(sequences: np.ndarray, data: MotionDataset, windo
     """Per-step labelling accuracy when the true boundaries are given: each true segment's
     code is the mean of the windows it touches, clustered as :func:`segment_codes` does.
     Separates labelling from finding the boundaries."""
-    from primspace.cluster import LowRankSubspaceClustering
-    from primspace.segmentation import SEGMENT_R2_TARGET, step_labelling_accuracy
+    from primspace.segmentation import label_segments, step_labelling_accuracy
 
     codes, owners = [], []
     for i, segments in enumerate(data.step_segments):
@@ -120,10 +118,9 @@ def _accuracy_given_boundaries(sequences: np.ndarray, data: MotionDataset, windo
             steps = np.flatnonzero(segments == s)
             codes.append(sequences[i, steps[0] // window : steps[-1] // window + 1].mean(axis=0))
             owners.append((i, steps))
-    codes = np.asarray(codes)
-    if len(codes) <= n_primitives or np.allclose(codes, codes[0]):
+    labels, note = label_segments(np.asarray(codes), n_primitives)
+    if note is not None:
         return None  # nothing to cluster (e.g. untrained zero codes)
-    labels = LowRankSubspaceClustering(n_primitives, affine=True, r2_target=SEGMENT_R2_TARGET, random_state=0).fit(codes).labels_
     found = np.full(data.step_labels.shape, -1)
     for (i, steps), label in zip(owners, labels):
         found[i, steps] = label
@@ -157,13 +154,9 @@ def run_composite(exp: ExperimentDir) -> dict:
     arrays and the figures."""
     preset = exp.preset
     if preset.model.code_window is None:
-        from primspace.errors import UserError
-
         raise UserError(f"preset {preset.name!r} has no code window (model.code_window); use --preset demo or paper")
     data = exp.dataset()
     if data.step_segments is None:
-        from primspace.errors import UserError
-
         raise UserError(f"{exp.data_path}: the composite experiment needs long demonstrations with step_segments "
                         "(primspace generate --preset composite-demo)")
     points, splits = [], {}
@@ -188,30 +181,29 @@ def run_composite(exp: ExperimentDir) -> dict:
 
 def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
     """The code sequences, true and found boundaries and labels of the first
-    :data:`TIMELINE_SAMPLES` held-out demonstrations, per init of the first seed and q."""
+    :data:`TIMELINE_SAMPLES` held-out demonstrations, per init of the first seed and q. The
+    found ones are those of the scored segmentation (all held-out demonstrations at once:
+    one noise level, one clustering), sliced."""
     from primspace.train import load_run
 
     data = exp.dataset()
     first = runs[0]
     chosen = [r for r in runs if (r["seed"], r["latent_dim"]) == (first["seed"], first["latent_dim"])]
+    held_out = data.subset(load_run(run_dir_of(exp.path, first["key"]) / "infer").indices)
+    n = min(TIMELINE_SAMPLES, len(held_out))
     arrays: dict[str, np.ndarray] = {}
-    inits = []
     for r in chosen:
         run = load_run(run_dir_of(exp.path, r["key"]) / "infer")
-        show = run.indices[:TIMELINE_SAMPLES]
-        held_out = data.subset(show)
-        result, _ = segment_codes(run.latents[:len(show)], held_out, r["window"], r["latent_dim"])
-        arrays[f"codes_{r['init']}"] = run.latents[:len(show)].reshape(len(show), -1, r["latent_dim"])
-        arrays[f"found_{r['init']}"] = result.padded_step_labels(data.length)
-        arrays[f"bounds_{r['init']}"] = _padded(result.boundaries)
-        inits.append(r["init"])
-    arrays["samples"] = np.asarray(show)
-    arrays["lengths"] = held_out.lengths
-    arrays["step_labels"] = held_out.step_labels
-    arrays["step_segments"] = held_out.step_segments
+        result, _ = segment_codes(run.latents, held_out, r["window"], r["latent_dim"])
+        arrays[f"codes_{r['init']}"] = run.latents[:n].reshape(n, -1, r["latent_dim"])
+        arrays[f"found_{r['init']}"] = result.padded_step_labels(data.length)[:n]
+        arrays[f"bounds_{r['init']}"] = _padded(result.boundaries[:n])
+    arrays |= {"samples": run.indices[:n], "lengths": held_out.lengths[:n], "step_labels": held_out.step_labels[:n],
+               "step_segments": held_out.step_segments[:n]}
     exp.write_arrays("composite", arrays)
-    exp.write_results("composite_timeline", {"inits": inits, "window": first["window"], "latent_dim": first["latent_dim"],
-                                             "seed": first["seed"], "label_names": list(data.label_names)})
+    exp.write_results("composite_timeline", {"inits": [r["init"] for r in chosen], "window": first["window"],
+                                             "latent_dim": first["latent_dim"], "seed": first["seed"],
+                                             "label_names": list(data.label_names)})
 
 
 def _padded(boundaries: list[np.ndarray]) -> np.ndarray:

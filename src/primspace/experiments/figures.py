@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from primspace.experiments.results import (
     ANIMATION_RESULTS,
     IMAGE_STRIPS,
@@ -136,6 +134,7 @@ def draw_composite(out_dir: str | Path) -> list[Path]:
     timeline of a few held-out demonstrations' codes with true and found boundaries."""
     from primspace import plots
     from primspace.plots.sequences import plot_code_timeline
+    from primspace.segmentation import boundaries_from_segments
 
     results = read_results(out_dir, "composite")
     if results is None or not results["runs"]:
@@ -147,7 +146,7 @@ def draw_composite(out_dir: str | Path) -> list[Path]:
     meta, arrays = read_results(out_dir, "composite_timeline"), read_arrays(out_dir, "composite")
     if meta is None or arrays is None:
         return drawn
-    true_bounds = [np.flatnonzero(np.diff(s[:n]) > 0) + 1 for s, n in zip(arrays["step_segments"], arrays["lengths"])]
+    true_bounds = boundaries_from_segments(arrays["step_segments"], arrays["lengths"])
     for init in meta["inits"]:
         found = [b[b >= 0] for b in arrays[f"bounds_{init}"]]
         fig = plot_code_timeline(
