@@ -39,10 +39,17 @@ import torch
 
 from primspace.errors import UserError
 
-__all__ = ["INIT_METHODS", "LatentInitializer", "LatentTable", "appendix_a_check"]
+__all__ = ["INIT_METHODS", "CALIBRATED", "START_METHODS", "LatentInitializer", "LatentTable", "appendix_a_check"]
 
 #: The initialisation strategies, in the order figures show them.
 INIT_METHODS = ("zero", "random", "projection", "pca")
+
+#: A start that needs a trained run: its initialiser's codes mapped by the run's
+#: :class:`primspace.calibration.CodeCalibration` (runs fitted with projection or pca).
+CALIBRATED = "calibrated"
+
+#: Every way codes can start: the initialisers, then the calibrated start.
+START_METHODS = INIT_METHODS + (CALIBRATED,)
 
 
 # ---------------------------------------------------------------------- initialiser

@@ -25,6 +25,7 @@ class LatentInit(str, Enum):
     random = "random"
     projection = "projection"
     pca = "pca"
+    calibrated = "calibrated"
 
 
 def _run_summary(run) -> str:
@@ -33,10 +34,16 @@ def _run_summary(run) -> str:
     parts = [f"loss {last.get('loss', float('nan')):.5g}", f"motor {last.get('motor', float('nan')):.5g}"]
     if vision is not None:
         parts.append(f"vision {vision:.5g}")
-    return (
+    line = (
         f"wrote {run.run_dir}: {run.kind}, {len(run.indices)} samples, init {run.init}, "
         f"q={run.model_config.latent_dim}, epoch {run.epoch}: " + ", ".join(parts)
     )
+    if run.kind == "fit" and run.calibration is not None:
+        d = run.calibration.diagnostics()
+        heldout = "n/a (under 3 samples)" if d["heldout_r2"] is None else f"{d['heldout_r2']:.3f}"
+        line += (f"\ncalibration (for --init calibrated): the fitted codes moved {100 * d['movement']:.1f}% from their "
+                 f"initial codes; R^2 of the initial codes {d['identity_r2']:.3f}, of the map (held out) {heldout}")
+    return line
 
 
 # Defaults come from the configuration classes (written once there); these two imports
@@ -69,7 +76,10 @@ _TRAIN_FLAGS = ("epochs", "batch_size", "lr", "latent_lr", "final_lr_fraction", 
 def train_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create."),
-    init: LatentInit = typer.Option(LatentInit.projection, "--init", help="How the latent codes start."),
+    init: LatentInit = typer.Option(
+        LatentInit.projection, "--init",
+        help="How the latent codes start (calibrated: only with --weights-from a projection or pca run).",
+    ),
     latent_dim: int = typer.Option(_MC.latent_dim, "--latent-dim", "-q", help="q, the size of each latent code."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs (with --resume: train up to this many)."),
     no_images: bool = typer.Option(False, "--no-images", help="Motor only: no image head, images ignored."),
@@ -134,7 +144,11 @@ def infer_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the new samples."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create for the new codes."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs of code optimisation."),
-    init: Optional[LatentInit] = typer.Option(None, "--init", help="How the codes start (default: the run's)."),
+    init: Optional[LatentInit] = typer.Option(
+        None, "--init",
+        help="How the codes start (default: the run's). calibrated: the run's projection mapped by its ridge "
+             "calibration onto where its fitted codes ended (runs fitted with projection or pca init).",
+    ),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to use (.npy or text)."),
     batch_size: Optional[int] = typer.Option(None, "--batch-size", help="Default: the run's."),
     latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),

@@ -23,7 +23,8 @@ import torch
 from primspace.data import JointScaler, MotionDataset
 from primspace.data.indices import check_indices
 from primspace.errors import UserError
-from primspace.latent import INIT_METHODS, LatentInitializer, LatentTable
+from primspace.calibration import CodeCalibration
+from primspace.latent import CALIBRATED, START_METHODS, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
@@ -69,8 +70,12 @@ def fit(
         Sizes; J, T and the image size are filled in from ``dataset``. Default:
         ``ModelConfig()`` with an image head when the data has images (see ``images``).
     train_config : TrainConfig, optional
-    init : {"zero", "random", "projection", "pca"}
-        How the codes start (:class:`primspace.latent.LatentInitializer`).
+    init : {"zero", "random", "projection", "pca", "calibrated"}
+        How the codes start (:class:`primspace.latent.LatentInitializer`); ``calibrated``
+        (with ``weights_from`` only): the parent's initialiser, its codes mapped by the
+        parent's calibration (:class:`primspace.calibration.CodeCalibration`). A fit whose
+        initialiser is ``projection`` or ``pca`` ends by fitting its own calibration map
+        (``TrainedRun.calibration``; diagnostics in ``calibration.json``).
     indices : array-like of int, optional
         Samples of ``dataset`` to train on (recorded in config.json). Default: all.
     resume : bool
@@ -121,6 +126,7 @@ def fit(
     _check_init(init)
     data, idx = _select(dataset, indices)
     parent = None if weights_from is None else as_run(weights_from)
+    _check_calibrated(init, parent)
     _check_scaler(scaler, parent, data)
     mc = _fit_model_config(model_config, parent, data, images)
     use_images = uses_images(mc, data, tc, images, where=None if parent is None else _run_name(parent))
@@ -138,6 +144,7 @@ def fit(
         theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
         theta_opt.load_state_dict(parts.theta_optimizer)
         table = LatentTable.from_state_dict(parts.latents, device)
+        scaled = scaler.transform(data.motor)
     else:
         scaler = parent.scaler if parent is not None else scaler or JointScaler().fit(data.motor)
         model = _new_model(mc, seeds["model"], None if parent is None else parent.model.state_dict())
@@ -145,7 +152,7 @@ def fit(
         initializer = _initializer(init, parent, mc, scaled, seeds)
         model.to(device)
         theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
-        codes = initializer.transform(scaled, random_state=seeds["codes_fit"]).astype(np.float64)
+        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_fit"]).astype(np.float64)
         if initial_latents is not None:
             given = ~np.isnan(initial_latents).any(axis=1)
             codes[given] = initial_latents[given]
@@ -153,7 +160,7 @@ def fit(
     session = Session(
         store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"],
+        frames_seed=seeds["frames"], calibrate=_calibrator(initializer, scaled, mc.latent_dim),
     )
     session.run(ckpt, progress, label="fit")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -168,6 +175,7 @@ def infer(
     init: str | None = None,
     indices=None,
     train_config: TrainConfig | None = None,
+    initial_latents: np.ndarray | None = None,
     resume: bool = False,
     overwrite: bool = False,
     progress: bool | None = None,
@@ -190,12 +198,18 @@ def infer(
     init : str, optional
         How the new codes start; default: the trained run's init. The same init reuses
         the run's initialiser (its ``P``); another one is fitted here (``pca`` on the new
-        data, ``projection`` with a new ``P`` from ``seed``).
+        data, ``projection`` with a new ``P`` from ``seed``). ``calibrated``: the run's
+        initialiser, its codes mapped by the run's calibration (``B P m + c``, ridge from
+        the training samples' initial to fitted codes; runs fitted with ``projection`` or
+        ``pca`` init have one, :mod:`primspace.calibration`).
     indices : array-like of int, optional
         Samples of ``dataset`` to use.
     train_config : TrainConfig, optional
         Default: the trained run's, with ``epochs`` and ``overrides`` applied
         (e.g. ``latent_lr=...``, ``batch_size=...``, ``device=...``). ``lr`` is unused.
+    initial_latents : ndarray (N, q), optional
+        Starting codes, one row per selected sample; rows containing NaN start by
+        ``init`` (e.g. to try another start with the same weights).
     resume, overwrite, progress
         As in :func:`fit`.
 
@@ -211,8 +225,10 @@ def infer(
         raise UserError(f"unknown train config override ({exc})") from None
     init = init or parent.init
     _check_init(init)
+    _check_calibrated(init, parent)
     data, idx = _select(dataset, indices)
     mc = parent.model_config
+    initial_latents = _check_initial_latents(initial_latents, len(data), mc.code_size)
     use_images = uses_images(mc, data, tc)
     config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
@@ -227,13 +243,16 @@ def infer(
     else:
         scaled = parent.scaler.transform(data.motor)
         initializer = _initializer(init, parent, mc, scaled, seeds)
-        codes = initializer.transform(scaled, random_state=seeds["codes_infer"])
+        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"])
+        if initial_latents is not None:
+            given = ~np.isnan(initial_latents).any(axis=1)
+            codes[given] = initial_latents[given]
         table = LatentTable(torch.from_numpy(codes).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
     session = Session(
         store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"],
+        frames_seed=seeds["frames"], calibration=parent.calibration,
     )
     session.run(ckpt, progress, label="infer")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -370,8 +389,38 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
 
 
 def _check_init(init: str) -> None:
-    if init not in INIT_METHODS:
-        raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(INIT_METHODS)}")
+    if init not in START_METHODS:
+        raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(START_METHODS)}")
+
+
+def _check_calibrated(init: str, parent: TrainedRun | None) -> None:
+    """Refuse ``calibrated`` without a trained run that has a calibration map, in one line."""
+    if init != CALIBRATED:
+        return
+    if parent is None:
+        raise UserError("init 'calibrated' starts from a trained run's calibration map: use it to infer codes "
+                        "with a run fitted with projection or pca init (or with weights_from such a run)")
+    if parent.calibration is not None:
+        return
+    method = parent.initializer.method
+    if method in ("projection", "pca") and parent.kind == "fit":
+        raise UserError(f"{_run_name(parent)}: has no calibration map (fitted by primspace < 0.5); "
+                        "resume its fit once (same epochs) to add it")
+    raise UserError(f"{_run_name(parent)}: init 'calibrated' needs a run fitted with projection or pca init; "
+                    f"this run's codes start from '{method}'")
+
+
+def _start_codes(init: str, parent: TrainedRun | None, initializer: LatentInitializer, scaled, seed: int) -> np.ndarray:
+    """The starting codes: the initialiser's, mapped by the parent's calibration for ``calibrated``."""
+    codes = initializer.transform(scaled, random_state=seed)
+    return parent.calibration.transform(codes) if init == CALIBRATED else codes
+
+
+def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: int):
+    """What fits a run's calibration map from its final codes (None: its initialiser has no data map)."""
+    if initializer.method not in ("projection", "pca"):
+        return None
+    return lambda codes: CodeCalibration(latent_dim).fit(initializer.transform(scaled), codes)
 
 
 def _check_scaler(scaler, parent: TrainedRun | None, data: MotionDataset) -> None:
@@ -412,7 +461,7 @@ def _check_initial_latents(initial_latents, n: int, q: int) -> np.ndarray | None
 def _initializer(init: str, parent: TrainedRun | None, mc: ModelConfig, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
     """The parent's initialiser for the same init (its ``P``); otherwise one fitted here
     (one code per window of ``mc.code_window`` steps when set)."""
-    if parent is not None and init == parent.init:
+    if parent is not None and init in (parent.init, CALIBRATED):
         return parent.initializer
     return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
 

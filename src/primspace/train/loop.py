@@ -144,7 +144,11 @@ class Session:
         self, *, store: RunDirectory | None, config: dict, model: MTRNNDecoder, theta_opt, table: LatentTable,
         scaler: JointScaler, initializer: LatentInitializer, data: MotionDataset, use_images: bool,
         tc: TrainConfig, device: torch.device, shuffle_seed: int, frames_seed: int = 0,
+        calibrate=None, calibration=None,
     ) -> None:
+        # calibrate: codes -> CodeCalibration, fitted when the last epoch is done (fit);
+        # calibration: a map carried as is (infer: the trained run's)
+        self.calibrate, self.calibration = calibrate, calibration
         self.store, self.config, self.model, self.theta_opt = store, config, model, theta_opt
         self.table, self.scaler, self.initializer, self.tc, self.device = table, scaler, initializer, tc, device
         self.tensors = DataTensors.build(data, scaler, use_images, device)
@@ -171,7 +175,7 @@ class Session:
         return checkpoint_state(
             config=self.config, epoch=self.epoch, model=self.model, theta_opt=self.theta_opt, table=self.table,
             initial_codes=self.initial_codes, scaler=self.scaler, initializer=self.initializer,
-            generator=self.generator, frame_generator=self.frame_generator,
+            generator=self.generator, frame_generator=self.frame_generator, calibration=self.calibration,
         )
 
     # ------------------------------------------------------------------------ loop
@@ -201,9 +205,14 @@ class Session:
                 self.epoch += 1
                 self._log(self.epoch, values, seconds)
                 due = tc.checkpoint_every is not None and self.epoch % tc.checkpoint_every == 0
+                if self.epoch == tc.epochs and self.calibrate is not None:
+                    self.calibration = self.calibrate(self.table.numpy())
                 if due or self.epoch == tc.epochs or time.monotonic() - self._checkpoint_time >= tc.checkpoint_seconds:
                     self._checkpoint()
                 advance(loss=values["loss"], sps=self.n / max(seconds, 1e-9))
+        if self.calibrate is not None and self.calibration is None:  # finished by a version without calibration
+            self.calibration = self.calibrate(self.table.numpy())
+            self._checkpoint()
 
     def _check_finite(self, values: dict) -> None:
         bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
@@ -266,5 +275,7 @@ class Session:
         self.epoch = self._last_checkpoint = ckpt.epoch
         self._checkpoint_time = time.monotonic()
         self.initial_codes = ckpt.initial_codes
+        if ckpt.calibration is not None and (self.calibrate is None or ckpt.epoch >= self.tc.epochs):
+            self.calibration = ckpt.calibration  # a fit extended past it fits a new one at its new end
         restore_rng(ckpt.rng, self.generator, self.frame_generator)
         self.history = self.store.history_through(self.epoch) if self.store is not None else []

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from primspace.calibration import CodeCalibration
 from primspace.data import JointScaler
 from primspace.latent import LatentInitializer
 from primspace.model import ModelConfig, MTRNNDecoder
@@ -55,6 +56,10 @@ class TrainedRun:
     state : dict or None
         The final checkpoint of a run trained in memory (what
         :func:`primspace.train.rundir.write_run` saves); None for a run read from disk.
+    calibration : CodeCalibration or None
+        The map from the initialiser's codes to the fitted codes (``init="calibrated"``):
+        fitted at the end of a ``fit`` whose initialiser is ``projection`` or ``pca``, carried
+        by the runs inferred from it; None otherwise.
     """
 
     run_dir: Path | None
@@ -74,6 +79,7 @@ class TrainedRun:
     epoch: int
     config: dict = field(repr=False, default_factory=dict)
     state: dict | None = field(repr=False, default=None)
+    calibration: CodeCalibration | None = field(repr=False, default=None)
 
     @property
     def final_loss(self) -> float | None:

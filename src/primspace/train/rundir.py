@@ -10,6 +10,8 @@ A run directory holds::
                       RNG states, epoch (written atomically)
     latents.npy       the codes at the last checkpoint
     latents_init.npy  the codes as initialised
+    calibration.json  the diagnostics of the calibration map (runs that have one; the map
+                      itself is in the checkpoint)
 
 Anything else in the directory is not the run's: an overwrite removes only the files
 above, and only when the new run starts writing (:meth:`RunDirectory.begin`).
@@ -32,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from primspace.calibration import CodeCalibration
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import OutputExistsError, UserError
 from primspace.files import atomic_path, atomic_write_json, atomic_write_text, check_outside_inputs, os_error
@@ -42,6 +45,7 @@ from primspace.train.run import TrainedRun
 
 __all__ = [
     "CHECKPOINT_FORMAT", "CONFIG_NAME", "METRICS_NAME", "CHECKPOINT_NAME", "LATENTS_NAME", "LATENTS_INIT_NAME",
+    "CALIBRATION_NAME",
     "RUN_FILES", "RESUMABLE_CHANGES", "Checkpoint", "RunDirectory", "run_config", "prepare_run_dir",
     "checkpoint_state", "unpack_checkpoint", "restore_rng", "run_from_state", "load_run", "write_run",
     "read_config", "read_checkpoint", "read_metrics", "fingerprint", "check_run_data",
@@ -50,7 +54,8 @@ __all__ = [
 CHECKPOINT_FORMAT = 1
 CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME = "config.json", "metrics.jsonl", "checkpoint.pt"
 LATENTS_NAME, LATENTS_INIT_NAME = "latents.npy", "latents_init.npy"
-RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_INIT_NAME)
+CALIBRATION_NAME = "calibration.json"
+RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_INIT_NAME, CALIBRATION_NAME)
 
 # Train-config fields that may change when a run is resumed (they do not change the numbers).
 RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc"}
@@ -209,13 +214,14 @@ def save_npy(path: Path, array: np.ndarray) -> None:
 def checkpoint_state(
     *, config: dict, epoch: int, model: torch.nn.Module, theta_opt, table, initial_codes: torch.Tensor,
     scaler: JointScaler, initializer: LatentInitializer, generator: torch.Generator,
-    frame_generator: torch.Generator | None = None,
+    frame_generator: torch.Generator | None = None, calibration: CodeCalibration | None = None,
 ) -> dict:
     """Everything a run needs to continue bit-identically, as one dict (``checkpoint.pt``).
 
     ``theta_opt`` is None while inferring (θ frozen). The RNG states are the batch-order
     generator's, the frame-drawing generator's (``vision_frames`` runs only) and the
-    process's global torch, Python and NumPy generators.
+    process's global torch, Python and NumPy generators. ``calibration``: the run's map
+    from initial to fitted codes, or the one an inferred run carries from its trained run.
     """
     rng = {
         "shuffle": generator.get_state(),
@@ -235,6 +241,7 @@ def checkpoint_state(
         "initial_codes": initial_codes,
         "scaler": scaler.to_dict(),
         "initializer": initializer.state_dict(),
+        "calibration": None if calibration is None else calibration.state_dict(),
         "rng": rng,
         "config": config,
     }
@@ -253,6 +260,7 @@ class Checkpoint:
     initializer: LatentInitializer
     rng: dict
     config: dict
+    calibration: CodeCalibration | None = None
 
 
 def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoint:
@@ -264,6 +272,7 @@ def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoi
             scaler=JointScaler.from_dict(state["scaler"]),
             initializer=LatentInitializer.from_state_dict(state["initializer"]),
             rng=state["rng"], config=state["config"],
+            calibration=None if state.get("calibration") is None else CodeCalibration.from_state_dict(state["calibration"]),
         )
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
@@ -300,7 +309,7 @@ def run_from_state(state: dict, history: list[dict], run_dir: Path | None) -> Tr
         train_config=tc, scaler=ckpt.scaler, initializer=ckpt.initializer, latents=latents,
         initial_latents=initial, history=[h for h in history if h["epoch"] <= ckpt.epoch],
         indices=np.asarray(data.get("indices", []), dtype=np.int64), data_path=data.get("path"),
-        parent=config.get("parent"), epoch=ckpt.epoch, config=config, state=state,
+        parent=config.get("parent"), epoch=ckpt.epoch, config=config, state=state, calibration=ckpt.calibration,
     )
 
 
@@ -363,6 +372,10 @@ class RunDirectory:
         with atomic_path(self.path / CHECKPOINT_NAME) as tmp:
             torch.save(state, tmp)
         save_npy(self.path / LATENTS_NAME, codes)
+        calibration = state.get("calibration")
+        if calibration is not None and state.get("kind") == "fit":  # an inferred run only carries its parent's
+            diagnostics = {k: v for k, v in calibration.items() if not isinstance(v, torch.Tensor)}
+            atomic_write_json(self.path / CALIBRATION_NAME, diagnostics)
 
     def history_through(self, epoch: int) -> list[dict]:
         """The metrics up to ``epoch``; lines past it (written before a kill) are dropped from the file."""
