@@ -5,6 +5,9 @@ continues θ (and the replayed codes) on the seventh primitive plus a 10% replay
 phase-1 samples (to avoid forgetting), new codes initialised by the method compared. The
 figure is the phase-2 loss, mean ± std over folds, for zero and projection initialisation
 (q = 20). Both phases resume from their checkpoints.
+
+``calibrated`` (beyond the paper): phase 1 is projection's (shared, :func:`shared_fit`);
+the new primitive's codes start at phase 1's calibration map applied to their ``P m``.
 """
 
 from __future__ import annotations
@@ -17,11 +20,11 @@ import numpy as np
 from primspace.experiments import figures
 from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
-from primspace.experiments.runs import curves, experiment_scaler, load_run_data, train_configs
+from primspace.experiments.runs import curves, experiment_scaler, fit_init, load_run_data, shared_fit, train_configs
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["run_inter", "run_inter_point", "replay_indices"]
+__all__ = ["run_inter", "run_inter_point", "replay_indices", "inter_key"]
 
 
 def replay_indices(first: np.ndarray, fraction: float, seed: int, fold: int) -> np.ndarray:
@@ -42,8 +45,9 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     new = np.flatnonzero(data.labels == fold)
     model_config, tc1 = train_configs(p, latent_dim, seed, p.inter_epochs[0])
     configure_process(tc1)  # one thread per run (the preset's threads), as every backend
-    phase1 = fit(data, run_dir / "phase1", model_config=model_config, train_config=tc1, init=init,
-                 indices=first, resume=True, images=use_images, scaler=experiment_scaler(data), progress=False)
+    phase1_dir = run_dir.parent / inter_key(fit_init(init), fold, seed).split("/")[1] / "phase1"
+    phase1 = shared_fit(phase1_dir, dataset=data, model_config=model_config, train_config=tc1, init=fit_init(init),
+                        indices=first, images=use_images, scaler=experiment_scaler(data), progress=False)
     replay = replay_indices(first, p.inter_replay, seed, fold)
     second = np.concatenate([new, replay])
     initial = np.full((len(second), latent_dim), np.nan, dtype=np.float32)
@@ -51,7 +55,7 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     initial[len(new):] = phase1.latents[[row_of[int(s)] for s in replay]]
     _, tc2 = train_configs(p, latent_dim, seed, p.inter_epochs[1])
     phase2 = fit(data, run_dir / "phase2", train_config=tc2, init=init, indices=second, resume=True,
-                 weights_from=run_dir / "phase1", initial_latents=initial, images=use_images, progress=False)
+                 weights_from=phase1_dir, initial_latents=initial, images=use_images, progress=False)
     return {
         "fold": fold,
         "primitive": data.label_names[fold],
@@ -67,13 +71,18 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     }
 
 
+def inter_key(init: str, fold: int, seed: int) -> str:
+    """The grid key (and ``OUT/runs/`` folder) of one inter-primitive fold."""
+    return f"inter/{init}-fold{fold}-s{seed}"
+
+
 def run_inter(exp: ExperimentDir) -> dict:
     """Run (or finish) the seven folds per init; write results/inter.json and its figure."""
     preset = exp.preset
     data = exp.dataset()
     folds = sorted(int(v) for v in np.unique(data.labels))
     points = [
-        GridPoint(f"inter/{init}-fold{fold}-s{seed}", (str(exp.data_path), fold, init, preset.inter_latent_dim, seed, preset.to_dict()))
+        GridPoint(inter_key(init, fold, seed), (str(exp.data_path), fold, init, preset.inter_latent_dim, seed, preset.to_dict()))
         for seed in preset.seeds for init in preset.inter_inits for fold in folds
     ]
     with exp.stage("inter"):

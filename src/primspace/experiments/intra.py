@@ -35,6 +35,7 @@ from primspace.experiments.runs import (
     intra_run_dir,
     load_codes,
     load_run_data,
+    phase_dir,
 )
 from primspace.experiments.sweep import GridPoint, complete_result
 from primspace.experiments.workspace import ExperimentDir
@@ -82,6 +83,8 @@ def run_intra_point(
         "fit": curves(fitted.history),
         "infer": curves(inferred.history),
         "final": all_frame_losses(fitted, inferred, data) if use_images else None,
+        # the fit's map from initial to fitted codes (projection / pca fits; calibrated uses projection's)
+        "calibration": None if fitted.calibration is None else fitted.calibration.diagnostics(),
         "fit_seconds": round(fit_seconds, 2),
         "seconds": round(time.perf_counter() - start, 2),
     }
@@ -131,8 +134,8 @@ def _complete_final_losses(exp: ExperimentDir, results: dict) -> None:
     data, use_images = load_run_data(str(exp.data_path), exp.preset)
     for key in missing:
         r = results[key]
-        run_dir = intra_run_dir(exp.path, r["init"], r["latent_dim"], r["seed"])
-        final = all_frame_losses(load_run(run_dir / "fit"), load_run(run_dir / "infer"), data) if use_images else None
+        fitted, inferred = (load_run(phase_dir(exp.path, r["init"], r["latent_dim"], r["seed"], p)) for p in ("fit", "infer"))
+        final = all_frame_losses(fitted, inferred, data) if use_images else None
         results[key] = complete_result(exp.path, key, {"final": final})
 
 

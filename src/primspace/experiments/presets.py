@@ -77,7 +77,8 @@ class ExperimentPreset:
     train_fraction : float
         Share of samples that fit θ and Z (the paper: 20%), drawn per primitive.
     inits : tuple of str
-        Latent initialisations compared in the intra-primitive experiment.
+        Latent initialisations compared in the intra-primitive experiment; ``calibrated``
+        infers with projection's fit (beyond the paper, :mod:`primspace.calibration`).
     latent_dims : tuple of int
         Latent sizes q compared.
     seeds : tuple of int
@@ -123,7 +124,7 @@ class ExperimentPreset:
     name: str
     data_preset: str
     train_fraction: float = 0.2
-    inits: tuple[str, ...] = ("zero", "random", "projection", "pca")
+    inits: tuple[str, ...] = ("zero", "random", "projection", "pca", "calibrated")
     latent_dims: tuple[int, ...] = (10, 20, 40)
     seeds: tuple[int, ...] = (0,)
     fit_epochs: int = 800
@@ -137,7 +138,7 @@ class ExperimentPreset:
     trajectory_r2: float = 0.9
     lasa_length: int = 100
     inter_latent_dim: int = 20
-    inter_inits: tuple[str, ...] = ("zero", "projection")
+    inter_inits: tuple[str, ...] = ("zero", "projection", "calibrated")
     inter_epochs: tuple[int, int] = (400, 400)
     inter_replay: float = 0.1
     extra: dict = field(default_factory=dict, compare=False)
@@ -190,15 +191,15 @@ class ExperimentPreset:
         UserError
             An unknown initialisation, a latent size < 1, negative epochs, no seeds.
         """
-        from primspace.latent import INIT_METHODS
+        from primspace.latent import START_METHODS
 
         changes = {k: v for k, v in changes.items() if v is not None}
         if "vision_frames" in changes:  # a training setting: it goes into the preset's TrainConfig
             changes["train"] = replace(changes.get("train", self.train), vision_frames=changes.pop("vision_frames"))
             changes["train"].validate()
-        unknown = [i for i in changes.get("inits", ()) if i not in INIT_METHODS]
+        unknown = [i for i in changes.get("inits", ()) if i not in START_METHODS]
         if unknown:
-            raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(INIT_METHODS)}")
+            raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(START_METHODS)}")
         if any(q < 1 for q in changes.get("latent_dims", ())):
             raise UserError("latent sizes must be at least 1")
         if any(changes.get(k, 1) < 1 for k in ("fit_epochs", "infer_epochs")):

@@ -4,6 +4,11 @@ Every experiment (intra, clustering, success, inter) builds on the intra-primiti
 grid's runs ``OUT/runs/intra/<init>-q<q>-s<seed>/{fit,infer}``; this module names them,
 derives each run's configurations from the preset, loads a run's data and scaler, and
 reads the codes back. It imports no experiment.
+
+An inference start that needs a trained run (``calibrated``) has no fit of its own: its
+point infers with the fit of the init it calibrates (:data:`FIT_INIT_OF`), e.g.
+``intra/calibrated-q40-s0/infer`` from ``intra/projection-q40-s0/fit``. Both points
+resume that fit under one lock, so whichever starts first trains it and the other waits.
 """
 
 from __future__ import annotations
@@ -19,8 +24,12 @@ from primspace.experiments.sweep import run_dir_of
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = [
+    "FIT_INIT_OF",
+    "fit_init",
     "intra_key",
     "intra_run_dir",
+    "phase_dir",
+    "shared_fit",
     "train_configs",
     "load_run_data",
     "experiment_scaler",
@@ -34,6 +43,15 @@ __all__ = [
 ]
 
 
+#: Starts whose grid point infers with another init's fit.
+FIT_INIT_OF = {"calibrated": "projection"}
+
+
+def fit_init(init: str) -> str:
+    """The init of the fit an init's grid point uses (itself, or :data:`FIT_INIT_OF`'s)."""
+    return FIT_INIT_OF.get(init, init)
+
+
 def intra_key(init: str, latent_dim: int, seed: int) -> str:
     """The grid key (and ``OUT/runs/`` folder) of one intra-primitive run."""
     return f"intra/{init}-q{latent_dim}-s{seed}"
@@ -42,6 +60,22 @@ def intra_key(init: str, latent_dim: int, seed: int) -> str:
 def intra_run_dir(out_dir: str | Path, init: str, latent_dim: int, seed: int) -> Path:
     """``OUT/runs/intra/<init>-q<q>-s<seed>``: its ``fit/`` and ``infer/`` run directories."""
     return run_dir_of(out_dir, intra_key(init, latent_dim, seed))
+
+
+def phase_dir(out_dir: str | Path, init: str, latent_dim: int, seed: int, phase: str) -> Path:
+    """The ``fit`` or ``infer`` run directory of an intra grid point (a calibrated point's
+    ``fit`` is its projection point's)."""
+    return intra_run_dir(out_dir, fit_init(init) if phase == "fit" else init, latent_dim, seed) / phase
+
+
+def shared_fit(fit_dir: Path, **fit_args):
+    """:func:`primspace.train.fit` into ``fit_dir`` with ``resume=True``, holding a lock
+    beside it: grid points that share a fit (:data:`FIT_INIT_OF`) train it once."""
+    from primspace.files import exclusive_lock
+    from primspace.train import fit
+
+    with exclusive_lock(fit_dir.parent / f".{fit_dir.name}.lock"):
+        return fit(resume=True, out_dir=fit_dir, **fit_args)
 
 
 def train_configs(preset: ExperimentPreset, latent_dim: int, seed: int, epochs: int):
@@ -103,8 +137,7 @@ def load_codes(exp: ExperimentDir, init: str, latent_dim: int, seed: int) -> tup
     """
     from primspace.train import load_run
 
-    run_dir = intra_run_dir(exp.path, init, latent_dim, seed)
-    fitted, inferred = load_run(run_dir / "fit"), load_run(run_dir / "infer")
+    fitted, inferred = (load_run(phase_dir(exp.path, init, latent_dim, seed, p)) for p in ("fit", "infer"))
     n = len(exp.dataset())
     z = np.full((n, latent_dim), np.nan, dtype=np.float32)
     z[fitted.indices] = fitted.latents
@@ -118,8 +151,7 @@ def initial_codes(exp: ExperimentDir, init: str, latent_dim: int, seed: int) -> 
     """All samples' codes of one intra run *before* training (e.g. ``P m``), float64, data-set order."""
     from primspace.train import load_run
 
-    run_dir = intra_run_dir(exp.path, init, latent_dim, seed)
-    fitted, inferred = load_run(run_dir / "fit"), load_run(run_dir / "infer")
+    fitted, inferred = (load_run(phase_dir(exp.path, init, latent_dim, seed, p)) for p in ("fit", "infer"))
     z0 = np.empty((len(exp.dataset()), latent_dim))
     z0[fitted.indices], z0[inferred.indices] = fitted.initial_latents, inferred.initial_latents
     return z0
@@ -160,7 +192,8 @@ def fit_and_infer(run_dir: Path, data: MotionDataset, preset: ExperimentPreset, 
                   train_idx, eval_idx, use_images: bool):
     """One grid point's two phases: fit θ and the codes on ``train_idx``, then infer the
     codes of ``eval_idx`` with θ frozen, into ``run_dir/fit`` and ``run_dir/infer`` (each
-    resumes from its checkpoint when the point was interrupted).
+    resumes from its checkpoint when the point was interrupted). A calibrated point
+    infers with its projection point's fit (:func:`shared_fit`).
 
     Returns
     -------
@@ -169,18 +202,19 @@ def fit_and_infer(run_dir: Path, data: MotionDataset, preset: ExperimentPreset, 
     """
     import time
 
-    from primspace.train import configure_process, fit, infer
+    from primspace.train import configure_process, infer
 
     start = time.perf_counter()
     model_config, train_config = train_configs(preset, latent_dim, seed, preset.fit_epochs)
     configure_process(train_config)  # one thread per run (the preset's threads), as every backend
-    fitted = fit(
-        data, run_dir / "fit", model_config=model_config, train_config=train_config, init=init,
-        indices=np.asarray(train_idx), resume=True, images=use_images, scaler=experiment_scaler(data), progress=False,
+    fit_dir = run_dir.parent / intra_run_dir(".", fit_init(init), latent_dim, seed).name / "fit"
+    fitted = shared_fit(
+        fit_dir, dataset=data, model_config=model_config, train_config=train_config, init=fit_init(init),
+        indices=np.asarray(train_idx), images=use_images, scaler=experiment_scaler(data), progress=False,
     )
     fit_seconds = time.perf_counter() - start
     inferred = infer(
-        run_dir / "fit", data, run_dir / "infer", epochs=preset.infer_epochs, init=init,
+        fit_dir, data, run_dir / "infer", epochs=preset.infer_epochs, init=init,
         indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset.infer_batch_size,
     )
     return fitted, inferred, fit_seconds

@@ -13,7 +13,8 @@ from primspace.files import atomic_path
 __all__ = ["save_figure", "INIT_COLORS", "init_color", "label_colors"]
 
 # One palette for the latent initialisations, so every figure colours them alike.
-INIT_COLORS = {"zero": "tab:blue", "random": "tab:red", "projection": "tab:green", "pca": "tab:purple"}
+INIT_COLORS = {"zero": "tab:blue", "random": "tab:red", "projection": "tab:green", "pca": "tab:purple",
+               "calibrated": "tab:orange"}
 
 
 def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 120) -> Path:
