@@ -51,6 +51,8 @@ __all__ = [
     "success_table",
     "failed_criteria_table",
     "inter_table",
+    "calibration_table",
+    "calibration_verdict",
 ]
 
 META_FILE = "experiment.json"
@@ -318,3 +320,63 @@ def composite_table(results: dict) -> tuple[list[str], list[list]]:
             "accuracy given the true boundaries",
             "F1, untrained codes", "accuracy, untrained codes", "segments found / true"], rows
 
+
+
+#: The starts the calibration table compares, in its column order.
+CALIBRATION_COMPARED = ("projection", "calibrated", "zero", "pca")
+
+
+def _eval_losses(results: dict) -> dict:
+    """``{(q, init): [(start, final) per seed]}`` of the intra runs' eval part."""
+    out: dict = {}
+    for r in results["runs"]:
+        losses = [h["loss"] for h in r["infer"]]
+        out.setdefault((r["latent_dim"], r["init"]), []).append((losses[0], final(losses)))
+    return out
+
+
+def calibration_table(results: dict) -> tuple[list[str], list[list]] | None:
+    """Calibrated projection against the raw projection, zero and pca, per q (mean ± std
+    over seeds): how far the fitted codes moved from ``P m`` and how well the ridge map
+    predicts them (projection fit's ``calibration``), and the eval loss at the start and
+    the end of inference. None without calibrated runs."""
+    losses = _eval_losses(results)
+    qs = sorted({q for q, init in losses if init == "calibrated"})
+    if not qs:
+        return None
+    diag: dict = {}
+    for r in results["runs"]:
+        if r["init"] == "projection" and r.get("calibration"):
+            diag.setdefault(r["latent_dim"], []).append(r["calibration"])
+    rows = []
+    for q in qs:
+        d = diag.get(q, [])
+        row = [q, len(losses[(q, "calibrated")]), _mean_std([x["movement"] for x in d]),
+               _mean_std([x["identity_r2"] for x in d]), _mean_std([x["heldout_r2"] for x in d])]
+        for which in (0, 1):
+            row += [_mean_std([v[which] for v in losses[(q, init)]]) if (q, init) in losses else "—"
+                    for init in CALIBRATION_COMPARED]
+        rows.append(row)
+    columns = ["q", "seeds", "movement ‖Z−Pm‖/‖Pm‖", "R² of P m", "held-out R² of the map"]
+    columns += [f"start {i}" for i in CALIBRATION_COMPARED] + [f"final {i}" for i in CALIBRATION_COMPARED]
+    return columns, rows
+
+
+def calibration_verdict(results: dict) -> tuple[bool | None, str]:
+    """Does calibrated end at or below the raw projection and zero, seed by seed, at every q?"""
+    by: dict = {}
+    for r in results["runs"]:
+        by.setdefault((r["latent_dim"], r["seed"]), {})[r["init"]] = final([h["loss"] for h in r["infer"]])
+    verdicts, lines = [], []
+    for (q, seed), d in sorted(by.items()):
+        if "calibrated" not in d or "projection" not in d:
+            continue
+        others = [i for i in ("projection", "zero") if i in d]
+        ok = all(d["calibrated"] <= d[i] for i in others)
+        verdicts.append(ok)
+        lines.append(f"q={q}, seed {seed}: calibrated {d['calibrated']:.3g} vs "
+                     + ", ".join(f"{i} {d[i]:.3g} ({d[i] / d['calibrated']:.3g}x)" for i in others))
+    if not verdicts:
+        return None, "no calibrated runs beside projection ones"
+    held = sum(verdicts)
+    return all(verdicts), f"calibrated ends lowest in {held} of {len(verdicts)} runs: " + "; ".join(lines)

@@ -23,6 +23,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.claims, "claims"),
     (sections.data, "data"),
     (sections.intra, "intra"),
+    (sections.calibration, "intra"),
     (sections.clustering, "clustering"),
     (sections.success, "success"),
     (sections.inter, "inter"),
