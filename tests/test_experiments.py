@@ -425,3 +425,52 @@ def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tm
         _judgeable_steps(exp, "success", steps)
     res = run_cli("experiment", "success", "--preset", "lasa", "--data", lasa, "--out", tmp_path / "out2")
     assert res.code == 2 and "judging needs" in res.err and len(res.err.strip().splitlines()) == 1
+
+
+def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tmp_path):
+    """The intra grid's calibrated point has no fit of its own: it and the projection point
+    share ``projection-q4-s0/fit`` under a lock (two workers: trained once, every epoch logged
+    once), and its codes start at that fit's calibration map applied to P m."""
+    from primspace.experiments.results import calibration_table, calibration_verdict
+    from primspace.experiments.runs import intra_run_dir
+    from primspace.train import load_run
+
+    preset = replace(TINY, inits=("projection", "calibrated"))
+    exp = ExperimentDir(tmp_path / "cal", preset, data=tiny_data, workers=2, progress=False)
+    intra = run_intra(exp)
+    assert intra["failures"] == {}
+    by_init = {r["init"]: r for r in intra["runs"]}
+    assert not (intra_run_dir(exp.path, "calibrated", 4, 0) / "fit").exists()
+    fit_dir = intra_run_dir(exp.path, "projection", 4, 0) / "fit"
+    epochs = [json.loads(line)["epoch"] for line in (fit_dir / "metrics.jsonl").read_text().splitlines()]
+    assert epochs == [0, 1, 2, 3]
+    assert by_init["calibrated"]["fit"] == by_init["projection"]["fit"]
+    assert by_init["calibrated"]["calibration"] == by_init["projection"]["calibration"] is not None
+    fitted = load_run(fit_dir)
+    inferred = load_run(intra_run_dir(exp.path, "calibrated", 4, 0) / "infer")
+    data = exp.dataset()
+    start = fitted.calibration.transform(fitted.initializer.transform(fitted.scaler.transform(data.subset(inferred.indices).motor)))
+    np.testing.assert_allclose(inferred.initial_latents, start, rtol=1e-5, atol=1e-6)
+    columns, rows = calibration_table(intra)
+    assert rows[0][0] == 4 and "start calibrated" in columns
+    assert calibration_verdict(intra)[0] in (True, False)
+    html = build_report(exp.path).read_text()
+    assert "Calibrated projection (beyond the paper)" in html
+
+
+def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
+    from primspace.train import load_run
+
+    preset = replace(TINY, inter_inits=("projection", "calibrated"))
+    exp = ExperimentDir(tmp_path / "inter-cal", preset, data=tiny_data, workers=1, progress=False)
+    results = run_inter(exp)
+    assert results["failures"] == {}
+    runs = exp.path / "runs" / "inter"
+    assert not (runs / "calibrated-fold0-s0" / "phase1").exists()
+    phase1 = load_run(runs / "projection-fold0-s0" / "phase1")
+    phase2 = load_run(runs / "calibrated-fold0-s0" / "phase2")
+    assert phase2.init == "calibrated" and phase2.parent == str((runs / "projection-fold0-s0" / "phase1").resolve())
+    data = exp.dataset()
+    new = phase2.indices[data.labels[phase2.indices] == 0]
+    start = phase1.calibration.transform(phase1.initializer.transform(phase1.scaler.transform(data.subset(new).motor)))
+    np.testing.assert_allclose(phase2.initial_latents[: len(new)], start, rtol=1e-5, atol=1e-6)

@@ -72,14 +72,14 @@ _TRAIN_FLAGS = ("epochs", "batch_size", "lr", "latent_lr", "final_lr_fraction", 
                 "checkpoint_seconds")
 
 
+_TRAIN_INIT_HELP = "How the latent codes start (calibrated: only with --weights-from a projection or pca run)."
+
+
 @app.command("train")
 def train_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create."),
-    init: LatentInit = typer.Option(
-        LatentInit.projection, "--init",
-        help="How the latent codes start (calibrated: only with --weights-from a projection or pca run).",
-    ),
+    init: LatentInit = typer.Option(LatentInit.projection, "--init", help=_TRAIN_INIT_HELP),
     latent_dim: int = typer.Option(_MC.latent_dim, "--latent-dim", "-q", help="q, the size of each latent code."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs (with --resume: train up to this many)."),
     no_images: bool = typer.Option(False, "--no-images", help="Motor only: no image head, images ignored."),

@@ -21,13 +21,22 @@ import numpy as np
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.data.indices import check_indices
 from primspace.errors import UserError
 from primspace.calibration import CodeCalibration
-from primspace.latent import CALIBRATED, START_METHODS, LatentInitializer, LatentTable
+from primspace.latent import CALIBRATED, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
+from primspace.train.checks import (
+    check_calibrated,
+    check_data_fits,
+    check_init,
+    check_initial_latents,
+    check_scaler,
+    fit_model_config,
+    run_name,
+    select,
+)
 from primspace.train.run import TrainedRun
 from primspace.train.rundir import (
     RunDirectory,
@@ -123,14 +132,14 @@ def fit(
         The loss became NaN/inf (the last good checkpoint is kept).
     """
     tc = (train_config or TrainConfig()).validate()
-    _check_init(init)
-    data, idx = _select(dataset, indices)
+    check_init(init)
+    data, idx = select(dataset, indices)
     parent = None if weights_from is None else as_run(weights_from)
-    _check_calibrated(init, parent)
-    _check_scaler(scaler, parent, data)
-    mc = _fit_model_config(model_config, parent, data, images)
-    use_images = uses_images(mc, data, tc, images, where=None if parent is None else _run_name(parent))
-    initial_latents = _check_initial_latents(initial_latents, len(data), mc.code_size)
+    check_calibrated(init, parent)
+    check_scaler(scaler, parent, data)
+    mc = fit_model_config(model_config, parent, data, images)
+    use_images = uses_images(mc, data, tc, images, where=None if parent is None else run_name(parent))
+    initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     config = run_config("fit", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config["scaler"] = None if scaler is None else scaler.to_dict()
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
@@ -224,11 +233,11 @@ def infer(
     except TypeError as exc:
         raise UserError(f"unknown train config override ({exc})") from None
     init = init or parent.init
-    _check_init(init)
-    _check_calibrated(init, parent)
-    data, idx = _select(dataset, indices)
+    check_init(init)
+    check_calibrated(init, parent)
+    data, idx = select(dataset, indices)
     mc = parent.model_config
-    initial_latents = _check_initial_latents(initial_latents, len(data), mc.code_size)
+    initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     use_images = uses_images(mc, data, tc)
     config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
@@ -334,7 +343,7 @@ def evaluate(
         ``loss``, ``motor``, ``vision`` (None without images).
     """
     run = as_run(run)
-    data, _ = _select(dataset, indices)
+    data, _ = select(dataset, indices)
     z = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
     if z.shape != (len(data), run.model_config.code_size):
         raise UserError(f"latents must have shape ({len(data)}, {run.model_config.code_size}), got {z.shape}")
@@ -361,7 +370,7 @@ def uses_images(
     if images and not mc.has_images:
         raise UserError(f"{where + ': ' if where else ''}the model has no image head")
     want = mc.has_images and (data.has_images if images is None else bool(images))
-    _check_data_fits(data, mc, want)
+    check_data_fits(data, mc, want)
     return bool(want) and tc.vision_weight > 0
 
 
@@ -388,28 +397,6 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
     return RunDirectory(out_dir), ckpt
 
 
-def _check_init(init: str) -> None:
-    if init not in START_METHODS:
-        raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(START_METHODS)}")
-
-
-def _check_calibrated(init: str, parent: TrainedRun | None) -> None:
-    """Refuse ``calibrated`` without a trained run that has a calibration map, in one line."""
-    if init != CALIBRATED:
-        return
-    if parent is None:
-        raise UserError("init 'calibrated' starts from a trained run's calibration map: use it to infer codes "
-                        "with a run fitted with projection or pca init (or with weights_from such a run)")
-    if parent.calibration is not None:
-        return
-    method = parent.initializer.method
-    if method in ("projection", "pca") and parent.kind == "fit":
-        raise UserError(f"{_run_name(parent)}: has no calibration map (fitted by primspace < 0.5); "
-                        "resume its fit once (same epochs) to add it")
-    raise UserError(f"{_run_name(parent)}: init 'calibrated' needs a run fitted with projection or pca init; "
-                    f"this run's codes start from '{method}'")
-
-
 def _start_codes(init: str, parent: TrainedRun | None, initializer: LatentInitializer, scaled, seed: int) -> np.ndarray:
     """The starting codes: the initialiser's, mapped by the parent's calibration for ``calibrated``."""
     codes = initializer.transform(scaled, random_state=seed)
@@ -423,71 +410,12 @@ def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: 
     return lambda codes: CodeCalibration(latent_dim).fit(initializer.transform(scaled), codes)
 
 
-def _check_scaler(scaler, parent: TrainedRun | None, data: MotionDataset) -> None:
-    if scaler is None:
-        return
-    if parent is not None:
-        raise UserError("give either weights_from (its scaler is used) or scaler, not both")
-    if not isinstance(scaler, JointScaler) or scaler.data_min_ is None:
-        raise UserError("scaler must be a fitted primspace.data.JointScaler")
-    if scaler.n_joints != data.n_joints:
-        raise UserError(f"scaler was fitted on {scaler.n_joints} joints, the data has {data.n_joints}")
-
-
-def _fit_model_config(model_config, parent: TrainedRun | None, data: MotionDataset, images) -> ModelConfig:
-    """The model config of a fit: the parent's (a given one must agree), or the given one fitted to the data."""
-    if parent is None:
-        return (model_config or ModelConfig()).fitted_to(data, images=data.has_images if images is None else images)
-    mc = parent.model_config
-    if model_config is not None:
-        given = model_config.fitted_to(data, images=mc.has_images if images is None else images)
-        if given.to_dict() != mc.to_dict():
-            raise UserError(f"{_run_name(parent)}: model config differs from the one given; omit model_config")
-    return mc
-
-
-def _check_initial_latents(initial_latents, n: int, q: int) -> np.ndarray | None:
-    if initial_latents is None:
-        return None
-    initial_latents = np.asarray(initial_latents, dtype=np.float64)
-    if initial_latents.shape != (n, q):
-        raise UserError(f"initial_latents must have shape ({n}, {q}), got {initial_latents.shape}")
-    if np.isinf(initial_latents).any():
-        row = int(np.argwhere(np.isinf(initial_latents))[0, 0])
-        raise UserError(f"initial_latents row {row} contains inf (use NaN rows for 'no initial code')")
-    return initial_latents
-
-
 def _initializer(init: str, parent: TrainedRun | None, mc: ModelConfig, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
     """The parent's initialiser for the same init (its ``P``); otherwise one fitted here
     (one code per window of ``mc.code_window`` steps when set)."""
     if parent is not None and init in (parent.init, CALIBRATED):
         return parent.initializer
     return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
-
-
-def _select(dataset: MotionDataset, indices) -> tuple[MotionDataset, np.ndarray]:
-    if not isinstance(dataset, MotionDataset):
-        raise UserError(f"expected a MotionDataset, got {type(dataset).__name__}")
-    if indices is None:
-        return dataset, np.arange(len(dataset), dtype=np.int64)
-    idx = check_indices(indices, len(dataset))
-    return dataset.subset(idx), idx
-
-
-def _check_data_fits(data: MotionDataset, mc: ModelConfig, use_images: bool) -> None:
-    where = str(data.path) if data.path is not None else "the data set"
-    if data.n_joints != mc.n_joints or data.length != mc.length:
-        raise UserError(
-            f"{where}: has T={data.length} steps x J={data.n_joints} joints, the model expects "
-            f"T={mc.length} x J={mc.n_joints}"
-        )
-    if use_images:
-        if not data.has_images:
-            raise UserError(f"{where}: has no images")
-        if tuple(data.image_size) != tuple(mc.image_size):
-            h, w = data.image_size
-            raise UserError(f"{where}: images are {h}x{w}, the model predicts {mc.image_size[0]}x{mc.image_size[1]}")
 
 
 def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDecoder:
@@ -509,10 +437,6 @@ def _seeds(seed: int) -> dict:
 
 def _run_path(run: TrainedRun | None) -> str | None:
     return None if run is None or run.run_dir is None else str(Path(run.run_dir).resolve())
-
-
-def _run_name(run: TrainedRun) -> str:
-    return str(run.run_dir) if run.run_dir is not None else "the given run"
 
 
 @contextlib.contextmanager
