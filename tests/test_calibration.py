@@ -222,3 +222,13 @@ def test_cli_infer_calibrated_and_its_refusal(run_cli, train_set, eval_set, tmp_
     assert not (tmp_path / "ev0").exists()
     res = run_cli("train", data, "--init", "calibrated", "--out", tmp_path / "c", *args)
     assert_user_error(res, "starts from a trained run's calibration map")
+
+
+def test_the_estimator_transforms_from_the_calibrated_start(train_set, eval_set):
+    from primspace.train import AutoDecoder
+
+    model = AutoDecoder(SMALL, _tc(epochs=3), init="projection", progress=False).fit(train_set)
+    z = model.transform(eval_set, epochs=0, init="calibrated")
+    run = model.run_
+    expected = run.calibration.transform(run.initializer.transform(run.scaler.transform(eval_set.motor)))
+    np.testing.assert_allclose(z, expected, rtol=1e-6)

@@ -311,9 +311,13 @@ def test_demo_numbers_are_pinned(tmp_path):
     exp = ExperimentDir(tmp_path / "demo", PRESETS["demo"], workers=2, progress=False)
     exp.dataset()
     got = _numbers(run_intra(exp), run_clustering(exp), run_success(exp))
-    pinned = pinned_for_this_cpu({"avx512": PINNED, "avx2": PINNED_AVX2}, "demo numbers")
-    assert _flat(got).keys() == _flat(pinned).keys()
-    assert _flat(got) == pytest.approx(_flat(pinned), rel=1e-6, abs=1e-12)
+    pinned = _flat(pinned_for_this_cpu({"avx512": PINNED, "avx2": PINNED_AVX2}, "demo numbers"))
+    got = _flat(got)
+    # the calibrated start (0.5) joined the demo after the AVX-512 values were recorded: on
+    # those CPUs its numbers are new (every number pinned before must still be the same)
+    unpinned = set() if any("calibrated" in k for k in pinned) else {k for k in got if "calibrated" in k}
+    assert got.keys() - unpinned == pinned.keys()
+    assert {k: got[k] for k in pinned} == pytest.approx(pinned, rel=1e-6, abs=1e-12)
 
 
 def _flat(tree, prefix: str = "") -> dict:

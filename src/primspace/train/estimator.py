@@ -119,7 +119,9 @@ class AutoDecoder(BaseEstimator):
         epochs : int, optional
             Epochs of code optimisation (default: the fit's).
         init : str, optional
-            How the new codes start (default: the fit's init, with its ``P``).
+            How the new codes start (default: the fit's init, with its ``P``);
+            ``"calibrated"``: ``P m`` mapped by the fit's ridge calibration onto where the
+            fitted codes went (fits with ``projection`` or ``pca`` init).
         checkpoint_dir : path-like, optional
             Write the inference as a run directory (default: in memory).
         **overrides
