@@ -474,3 +474,22 @@ def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
     new = phase2.indices[data.labels[phase2.indices] == 0]
     start = phase1.calibration.transform(phase1.initializer.transform(phase1.scaler.transform(data.subset(new).motor)))
     np.testing.assert_allclose(phase2.initial_latents[: len(new)], start, rtol=1e-5, atol=1e-6)
+
+
+def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_path):
+    """A directory of an older version (four inits) gains calibrated runs beside its own;
+    dropping an init or changing any other setting is still refused."""
+    from primspace.errors import UserError
+
+    exp = ExperimentDir(tmp_path / "grow", TINY, data=tiny_data, workers=1, progress=False)
+    run_intra(exp)
+    exp.save_meta()
+    more = replace(TINY, inits=("zero", "projection", "calibrated"))
+    grown = ExperimentDir(exp.path, more, workers=1, progress=False)
+    intra = run_intra(grown)
+    assert sorted(r["init"] for r in intra["runs"]) == ["calibrated", "projection", "zero"]
+    assert json.loads((exp.path / "experiment.json").read_text())["preset_config"]["inits"] == list(more.inits)
+    with pytest.raises(UserError, match="made with other settings"):
+        ExperimentDir(exp.path, replace(TINY, inits=("zero",)))
+    with pytest.raises(UserError, match="made with other settings"):
+        ExperimentDir(exp.path, replace(more, fit_epochs=4))

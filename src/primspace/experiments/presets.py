@@ -197,7 +197,7 @@ class ExperimentPreset:
         if "vision_frames" in changes:  # a training setting: it goes into the preset's TrainConfig
             changes["train"] = replace(changes.get("train", self.train), vision_frames=changes.pop("vision_frames"))
             changes["train"].validate()
-        unknown = [i for i in changes.get("inits", ()) if i not in START_METHODS]
+        unknown = list(dict.fromkeys(i for key in ("inits", "inter_inits") for i in changes.get(key, ()) if i not in START_METHODS))
         if unknown:
             raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(START_METHODS)}")
         if any(q < 1 for q in changes.get("latent_dims", ())):

@@ -93,7 +93,8 @@ class ExperimentDir:
                 raise UserError(
                     f"{self.path}: made with preset {self.meta.get('preset')!r}, not {preset.name!r}; use another --out"
                 )
-            _check_same_settings(meta_file, preset, self.meta.get("preset_config", {}))
+            if _check_same_settings(meta_file, preset, self.meta.get("preset_config", {})):
+                self.meta["preset_config"] = preset.to_dict()  # more inits compared: recorded at the next save
             if data is not None and self.meta.get("data") != str(data_path):
                 raise UserError(f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out")
             if not isinstance(self.meta.get("data"), str):
@@ -222,8 +223,14 @@ def _plain(value: Any) -> Any:
     return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
 
 
-def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict) -> None:
-    """Refuse ``preset`` if any setting differs from those ``meta_file`` was made with.
+#: Settings an experiment directory may extend: more initialisations (e.g. ``calibrated``,
+#: new in 0.5, beside the runs of an older directory).
+_ADDABLE = ("inits", "inter_inits")
+
+
+def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict) -> bool:
+    """Refuse ``preset`` if any setting differs from those ``meta_file`` was made with,
+    except initialisations added to those compared (:data:`_ADDABLE`); True if it adds some.
 
     ``saved`` may be in the flat form of older versions: both are compared as
     :meth:`ExperimentPreset.settings` (nested fields dotted, e.g. ``train.lr``).
@@ -234,8 +241,12 @@ def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict)
         raise UserError(f"{meta_file}: cannot read its preset_config ({exc})") from None
     now = _jsonable(preset.settings())
     changed = sorted(k for k, v in now.items() if k in before and v != before[k])
+    # comparing more initialisations adds grid points and changes none of the others' numbers
+    grown = [k for k in changed if k in _ADDABLE and set(before[k]) <= set(now[k])]
+    changed = [k for k in changed if k not in grown]
     if changed:
         raise UserError(
             f"{meta_file.parent}: made with other settings ({', '.join(f'{k}={before[k]}' for k in changed)}); "
             "use another --out to run with these"
         )
+    return bool(grown)
