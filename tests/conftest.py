@@ -109,26 +109,39 @@ def assert_figure(path, *, height=(200, 1500), width=(300, 2500), min_ink: float
     return rgb
 
 
-def cpu_class() -> str:
-    """The widest SIMD set NumPy dispatches to on this CPU: "avx512", "avx2" or "other".
+def cpu_class(vendor: bool = False) -> str:
+    """The widest SIMD set NumPy dispatches to on this CPU: "avx512", "avx2" or "other";
+    with ``vendor``, AMD's AVX-512 CPUs apart: "avx512-amd".
 
     NumPy's transcendental functions (sin, cos, ...) and the BLAS kernels round in the last
     bit differently per SIMD set, so numbers pinned bit for bit (hashes of generated data,
     losses after hundreds of epochs) are recorded per class: the same code gives the same
-    bits on every CPU of a class, not across classes.
+    bits on every CPU of a class, not across classes. Simulated data are the same on Intel
+    and AMD AVX-512 CPUs; training is not (measured: every demo loss differs in the last
+    digits between an Intel AVX-512 CPU and an AMD EPYC Zen 4), so training pins ask for
+    the vendor too.
     """
     try:
         from numpy._core._multiarray_umath import __cpu_features__ as features
     except ImportError:  # NumPy 1
         from numpy.core._multiarray_umath import __cpu_features__ as features
     if features.get("AVX512F") and features.get("AVX512_SKX"):
-        return "avx512"
+        return "avx512-amd" if vendor and _cpu_vendor() == "AuthenticAMD" else "avx512"
     return "avx2" if features.get("AVX2") else "other"
 
 
-def pinned_for_this_cpu(table: dict, what: str):
-    """``table[cpu_class()]``; a skip naming the classes pinned when this CPU's is not one."""
-    cls = cpu_class()
+def _cpu_vendor() -> str:
+    """``vendor_id`` of /proc/cpuinfo ("GenuineIntel", "AuthenticAMD"; "" where unknown)."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            return next((line.split(":", 1)[1].strip() for line in f if line.startswith("vendor_id")), "")
+    except OSError:
+        return ""
+
+
+def pinned_for_this_cpu(table: dict, what: str, vendor: bool = False):
+    """``table[cpu_class(vendor)]``; a skip naming the classes pinned when this CPU's is not one."""
+    cls = cpu_class(vendor)
     if cls not in table:
         pytest.skip(f"{what}: pinned on {', '.join(sorted(table))} CPUs; this one is {cls}")
     return table[cls]
