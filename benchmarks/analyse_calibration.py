@@ -56,7 +56,13 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--velocities", action="store_true", help="LASA with vx, vy beside x, y.")
     parser.add_argument("--data", type=Path, help="Another data set (.h5, with labels) instead of LASA.")
+    parser.add_argument("--figures-only", action="store_true", help="Redraw the figures from OUT/calibration_analysis.json.")
     args = parser.parse_args()
+    if args.figures_only:
+        result = json.loads((args.out / "calibration_analysis.json").read_text())
+        _figures(result, args.out)
+        _print(result)
+        return
 
     from primspace.data import import_lasa
     from primspace.experiments.intra import split_indices
@@ -158,6 +164,7 @@ def _figures(result: dict, out: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     from primspace.plots import save_figure
     from primspace.plots.base import init_color
@@ -178,7 +185,7 @@ def _figures(result: dict, out: Path) -> None:
     save_figure(fig, out / "calibration_starts.png", dpi=90)
 
     c = result["codes"]
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    fig, axes = plt.subplots(1, 3, figsize=(12.5, 3.6), gridspec_kw={"wspace": 0.4})
     axes[0].scatter(c["fit"]["norm_pm"], c["fit"]["norm_fitted"], s=10, color="tab:green")
     lim = max(max(c["fit"]["norm_pm"]), max(c["fit"]["norm_fitted"]))
     axes[0].plot([0, lim], [0, lim], "k:", lw=1)
@@ -192,7 +199,7 @@ def _figures(result: dict, out: Path) -> None:
     axes[2].legend(fontsize=7)
     save_figure(fig, out / "calibration_codes.png", dpi=90)
 
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    fig, axes = plt.subplots(1, 3, figsize=(12.5, 3.6), gridspec_kw={"wspace": 0.4})
     proj, zero = np.asarray(starts["projection"]["per_sample"]), np.asarray(starts["zero (own θ)"]["per_sample"])
     cal = np.asarray(starts["calibrated"]["per_sample"])
     for ax, other, label in ((axes[0], zero, "zero (own θ)"), (axes[1], cal, "calibrated")):
@@ -207,6 +214,9 @@ def _figures(result: dict, out: Path) -> None:
                      color=colours.get(start) or init_color(start))
     axes[2].set(xscale="log", yscale="log", xlabel="latent learning rate (inference)", ylabel="final held-out loss",
                 title="Sensitivity to the latent learning rate")
+    rates = [float(k) for k in next(iter(sens["latent_lr"].values()))]
+    axes[2].set_xticks(rates, [f"{v:g}" for v in rates])
+    axes[2].xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
     axes[2].legend(fontsize=7)
     save_figure(fig, out / "calibration_per_sample.png", dpi=90)
 
