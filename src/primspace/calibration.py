@@ -15,7 +15,13 @@ output) and its fitted code ``y_i``. A ridge regression with intercept
 is solved in closed form, ``α`` chosen by efficient leave-one-out cross-validation on the
 training codes (:class:`sklearn.linear_model.RidgeCV`; one α for all q outputs, tried
 relative to the mean eigenvalue of the centred ``XᵀX`` so the grid does not depend on the
-codes' scale). A new sample then starts inference at ``B P m + c`` ("calibrated"):
+codes' scale). The penalty pulls ``B`` towards the identity (``prior="identity"``, the
+default: ``‖B − I‖²_F``, i.e. a ridge of ``y − x`` on ``x``), the paper's own assumption
+that codes stay where ``P m`` put them; a strong penalty leaves ``P m`` shifted by the mean
+movement. Pulled towards zero instead (``prior="zero"``, the textbook ridge) the map
+predicted held-out fitted codes *worse* than ``P m`` itself on small training parts
+(measured: held-out R² 0.72 against 0.81 for ``P m`` on 42 wrist-sensor recordings, 0.89
+against 0.91 on the demo at q = 40), towards the identity never by more than 0.006. A new sample then starts inference at ``B P m + c`` ("calibrated"):
 the same ``P`` and the same frozen θ, a start moved to where fitted codes of similar
 ``P m`` ended. This goes beyond the paper (its new samples start at ``P m``).
 
@@ -54,6 +60,8 @@ class CodeCalibration:
         Folds for the held-out R² (folds by sample).
     random_state : int
         Seed of the fold assignment.
+    prior : {"identity", "zero"}
+        What the penalty pulls ``B`` towards.
 
     Attributes
     ----------
@@ -80,8 +88,10 @@ class CodeCalibration:
     True
     """
 
-    def __init__(self, latent_dim: int, alphas=RELATIVE_ALPHAS, n_splits: int = 5, random_state: int = 0) -> None:
+    def __init__(self, latent_dim: int, alphas=RELATIVE_ALPHAS, n_splits: int = 5, random_state: int = 0,
+                 prior: str = "identity") -> None:
         self.latent_dim = latent_dim
+        self.prior = prior
         self.alphas = alphas
         self.n_splits = n_splits
         self.random_state = random_state
@@ -97,6 +107,8 @@ class CodeCalibration:
         fitted : array-like (n, K·q)
             Their codes after training.
         """
+        if self.prior not in ("identity", "zero"):
+            raise UserError(f"calibration prior must be 'identity' or 'zero', got {self.prior!r}")
         x, y, groups = self._pairs(initial, fitted)
         q = int(self.latent_dim)
         self.n_samples_ = int(len(np.unique(groups)))
@@ -149,8 +161,10 @@ class CodeCalibration:
 
         xc = x - x.mean(axis=0)
         scale = max(float(np.sum(xc**2)) / x.shape[1], 1e-12)  # mean eigenvalue of the centred XᵀX
-        model = RidgeCV(alphas=scale * np.asarray(self.alphas, dtype=float), fit_intercept=True).fit(x, y)
-        return np.asarray(model.coef_, dtype=np.float64), np.asarray(model.intercept_, dtype=np.float64), float(model.alpha_)
+        shift = x if self.prior == "identity" else 0.0  # shrink B towards I (or towards 0)
+        model = RidgeCV(alphas=scale * np.asarray(self.alphas, dtype=float), fit_intercept=True).fit(x, y - shift)
+        coef = np.asarray(model.coef_, dtype=np.float64) + (np.eye(x.shape[1]) if self.prior == "identity" else 0.0)
+        return coef, np.asarray(model.intercept_, dtype=np.float64), float(model.alpha_)
 
     def _heldout_r2(self, x, y, groups, total) -> float:
         n_groups = int(groups.max()) + 1
@@ -167,14 +181,15 @@ class CodeCalibration:
     def state_dict(self) -> dict:
         """The fitted map and its diagnostics (tensors and numbers: a checkpoint entry)."""
         return {
-            "latent_dim": int(self.latent_dim), "coef": torch.from_numpy(np.ascontiguousarray(self.coef_)),
+            "latent_dim": int(self.latent_dim), "prior": self.prior,
+            "coef": torch.from_numpy(np.ascontiguousarray(self.coef_)),
             "intercept": torch.from_numpy(np.ascontiguousarray(self.intercept_)), **self.diagnostics(),
         }
 
     @classmethod
     def from_state_dict(cls, state: dict) -> "CodeCalibration":
         try:
-            cal = cls(int(state["latent_dim"]))
+            cal = cls(int(state["latent_dim"]), prior=state.get("prior", "zero"))  # early 0.5 maps: towards zero
             cal.coef_ = np.asarray(state["coef"], dtype=np.float64)
             cal.intercept_ = np.asarray(state["intercept"], dtype=np.float64)
             cal.alpha_ = float(state["alpha"])
@@ -188,6 +203,11 @@ class CodeCalibration:
         if cal.coef_.shape != (q, q) or cal.intercept_.shape != (q,):
             raise UserError(f"not a CodeCalibration state (coef {cal.coef_.shape}, intercept {cal.intercept_.shape} for q = {q})")
         return cal
+
+    def same_map(self, other: "CodeCalibration | None") -> bool:
+        """Whether ``other`` is this very map (same prior, ``B``, ``c``)."""
+        return (other is not None and other.prior == self.prior and np.array_equal(other.coef_, self.coef_)
+                and np.array_equal(other.intercept_, self.intercept_))
 
     def __repr__(self) -> str:
         fitted = "" if not hasattr(self, "coef_") else f", movement={self.movement_:.3g}, heldout_r2={self.heldout_r2_}"

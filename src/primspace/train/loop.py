@@ -193,6 +193,7 @@ class Session:
                 sums = evaluate_loop(self.model, self.table, self.tensors, tc, self.device)
                 self._log(0, epoch_values(sums, self.n, self.use_images), time.perf_counter() - t0)
             self._checkpoint()
+        calibrated = False
         fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
         with progress_bar(tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
             if self.epoch:
@@ -207,12 +208,15 @@ class Session:
                 due = tc.checkpoint_every is not None and self.epoch % tc.checkpoint_every == 0
                 if self.epoch == tc.epochs and self.calibrate is not None:
                     self.calibration = self.calibrate(self.table.numpy())
+                    calibrated = True
                 if due or self.epoch == tc.epochs or time.monotonic() - self._checkpoint_time >= tc.checkpoint_seconds:
                     self._checkpoint()
                 advance(loss=values["loss"], sps=self.n / max(seconds, 1e-9))
-        if self.calibrate is not None and self.calibration is None:  # finished by a version without calibration
-            self.calibration = self.calibrate(self.table.numpy())
-            self._checkpoint()
+        if self.calibrate is not None and not calibrated:  # a finished fit: its map as this version fits it
+            fresh = self.calibrate(self.table.numpy())
+            if not fresh.same_map(self.calibration):  # none yet (primspace 0.4), or fitted another way
+                self.calibration = fresh
+                self._checkpoint()
 
     def _check_finite(self, values: dict) -> None:
         bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
