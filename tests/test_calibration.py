@@ -7,27 +7,11 @@ import numpy as np
 import pytest
 import torch
 from conftest import assert_user_error
-from test_train import SMALL, primitives
+from test_train import SMALL, _tc, eval_set, primitives, train_set  # noqa: F401 (the fixtures, shared)
 
 from primspace.calibration import CodeCalibration
 from primspace.errors import UserError
-from primspace.train import TrainConfig, evaluate, fit, infer, load_run
-
-FAST = dict(batch_size=12, threads=1)
-
-
-def _tc(**kw):
-    return TrainConfig(**{**FAST, **kw})
-
-
-@pytest.fixture(scope="module")
-def train_set():
-    return primitives(12, seed=0)
-
-
-@pytest.fixture(scope="module")
-def eval_set():
-    return primitives(8, seed=100)
+from primspace.train import evaluate, fit, infer, load_run
 
 
 @pytest.fixture(scope="module")
