@@ -97,7 +97,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."),
         latent_dims: Optional[str] = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."),
         inits: Optional[str] = typer.Option(
-            None, "--inits", help="Override the initialisations (intra and inter), e.g. zero,projection,calibrated."
+            None, "--inits", help="Override the initialisations compared (by inter too, for inter and all), e.g. zero,projection,calibrated."
         ),
         seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
         epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
@@ -113,7 +113,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             "latent_dims": int_list(latent_dims, "--latent-dims") if latent_dims is not None else None,
             "inits": name_list(inits, "--inits") if inits is not None else None,
             # the inter-primitive experiment compares its own inits (the paper: zero and projection)
-            "inter_inits": name_list(inits, "--inits") if inits is not None else None,
+            "inter_inits": name_list(inits, "--inits") if inits is not None and name in ("inter", "all") else None,
             "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
             "images": images,
             "vision_frames": vision_frames,
