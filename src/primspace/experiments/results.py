@@ -362,8 +362,14 @@ def calibration_table(results: dict) -> tuple[list[str], list[list]] | None:
     return columns, rows
 
 
+#: "Never loses": calibrated's final eval loss at most this factor above the better of
+#: projection's and zero's (5 %: the spread of reruns that differ in the last bits).
+CALIBRATION_TOLERANCE = 1.05
+
+
 def calibration_verdict(results: dict) -> tuple[bool | None, str]:
-    """Does calibrated end at or below the raw projection and zero, seed by seed, at every q?"""
+    """Does calibrated never lose, seed by seed and at every q, to the raw projection or to
+    zero: its final eval loss at most :data:`CALIBRATION_TOLERANCE` x the lower of theirs?"""
     by: dict = {}
     for r in results["runs"]:
         by.setdefault((r["latent_dim"], r["seed"]), {})[r["init"]] = final([h["loss"] for h in r["infer"]])
@@ -372,11 +378,11 @@ def calibration_verdict(results: dict) -> tuple[bool | None, str]:
         if "calibrated" not in d or "projection" not in d:
             continue
         others = [i for i in ("projection", "zero") if i in d]
-        ok = all(d["calibrated"] <= d[i] for i in others)
+        ok = d["calibrated"] <= CALIBRATION_TOLERANCE * min(d[i] for i in others)
         verdicts.append(ok)
-        lines.append(f"q={q}, seed {seed}: calibrated {d['calibrated']:.3g} vs "
+        lines.append(f"q={q}, seed {seed}: calibrated {d['calibrated']:.3g}, "
                      + ", ".join(f"{i} {d[i]:.3g} ({d[i] / d['calibrated']:.3g}x)" for i in others))
     if not verdicts:
         return None, "no calibrated runs beside projection ones"
-    held = sum(verdicts)
-    return all(verdicts), f"calibrated ends lowest in {held} of {len(verdicts)} runs: " + "; ".join(lines)
+    return all(verdicts), (f"calibrated within {CALIBRATION_TOLERANCE:g}x of the better of projection and zero in "
+                           f"{sum(verdicts)} of {len(verdicts)} runs: " + "; ".join(lines))
