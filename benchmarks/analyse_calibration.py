@@ -13,7 +13,13 @@ directions before and after the fit; the sensitivity of projection / calibrated 
 the latent learning rate and to the inference epochs. Prints a table with ratios, writes
 ``analysis.json`` and four figures into ``--out``.
 
-    python benchmarks/analyse_calibration.py --out docs/figures   # ~10 min on one core
+    python benchmarks/analyse_calibration.py --out OUT                 # LASA, the issue's setting; ~10 min
+    python benchmarks/analyse_calibration.py --data watch.h5 --preset lasa --out OUT   # where projection loses
+
+``--data`` takes any labelled data set (the second command: seglearn's wrist-sensor
+recordings of 7 physiotherapy exercises, docs/reproduce.md says how to make the file);
+``--preset`` trains as an experiment preset does (``lasa``: the tuned optimiser, 800 + 600
+epochs, 30 % fitted).
 
 (Not a timing benchmark: it lives here beside the other measurement scripts.)
 """
@@ -23,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -50,8 +57,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="Folder for analysis.json and the figures.")
     parser.add_argument("--latent-dim", type=int, default=8)
-    parser.add_argument("--fit-epochs", type=int, default=400)
-    parser.add_argument("--infer-epochs", type=int, default=250)
+    parser.add_argument("--fit-epochs", type=int, help="Default: 400, or the preset's.")
+    parser.add_argument("--infer-epochs", type=int, help="Default: 250, or the preset's.")
+    parser.add_argument("--preset", help="Train as this experiment preset does (its optimiser, epochs, train "
+                                         "fraction); default: TrainConfig() as `primspace train` without flags.")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--velocities", action="store_true", help="LASA with vx, vy beside x, y.")
@@ -74,9 +83,19 @@ def main() -> None:
     from primspace.data import MotionDataset
 
     data = MotionDataset.load(args.data) if args.data else import_lasa(length=61, velocities=args.velocities)
-    train, held = split_indices(data.labels, 0.3, args.seed)
+    if args.preset:
+        from primspace.experiments.presets import resolve_preset
+
+        preset = resolve_preset(args.preset)
+        base, fraction = preset.train, preset.train_fraction
+        args.fit_epochs = args.fit_epochs or preset.fit_epochs
+        args.infer_epochs = args.infer_epochs or preset.infer_epochs
+    else:
+        base, fraction = TrainConfig(), 0.3
+        args.fit_epochs, args.infer_epochs = args.fit_epochs or 400, args.infer_epochs or 250
+    train, held = split_indices(data.labels, fraction, args.seed)
     mc = ModelConfig(latent_dim=args.latent_dim)
-    tc = TrainConfig(epochs=args.fit_epochs, seed=args.seed, threads=args.threads)
+    tc = replace(base, epochs=args.fit_epochs, seed=args.seed, threads=args.threads)
     configure_process(tc)
     common = dict(model_config=mc, train_config=tc, indices=train, images=False, progress=False)
     runs = {init: fit(data, None, init=init, **common) for init in ("projection", "zero")}
@@ -129,13 +148,13 @@ def main() -> None:
         }
         sensitivity["epochs"][start] = {
             str(e): (table[start]["final"] if e == args.infer_epochs else run_from(start, epochs=e).history[-1]["loss"])
-            for e in (args.infer_epochs // 2, args.infer_epochs, 4 * args.infer_epochs)
+            for e in (args.infer_epochs // 2, args.infer_epochs, 2 * args.infer_epochs)
         }
 
     what = str(args.data) if args.data else "LASA, 26 shapes x 7, T = 61" + (", x y vx vy" if args.velocities else "")
     result = {"setting": {"data": what, "n_fit": len(train), "n_infer": len(held),
                           "latent_dim": args.latent_dim, "fit_epochs": args.fit_epochs, "infer_epochs": args.infer_epochs,
-                          "seed": args.seed, "train_config": tc.to_dict()},
+                          "seed": args.seed, "preset": args.preset, "train_config": tc.to_dict()},
               "starts": table, "codes": codes, "sensitivity": sensitivity,
               "seconds": round(time.perf_counter() - start_time, 1)}
     (args.out / "calibration_analysis.json").write_text(json.dumps(result, indent=1))
