@@ -20,7 +20,15 @@ import numpy as np
 from primspace.experiments import figures
 from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
-from primspace.experiments.runs import curves, experiment_scaler, fit_init, load_run_data, shared_fit, train_configs
+from primspace.experiments.runs import (
+    curves,
+    experiment_scaler,
+    fit_init,
+    fit_point_dir,
+    load_run_data,
+    shared_fit,
+    train_configs,
+)
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
@@ -45,7 +53,7 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     new = np.flatnonzero(data.labels == fold)
     model_config, tc1 = train_configs(p, latent_dim, seed, p.inter_epochs[0])
     configure_process(tc1)  # one thread per run (the preset's threads), as every backend
-    phase1_dir = run_dir.parent / inter_key(fit_init(init), fold, seed).split("/")[1] / "phase1"
+    phase1_dir = fit_point_dir(run_dir, init) / "phase1"
     phase1 = shared_fit(phase1_dir, dataset=data, model_config=model_config, train_config=tc1, init=fit_init(init),
                         indices=first, images=use_images, scaler=experiment_scaler(data), progress=False)
     replay = replay_indices(first, p.inter_replay, seed, fold)

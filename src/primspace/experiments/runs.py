@@ -29,6 +29,7 @@ __all__ = [
     "intra_key",
     "intra_run_dir",
     "phase_dir",
+    "fit_point_dir",
     "shared_fit",
     "train_configs",
     "load_run_data",
@@ -66,6 +67,15 @@ def phase_dir(out_dir: str | Path, init: str, latent_dim: int, seed: int, phase:
     """The ``fit`` or ``infer`` run directory of an intra grid point (a calibrated point's
     ``fit`` is its projection point's)."""
     return intra_run_dir(out_dir, fit_init(init) if phase == "fit" else init, latent_dim, seed) / phase
+
+
+def fit_point_dir(run_dir: Path, init: str) -> Path:
+    """The grid point whose fit the point ``run_dir`` (of ``init``) uses: itself, or the sibling
+    of :func:`fit_init` (grid keys start with their init: ``calibrated-q40-s0`` ->
+    ``projection-q40-s0``, ``calibrated-fold3-s0`` -> ``projection-fold3-s0``)."""
+    if not run_dir.name.startswith(init):
+        raise ValueError(f"grid point {run_dir.name} is not one of init {init}")
+    return run_dir.with_name(fit_init(init) + run_dir.name[len(init):])
 
 
 def shared_fit(fit_dir: Path, **fit_args):
@@ -207,7 +217,7 @@ def fit_and_infer(run_dir: Path, data: MotionDataset, preset: ExperimentPreset, 
     start = time.perf_counter()
     model_config, train_config = train_configs(preset, latent_dim, seed, preset.fit_epochs)
     configure_process(train_config)  # one thread per run (the preset's threads), as every backend
-    fit_dir = run_dir.parent / intra_run_dir(".", fit_init(init), latent_dim, seed).name / "fit"
+    fit_dir = fit_point_dir(run_dir, init) / "fit"
     fitted = shared_fit(
         fit_dir, dataset=data, model_config=model_config, train_config=train_config, init=fit_init(init),
         indices=np.asarray(train_idx), images=use_images, scaler=experiment_scaler(data), progress=False,
