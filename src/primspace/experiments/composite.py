@@ -29,7 +29,7 @@ from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments import figures
 from primspace.experiments.presets import ExperimentPreset
-from primspace.experiments.runs import curves, fit_and_infer, load_run_data
+from primspace.experiments.runs import curves, fit_and_infer, load_run_data, shared_fits_last
 from primspace.experiments.sweep import GridPoint, run_dir_of
 from primspace.experiments.workspace import ExperimentDir
 
@@ -168,7 +168,7 @@ def run_composite(exp: ExperimentDir) -> dict:
                 args = (str(exp.data_path), train.tolist(), evaluation.tolist(), init, q, seed, preset.to_dict())
                 points.append(GridPoint(composite_key(init, q, seed), args))
     with exp.stage("composite"):
-        grid = exp.grid(run_composite_point, points, "composite runs")
+        grid = exp.grid(run_composite_point, shared_fits_last(points), "composite runs")
     runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
     results = {"runs": runs, "failures": grid.failures, "splits": splits, "window": preset.model.code_window,
                "label_names": list(data.label_names)}

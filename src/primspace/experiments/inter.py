@@ -27,6 +27,7 @@ from primspace.experiments.runs import (
     fit_point_dir,
     load_run_data,
     shared_fit,
+    shared_fits_last,
     train_configs,
 )
 from primspace.experiments.sweep import GridPoint
@@ -94,7 +95,7 @@ def run_inter(exp: ExperimentDir) -> dict:
         for seed in preset.seeds for init in preset.inter_inits for fold in folds
     ]
     with exp.stage("inter"):
-        grid = exp.grid(run_inter_point, points, "inter-primitive folds")
+        grid = exp.grid(run_inter_point, shared_fits_last(points), "inter-primitive folds")
     results = {
         "runs": [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results],
         "failures": grid.failures,

@@ -27,7 +27,6 @@ from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.probe import run_probe
 from primspace.experiments.results import LATENT_RESULTS
 from primspace.experiments.runs import (
-    FIT_INIT_OF,
     all_frame_losses,
     curves,
     fit_and_infer,
@@ -37,6 +36,7 @@ from primspace.experiments.runs import (
     load_codes,
     load_run_data,
     phase_dir,
+    shared_fits_last,
 )
 from primspace.experiments.sweep import GridPoint, complete_result
 from primspace.experiments.workspace import ExperimentDir
@@ -104,10 +104,8 @@ def run_intra(exp: ExperimentDir) -> dict:
             for init in preset.inits:
                 args = (str(exp.data_path), train.tolist(), evaluation.tolist(), init, q, seed, preset.to_dict())
                 points.append(GridPoint(intra_key(init, q, seed), args))
-    # points that infer with another point's fit (calibrated) go last, so no worker waits on a fit in progress
-    order = sorted(points, key=lambda p: p.args[3] in FIT_INIT_OF)
     with exp.stage("intra"):
-        grid = exp.grid(run_intra_point, order, "intra-primitive runs")
+        grid = exp.grid(run_intra_point, shared_fits_last(points), "intra-primitive runs")
     _complete_final_losses(exp, grid.results)
     runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
     results = {

@@ -31,6 +31,7 @@ __all__ = [
     "phase_dir",
     "fit_point_dir",
     "shared_fit",
+    "shared_fits_last",
     "train_configs",
     "load_run_data",
     "experiment_scaler",
@@ -76,6 +77,13 @@ def fit_point_dir(run_dir: Path, init: str) -> Path:
     if not run_dir.name.startswith(init):
         raise ValueError(f"grid point {run_dir.name} is not one of init {init}")
     return run_dir.with_name(fit_init(init) + run_dir.name[len(init):])
+
+
+def shared_fits_last(points: list) -> list:
+    """Grid points in the order to run them: those that infer with another point's fit
+    (:data:`FIT_INIT_OF`; keys ``<experiment>/<init>-...``) after the others, so no worker
+    waits on a fit in progress."""
+    return sorted(points, key=lambda p: p.key.split("/", 1)[-1].split("-", 1)[0] in FIT_INIT_OF)
 
 
 def shared_fit(fit_dir: Path, **fit_args):
