@@ -2,7 +2,7 @@
 
 At demo scale (:data:`primspace.experiments.presets.PRESETS` ``["demo"]``) on a 2-core
 CPU, in about five minutes: generate the demo data set with the MuJoCo arm, run the
-intra-primitive experiment (four latent initialisations, two latent sizes), cluster the
+intra-primitive experiment (four latent initialisations and the calibrated start, two latent sizes), cluster the
 learned codes and the raw trajectories, judge the generated motions in the simulator,
 and write the HTML report. Whether the paper's qualitative result (projection-initialised
 codes infer to a lower loss than zero and random ones) holds at this scale is stated
