@@ -39,7 +39,7 @@ import torch
 
 from primspace.errors import UserError
 
-__all__ = ["INIT_METHODS", "CALIBRATED", "START_METHODS", "LatentInitializer", "LatentTable", "appendix_a_check"]
+__all__ = ["INIT_METHODS", "CALIBRATED", "CALIBRATABLE", "START_METHODS", "LatentInitializer", "LatentTable", "appendix_a_check"]
 
 #: The initialisation strategies, in the order figures show them.
 INIT_METHODS = ("zero", "random", "projection", "pca")
@@ -47,6 +47,9 @@ INIT_METHODS = ("zero", "random", "projection", "pca")
 #: A start that needs a trained run: its initialiser's codes mapped by the run's
 #: :class:`primspace.calibration.CodeCalibration` (runs fitted with projection or pca).
 CALIBRATED = "calibrated"
+
+#: The initialisers whose codes depend on the data, so a map from them to fitted codes means something.
+CALIBRATABLE = ("projection", "pca")
 
 #: Every way codes can start: the initialisers, then the calibrated start.
 START_METHODS = INIT_METHODS + (CALIBRATED,)

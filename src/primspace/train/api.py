@@ -23,7 +23,7 @@ import torch
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import UserError
 from primspace.calibration import CodeCalibration
-from primspace.latent import CALIBRATED, LatentInitializer, LatentTable
+from primspace.latent import CALIBRATABLE, CALIBRATED, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
@@ -161,10 +161,7 @@ def fit(
         initializer = _initializer(init, parent, mc, scaled, seeds)
         model.to(device)
         theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
-        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_fit"]).astype(np.float64)
-        if initial_latents is not None:
-            given = ~np.isnan(initial_latents).any(axis=1)
-            codes[given] = initial_latents[given]
+        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
         table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
     session = Session(
         store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
@@ -252,10 +249,7 @@ def infer(
     else:
         scaled = parent.scaler.transform(data.motor)
         initializer = _initializer(init, parent, mc, scaled, seeds)
-        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"])
-        if initial_latents is not None:
-            given = ~np.isnan(initial_latents).any(axis=1)
-            codes[given] = initial_latents[given]
+        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents).astype(np.float32)
         table = LatentTable(torch.from_numpy(codes).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
     session = Session(
@@ -397,15 +391,21 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
     return RunDirectory(out_dir), ckpt
 
 
-def _start_codes(init: str, parent: TrainedRun | None, initializer: LatentInitializer, scaled, seed: int) -> np.ndarray:
-    """The starting codes: the initialiser's, mapped by the parent's calibration for ``calibrated``."""
+def _start_codes(init: str, parent: TrainedRun | None, initializer: LatentInitializer, scaled, seed: int,
+                 initial_latents: np.ndarray | None = None) -> np.ndarray:
+    """The starting codes (float64): the initialiser's, mapped by the parent's calibration for
+    ``calibrated``; rows of ``initial_latents`` without NaN replace them."""
     codes = initializer.transform(scaled, random_state=seed)
-    return parent.calibration.transform(codes) if init == CALIBRATED else codes
+    codes = (parent.calibration.transform(codes) if init == CALIBRATED else codes).astype(np.float64)
+    if initial_latents is not None:
+        given = ~np.isnan(initial_latents).any(axis=1)
+        codes[given] = initial_latents[given]
+    return codes
 
 
 def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: int):
     """What fits a run's calibration map from its final codes (None: its initialiser has no data map)."""
-    if initializer.method not in ("projection", "pca"):
+    if initializer.method not in CALIBRATABLE:
         return None
     return lambda codes: CodeCalibration(latent_dim).fit(initializer.transform(scaled), codes)
 

@@ -8,7 +8,7 @@ import numpy as np
 from primspace.data import JointScaler, MotionDataset
 from primspace.data.indices import check_indices
 from primspace.errors import UserError
-from primspace.latent import CALIBRATED, START_METHODS
+from primspace.latent import CALIBRATABLE, CALIBRATED, START_METHODS
 from primspace.model import ModelConfig
 from primspace.train.run import TrainedRun
 
@@ -31,7 +31,7 @@ def check_calibrated(init: str, parent: TrainedRun | None) -> None:
     if parent.calibration is not None:
         return
     method = parent.initializer.method
-    if method in ("projection", "pca") and parent.kind == "fit":
+    if method in CALIBRATABLE and parent.kind == "fit":
         raise UserError(f"{run_name(parent)}: has no calibration map (fitted by primspace < 0.5); "
                         "resume its fit once (same epochs) to add it")
     raise UserError(f"{run_name(parent)}: init 'calibrated' needs a run fitted with projection or pca init; "
