@@ -1,28 +1,24 @@
-"""The paper's claims, quoted verbatim, and the check of each against our results.
+"""Version 1 of the rules that test the paper's claims (primspace 0.2-0.5), kept so that
+their verdicts stay readable beside the current rules' (:mod:`primspace.experiments.claims`).
 
-Where docs or the report say what "the paper" says, they quote it: :data:`CLAIMS` holds
-each sentence exactly as in shared/paper.tex (section *Experimental Results*), what we
-measure to test it, and the rule that decides "holds". :func:`check_claims` applies the
-rules to an experiment directory's results (read through
-:mod:`primspace.experiments.results`: this module imports no experiment); the report
-prints the table and docs/reproduce.md carries it for the paper preset. A claim whose
-experiment has not run reads "not run".
-
-The rules are ours: the paper gives no numbers for its loss curves or its clustering,
-so each rule states the reading we test (e.g. "very similar" as within a factor of 2).
+Frozen: a rule that changes gets a new version there; nothing here is edited except to
+keep it running. What was wrong with some of them (issue 23): a tie counted as an
+improvement (success: projection "at least" zero's), "did not converge at all" was
+tested by another sentence (random ends 10x above projection, while its own loss falls
+6-12x), clustering "similar" held when both inits were near chance, and the inter rule
+compared means without their spread.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from primspace.experiments.results import LEARNED_CODES, read_results
+from primspace.experiments.results import LEARNED_CODES
 
-__all__ = ["Claim", "CLAIMS", "check_claims", "claims_table"]
+__all__ = ["Claim", "CLAIMS_V1"]
 
 
 @dataclass(frozen=True)
@@ -154,8 +150,8 @@ def _inter_improved(results: dict) -> tuple[bool | None, str]:
                 f"vs {p[1]:.2g} ± {p[2]:.1g}")
 
 
-#: The paper's sentences (verbatim) and our tests, in the paper's order.
-CLAIMS: tuple[Claim, ...] = (
+#: The version-1 rules, in the paper's order (quotes as they were: some cut short).
+CLAIMS_V1: tuple[Claim, ...] = (
     Claim("fit_random", "intra", "Intra-primitive generalisation, Fig. loss_train",
           "random initialization performs very badly for low-dimensional latent space.",
           "final fit loss at the smallest q (at most 20): random at least 5x projection's", _random_fit_bad),
@@ -187,72 +183,3 @@ CLAIMS: tuple[Claim, ...] = (
           "phase-2 loss over folds: projection's start and final mean below zero's, its final std not above",
           _inter_improved),
 )
-
-
-_VERDICTS = {True: "holds", False: "does not hold", None: "cannot be checked"}
-
-
-def _seed_views(claim: Claim, results: dict) -> dict:
-    """``{seed: results as one seed's}``: intra runs filtered by seed; success and
-    clustering results with their focus seed's entries replaced by each seed's
-    (``by_seed``); empty for anything else."""
-    if claim.experiment == "intra":
-        seeds = sorted({r["seed"] for r in results.get("runs", [])})
-        return {s: results | {"runs": [r for r in results["runs"] if r["seed"] == s]} for s in seeds}
-    field = {"success": "generated", "clustering": "latent"}.get(claim.experiment)
-    if field is None or not results.get("by_seed"):
-        return {}
-    views = {results.get("seed", 0): results}
-    views |= {int(s): results | {field: v} for s, v in results["by_seed"].items()}
-    return dict(sorted(views.items()))
-
-
-def _verdict(claim: Claim, results: dict) -> tuple[str, str]:
-    """The verdict and numbers of one claim. Results with several seeds (intra runs, and
-    success and clustering over every seed) are checked seed by seed (each seed its own
-    split, weights and projection): "holds in k of n seeds" and each seed's numbers; with
-    one seed, as the rule says."""
-    views = _seed_views(claim, results)
-    if len(views) < 2:
-        ok, numbers = claim.check(results)
-        return _VERDICTS[ok], numbers
-    per_seed = {s: claim.check(view) for s, view in views.items()}
-    judged = {s: ok for s, (ok, _) in per_seed.items() if ok is not None}
-    numbers = "; ".join(f"seed {s}: {text}" for s, (_, text) in per_seed.items())
-    if not judged:
-        return _VERDICTS[None], numbers
-    held = [s for s, ok in judged.items() if ok]
-    if len(held) == len(judged):
-        verdict = f"holds in every seed ({len(held)} of {len(judged)})"
-    elif not held:
-        verdict = f"does not hold in any seed (0 of {len(judged)})"
-    else:
-        failed = ", ".join(str(s) for s in judged if s not in held)
-        verdict = f"holds in {len(held)} of {len(judged)} seeds (not in seed {failed})"
-    return verdict, numbers
-
-
-def check_claims(out_dir: str | Path) -> list[dict]:
-    """Each claim with its verdict on ``out_dir``'s results: ``holds`` / ``does not hold`` /
-    ``not run`` (or ``cannot be checked``), and the numbers behind it."""
-    rows = []
-    cache: dict[str, dict | None] = {}
-    for claim in CLAIMS:
-        if claim.experiment not in cache:
-            cache[claim.experiment] = read_results(out_dir, claim.experiment)
-        results = cache[claim.experiment]
-        if results is None:
-            verdict, numbers = "not run", ""
-        else:
-            verdict, numbers = _verdict(claim, results)
-        rows.append({"key": claim.key, "where": claim.where, "quote": claim.quote, "test": claim.test,
-                     "verdict": verdict, "ours": numbers})
-    return rows
-
-
-def claims_table(out_dir: str | Path) -> tuple[list[str], list[list]]:
-    """The claims as a table: the paper's sentence, our test, the verdict, our numbers."""
-    rows = check_claims(out_dir)
-    return (["the paper (verbatim)", "what we test", "verdict", "ours"],
-            [[f"“{r['quote']}” ({r['where']})", r["test"], r["verdict"], r["ours"]] for r in rows])
-
