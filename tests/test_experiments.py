@@ -372,6 +372,32 @@ def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
     assert "claims, checked" in html and "differs very slightly from random linear projection case." in html
 
 
+def test_a_summary_holds_what_the_claims_and_docs_read(finished):
+    """The stored summary of a directory gives the same verdicts and numbers as the
+    directory itself (the docs are generated from summaries), and stays small."""
+    from primspace.docs import render_summary
+    from primspace.experiments.claims import check_claims
+    from primspace.experiments.summary import read_summary, summarize
+
+    exp, intra, _, success = finished
+    summary = summarize(exp.path, "tiny", "primspace experiment success --out tiny")
+    assert set(summary["results"]) >= {"intra", "success", "clustering", "probe"}
+    assert check_claims(summary["results"]) == check_claims(exp.path)
+    last = {r["key"].split("/")[1]: r["infer"][-1]["loss"] for r in intra["runs"]}
+    kept = {f"{r['init']}-q{r['latent_dim']}-s{r['seed']}": r["infer"][-1]["loss"] for r in summary["results"]["intra"]["runs"]}
+    assert kept == last
+    assert summary["results"]["success"]["generated"]["zero"]["by_tolerance"]  # the judge's sweep is kept
+    path = exp.path / "summary.json"
+    path.write_text(json.dumps(summary))
+    assert len(path.read_bytes()) < 50_000
+    assert read_summary(path) == summary
+    text = render_summary(summary)
+    assert "| 4 | projection | 1 |" in text and "The paper's sentences, checked" in text
+    path.write_text("{}")
+    with pytest.raises(UserError, match="not a primspace summary"):
+        read_summary(path)
+
+
 def test_tiny_experiment_numbers_are_pinned(finished):
     """Same seed, same numbers: the tiny grid's losses, clustering accuracies and success
     rates as of 0.2 (CPU). A refactor that changes any of them changes results, and must

@@ -38,6 +38,11 @@ FORBIDDEN = {
     "experiments": ("report", "demo", "cli"),
     "report": ("demo", "cli"),
     "demo": ("cli",),
+    # small statistics helpers: the standard library only
+    "stats": ("data", "sim", "cluster", "probe", "segmentation", "model_config", "model", "latent", "train", "plots",
+              "experiments", "report", "demo", "cli", "docs"),
+    # the docs' generated numbers: read from stored summaries, above the experiments and the report
+    "docs": ("cli",),
 }
 
 

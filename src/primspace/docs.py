@@ -1,0 +1,274 @@
+"""The numbers of README and docs/reproduce.md, written from the stored summaries.
+
+``python -m primspace.docs`` reads every ``docs/results/*.json`` (experiment summaries,
+:mod:`primspace.experiments.summary`) and rewrites the generated blocks of README.md and
+docs/reproduce.md, the text between ``<!-- generated: NAME -->`` and
+``<!-- end generated: NAME -->``; ``--check`` writes nothing and exits 1 when a block
+differs from what it would write (tests/test_docs_generated.py runs it). Everything else
+in those files is prose, written by hand around the blocks.
+
+What is generated: per summary, the losses (mean ± std over seeds, and the per-seed
+range), success rates (mean ± std over seeds, and the pooled rate with its Wilson 95 %
+interval), clustering accuracies, the inter folds, and the paper's claims with each rule's
+version, threshold, per-seed verdicts, the judge-tolerance sweep and the earlier rule's
+verdict; and README's headline paragraph. Standard deviations are population ones (over
+the seeds run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from primspace.experiments.claims import check_claims
+from primspace.experiments.results import LEARNED_CODES
+from primspace.experiments.summary import read_summary
+from primspace.stats import wilson_interval
+
+__all__ = ["g", "mean_spread", "render_summary", "headline", "blocks", "replace_blocks", "main", "SUMMARY_DIR"]
+
+#: Where the summaries are kept, relative to the repository.
+SUMMARY_DIR = Path("docs") / "results"
+
+#: Each generated block: the file it lives in.
+TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.md"}
+
+#: The order summaries are shown in (others follow, by name).
+ORDER = ("paper", "paper-images", "demo", "lasa")
+
+
+def g(x: float | None, digits: int = 2) -> str:
+    """A number as the docs print it: ``digits`` significant digits, in scientific notation
+    below 1e-3 (``2.7e-5``, not ``2.7e-05`` or ``0.000027``)."""
+    if x is None or not np.isfinite(x):
+        return "—"
+    text = f"{x:.{digits - 1}e}" if x != 0 and (abs(x) < 1e-3 or abs(x) >= 1e5) else f"{x:.{digits}g}"
+    return re.sub(r"e([+-])0*(\d)", lambda m: "e" + ("-" if m.group(1) == "-" else "") + m.group(2), text)
+
+
+def mean_spread(values: list[float], digits: int = 2, rng: bool = True) -> str:
+    """``mean ± std`` (population std) and, with several values, ``[min–max]``."""
+    v = np.asarray([x for x in values if x is not None], dtype=float)
+    if v.size == 0:
+        return "—"
+    if v.size == 1:
+        return g(v[0], digits)
+    text = f"{g(v.mean(), digits)} ± {g(v.std(), 1 if digits <= 2 else digits - 1)}"
+    return text + (f" [{g(v.min(), digits)}–{g(v.max(), digits)}]" if rng else "")
+
+
+def _last(curve: list[dict]) -> float | None:
+    return curve[-1]["loss"] if curve else None
+
+
+def _intra_rows(intra: dict) -> list[list[str]]:
+    groups: dict = {}
+    for r in intra["runs"]:
+        groups.setdefault((r["latent_dim"], r["init"]), []).append(r)
+    order = ["projection", "calibrated", "pca", "zero", "random"]
+    rows = []
+    for (q, init), runs in sorted(groups.items(), key=lambda kv: (kv[0][0], order.index(kv[0][1]) if kv[0][1] in order else 9)):
+        rows.append([str(q), init, str(len(runs)),
+                     mean_spread([_last(r["fit"]) for r in runs]) if runs[0]["fit"] else "(projection's fit)",
+                     mean_spread([r["infer"][0]["loss"] for r in runs], rng=False),
+                     mean_spread([_last(r["infer"]) for r in runs])])
+    return rows
+
+
+def _table(columns: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _seed_points(success: dict) -> dict[str, list[dict]]:
+    """``{init: [judged point per seed]}`` of a success summary."""
+    out: dict = {}
+    for gen in [success.get("generated", {})] + list(success.get("by_seed", {}).values()):
+        for init, res in gen.items():
+            out.setdefault(init, []).append(res)
+    return out
+
+
+def _rate(points: list[dict], prim: str | None) -> str:
+    """Mean ± std over seeds of a success rate, and the pooled rate with its Wilson 95 % interval."""
+    rates, k, n = [], 0, 0
+    for p in points:
+        counts = p["counts"] if prim is None else {prim: p["counts"].get(prim)}
+        if any(c is None for c in counts.values()):
+            continue
+        succ = p.get("successes") or {q: round(p["rates"][q] * c) for q, c in p["counts"].items()}
+        k += sum(succ[q] for q in counts)
+        n += sum(counts.values())
+        rates.append(p["overall"] if prim is None else p["rates"][prim])
+    if not n:
+        return "—"
+    lo, hi = wilson_interval(k, n)
+    return f"{mean_spread(rates)}; pooled {k / n:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+def _outcome_rows(results: dict) -> list[list[str]]:
+    success, clustering = results.get("success"), results.get("clustering")
+    points = _seed_points(success) if success else {}
+    acc: dict = {}
+    if clustering:
+        for rows in [clustering["latent"]] + list(clustering.get("by_seed", {}).values()):
+            for r in rows:
+                key = r["init"] if r["codes"] == LEARNED_CODES else "untrained P m"
+                acc.setdefault(key, []).append(r["accuracy"])
+    out = []
+    for init in dict.fromkeys([*points, *acc]):
+        p = points.get(init, [])
+        out.append([init, str(max(len(p), len(acc.get(init, [])))), _rate(p, None) if p else "—",
+                    _rate(p, "grasp") if p else "—", mean_spread(acc.get(init, []))])
+    return out
+
+
+def _inter_rows(inter: dict) -> list[list[str]]:
+    by: dict = {}
+    for r in inter["runs"]:
+        by.setdefault(r["init"], []).append(r)
+    rows = []
+    for init, runs in by.items():
+        seeds = sorted({r.get("seed", 0) for r in runs})
+        eighth = [min(r["phase2"], key=lambda h: abs(h["epoch"] - max(1, round(r["phase2"][-1]["epoch"] / 8))))["loss"]
+                  for r in runs]
+        rows.append([init, f"{len(runs)} ({len(seeds)} seeds)", mean_spread([r["phase2"][0]["loss"] for r in runs], rng=False),
+                     mean_spread(eighth, rng=False), mean_spread([_last(r["phase2"]) for r in runs])])
+    return rows
+
+
+def _claim_rows(results: dict) -> list[list[str]]:
+    rows = []
+    for r in check_claims(results):
+        if r["verdict"] == "not run":
+            continue
+        verdict = f"**{r['verdict']}**"
+        if len(r["per_seed"]) > 1:
+            verdict += " (" + ", ".join(f"seed {s}: {v}" for s, v in r["per_seed"].items()) + ")"
+        if r.get("sweep"):
+            verdict += "; by judge tolerance: " + ", ".join(f"{float(t) * 1000:g} mm {v}" for t, v in r["sweep"].items())
+            verdict += " (robust)" if r["robust"] else " (**not robust** to the tolerance)"
+        earlier = "; ".join(f"v{p['version']}: {p['verdict']}" for p in r["previous"]) or "—"
+        rows.append([f"“{r['quote']}”", f"v{r['version']}: {r['test']}", verdict, earlier])
+    return rows
+
+
+def render_summary(summary: dict) -> str:
+    """The markdown section of one summary."""
+    res, preset = summary["results"], summary.get("preset", {})
+    cpu = summary.get("cpu", {})
+    seeds = preset.get("seeds", [])
+    out = [f"#### {summary['name']}", "",
+           "```", summary["command"].strip(), "```", "",
+           f"primspace {summary.get('primspace')}; preset {preset.get('name')}, "
+           f"{'with images' if preset.get('images') else 'motor only'}, seeds {', '.join(map(str, seeds))}, "
+           f"epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}, loss "
+           f"{preset.get('train', {}).get('loss_reduction', 'mean')}; measured on {cpu.get('model', '?')} ({cpu.get('isa', '?')})."
+           + (f" {summary['note']}" if summary.get("note") else "")]
+    if "intra" in res:
+        out += ["", "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
+                    "(θ frozen) before the first and after the last inference epoch.", "",
+                _table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"]))]
+    outcome = _outcome_rows(res)
+    if outcome:
+        q = (res.get("clustering") or res.get("success") or {}).get("latent_dim")
+        out += ["", f"At q = {q}: success rate of the generated eval motions judged by the simulator (mean ± std over "
+                    "seeds; pooled over seeds with its Wilson 95 % interval), and clustering accuracy of the codes "
+                    f"(R² = {preset.get('cluster_r2')}).", "",
+                _table(["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"], outcome)]
+    if "inter" in res:
+        out += ["", f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):", "",
+                _table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"]))]
+    claims = _claim_rows(res)
+    if claims:
+        out += ["", "The paper's sentences, checked (`primspace.experiments.claims`):", "",
+                _table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims)]
+    return "\n".join(out)
+
+
+def _final_by(intra: dict, q: int | None = None) -> dict[str, list[float]]:
+    qs = sorted({r["latent_dim"] for r in intra["runs"]})
+    q = q if q in qs else qs[-1]
+    out: dict = {}
+    for r in intra["runs"]:
+        if r["latent_dim"] == q:
+            out.setdefault(r["init"], []).append(_last(r["infer"]))
+    return out
+
+
+def headline(summaries: dict[str, dict]) -> str:
+    """README's results paragraph: for each summary, projection's final eval loss against
+    zero's and random's at the largest q, mean ± std over seeds, and the claims' verdicts counted."""
+    if not summaries:
+        return "No stored summaries yet (docs/results/)."
+    parts = []
+    for name, s in summaries.items():
+        intra = s["results"].get("intra")
+        if not intra:
+            continue
+        by = _final_by(intra)
+        q = max(r["latent_dim"] for r in intra["runs"])
+        n = len(by.get("projection", []))
+        losses = ", ".join(f"{i} {mean_spread(by[i], rng=False)}" for i in ("projection", "zero", "random", "pca") if i in by)
+        verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
+        held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
+        parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}; of the paper's sentences checked, "
+                     f"{held} of {len(verdicts)} hold in every seed")
+    return ("Results, mean ± std over seeds, generated from the stored summaries (docs/reproduce.md has the tables, "
+            "the commands and every claim seed by seed): " + "; ".join(parts) + ".")
+
+
+def load_summaries(root: Path) -> dict[str, dict]:
+    """The stored summaries by name, in :data:`ORDER`."""
+    found = {s["name"]: s for s in (read_summary(p) for p in sorted((root / SUMMARY_DIR).glob("*.json")))}
+    return {n: found[n] for n in sorted(found, key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))}
+
+
+def blocks(summaries: dict[str, dict]) -> dict[str, str]:
+    """The text of every generated block."""
+    results = "\n\n".join(render_summary(s) for s in summaries.values()) or "No stored summaries yet (docs/results/)."
+    return {"headline": headline(summaries), "results": results}
+
+
+def replace_blocks(text: str, new: dict[str, str], path: Path | str = "") -> str:
+    """``text`` with the block of each name in ``new`` replaced (markers kept)."""
+    for name, body in new.items():
+        pattern = re.compile(rf"(<!-- generated: {re.escape(name)} -->\n)(.*?)(<!-- end generated: {re.escape(name)} -->)", re.S)
+        if not pattern.search(text):
+            raise ValueError(f"{path}: no generated block {name!r} (markers <!-- generated: {name} --> ... "
+                             f"<!-- end generated: {name} -->)")
+        text = pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(3), text, count=1)
+    return text
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m primspace.docs", description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, default=Path("."), help="the repository (default: here)")
+    parser.add_argument("--check", action="store_true", help="write nothing; exit 1 if a block differs")
+    args = parser.parse_args(argv)
+    new = blocks(load_summaries(args.root))
+    stale = []
+    for target in dict.fromkeys(TARGETS.values()):
+        path = args.root / target
+        text = path.read_text(encoding="utf-8")
+        wanted = replace_blocks(text, {k: v for k, v in new.items() if TARGETS[k] == target}, path)
+        if wanted != text:
+            stale.append(str(target))
+            if not args.check:
+                tmp = path.with_name(path.name + ".tmp")
+                tmp.write_text(wanted, encoding="utf-8")
+                tmp.replace(path)
+    if args.check and stale:
+        print(f"stale generated text in {', '.join(stale)}: run python -m primspace.docs", file=sys.stderr)
+        return 1
+    print(("rewrote " + ", ".join(stale)) if stale else "generated text is up to date")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,182 @@
+"""The small summary of a finished experiment, kept in the repository.
+
+Result folders are not kept from one machine to the next, so the numbers the docs quote
+must live somewhere that is: :func:`summarize` reduces an experiment directory to a small
+JSON object (tens of kilobytes) that holds every number the docs' tables and the claims
+are made from, and nothing else: loss curves cut to a few epochs, success counts, the
+accuracy of each clustering, the inter folds. ``docs/results/NAME.json`` holds one per
+run we report; ``python -m primspace.docs`` writes the tables of README and
+docs/reproduce.md from them, and a test keeps the committed text equal to what it writes.
+
+The claims (:func:`primspace.experiments.claims.check_claims`) read a summary's
+``results`` exactly as they read a directory, so a rule that changes is re-judged from
+the stored summaries without re-running anything.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+
+from primspace.errors import UserError
+from primspace.experiments.results import read_meta, read_results
+
+__all__ = ["SUMMARY_VERSION", "CURVE_EPOCHS", "summarize", "read_summary", "cpu_class", "kept_epochs"]
+
+#: Bumped when the summary's form changes.
+SUMMARY_VERSION = 1
+
+#: The epochs of a loss curve a summary keeps (besides the last, and an eighth of the way,
+#: which the inter claim reads as "convergence speed").
+CURVE_EPOCHS = (0, 1, 2, 5, 10, 20, 50, 100, 200, 400, 800)
+
+
+def cpu_class() -> dict:
+    """The CPU a run was measured on: vendor and model, and the widest vector extension
+    (the same seed trains to other last digits on another class)."""
+    model, flags = platform.processor() or platform.machine(), set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name":
+                model = value.strip()
+            elif key.strip() == "flags":
+                flags = set(value.split())
+    except OSError:
+        pass
+    isa = "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else platform.machine()
+    return {"model": model, "isa": isa}
+
+
+def kept_epochs(last: int) -> set[int]:
+    """The epochs a summary keeps of a curve that ends at epoch ``last``."""
+    return {e for e in CURVE_EPOCHS if e <= last} | {last, max(1, round(last / 8))}
+
+
+def _curve(curve: list[dict]) -> list[dict]:
+    """The curve at :func:`kept_epochs` only (loss, motor, vision)."""
+    points = [h for h in curve if h.get("loss") is not None]
+    if not points:
+        return []
+    keep = kept_epochs(points[-1]["epoch"])
+    return [{k: h.get(k) for k in ("epoch", "loss", "motor", "vision") if h.get(k) is not None}
+            for h in points if h["epoch"] in keep]
+
+
+def _intra(r: dict) -> dict:
+    out = {k: r.get(k) for k in ("init", "latent_dim", "seed", "n_train", "n_eval", "fit_seconds", "seconds")}
+    out |= {"fit": _curve(r["fit"]), "infer": _curve(r["infer"])}
+    for key in ("final", "calibration"):
+        if r.get(key) is not None:
+            out[key] = r[key]
+    return out
+
+
+def _judged(res: dict | None) -> dict | None:
+    if res is None:
+        return None
+    return {k: v for k, v in res.items() if k != "failed_criteria"}
+
+
+def _success(s: dict) -> dict:
+    out = {k: v for k, v in s.items() if k not in ("recorded", "generated", "by_seed")}
+    out["recorded"] = _judged(s.get("recorded"))
+    out["generated"] = {i: _judged(r) for i, r in s.get("generated", {}).items()}
+    out["by_seed"] = {seed: {i: _judged(r) for i, r in g.items()} for seed, g in s.get("by_seed", {}).items()}
+    return out
+
+
+_CLUSTER_ROW = ("init", "codes", "tau", "r2", "rank", "accuracy", "nmi", "ari")
+
+
+def _clustering(c: dict) -> dict:
+    def rows(rs):
+        return [{k: r.get(k) for k in _CLUSTER_ROW} for r in rs]
+
+    return {
+        "latent_dim": c.get("latent_dim"), "seed": c.get("seed"), "r2_target": c.get("r2_target"),
+        "latent": rows(c.get("latent", [])),
+        "by_seed": {s: rows(rs) for s, rs in c.get("by_seed", {}).items()},
+        "trajectory": {name: {k: t.get(k) for k in ("n", "dim", "k", "r2_target", "chosen")}
+                       for name, t in c.get("trajectory", {}).items()},
+    }
+
+
+def _inter(i: dict) -> dict:
+    keep = ("fold", "primitive", "init", "latent_dim", "seed", "n_phase1", "n_new", "n_replay", "seconds")
+    return {"latent_dim": i.get("latent_dim"), "replay": i.get("replay"), "failures": i.get("failures", {}),
+            "runs": [{k: r.get(k) for k in keep} | {"phase1": _curve(r["phase1"]), "phase2": _curve(r["phase2"])}
+                     for r in i.get("runs", [])]}
+
+
+def _probe(p: dict) -> dict:
+    return {"runs": [{k: r.get(k) for k in ("init", "latent_dim", "seed")}
+                     | {codes: {"mean_r2": r.get(codes, {}).get("mean_r2")} for codes in ("fitted", "inferred", "initial")}
+                     for r in p.get("runs", [])]}
+
+
+_REDUCERS = {
+    "intra": lambda r: {"runs": [_intra(x) for x in r.get("runs", [])], "failures": r.get("failures", {}),
+                        "splits": r.get("splits", {}), "label_names": r.get("label_names")},
+    "success": _success,
+    "clustering": _clustering,
+    "inter": _inter,
+    "probe": _probe,
+}
+
+
+def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> dict:
+    """The summary of experiment directory ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : path
+        A directory ``primspace experiment`` wrote.
+    name : str
+        The summary's name (its file in docs/results/ and its heading in the docs).
+    command : str
+        The command(s) that made the directory, exactly as run (the docs print them).
+    note : str
+        Anything a reader must know (e.g. "other jobs shared the cores").
+
+    Returns
+    -------
+    dict
+        ``summary_version``, ``name``, ``command``, ``note``, ``primspace`` (the version
+        that made the runs), ``cpu`` (:func:`cpu_class` of this machine: run it where the
+        runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
+        ``results`` by experiment name (intra, success, clustering, inter, probe: those run).
+    """
+    meta = read_meta(out_dir)
+    results = {}
+    for key, reduce in _REDUCERS.items():
+        found = read_results(out_dir, key)
+        if found is not None:
+            results[key] = reduce(found)
+    if not results:
+        raise UserError(f"{out_dir}: no results to summarise (run an experiment into it first)")
+    data = read_results(out_dir, "data") or {}
+    return {
+        "summary_version": SUMMARY_VERSION,
+        "name": name,
+        "command": command,
+        "note": note,
+        "primspace": meta.get("primspace"),
+        "cpu": cpu_class(),
+        "preset": meta.get("preset_config", {}),
+        "timings": meta.get("timings", {}),
+        "data": {k: data.get(k) for k in ("n_samples", "length", "n_joints", "label_names", "image_shape") if k in data},
+        "results": results,
+    }
+
+
+def read_summary(path: str | Path) -> dict:
+    """A stored summary, checked to be one (one clear line if not)."""
+    try:
+        summary = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise UserError(f"{path}: cannot read the summary ({exc})") from None
+    if not isinstance(summary, dict) or summary.get("summary_version") != SUMMARY_VERSION:
+        raise UserError(f"{path}: not a primspace summary of version {SUMMARY_VERSION}")
+    return summary

@@ -1,0 +1,48 @@
+"""README's and docs/reproduce.md's numbers are generated from the stored summaries
+(docs/results/*.json) by ``python -m primspace.docs``: the committed text must equal what
+it writes, so no number in those blocks is typed by hand or left stale."""
+
+from pathlib import Path
+
+import pytest
+
+from primspace.docs import g, main, mean_spread, replace_blocks
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_committed_docs_equal_what_the_summaries_give(capsys):
+    assert main(["--root", str(ROOT), "--check"]) == 0, capsys.readouterr().err
+
+
+def test_a_stale_block_is_found_and_rewritten(tmp_path):
+    for target in ("README.md", "docs/reproduce.md"):
+        (tmp_path / target).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / target).write_text((ROOT / target).read_text(encoding="utf-8"), encoding="utf-8")
+    readme = tmp_path / "README.md"
+    readme.write_text(readme.read_text().replace("<!-- generated: headline -->\n", "<!-- generated: headline -->\nhand-typed 0.99\n"))
+    (tmp_path / "docs" / "results").mkdir()
+    for summary in (ROOT / "docs" / "results").glob("*.json"):
+        (tmp_path / "docs" / "results" / summary.name).write_text(summary.read_text())
+    assert main(["--root", str(tmp_path), "--check"]) == 1
+    assert "hand-typed" in readme.read_text()  # --check writes nothing
+    assert main(["--root", str(tmp_path)]) == 0
+    assert "hand-typed" not in readme.read_text()
+    assert main(["--root", str(tmp_path), "--check"]) == 0
+
+
+def test_blocks_are_replaced_between_their_markers_only():
+    text = "a\n<!-- generated: x -->\nold\n<!-- end generated: x -->\nb"
+    assert replace_blocks(text, {"x": "new"}) == "a\n<!-- generated: x -->\nnew\n<!-- end generated: x -->\nb"
+    empty = "<!-- generated: x -->\n<!-- end generated: x -->"
+    assert replace_blocks(empty, {"x": "new"}) == "<!-- generated: x -->\nnew\n<!-- end generated: x -->"
+    with pytest.raises(ValueError, match="no generated block 'y'"):
+        replace_blocks(text, {"y": "new"}, "f.md")
+
+
+def test_numbers_are_printed_with_their_spread():
+    assert g(2.7e-05) == "2.7e-5" and g(0.123456) == "0.12" and g(None) == "—" and g(float("nan")) == "—"
+    assert g(2e-4) == "2.0e-4" and g(0.0012) == "0.0012" and g(1234.5) == "1.2e3"
+    assert mean_spread([1e-4, 3e-4]) == "2.0e-4 ± 1e-4 [1.0e-4–3.0e-4]"
+    assert mean_spread([0.5]) == "0.5"  # one seed: no spread to show
+    assert mean_spread([0.8, 0.9, 1.0], rng=False) == "0.9 ± 0.08"
