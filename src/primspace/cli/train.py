@@ -28,6 +28,17 @@ class LatentInit(str, Enum):
     calibrated = "calibrated"
 
 
+class LossReduction(str, Enum):
+    """``TrainConfig.loss_reduction``: per-element means (primspace) or the paper's sums."""
+
+    mean = "mean"
+    sum = "sum"
+
+
+_LOSS_REDUCTION_HELP = ("mean: per-element mean squared errors (motor and vision weigh alike); sum: the paper's "
+                        "summed squared errors per sample (docs/model.md). Learning rates are not rescaled.")
+
+
 def _run_summary(run) -> str:
     last = run.history[-1] if run.history else {}
     vision = last.get("vision")
@@ -68,8 +79,8 @@ def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path
 
 #: The train command's arguments that are TrainConfig fields of the same name.
 _TRAIN_FLAGS = ("epochs", "batch_size", "lr", "latent_lr", "final_lr_fraction", "motor_weight", "vision_weight",
-                "vision_frames", "code_smoothness", "seed", "device", "amp", "threads", "checkpoint_every",
-                "checkpoint_seconds")
+                "vision_frames", "loss_reduction", "code_smoothness", "seed", "device", "amp", "threads",
+                "checkpoint_every", "checkpoint_seconds")
 
 
 _TRAIN_INIT_HELP = "How the latent codes start (calibrated: only with --weights-from a projection or pca run)."
@@ -97,6 +108,7 @@ def train_command(
         _TC.vision_frames, "--vision-frames",
         help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
     ),
+    loss_reduction: LossReduction = typer.Option(_TC.loss_reduction, "--loss-reduction", help=_LOSS_REDUCTION_HELP),
     code_window: Optional[int] = typer.Option(
         None, "--code-window",
         help="One code per window of W steps (a sequence of codes, for long demonstrations of several primitives).",
@@ -124,7 +136,7 @@ def train_command(
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
     from primspace.train import configure_process, fit
 
-    given = dict(locals())
+    given = dict(locals()) | {"loss_reduction": loss_reduction.value}
     mc = replace(_MC, **{k: given[k] for k in ("latent_dim", "code_window")}, layer_sizes=int_list(layers, "--layers"),
                  taus=float_list(taus, "--taus"), image_channels=int_list(image_channels, "--image-channels"))
     tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
@@ -153,6 +165,8 @@ def infer_command(
     batch_size: Optional[int] = typer.Option(None, "--batch-size", help="Default: the run's."),
     latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
+    loss_reduction: Optional[LossReduction] = typer.Option(
+        None, "--loss-reduction", help="Default: the run's. " + _LOSS_REDUCTION_HELP),
     device: str = typer.Option(_TC.device, "--device"),
     amp: bool = typer.Option(_TC.amp, "--amp"),
     threads: Optional[int] = typer.Option(_TC.threads, "--threads"),
@@ -163,7 +177,9 @@ def infer_command(
     from primspace.train import configure_process, infer
 
     overrides = {"device": device, "amp": amp, "threads": threads}
-    for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed)):
+    reduction = None if loss_reduction is None else loss_reduction.value
+    for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed),
+                        ("loss_reduction", reduction)):
         if value is not None:
             overrides[name] = value
     ds, idx = _inputs(out, file, indices, run)

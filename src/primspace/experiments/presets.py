@@ -186,6 +186,9 @@ class ExperimentPreset:
     def with_overrides(self, **changes) -> "ExperimentPreset":
         """A copy with some fields changed (``None`` values are ignored), checked.
 
+        ``vision_frames`` and ``loss_reduction`` are :class:`~primspace.train.TrainConfig`
+        fields: they replace those of the preset's ``train``.
+
         Raises
         ------
         UserError
@@ -194,9 +197,10 @@ class ExperimentPreset:
         from primspace.latent import START_METHODS
 
         changes = {k: v for k, v in changes.items() if v is not None}
-        if "vision_frames" in changes:  # a training setting: it goes into the preset's TrainConfig
-            changes["train"] = replace(changes.get("train", self.train), vision_frames=changes.pop("vision_frames"))
-            changes["train"].validate()
+        for key in ("vision_frames", "loss_reduction"):  # training settings: they go into the preset's TrainConfig
+            if key in changes:
+                changes["train"] = replace(changes.get("train", self.train), **{key: changes.pop(key)})
+                changes["train"].validate()
         unknown = list(dict.fromkeys(i for key in ("inits", "inter_inits") for i in changes.get(key, ()) if i not in START_METHODS))
         if unknown:
             raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(START_METHODS)}")

@@ -334,7 +334,9 @@ def evaluate(
     Returns
     -------
     dict
-        ``loss``, ``motor``, ``vision`` (None without images).
+        ``loss`` (the objective of the run's ``TrainConfig.loss_reduction``, every frame),
+        ``motor``, ``vision`` (per-element mean squared errors under either reduction;
+        ``vision`` None without images).
     """
     run = as_run(run)
     data, _ = select(dataset, indices)

@@ -14,7 +14,10 @@ from dataclasses import asdict, dataclass
 
 from primspace.errors import UserError, config_from_dict
 
-__all__ = ["TrainConfig", "TrainingDivergedError", "lr_factor", "resolve_device", "configure_process"]
+__all__ = ["TrainConfig", "TrainingDivergedError", "LOSS_REDUCTIONS", "lr_factor", "resolve_device", "configure_process"]
+
+#: :attr:`TrainConfig.loss_reduction`'s values: primspace's per-element means, the paper's sums.
+LOSS_REDUCTIONS = ("mean", "sum")
 
 
 class TrainingDivergedError(UserError):
@@ -43,6 +46,28 @@ class TrainConfig:
     motor_weight, vision_weight : float
         ``w_m``, ``w_v`` of the loss (module docstring). ``vision_weight = 0`` skips the
         image head.
+    loss_reduction : {"mean", "sum"}
+        How the squared errors of a sample are reduced (docs/model.md, "The paper's
+        summed loss"). ``"mean"`` (default, primspace's loss): each sample's mean over
+        its valid motor entries and over its pixels,
+        ``ℓ_i = w_m · mean_{t,j}(m̂_itj − m_itj)² + w_v · mean_{t,pixels}(ŝ_it − s_it)²``,
+        so motor and vision weigh alike at weights 1. ``"sum"``: the paper's loss
+        (*Main Results*, ``L(θ, z_1..z_n) = Σ_i ‖d(θ, z_i) − o_i‖²``): sums instead of
+        means, ``ℓ_i = w_m · Σ_{t valid, j}(m̂_itj − m_itj)² + w_v · Σ_{t valid, pixels}(ŝ_it − s_it)²``,
+        so each pixel weighs as much as each joint value (vision then outweighs motor
+        by the ratio of their sizes, ~1000 for 9 joints and 48x64x3 frames). Under
+        both, the batch objective is the mean of ``ℓ_i`` over the batch's samples (θ's
+        step does not depend on the batch size; a code steps on its own ``∇ℓ_i``); the
+        paper's ``L`` is ``n`` times the mean over all samples, the same minimiser.
+        Padded steps never count. With ``vision_frames=K`` the vision sum runs over the
+        K drawn frames times ``T / K`` (each step is drawn with probability ``K / T``):
+        an unbiased estimate of the all-frame sum. The learning rates are not rescaled:
+        Adam's step is invariant to a constant factor on the loss except through its
+        ``eps`` (1e-8), whose damping becomes ``D`` times weaker for a loss ``D`` times
+        larger (``D`` = T·J for motor, more with frames), negligible at the gradient
+        sizes of training; tested stable (finite, decreasing) with the default rates.
+        The logged ``loss`` is the objective; ``motor`` and ``vision`` stay the
+        per-element mean squared errors under both, comparable across reductions.
     vision_frames : int, optional
         Compute the vision loss of each training step on this many frames per sequence,
         drawn uniformly without replacement (a fresh draw per sequence and step, from
@@ -88,6 +113,7 @@ class TrainConfig:
     motor_weight: float = 1.0
     vision_weight: float = 1.0
     vision_frames: int | None = None
+    loss_reduction: str = "mean"
     code_smoothness: float = 0.0
     seed: int = 0
     device: str = "auto"
@@ -118,6 +144,8 @@ class TrainConfig:
             raise UserError(f"code_smoothness must be a finite number >= 0, got {self.code_smoothness}")
         if self.vision_frames is not None and (not isinstance(self.vision_frames, int) or self.vision_frames < 1):
             raise UserError(f"vision_frames must be a whole number >= 1 (or None: every frame), got {self.vision_frames}")
+        if self.loss_reduction not in LOSS_REDUCTIONS:
+            raise UserError(f"loss_reduction must be 'mean' or 'sum', got {self.loss_reduction!r}")
         if self.motor_weight == 0 and self.vision_weight == 0:
             raise UserError("motor_weight and vision_weight are both 0: nothing to train")
         if self.checkpoint_every is not None and (not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1):

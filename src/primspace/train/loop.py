@@ -3,10 +3,11 @@ frozen) and the codes, logs every epoch and checkpoints through an optional
 :class:`~primspace.train.rundir.RunDirectory` (None: the run lives in memory only).
 
 The loss (paper, *Main Results*: ``L(θ, z_1..z_n) = Σ_i ‖d(θ, z_i) − o_i‖²``) is taken here
-as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`). For data
-of different lengths (``MotionDataset.lengths``) each sample's loss is its mean over its
-own valid steps and the batch loss the mean over samples, so padding never counts and a
-code's gradient does not depend on the other samples of its batch.
+as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`), or with
+``TrainConfig.loss_reduction="sum"`` as the paper's sums over each sample's entries. For
+data of different lengths (``MotionDataset.lengths``) each sample's loss is its mean (or
+sum) over its own valid steps and the batch loss the mean over samples, so padding never
+counts and a code's gradient does not depend on the other samples of its batch.
 """
 
 from __future__ import annotations
@@ -61,19 +62,50 @@ def _mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) ->
     return ((per_step * mask).sum(dim=1) / mask.sum(dim=1).clamp_min(1.0)).mean()
 
 
+def _sse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None,
+         scale: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """The paper's summed squared error (*Main Results*, ``Σ_i ‖d(θ, z_i) − o_i‖²``) and,
+    detached, the per-element mean squared error that :func:`_mse` computes.
+
+    The first is the mean over samples of each sample's sum over its valid entries
+    (``mask`` (B, K) over the first two axes), times ``scale``; the second is for logging,
+    so that ``motor`` / ``vision`` read the same under both reductions.
+    """
+    per_step = (pred - target).pow(2).flatten(2).sum(dim=2)  # (B, K): one sum per step
+    valid = per_step if mask is None else per_step * mask
+    summed = valid.sum(dim=1).mean()
+    if scale != 1.0:
+        summed = summed * scale
+    with torch.no_grad():
+        size = per_step.new_tensor(float(pred[0, 0].numel()))  # entries per step
+        if mask is None:
+            mse = per_step.mean() / size
+        else:
+            mse = (valid.sum(dim=1) / size / mask.sum(dim=1).clamp_min(1.0)).mean()
+    return summed, mse
+
+
 def batch_loss(
     model, z, idx, tensors: DataTensors, tc: TrainConfig, autocast, steps: torch.Tensor | None = None
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The loss of one batch and the detached ``[loss, motor, vision]`` means.
 
-    ``steps`` (B, K): the vision loss on those frames of each sequence only (every
-    frame when None).
+    ``loss`` is the objective of ``tc.loss_reduction`` (``"mean"``: ``w_m · motor + w_v ·
+    vision``; ``"sum"``: the same weights on each sample's summed squared errors, then the
+    mean over samples); ``motor`` and ``vision`` are per-element mean squared errors
+    under both. ``steps`` (B, K): the vision loss on those frames of each sequence only
+    (every frame when None); a sum over them is scaled by ``T / K``, an unbiased estimate
+    of the sum over all frames (each step is drawn with probability ``K / T``).
     """
+    summed = tc.loss_reduction == "sum"
     use_images = tensors.images is not None
     mask = None if tensors.mask is None else tensors.mask.index_select(0, idx)
     with autocast:
         out = model(z, images=use_images, frame_steps=steps if use_images else None)
-    motor = _mse(out.motor.float(), tensors.motor.index_select(0, idx), mask)
+    if summed:
+        motor_term, motor = _sse(out.motor.float(), tensors.motor.index_select(0, idx), mask)
+    else:
+        motor = motor_term = _mse(out.motor.float(), tensors.motor.index_select(0, idx), mask)
     if use_images:
         frame_mask = mask
         if steps is None:
@@ -85,11 +117,15 @@ def batch_loss(
             target = tensors.images.view(n * t, *tensors.images.shape[2:]).index_select(0, rows)
             target = target.view(*steps.shape, *tensors.images.shape[2:])
         target = target.to(torch.float32).div_(255.0)
-        vision = _mse(out.images.float(), target, frame_mask)
-        loss = tc.motor_weight * motor + tc.vision_weight * vision
+        if summed:
+            scale = 1.0 if steps is None else tensors.images.shape[1] / steps.shape[1]
+            vision_term, vision = _sse(out.images.float(), target, frame_mask, scale)
+        else:
+            vision = vision_term = _mse(out.images.float(), target, frame_mask)
+        loss = tc.motor_weight * motor_term + tc.vision_weight * vision_term
     else:
         vision = torch.zeros((), device=motor.device)
-        loss = tc.motor_weight * motor
+        loss = tc.motor_weight * motor_term
     if tc.code_smoothness > 0 and model.config.code_window is not None:
         loss = loss + tc.code_smoothness * code_variation(z, model.config, mask)
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])

@@ -148,6 +148,9 @@ def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
     def fail(what: str, a, b) -> None:
         raise UserError(f"{out_dir}: cannot resume: {what} differs (saved {a}, given {b})")
 
+    # a run saved before a field existed has that field's default (which gives its numbers)
+    saved = saved | {"model": ModelConfig.from_dict(saved["model"]).to_dict(),
+                     "train": TrainConfig.from_dict(saved["train"]).to_dict()}
     for key in ("kind", "init", "parent", "scaler"):
         if saved.get(key) != given.get(key):
             fail(key, saved.get(key), given.get(key))
