@@ -12,6 +12,7 @@ from primspace.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import check_workers, echo_table, int_list, name_list
+from primspace.cli.train import LossReduction
 
 
 # ============================================================ experiments, report
@@ -105,6 +106,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         vision_frames: Optional[int] = typer.Option(
             None, "--vision-frames", help="Vision loss on K drawn frames per sequence and step (default: every frame)."
         ),
+        loss_reduction: Optional[LossReduction] = typer.Option(None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
     ) -> None:
         import importlib
@@ -117,6 +119,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
             "images": images,
             "vision_frames": vision_frames,
+            "loss_reduction": None if loss_reduction is None else loss_reduction.value,
         }
         if epochs is not None:
             fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]
@@ -163,9 +166,36 @@ _experiment_command(
     ("composite:run_composite",), "composite_table", preset_names="COMPOSITE_PRESET_OF",
 )
 _experiment_command(
+    "tune", "Fair baselines: tune each init's layer time constants and latent learning rate on a validation split "
+    "carved from the fitted part (the same grid and epochs for all), then rerun intra with each init's choice "
+    "beside the shared setting (runs intra if needed).",
+    ("tuning:run_tune",), "tuning_table",
+)
+_experiment_command(
     "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
     ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"), None,
 )
+
+
+@app.command("summarize")
+def summarize_command(
+    directory: Path = typer.Argument(..., help="An experiment directory."),
+    name: str = typer.Option(..., "--name", help="The summary's name (its heading in the docs)."),
+    command: str = typer.Option(..., "--command", help="The command(s) that made DIRECTORY, exactly as run."),
+    out: Path = typer.Option(..., "--out", "-o", help="The summary file, e.g. docs/results/NAME.json."),
+    note: str = typer.Option("", "--note", help="What a reader must know (e.g. other jobs shared the cores)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier summary at OUT (nothing else)."),
+) -> None:
+    """Write the small summary of an experiment that the docs' tables are generated from
+    (`python -m primspace.docs`); run it on the machine that ran the experiment (it records the CPU)."""
+    from primspace.experiments.summary import read_summary, summarize
+    from primspace.files import atomic_write_json, output_file
+
+    path = output_file(out, inputs=(directory,), overwrite=overwrite)
+    if path.exists():
+        read_summary(path)  # --overwrite replaces a summary only, never another file
+    atomic_write_json(path, summarize(directory, name, command, note))
+    typer.echo(f"wrote {path}")
 
 
 @app.command("report")

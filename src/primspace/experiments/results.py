@@ -53,6 +53,7 @@ __all__ = [
     "inter_table",
     "calibration_table",
     "calibration_verdict",
+    "tuning_table",
 ]
 
 META_FILE = "experiment.json"
@@ -386,3 +387,21 @@ def calibration_verdict(results: dict) -> tuple[bool | None, str]:
         return None, "no calibrated runs beside projection ones"
     return all(verdicts), (f"calibrated within {CALIBRATION_TOLERANCE:g}x of the better of projection and zero in "
                            f"{sum(verdicts)} of {len(verdicts)} runs: " + "; ".join(lines))
+
+
+def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], list[list]]:
+    """Tune: per q and init, the chosen setting (layer time constants, latent learning
+    rate, its validation loss) and the final eval loss under the shared setting and under
+    the tuned one, mean ± std over seeds. The shared runs are ``intra``'s (default: the
+    copy the tune results keep)."""
+    shared = (intra or results.get("shared") or {"runs": []})["runs"]
+    tuned = results["tuned"]["runs"]
+    rows = []
+    for q in sorted({r["latent_dim"] for r in tuned}):
+        for init, setting in results["chosen"].items():
+            s = [final([h["loss"] for h in r["infer"]]) for r in shared if r["init"] == init and r["latent_dim"] == q]
+            t = [final([h["loss"] for h in r["infer"]]) for r in tuned if r["init"] == init and r["latent_dim"] == q]
+            rows.append([q, init, f"τ {setting['taus'][0]:g}, {setting['taus'][1]:g}; latent lr {setting['latent_lr']:.3g}",
+                         f"{setting['validation_loss']:.3g}", _mean_std(s), _mean_std(t)])
+    return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
+            "final eval loss, tuned"], rows

@@ -116,6 +116,11 @@ def _probe(p: dict) -> dict:
                      for r in p.get("runs", [])]}
 
 
+def _tune(t: dict) -> dict:
+    return {k: t.get(k) for k in ("latent_dim", "grid", "settings", "validation", "chosen", "failures")} | {
+        "tuned": {"runs": [_intra(x) for x in t.get("tuned", {}).get("runs", [])]}}
+
+
 _REDUCERS = {
     "intra": lambda r: {"runs": [_intra(x) for x in r.get("runs", [])], "failures": r.get("failures", {}),
                         "splits": r.get("splits", {}), "label_names": r.get("label_names")},
@@ -123,6 +128,7 @@ _REDUCERS = {
     "clustering": _clustering,
     "inter": _inter,
     "probe": _probe,
+    "tune": _tune,
 }
 
 
@@ -146,7 +152,7 @@ def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> d
         ``summary_version``, ``name``, ``command``, ``note``, ``primspace`` (the version
         that made the runs), ``cpu`` (:func:`cpu_class` of this machine: run it where the
         runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
-        ``results`` by experiment name (intra, success, clustering, inter, probe: those run).
+        ``results`` by experiment name (intra, success, clustering, inter, probe, tune: those run).
     """
     meta = read_meta(out_dir)
     results = {}
