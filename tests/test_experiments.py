@@ -398,6 +398,41 @@ def test_a_summary_holds_what_the_claims_and_docs_read(finished):
         read_summary(path)
 
 
+def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp_path):
+    """Fair baselines: each init is tuned over the same settings and epochs on a validation
+    part carved from the fitted part (never the evaluation part), and the intra protocol
+    reruns with each init's choice beside the shared setting."""
+    from primspace.experiments.intra import split_indices
+    from primspace.experiments.results import tuning_table
+    from primspace.experiments.tuning import TUNING_GRID, run_tune, settings_of, validation_split
+    from primspace.sim.generate import GenerationConfig, generate_dataset
+
+    with pytest.raises(UserError, match="one sample per primitive, so none is left to validate on"):
+        run_tune(finished[0])  # two motions per primitive, half fitted: nothing to validate on
+    config = GenerationConfig(block_x=(0.42, 0.47, 0.52, 0.57), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
+    generate_dataset(config, seed=0, out=tmp_path / "four.h5", progress=False)
+    exp = ExperimentDir(tmp_path / "tune", TINY, data=tmp_path / "four.h5", workers=1, progress=False)
+    data = exp.dataset()
+    train, evaluation = split_indices(data.labels, TINY.train_fraction, 0)
+    fit_idx, val_idx = validation_split(data.labels, train, 0)
+    assert set(fit_idx) | set(val_idx) == set(train) and not set(fit_idx) & set(val_idx)
+    assert not set(val_idx) & set(evaluation)
+    settings = settings_of(TINY)
+    assert len(settings) == len(TUNING_GRID["taus"]) * len(TUNING_GRID["latent_lr_factor"])  # the preset's is in the grid
+    tune = run_tune(exp)
+    assert tune["failures"] == {}
+    for init in ("zero", "projection"):  # the same grid for both, scored on the validation part
+        tried = [v for v in tune["validation"] if v["init"] == init]
+        assert len(tried) == len(settings) and {v["n_validation"] for v in tried} == {len(val_idx)}
+        best = min(tried, key=lambda v: v["validation_loss"])
+        assert tune["chosen"][init]["validation_loss"] == best["validation_loss"]
+    assert {(r["init"], r["seed"]) for r in tune["tuned"]["runs"]} == {("zero", 0), ("projection", 0)}
+    columns, rows = tuning_table(tune)
+    assert columns[-1] == "final eval loss, tuned" and len(rows) == 2
+    again = run_tune(exp)  # resumable: every point is found finished
+    assert again["chosen"] == tune["chosen"]
+
+
 def test_tiny_experiment_numbers_are_pinned(finished):
     """Same seed, same numbers: the tiny grid's losses, clustering accuracies and success
     rates as of 0.2 (CPU). A refactor that changes any of them changes results, and must

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments.claims import check_claims
-from primspace.experiments.results import LEARNED_CODES
+from primspace.experiments.results import LEARNED_CODES, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
 
@@ -184,6 +184,14 @@ def render_summary(summary: dict) -> str:
     if "inter" in res:
         out += ["", f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):", "",
                 _table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"]))]
+    if "tune" in res and res.get("intra"):
+        columns, rows = tuning_table(res["tune"], res["intra"])
+        out += ["", f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
+                    f"the fitted part, over the same grid (layer time constants {res['tune']['grid']['taus']}, latent "
+                    f"learning rate x {', '.join(f'{f:.3g}' for f in res['tune']['grid']['latent_lr_factor'])}) at "
+                    f"q = {res['tune']['latent_dim']}; the final eval loss with the shared and the tuned setting "
+                    "(mean ± std over seeds):", "",
+                _table(columns, [[str(c) for c in row] for row in rows])]
     claims = _claim_rows(res)
     if claims:
         out += ["", "The paper's sentences, checked (`primspace.experiments.claims`):", "",

@@ -32,6 +32,7 @@ from itertools import product
 
 import numpy as np
 
+from primspace.errors import UserError
 from primspace.experiments.intra import run_intra, run_intra_point, split_indices
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint
@@ -108,6 +109,10 @@ def run_tune(exp: ExperimentDir) -> dict:
     for seed in preset.seeds:
         train, evaluation = split_indices(data.labels, preset.train_fraction, seed)
         fit_idx, val_idx = validation_split(data.labels, train, seed)
+        if not len(val_idx):
+            raise UserError(f"tune: seed {seed}'s fitted part has one sample per primitive, so none is left to "
+                            "validate on; tuning needs at least 2 fitted samples of a primitive (more data or a "
+                            "larger train_fraction)")
         for setting, init in product(settings, inits):
             key = f"tune/{init}-q{q}-s{seed}-{_name(setting)}"
             args = (str(exp.data_path), fit_idx.tolist(), val_idx.tolist(), init, q, seed, _with(preset, setting).to_dict())
