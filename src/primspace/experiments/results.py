@@ -261,14 +261,23 @@ def latent_table(results: dict) -> tuple[list[str], list[list]]:
     return ["init / data", "codes", "τ", "R²", "rank", "accuracy", "NMI", "ARI"], rows
 
 
+def _with_interval(res: dict, prim: str) -> str | float:
+    """A success rate with its Wilson 95 % interval where the results hold one."""
+    rate = res["overall"] if prim == "all" else res["rates"].get(prim, float("nan"))
+    interval = res.get("intervals", {}).get(prim)
+    return rate if interval is None else f"{rate:.2f} [{interval[0]:.2f}, {interval[1]:.2f}]"
+
+
 def success_table(results: dict) -> tuple[list[str], list[list]]:
-    """Success: rows primitive; columns recorded, then each init's success rate."""
+    """Success: rows primitive (then "all", then "all" at each judge tolerance of the
+    sweep); columns recorded, then each init's success rate with its Wilson 95 % interval."""
     inits = list(results["generated"])
     prims = [p for p in results["label_names"] if results["recorded"] and p in results["recorded"]["rates"]]
-    rows = []
-    for p in prims:
-        rows.append([p, results["recorded"]["rates"][p]] + [results["generated"][i]["rates"].get(p, float("nan")) for i in inits])
-    rows.append(["all"] + [results["recorded"]["overall"]] + [results["generated"][i]["overall"] for i in inits])
+    judged = [results["recorded"]] + [results["generated"][i] for i in inits]
+    rows = [[p] + [_with_interval(res, p) for res in judged] for p in prims + ["all"]]
+    for tol in sorted(results["recorded"].get("by_tolerance", {}), key=float):
+        rows.append([f"all, held within {float(tol) * 1000:g} mm"]
+                    + [res.get("by_tolerance", {}).get(tol, {}).get("overall", float("nan")) for res in judged])
     return ["primitive", "recorded"] + [f"{i} init" for i in inits], rows
 
 

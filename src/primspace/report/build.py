@@ -27,6 +27,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.clustering, "clustering"),
     (sections.success, "success"),
     (sections.inter, "inter"),
+    (sections.tuning, "tune"),
     (sections.composite, "composite"),
     (sections.latent_figures, "intra"),
     (sections.animations, "intra_animation"),
