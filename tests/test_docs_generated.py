@@ -46,3 +46,21 @@ def test_numbers_are_printed_with_their_spread():
     assert mean_spread([1e-4, 3e-4]) == "2.0e-4 ± 1e-4 [1.0e-4–3.0e-4]"
     assert mean_spread([0.5]) == "0.5"  # one seed: no spread to show
     assert mean_spread([0.8, 0.9, 1.0], rng=False) == "0.9 ± 0.08"
+
+
+def _summary(name, motor, psnr):
+    runs = [{"init": init, "latent_dim": 40, "seed": s, "fit": [{"epoch": 0, "loss": 1.0}], "infer": [{"epoch": 0, "loss": 1.0}],
+             "final": {"fit": {}, "infer": {"motor": m, "psnr": p}}}
+            for init, ms in motor.items() for s, (m, p) in enumerate(zip(ms, psnr[init]))]
+    return {"name": name, "results": {"intra": {"runs": runs}}}
+
+
+def test_two_summaries_are_compared_side_by_side_on_per_element_errors():
+    from primspace.docs import render_comparison
+
+    a = _summary("mean", {"projection": [1e-4, 3e-4], "zero": [1e-3, 1e-3]}, {"projection": [28.0, 30.0], "zero": [27.0, 27.0]})
+    b = _summary("sum", {"projection": [2e-3, 2e-3], "zero": [4e-3, 6e-3]}, {"projection": [29.0, 29.0], "zero": [28.0, 28.0]})
+    text = render_comparison(a, b, "two losses")
+    assert text.startswith("#### mean against sum: two losses")
+    assert "| projection | 2.0e-4 ± 1e-4 | 0.002 ± 0 | 29 ± 1 | 29 ± 0 |" in text
+    assert "| zero | 0.001 ± 0 | 0.005 ± 0.001 |" in text

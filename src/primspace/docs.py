@@ -29,7 +29,7 @@ from primspace.experiments.results import LEARNED_CODES, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
 
-__all__ = ["g", "mean_spread", "render_summary", "headline", "blocks", "replace_blocks", "main", "SUMMARY_DIR"]
+__all__ = ["g", "mean_spread", "render_summary", "render_comparison", "headline", "blocks", "replace_blocks", "main", "SUMMARY_DIR"]
 
 #: Where the summaries are kept, relative to the repository.
 SUMMARY_DIR = Path("docs") / "results"
@@ -231,6 +231,42 @@ def headline(summaries: dict[str, dict]) -> str:
             "the commands and every claim seed by seed): " + "; ".join(parts) + ".")
 
 
+#: Pairs of summaries shown side by side: (a, b, what differs). Both must be stored.
+COMPARISONS = (("demo-images-mean", "demo-images-sum",
+                "the per-element loss (ours) against the paper's summed loss (`--loss-reduction sum`)"),)
+
+
+def _final_metric(run: dict, phase: str, key: str) -> float | None:
+    """An intra run's final all-frame ``key`` (motor, vision, psnr) of ``phase``, else its last logged value."""
+    if run.get("final"):
+        return run["final"][phase].get(key)
+    curve = run["fit" if phase == "fit" else "infer"]
+    return curve[-1].get(key) if curve else None
+
+
+def render_comparison(a: dict, b: dict, what: str) -> str:
+    """Two summaries of the same grid under one changed setting, per init: the inferred
+    motor loss and vision PSNR (all frames, per element: comparable across losses),
+    success and clustering accuracy, mean ± std over seeds."""
+    rows = []
+    inits = dict.fromkeys(r["init"] for r in a["results"]["intra"]["runs"])
+    outcomes = {name: {row[0]: row for row in _outcome_rows(s["results"])} for name, s in (("a", a), ("b", b))}
+    for init in inits:
+        row = [init]
+        for key in ("motor", "psnr"):
+            for s in (a, b):
+                runs = [r for r in s["results"]["intra"]["runs"] if r["init"] == init]
+                row.append(mean_spread([_final_metric(r, "infer", key) for r in runs], 3 if key == "psnr" else 2, rng=False))
+        for col in (2, 4):
+            row += [outcomes[k].get(init, [""] * 5)[col] for k in ("a", "b")]
+        rows.append(row)
+    columns = ["init"] + [f"{m}: {n}" for m in ("eval motor MSE", "eval vision PSNR dB", "success, all", "clustering")
+                          for n in (a["name"], b["name"])]
+    return "\n".join([f"#### {a['name']} against {b['name']}: {what}", "",
+                      "Per-element errors recomputed on every frame, so the two losses are compared on the same scale; "
+                      "mean ± std over seeds (pooled success with its Wilson 95 % interval).", "", _table(columns, rows)])
+
+
 def load_summaries(root: Path) -> dict[str, dict]:
     """The stored summaries by name, in :data:`ORDER`."""
     found = {s["name"]: s for s in (read_summary(p) for p in sorted((root / SUMMARY_DIR).glob("*.json")))}
@@ -239,7 +275,10 @@ def load_summaries(root: Path) -> dict[str, dict]:
 
 def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block."""
-    results = "\n\n".join(render_summary(s) for s in summaries.values()) or "No stored summaries yet (docs/results/)."
+    parts = [render_summary(s) for s in summaries.values()]
+    parts += [render_comparison(summaries[a], summaries[b], what) for a, b, what in COMPARISONS
+              if a in summaries and b in summaries]
+    results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
     return {"headline": headline(summaries), "results": results}
 
 
