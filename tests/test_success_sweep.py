@@ -10,6 +10,8 @@ import math
 import numpy as np
 import pytest
 
+from test_experiments import tiny_data  # noqa: F401 (the shared fixture: 14 motions, no images)
+
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments.success import (
@@ -196,17 +198,6 @@ def test_wilson_interval_properties_and_errors():
             wilson_interval(*bad)
     with pytest.raises(ValueError, match="confidence"):
         wilson_interval(1, 2, confidence=1.0)
-
-
-@pytest.fixture(scope="module")
-def tiny_data(tmp_path_factory):
-    """Two block positions per primitive: 14 motions of 31 steps, no images (seconds)."""
-    from primspace.sim.generate import GenerationConfig, generate_dataset
-
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
-    path = tmp_path_factory.mktemp("data") / "tiny.h5"
-    generate_dataset(config, seed=0, out=path, progress=False)
-    return path
 
 
 def test_run_success_point_reports_every_tolerance_and_intervals(tiny_data, tmp_path, monkeypatch):

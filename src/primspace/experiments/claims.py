@@ -40,7 +40,7 @@ from typing import Callable, Mapping, NamedTuple
 
 import numpy as np
 
-from primspace.experiments.claim_rules_v1 import CLAIMS_V1
+from primspace.experiments.claim_rules_v1 import CLAIMS_V1, _by_q, _need  # the same readings of the results
 from primspace.experiments.results import LEARNED_CODES, read_results
 from primspace.stats import wilson_interval
 
@@ -76,21 +76,6 @@ class Claim:
     version: int
     check: Callable[[dict], Outcome]
     previous: tuple = field(default=(), compare=False)  # earlier rules (claim_rules_v1.Claim)
-
-
-def _by_q(results: dict, phase: str, at: int = -1) -> dict[int, dict[str, float]]:
-    """``{q: {init: loss}}`` averaged over the runs given (one seed's, when checked by seed),
-    at epoch index ``at`` of ``phase``."""
-    acc: dict[int, dict[str, list]] = {}
-    for r in results["runs"]:
-        curve = [h["loss"] for h in r[phase] if h.get("loss") is not None]
-        if curve:
-            acc.setdefault(r["latent_dim"], {}).setdefault(r["init"], []).append(curve[at])
-    return {q: {i: float(np.mean(v)) for i, v in d.items()} for q, d in sorted(acc.items())}
-
-
-def _need(d: Mapping, *inits: str) -> bool:
-    return all(i in d for i in inits)
 
 
 #: The largest latent size read as "low-dimensional latent space" (the paper's figure
