@@ -338,7 +338,8 @@ def _seed_views(experiment: str, results: dict) -> dict:
 
 
 def _count(per_seed: dict) -> str:
-    """"holds in every seed (3 of 3)", "holds in 1 of 3 seeds, partly in 1 (seed 2), not in seed 0", ..."""
+    """"holds in every seed (3 of 3)", "holds in 1 of 3 seeds (not in seed 0, 2)",
+    "holds in 1 of 3 seeds, partly in 1 (seed 2), not in seed 0", "partly in 1 of 3 seeds (seed 1), not in seed 0, 2"."""
     judged = {s: ok for s, ok in per_seed.items() if ok is not None}
     if not judged:
         return _VERDICTS[None]
@@ -354,12 +355,22 @@ def _count(per_seed: dict) -> str:
         return f"partly in every seed ({n} of {n})"
     if not partly:
         return f"holds in {len(held)} of {n} seeds (not in seed {', '.join(map(str, failed))})"
-    parts = [f"holds in {len(held)} of {n} seeds"]
-    if partly:
-        parts.append(f"partly in {len(partly)} (seed {', '.join(map(str, partly))})")
+    parts = [f"holds in {len(held)} of {n} seeds"] if held else []
+    parts.append(f"partly in {len(partly)}{'' if held else f' of {n} seeds'} (seed {', '.join(map(str, partly))})")
     if failed:
         parts.append(f"not in seed {', '.join(map(str, failed))}")
     return ", ".join(parts)
+
+
+def _plain(ok):
+    """A rule's verdict as True / False / PARTLY / None (numpy booleans made plain)."""
+    return ok if ok is None or ok == PARTLY else bool(ok)
+
+
+def _checked(check: Callable[[dict], Outcome], results: dict) -> Outcome:
+    """``check(results)`` with plain verdicts, at every tolerance too."""
+    o = check(results)
+    return o._replace(ok=_plain(o.ok), sweep=o.sweep and {t: _plain(v) for t, v in o.sweep.items()})
 
 
 def _verdict(check: Callable[[dict], Outcome], experiment: str, results: dict) -> dict:
@@ -369,7 +380,7 @@ def _verdict(check: Callable[[dict], Outcome], experiment: str, results: dict) -
     views = _seed_views(experiment, results)
     if len(views) < 2:
         views = {results.get("seed", 0): results}
-    outcomes = {s: check(view) for s, view in views.items()}
+    outcomes = {s: _checked(check, view) for s, view in views.items()}
     per_seed = {s: o.ok for s, o in outcomes.items()}
     verdict = _VERDICTS[next(iter(per_seed.values()))] if len(per_seed) == 1 else _count(per_seed)
     numbers = next(iter(outcomes.values())).numbers if len(outcomes) == 1 else "; ".join(

@@ -22,7 +22,8 @@ from pathlib import Path
 from primspace.errors import UserError
 from primspace.experiments.results import read_meta, read_results
 
-__all__ = ["SUMMARY_VERSION", "CURVE_EPOCHS", "summarize", "read_summary", "cpu_class", "kept_epochs"]
+__all__ = ["SUMMARY_VERSION", "CURVE_EPOCHS", "DIGITS", "summarize", "read_summary", "write_summary", "cpu_class",
+           "kept_epochs"]
 
 #: Bumped when the summary's form changes.
 SUMMARY_VERSION = 1
@@ -54,14 +55,30 @@ def kept_epochs(last: int) -> set[int]:
     return {e for e in CURVE_EPOCHS if e <= last} | {last, max(1, round(last / 8))}
 
 
-def _curve(curve: list[dict]) -> list[dict]:
-    """The curve at :func:`kept_epochs` only (loss, motor, vision)."""
+#: Significant digits a summary keeps of a measured number (losses, rates, accuracies).
+DIGITS = 5
+
+
+def _round(value):
+    """``value`` with every float cut to :data:`DIGITS` significant digits (nested)."""
+    if isinstance(value, float):
+        return float(f"{value:.{DIGITS}g}")
+    if isinstance(value, dict):
+        return {k: _round(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_round(v) for v in value]
+    return value
+
+
+def _curve(curve: list[dict], epochs: set[int] | None = None) -> list[dict]:
+    """The curve at :func:`kept_epochs` only (or at ``epochs``): the loss, and the motor
+    and vision parts when vision was trained (without it the motor part is the loss)."""
     points = [h for h in curve if h.get("loss") is not None]
     if not points:
         return []
-    keep = kept_epochs(points[-1]["epoch"])
-    return [{k: h.get(k) for k in ("epoch", "loss", "motor", "vision") if h.get(k) is not None}
-            for h in points if h["epoch"] in keep]
+    keep = kept_epochs(points[-1]["epoch"]) if epochs is None else epochs | {points[0]["epoch"], points[-1]["epoch"]}
+    parts = ("epoch", "loss", "motor", "vision") if any(h.get("vision") is not None for h in points) else ("epoch", "loss")
+    return [{k: h[k] for k in parts if h.get(k) is not None} for h in points if h["epoch"] in keep]
 
 
 def _intra(r: dict) -> dict:
@@ -106,7 +123,7 @@ def _clustering(c: dict) -> dict:
 def _inter(i: dict) -> dict:
     keep = ("fold", "primitive", "init", "latent_dim", "seed", "n_phase1", "n_new", "n_replay", "seconds")
     return {"latent_dim": i.get("latent_dim"), "replay": i.get("replay"), "failures": i.get("failures", {}),
-            "runs": [{k: r.get(k) for k in keep} | {"phase1": _curve(r["phase1"]), "phase2": _curve(r["phase2"])}
+            "runs": [{k: r.get(k) for k in keep} | {"phase1": _curve(r["phase1"], set()), "phase2": _curve(r["phase2"])}
                      for r in i.get("runs", [])]}
 
 
@@ -173,7 +190,7 @@ def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> d
         "preset": meta.get("preset_config", {}),
         "timings": meta.get("timings", {}),
         "data": {k: data.get(k) for k in ("n_samples", "length", "n_joints", "label_names", "image_shape") if k in data},
-        "results": results,
+        "results": _round(results),
     }
 
 
@@ -186,3 +203,12 @@ def read_summary(path: str | Path) -> dict:
     if not isinstance(summary, dict) or summary.get("summary_version") != SUMMARY_VERSION:
         raise UserError(f"{path}: not a primspace summary of version {SUMMARY_VERSION}")
     return summary
+
+
+def write_summary(path: str | Path, summary: dict, overwrite: bool = False) -> None:
+    """Write a summary compactly (one line per top-level key), atomically; an existing
+    file only with ``overwrite``."""
+    from primspace.files import atomic_write_text
+
+    lines = ",\n".join(f"{json.dumps(k)}: {json.dumps(v, separators=(',', ':'))}" for k, v in summary.items())
+    atomic_write_text(path, "{\n" + lines + "\n}\n", overwrite)
