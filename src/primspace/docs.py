@@ -223,10 +223,18 @@ def headline(summaries: dict[str, dict]) -> str:
         q = max(r["latent_dim"] for r in intra["runs"])
         n = len(by.get("projection", []))
         losses = ", ".join(f"{i} {mean_spread(by[i], rng=False)}" for i in ("projection", "zero", "random", "pca") if i in by)
+        outcomes = {row[0]: row for row in _outcome_rows(s["results"])}
+        extra = ""
+        if s["results"].get("success"):
+            extra += "; success in the simulator " + ", ".join(
+                f"{i} {outcomes[i][2].split(';')[0]}" for i in ("projection", "zero") if i in outcomes)
+        if s["results"].get("clustering"):
+            extra += "; clustering accuracy of the codes " + ", ".join(
+                f"{i} {outcomes[i][4].split(' [')[0]}" for i in ("projection", "zero", "untrained P m") if i in outcomes)
         verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
         held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
-        parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}; of the paper's sentences checked, "
-                     f"{held} of {len(verdicts)} hold in every seed")
+        parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}{extra}; of the {len(verdicts)} "
+                     f"sentences of the paper checked, {held} hold in every seed")
     return ("Results, mean ± std over seeds, generated from the stored summaries (docs/reproduce.md has the tables, "
             "the commands and every claim seed by seed): " + "; ".join(parts) + ".")
 
