@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from primspace.data import DatasetWriter, LazyImages, MotionDataset
+from primspace.data.schema import SCHEMA_VERSION
 from primspace.errors import DataError, OutputExistsError, UserError
 
 
@@ -67,7 +68,7 @@ def test_images_are_chunked_per_sample_and_compressed(tmp_path):
     with h5py.File(path) as f:
         assert f["images"].chunks == (1, 6, 4, 5, 3)
         assert f["images"].compression == "gzip"
-        assert f.attrs["schema_version"] == 1
+        assert f.attrs["schema_version"] == SCHEMA_VERSION == 2  # 2: fletcher32 checksums (0.6)
         assert list(f.attrs["label_names"]) == ["a", "b"]
 
 

@@ -271,7 +271,7 @@ def error_cases(tmp_path) -> list:
         lambda: MotionDataset.load(_raw(tmp_path / "pn.h5", {"param_names": ["a", "b"]}, motor=z((2, 3, 1)), params=z((2, 1)))),
         lambda: MotionDataset.load(_raw(tmp_path / "dt.h5", {"dt": -1.0}, motor=z((2, 3, 1)))),
         lambda: MotionDataset.load(_raw(tmp_path / "dts.h5", {"dt": "x"}, motor=z((2, 3, 1)))),
-        lambda: MotionDataset.load(_raw(tmp_path / "ver.h5", {"schema_version": 2}, motor=z((2, 3, 1)))),
+        lambda: MotionDataset.load(_raw(tmp_path / "ver.h5", {"schema_version": 3}, motor=z((2, 3, 1)))),
         lambda: MotionDataset.load(_raw(tmp_path / "ver0.h5", {"schema_version": 0}, motor=z((2, 3, 1)))),
     ]
     with h5py.File(tmp_path / "grp.h5", "w") as f:
@@ -326,6 +326,9 @@ def error_cases(tmp_path) -> list:
 #: The libhdf5 the whole-file digests ("file") were recorded with.
 RECORDED_HDF5 = "2.0.0"
 
+# Re-recorded for schema 2 (issue 24): fletcher32 on motor/labels/params (chunked, with a
+# checksum filter) and schema_version 2 change the "attrs", "file", "motor", "labels" and
+# "params" digests of the saved files; images and every in-memory result are unchanged.
 PINNED = {
     "load bare": "039d9e4eda0ebbf00d73a0317ba83661730d3e4a",
     "load full": "f444f839ef08aec67a3e15a24552a1d7bfcfc0f5",
@@ -335,54 +338,54 @@ PINNED = {
     "memory bare": "33472f4fc5a3233194ba53876de3b9da65f066d0",
     "memory full": "efdf470ad8151012ecea868dba7d3a05193c347b",
     "merge": {
-        "attrs": "e3ba4ef4fba5738bd89e223fba3f23e069b0f31f",
-        "file": "c79aacbc5afcc6c4466a6c3e145a0fc7feae6581",
+        "attrs": "7b6ac1b0f9c8f6b8f3ee56b0be1500278c4a8ee4",
+        "file": "07b871d7d6858873ef84858e91e2cfd9de340056",
         "images": "a095375621fe1e57e1765668caf73697d8162107",
-        "labels": "1858f2c90b8f79ff33d15aae7aa008323438fbed",
-        "motor": "8c68c7f071ff1e1eb3dbd47ea5429babce71ca48",
+        "labels": "41f7fa1f5742bbbe55ed14903acab75d91af7379",
+        "motor": "57bf9c36bde93f4f3f18ffe734b94e4575445244",
         "nodes": ["images", "labels", "motor", "params"],
-        "params": "2ad2782f8f3a13ed8012e9dd737070eefb778c46",
+        "params": "972676da9aa258ce79b6a98302fd4c21ee7341e3",
     },
     "save bare": {
-        "attrs": "0f5f17f98ee8a6256f7a49966cc5435d7ec3c8b3",
-        "file": "b8ef6f744b4b6f5b0fbb64e07befcc2bc724fd62",
-        "motor": "ba51fba19ff1a5eccf586be398c3d642d270b677",
+        "attrs": "f9b0099e08498730251d0e33d5519b38fc9d4dfb",
+        "file": "492686e692ebe8a5eaf569919d56299f0c69f790",
+        "motor": "b7a2429205242b7b8ff1f31b3877b88d14d4af22",
         "nodes": ["motor"],
     },
     "save full": {
-        "attrs": "9fcd8abf2d2c64f97f7ae4613a84b294f94b10fe",
-        "file": "3f282c5dbcc8d7703362281a540e856bb5d2e438",
+        "attrs": "38d278782a897aa7734a94fbc34d7bf1cfbbaa09",
+        "file": "fb6b2c0a0a9896d8fca5f790e6cd3b98aefc61af",
         "images": "a095375621fe1e57e1765668caf73697d8162107",
-        "labels": "1858f2c90b8f79ff33d15aae7aa008323438fbed",
-        "motor": "8c68c7f071ff1e1eb3dbd47ea5429babce71ca48",
+        "labels": "41f7fa1f5742bbbe55ed14903acab75d91af7379",
+        "motor": "57bf9c36bde93f4f3f18ffe734b94e4575445244",
         "nodes": ["images", "labels", "motor", "params"],
-        "params": "2ad2782f8f3a13ed8012e9dd737070eefb778c46",
+        "params": "972676da9aa258ce79b6a98302fd4c21ee7341e3",
     },
     "save full, gzip 9": {
-        "attrs": "9fcd8abf2d2c64f97f7ae4613a84b294f94b10fe",
-        "file": "e1061361ed3e48874510aca2c54399314f932670",
+        "attrs": "38d278782a897aa7734a94fbc34d7bf1cfbbaa09",
+        "file": "9750f308bc2d5d511d345992df0d4c46c1464b44",
         "images": "318358fd7088f7b576f3368b368df87a2d8d10e9",
-        "labels": "1858f2c90b8f79ff33d15aae7aa008323438fbed",
-        "motor": "8c68c7f071ff1e1eb3dbd47ea5429babce71ca48",
+        "labels": "41f7fa1f5742bbbe55ed14903acab75d91af7379",
+        "motor": "57bf9c36bde93f4f3f18ffe734b94e4575445244",
         "nodes": ["images", "labels", "motor", "params"],
-        "params": "2ad2782f8f3a13ed8012e9dd737070eefb778c46",
+        "params": "972676da9aa258ce79b6a98302fd4c21ee7341e3",
     },
     "save subset": {
-        "attrs": "9fcd8abf2d2c64f97f7ae4613a84b294f94b10fe",
-        "file": "4825b778a4911357cb91578e19474b09961c74cf",
+        "attrs": "38d278782a897aa7734a94fbc34d7bf1cfbbaa09",
+        "file": "d57a31b441c335fff44297cc2cf8fd6736258473",
         "images": "0a96549ad7c543209f3336a4b7e436f92d94d449",
-        "labels": "d64806387675297b96681837b15bac564f054677",
-        "motor": "53c7486fd44a9d40113a8611f7f497659d52d5b8",
+        "labels": "f61bfbbb4203e2d466aca56f635882275b4cc84d",
+        "motor": "a3dcc0bfa373cc874ddbc2e251ba614b1819372d",
         "nodes": ["images", "labels", "motor", "params"],
-        "params": "e649d113e7f185c27d75e3bc0be7143d4d6282c4",
+        "params": "7d6ca87a3afcd8becb186ff39c0ed0a9d38b47e8",
     },
     "save without_images": {
-        "attrs": "9fcd8abf2d2c64f97f7ae4613a84b294f94b10fe",
-        "file": "ddaa671f3b75f941428a9e66ce4b4f4bfe88ab52",
-        "labels": "1858f2c90b8f79ff33d15aae7aa008323438fbed",
-        "motor": "8c68c7f071ff1e1eb3dbd47ea5429babce71ca48",
+        "attrs": "38d278782a897aa7734a94fbc34d7bf1cfbbaa09",
+        "file": "b3c78c59249f808d5ba27825e1775296f2dd3ed2",
+        "labels": "41f7fa1f5742bbbe55ed14903acab75d91af7379",
+        "motor": "57bf9c36bde93f4f3f18ffe734b94e4575445244",
         "nodes": ["labels", "motor", "params"],
-        "params": "2ad2782f8f3a13ed8012e9dd737070eefb778c46",
+        "params": "972676da9aa258ce79b6a98302fd4c21ee7341e3",
     },
     "subset by mask": "acf7dce61dd904a64eaa7d8b8f7e8210ea3c18a2",
     "subset of file": "1e6f71674b0fe09d1a514a69c751748f1076cd14",
@@ -392,10 +395,10 @@ PINNED = {
     "summary full": "5c96e38b745031d6b9d50a4c9c7bd633f4ad5292",
     "without_images": "4742a12ee69ad8c18dc893cbb454e529bbe93620",
     "writer flags": {
-        "attrs": "a22c431856c1f650c80b435388378ba04ca103c9",
-        "file": "7421a1b7b32a1a7e68e804fe0bfaaf567eb0586b",
-        "labels": "c132c5199d61baeb781b6a14b7031d0119a6630b",
-        "motor": "5037419766cbb9490c9fe48993c3278f52751a29",
+        "attrs": "8f38a9b5f5f072d0d3f0cfb50420bfeaf2ce2594",
+        "file": "e7da03d386cf7ce5dd3c6a69a5be4b8a13f1222a",
+        "labels": "82134a46abc11917b451da3578c858d0606ba868",
+        "motor": "37d66febbf527f84cc35530892cd7f70fc60386f",
         "nodes": ["labels", "motor"],
     },
 }
@@ -442,7 +445,7 @@ PINNED_ERRORS = [
     "DataError: <tmp>/pn.h5, field 'param_names': 2 names for P=1 params",
     "DataError: <tmp>/dt.h5, field 'dt': must be a positive number, got -1.0",
     "DataError: <tmp>/dts.h5, field 'dt': must be one number, got 1 value(s) of type <U1",
-    "DataError: <tmp>/ver.h5, field 'schema_version': schema version 2 is newer than this primspace reads (1)",
+    "DataError: <tmp>/ver.h5, field 'schema_version': schema version 3 is newer than this primspace reads (2)",
     "DataError: <tmp>/ver0.h5, field 'schema_version': must be a positive integer, got 0",
     "DataError: <tmp>/grp.h5, field 'labels': is not an array",
     "DataError: <tmp>/grpimg.h5, field 'images': is not an array",
@@ -500,15 +503,16 @@ def test_save_equals_the_layout_written_by_hand(tmp_path):
     by_hand = tmp_path / "by_hand.h5"
     s = h5py.string_dtype()
     with h5py.File(by_hand, "w") as f:
-        f.attrs["schema_version"] = 1
+        f.attrs["schema_version"] = 2  # schema 2: fletcher32 on motor/labels/params
         f.attrs["joint_names"] = np.array(ds.joint_names, dtype=s)
         f.attrs["label_names"] = np.array(ds.label_names, dtype=s)
         f.attrs["param_names"] = np.array(ds.param_names, dtype=s)
         f.attrs["dt"] = ds.dt
         f.attrs["source"] = ds.source
-        f.create_dataset("motor", data=ds.motor.astype(np.float32))
-        f.create_dataset("labels", data=ds.labels.astype(np.int32), fillvalue=-1)
-        f.create_dataset("params", data=ds.params.astype(np.float32))
+        # schema 2: fletcher32 on motor/labels/params, in chunks of whole samples (6 fit in one)
+        f.create_dataset("motor", data=ds.motor.astype(np.float32), chunks=(6, T, J), fletcher32=True)
+        f.create_dataset("labels", data=ds.labels.astype(np.int32), fillvalue=-1, chunks=(6,), fletcher32=True)
+        f.create_dataset("params", data=ds.params.astype(np.float32), chunks=(6, 2), fletcher32=True)
         f.create_dataset("images", data=ds.images, chunks=(1, T, H, W, 3), compression="gzip", compression_opts=4)
     assert dict(file_digest(path), file=None) == dict(file_digest(by_hand), file=None)
 

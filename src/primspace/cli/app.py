@@ -2,17 +2,27 @@
 
 Commands register themselves on :data:`app` from the modules of this package; a
 :class:`~primspace.errors.UserError` raised anywhere below is printed by :func:`main` as
-one line, ``primspace: error: ...``, with exit status 2 and no traceback.
+one line, ``primspace: error: ...``, with exit status 2 and no traceback. So is every
+error of the option parser (an unknown option or command, a bad or missing value): one
+line naming the option, not Click's usage box.
 """
 
 from __future__ import annotations
 
+import errno
+import os
 import re
 import sys
 
 import typer
+import typer.main
 
 from primspace.errors import UserError, first_line
+
+try:  # typer >= 0.2x carries its own copy of Click
+    from typer._click import exceptions as _click_errors
+except ImportError:  # pragma: no cover - older typer runs on Click itself
+    from click import exceptions as _click_errors
 
 app = typer.Typer(
     name="primspace",
@@ -57,14 +67,73 @@ def as_flags(message: str) -> str:
     return message
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``primspace`` command (and ``python -m primspace``)."""
+def _given_value(exc, args: list[str]) -> str | None:
+    """The value given to the option a :class:`BadParameter` names (``--k 1.5`` -> ``1.5``)."""
+    if not isinstance(exc, _click_errors.BadParameter) or isinstance(exc, _click_errors.MissingParameter):
+        return None
+    opts = getattr(getattr(exc, "param", None), "opts", None) or []
+    for i, arg in enumerate(args):
+        for opt in opts:
+            if arg == opt and i + 1 < len(args):
+                return args[i + 1]
+            if opt.startswith("--") and arg.startswith(opt + "="):
+                return arg[len(opt) + 1 :]
+    return None
+
+
+def _usage_line(exc, args: list[str]) -> str:
+    """A Click usage error as one line: its message, the value given, where to find help."""
+    text = " ".join(exc.format_message().split())
+    value = _given_value(exc, args)
+    if value is not None and repr(value) not in text:
+        text = f"{text.rstrip('.')}; got {value!r}"
+    ctx = getattr(exc, "ctx", None)
+    if ctx is not None and ctx.command.get_help_option(ctx) is not None:
+        text += f" (see '{ctx.command_path} --help')"
+    return text
+
+
+def _run(args: list[str]) -> int:
+    """Parse ``args`` and run the command; return the exit status (Click's errors propagate)."""
+    command = typer.main.get_command(app)
     try:
-        app(args=argv, prog_name="primspace")
+        with command.make_context("primspace", args) as ctx:
+            command.invoke(ctx)
+    except typer.Exit as exc:  # --help, --version, a command's own exit status
+        return exc.exit_code
+    return 0
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``primspace`` command (and ``python -m primspace``).
+
+    Every error a user can fix is one line on stderr, ``primspace: error: ...``, exit 2:
+    a :class:`~primspace.errors.UserError`, a refusal of the file system, and any error
+    of the option parser. Ctrl-C is one line and exit 130. ``primspace`` alone prints the
+    help (exit 2, as Click does).
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        code = _run(args)
+    except getattr(_click_errors, "NoArgsIsHelpError", ()) as exc:  # the help, printed already or here
+        if exc.format_message().strip():
+            typer.echo(exc.format_message())
+        sys.exit(exc.exit_code)
+    except _click_errors.ClickException as exc:  # the option parser's usage errors
+        typer.echo(f"primspace: error: {_usage_line(exc, args)}", err=True)
+        sys.exit(2)
+    except (KeyboardInterrupt, EOFError, typer.Abort):
+        typer.echo("primspace: error: interrupted", err=True)
+        sys.exit(130)
     except UserError as exc:
         typer.echo(f"primspace: error: {as_flags(str(exc))}", err=True)
         sys.exit(2)
     except OSError as exc:  # the file system said no (permissions, disk full, read-only): one line
+        if exc.errno == errno.EPIPE:  # the reader left (`primspace info ... | head`): quietly, as Click does
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            sys.exit(1)
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         typer.echo(f"primspace: error: {where}{exc.strerror or first_line(exc)}", err=True)
         sys.exit(2)
+    if code:
+        sys.exit(code)

@@ -207,8 +207,9 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         ------
         ValueError
             Invalid parameters, NaN/inf, 1-D input, fewer than 2 points or fewer points than
-            clusters, two tau options at once, a tau that keeps no component, or an ``svd``
-            of other points or other settings.
+            clusters, all points identical, values too large or too close for float64
+            (:func:`check_scale`: scale the points), two tau options at once, a tau that
+            keeps no component, or an ``svd`` of other points or other settings.
         """
         X, tau_option = self._check_fit_input(X, reset=True)
         with small_problem_threads(X.shape[0]):
@@ -278,6 +279,7 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         n_samples = X.shape[0]
         if n_samples < self.n_clusters:
             raise UserError(f"n_samples={n_samples} should be >= n_clusters={self.n_clusters}")
+        check_scale(X, X.shape[1] + 1 if self.affine else X.shape[1])
         return X, tau_option_from(self.tau, self.tau_relative, self.r2_target)
 
     def _check_svd(self, svd, n_samples: int) -> None:
@@ -290,6 +292,32 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
                 f"this fit has {n_samples} points with affine={self.affine}, ones_weight={self.ones_weight}: "
                 "use decompose(X) of this estimator"
             )
+
+
+def check_scale(X: np.ndarray, n_columns: int) -> None:
+    """Refuse points the closed form cannot handle in float64, with the reason, in one line.
+
+    All rows equal: nothing to cluster (R^2 is undefined). Values whose squares summed over
+    the ``n_samples x n_columns`` matrix overflow float64 (about 1e154 / sqrt(entries)), or
+    differences between points whose squares underflow (below about 1e-153): the SVD, R^2
+    and tau would be inf, 0 or NaN, so scaling the points is the fix, named as such.
+    """
+    spread = float(np.max(X.max(axis=0) - X.min(axis=0))) if X.size else 0.0
+    largest = float(np.max(np.abs(X))) if X.size else 0.0
+    limit = float(np.sqrt(np.finfo(np.float64).max / max(1, X.shape[0] * n_columns))) / 16
+    if not np.isfinite(spread) or largest > limit:
+        raise UserError(
+            f"point values up to {largest:.3g} are too large: their squares overflow float64 (keep them below "
+            f"{limit:.3g} for {X.shape[0]} x {n_columns} values); scale the points down, e.g. divide by {largest:.0e}"
+        )
+    if spread == 0:
+        raise UserError(f"all {X.shape[0]} points are identical: there is nothing to cluster")
+    smallest = float(np.sqrt(np.finfo(np.float64).tiny)) * 16
+    if spread < smallest:
+        raise UserError(
+            f"the points differ by at most {spread:.3g}: too small, their squares underflow float64 (need "
+            f"differences above {smallest:.3g}); scale the points up, e.g. divide by {spread:.0e}"
+        )
 
 
 # ------------------------------------------------------- shared with tau_sweep()

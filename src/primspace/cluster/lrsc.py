@@ -163,7 +163,7 @@ def tau_for_r2(singular_values, target: float, data_share=None, total_sum_square
     lam = np.asarray(singular_values, dtype=np.float64)
     weights, total = _weights_total(lam, data_share, total_sum_squares)
     if total <= 0:
-        raise UserError("R^2 is undefined: all points are identical")
+        raise UserError("R^2 is undefined: the points do not vary (all identical, or too close for float64)")
     order = np.argsort(-lam, kind="stable")
     lam, weights = lam[order], weights[order]
     positive = lam > 0

@@ -181,18 +181,22 @@ class MotionDataset:
         return dataclasses.replace(self, **{array.name: None for array in ARRAYS if array.lazy})
 
     # ---------------------------------------------------------------------------- io
-    def save(self, path: str | os.PathLike, overwrite: bool = False, compression_level: int = 4) -> Path:
+    def save(
+        self, path: str | os.PathLike, overwrite: bool = False, compression_level: int = 4, writer: str | None = None
+    ) -> Path:
         """Write the data set to an HDF5 file, atomically.
 
         Images are written in blocks of samples, one gzip-compressed chunk per sample,
-        so saving a lazily-read image set never holds it all in memory.
+        so saving a lazily-read image set never holds it all in memory. ``writer``, when
+        given, is stored as the file attribute ``primspace_writer`` (read back by
+        :func:`primspace.data.storage.file_writer`).
 
         Raises
         ------
         OutputExistsError
             If ``path`` exists and ``overwrite`` is false.
         """
-        return write_dataset(self, Path(path), overwrite, compression_level)
+        return write_dataset(self, Path(path), overwrite, compression_level, writer=writer)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "MotionDataset":

@@ -44,6 +44,8 @@ from primspace.errors import DataError
 
 __all__ = [
     "SCHEMA_VERSION",
+    "CHECKSUM_CHUNK_BYTES",
+    "WRITER_ATTRIBUTE",
     "Field",
     "FIELDS",
     "ARRAYS",
@@ -56,8 +58,20 @@ __all__ = [
     "markdown_table",
 ]
 
-#: Version of the HDF5 layout that :class:`~primspace.data.DatasetWriter` writes.
-SCHEMA_VERSION = 1
+#: Version of the HDF5 layout that :class:`~primspace.data.DatasetWriter` writes: 2 adds
+#: the Fletcher-32 checksum of ``motor``, ``labels``, ``params`` and the step fields
+#: (``Field.checksum``). Files of version 1 (no checksum) still read.
+SCHEMA_VERSION = 2
+
+#: The most bytes of a chunk of an array stored with a checksum (whole samples per chunk).
+CHECKSUM_CHUNK_BYTES = 1 << 18
+
+#: The optional file attribute marking which program wrote the file (``writer=`` of
+#: :meth:`MotionDataset.save` and :class:`DatasetWriter`; read by
+#: :func:`primspace.data.storage.file_writer`). Not a :class:`MotionDataset` field:
+#: loading ignores it, and a file without it (every file written without ``writer=``,
+#: every file of other tools) has no mark.
+WRITER_ATTRIBUTE = "primspace_writer"
 
 
 @dataclass(frozen=True)
@@ -85,6 +99,12 @@ class Field:
         HDF5 filter of the chunks (``"gzip"``: level = the writer's ``compression_level``).
     fillvalue : optional
         HDF5 fill value (what an unwritten sample reads as).
+    checksum : bool
+        Stored with HDF5's Fletcher-32 checksum (schema version 2 on) in chunks of whole
+        samples (:data:`CHECKSUM_CHUNK_BYTES` at most, one sample at least), so a
+        corrupted byte is refused when the array is read instead of read silently. An
+        array with no elements (P = 0) stays contiguous. Gzip-compressed arrays
+        (images) are checked by their codec.
     lazy : bool
         Read on demand (a :class:`~primspace.data.LazyImages` view): subset as a view,
         written first and merged chunk by chunk, dropped by ``without_images``.
@@ -131,6 +151,7 @@ class Field:
     chunks: Literal["contiguous", "sample"] = "contiguous"
     compression: str | None = None
     fillvalue: Any = None
+    checksum: bool = False
     lazy: bool = False
     owner: str | None = None
     matched: bool = False
@@ -167,6 +188,10 @@ class Field:
             options["fillvalue"] = self.fillvalue
         if self.chunks == "sample":
             options["chunks"] = (1,) + shape[1:]
+        if self.checksum and all(shape):
+            row = int(np.prod(shape[1:])) * self.dtype.itemsize
+            options["chunks"] = (max(1, min(shape[0], CHECKSUM_CHUNK_BYTES // row)),) + shape[1:]
+            options["fletcher32"] = True
         if self.compression is not None:
             options["compression"] = self.compression
             options["compression_opts"] = compression_level
@@ -317,7 +342,8 @@ def _uint8(dtype: np.dtype) -> str | None:
 FIELDS: tuple[Field, ...] = (
     Field(
         "motor", "dataset", "float32, joint values in physical units", required=True,
-        dtype=np.dtype(np.float32), shape=("N", "T", "J"), block_dims=("T", "J"), summary_key="joint_ranges",
+        checksum=True, dtype=np.dtype(np.float32), shape=("N", "T", "J"), block_dims=("T", "J"),
+        summary_key="joint_ranges",
         missing="missing (every data set needs joint values)",
         coerce=_coerce_motor, validate=_validate_motor,
         check_stored=_floating,
@@ -330,27 +356,28 @@ FIELDS: tuple[Field, ...] = (
     ),
     Field(
         "labels", "dataset", "int32, primitive index, -1 = unknown",
-        dtype=np.dtype(np.int32), shape=("N",), fillvalue=-1, writer_option="with_labels",
+        checksum=True, dtype=np.dtype(np.int32), shape=("N",), fillvalue=-1, writer_option="with_labels",
         coerce=_coerce_labels, validate=_validate_labels,
     ),
     Field(
         "params", "dataset", "float32, generative factors (block x, y, size ...)",
-        dtype=np.dtype(np.float32), shape=("N", "P"), writer_option="with_params", summary_key="param_ranges",
+        checksum=True, dtype=np.dtype(np.float32), shape=("N", "P"), writer_option="with_params",
+        summary_key="param_ranges",
         coerce=_coerce_params, validate=_validate_params,
     ),
     Field(
         "lengths", "dataset", "int32, valid steps per sample (later steps are padding)",
-        dtype=np.dtype(np.int32), shape=("N",), writer_option="with_steps",
+        checksum=True, dtype=np.dtype(np.int32), shape=("N",), writer_option="with_steps",
         coerce=partial(coerce_steps, "lengths"), validate=validate_lengths,
     ),
     Field(
         "step_labels", "dataset", "int32, primitive index per step, -1 = padding",
-        dtype=np.dtype(np.int32), shape=("N", "T"), fillvalue=-1, writer_option="with_steps",
+        checksum=True, dtype=np.dtype(np.int32), shape=("N", "T"), fillvalue=-1, writer_option="with_steps",
         coerce=partial(coerce_steps, "step_labels"), validate=validate_step_labels,
     ),
     Field(
         "step_segments", "dataset", "int32, segment index per step (0, 1, ...), -1 = padding",
-        dtype=np.dtype(np.int32), shape=("N", "T"), fillvalue=-1, writer_option="with_steps",
+        checksum=True, dtype=np.dtype(np.int32), shape=("N", "T"), fillvalue=-1, writer_option="with_steps",
         coerce=partial(coerce_steps, "step_segments"), validate=validate_step_segments,
     ),
     Field("schema_version", "attribute", "layout version of the file", codec="version", default=None),

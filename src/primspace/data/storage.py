@@ -19,7 +19,9 @@ import h5py
 import numpy as np
 
 from primspace.data.images import IMAGE_BLOCK, LazyImages, as_view, read_samples
-from primspace.data.schema import ARRAYS, ATTRIBUTES, SCHEMA_VERSION, Field, arrays_of, dims_of, field
+from primspace.data.schema import (
+    ARRAYS, ATTRIBUTES, SCHEMA_VERSION, WRITER_ATTRIBUTE, Field, arrays_of, dims_of, field,
+)
 from primspace.data.values import as_float32
 from primspace.errors import DataError, first_line
 from primspace.files import atomic_path
@@ -27,7 +29,7 @@ from primspace.files import atomic_path
 if TYPE_CHECKING:
     from primspace.data.dataset import MotionDataset
 
-__all__ = ["DatasetWriter", "read_fields", "write_dataset"]
+__all__ = ["DatasetWriter", "file_writer", "read_fields", "write_dataset"]
 
 #: Arrays held in memory (contiguous), then those read on demand (chunked per sample):
 #: the order a file's arrays are read, created and stored in.
@@ -82,6 +84,19 @@ def read_fields(path: str | os.PathLike) -> dict:
     return values
 
 
+def file_writer(path: str | os.PathLike) -> str | None:
+    """The writer mark of a file (its ``primspace_writer`` attribute), else None.
+
+    None also for a file that is missing, not HDF5 or unreadable: this never raises.
+    """
+    try:
+        with h5py.File(path, "r") as f:
+            value = f.attrs.get(WRITER_ATTRIBUTE)
+            return None if value is None else _as_str(value)
+    except Exception:  # noqa: BLE001 - not a file, not HDF5, unreadable: no mark
+        return None
+
+
 def _check_version(f: h5py.File, attr: Field, path) -> None:
     version = _attr_number(f, attr.name, None, path)
     if version is not None and not (np.isfinite(version) and version == int(version) and version >= 1):
@@ -134,7 +149,10 @@ def _read_array(f: h5py.File, name: str, path) -> np.ndarray:
     try:
         return node[()]
     except (OSError, ValueError) as exc:
-        raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=name) from None
+        why = "the file may be truncated"
+        if node.fletcher32:  # schema 2: a flipped byte fails the checksum
+            why = "its checksum does not match: the stored data is corrupted"
+        raise DataError(f"cannot be read, {why} ({first_line(exc)})", path=path, field=name) from None
 
 
 def _attr_number(f: h5py.File, name: str, default, path):
@@ -165,25 +183,20 @@ def _str_list(v) -> list[str]:
 # ---------------------------------------------------------------------------- writing
 
 
-def write_dataset(ds: "MotionDataset", path: Path, overwrite: bool, compression_level: int) -> Path:
+def write_dataset(ds: "MotionDataset", path: Path, overwrite: bool, compression_level: int, writer=None) -> Path:
     """Write ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`)."""
     settings = {a.writer_option: _option_value(a, getattr(ds, a.name)) for a in ARRAYS if a.writer_option}
     with DatasetWriter(
-        path,
-        n_samples=len(ds),
-        length=ds.length,
-        **{a.name: getattr(ds, a.name) for a in ATTRIBUTES if a.in_memory},
-        **settings,
-        overwrite=overwrite,
-        compression_level=compression_level,
-    ) as writer:
+        path, n_samples=len(ds), length=ds.length, **{a.name: getattr(ds, a.name) for a in ATTRIBUTES if a.in_memory},
+        **settings, overwrite=overwrite, compression_level=compression_level, writer=writer,
+    ) as out:
         arrays = arrays_of(ds)
         for a in _LAZY:  # read (and decoded) block by block, never all at once
             if arrays[a.name] is not None:
                 arrays[a.name] = as_view(arrays[a.name])
         for start in range(0, len(ds), IMAGE_BLOCK):
             stop = min(start + IMAGE_BLOCK, len(ds))
-            writer.write(start, **{name: None if v is None else v[start:stop] for name, v in arrays.items()})
+            out.write(start, **{name: None if v is None else v[start:stop] for name, v in arrays.items()})
     return path
 
 
@@ -230,6 +243,10 @@ class DatasetWriter:
         raised before anything is written).
     compression_level : int
         gzip level of the per-sample image chunks.
+    writer : str, optional
+        A mark of the program writing the file (e.g. ``"primspace simulate"``), stored
+        as the file attribute ``primspace_writer`` and read back by :func:`file_writer`;
+        None (default) writes no mark.
 
     Examples
     --------
@@ -259,8 +276,10 @@ class DatasetWriter:
         source: str = "",
         overwrite: bool = False,
         compression_level: int = 4,
+        writer: str | None = None,
     ) -> None:
         self.path = Path(path)
+        self.writer = None if writer is None else str(writer)
         self.n_samples, self.length = int(n_samples), int(length)
         self.joint_names = [str(s) for s in joint_names]
         self.image_size = None if image_size is None else (int(image_size[0]), int(image_size[1]))
@@ -300,6 +319,8 @@ class DatasetWriter:
             f = stack.enter_context(h5py.File(tmp, "w"))
             for attr in ATTRIBUTES:
                 f.attrs[attr.name] = self._attribute_value(attr)
+            if self.writer is not None:
+                f.attrs[WRITER_ATTRIBUTE] = self.writer
             dims = self._dims()
             for array in _EAGER + _LAZY:  # as files have always been laid out: small arrays first
                 if self._holds(array):

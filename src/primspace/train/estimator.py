@@ -19,7 +19,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.errors import UserError, first_line
 from primspace.model import ModelConfig
 from primspace.train.api import evaluate, fit, infer, reconstruct
 from primspace.train.config import TrainConfig
@@ -137,8 +137,16 @@ class AutoDecoder(BaseEstimator):
     def inverse_transform(self, Z: np.ndarray, *, images: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Decode codes ``Z`` (n, latent_dim): joint values in physical units (n, T, J)
         float32, and frames (n, T, H, W, 3) uint8 (None without an image head or with
-        ``images=False``)."""
-        return reconstruct(self._fitted(), Z, images=images)
+        ``images=False``).
+
+        Raises
+        ------
+        UserError
+            If ``Z`` is not a 2-D array of finite numbers with at least one row and one
+            column per code value (one line saying which).
+        """
+        run = self._fitted()
+        return reconstruct(run, _check_codes(Z, run.model_config.code_size), images=images)
 
     def score_samples(self, X: MotionDataset, Z: np.ndarray) -> dict:
         """The loss of codes ``Z`` on ``X`` (``loss``, ``motor``, ``vision``), as logged while training."""
@@ -168,3 +176,22 @@ class AutoDecoder(BaseEstimator):
 
     def __sklearn_is_fitted__(self) -> bool:
         return getattr(self, "run_", None) is not None
+
+
+def _check_codes(Z, q: int) -> np.ndarray:
+    """``Z`` as a float32 array (n, q), n >= 1, finite; else one :class:`UserError` saying why."""
+    try:
+        z = np.asarray(Z)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise UserError(f"Z must be an array of numbers of shape (n, {q}), got {type(Z).__name__} ({first_line(exc)})") from None
+    if z.dtype.kind not in "iuf":
+        raise UserError(f"Z must hold numbers, got an array of dtype {z.dtype}")
+    if z.ndim != 2 or z.shape[1] != q:
+        raise UserError(f"Z must have shape (n, {q}): one row of {q} code values per sample, got {z.shape}")
+    if z.shape[0] == 0:
+        raise UserError(f"Z has no rows (shape {z.shape}): nothing to decode")
+    bad = ~np.isfinite(z) | (np.abs(z) > np.finfo(np.float32).max)
+    if bad.any():
+        i, j = (int(v) for v in np.argwhere(bad)[0])
+        raise UserError(f"Z[{i}, {j}] = {z[i, j]:g}: codes must be finite numbers within the float32 range")
+    return z.astype(np.float32)
