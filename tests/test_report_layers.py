@@ -175,3 +175,16 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
     assert replace(PRESETS["paper"].train, epochs=1) == TrainConfig(epochs=1, final_lr_fraction=0.1, threads=1)
     with pytest.raises(Exception, match="both flat and inside"):
         ExperimentPreset.from_dict({**PRESETS["demo"].to_dict(), "lr": 0.1})
+
+
+def test_a_results_file_that_is_a_link_is_refused(tmp_path):
+    """A results file linked to another file would put that file's text into the report."""
+    from primspace.errors import UserError
+    from primspace.experiments.results import read_results
+
+    (tmp_path / "results").mkdir()
+    secret = tmp_path / "secret.json"
+    secret.write_text('{"runs": []}')
+    (tmp_path / "results" / "intra.json").symlink_to(secret)
+    with pytest.raises(UserError, match="not a regular file"):
+        read_results(tmp_path, "intra")

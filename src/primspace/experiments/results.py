@@ -101,6 +101,10 @@ def animation_file(out_dir: str | Path, name: str) -> Path:
 
 
 def _read_json(path: Path, what: str) -> Any:
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        # an experiment folder's results are its own files: a link could put any readable file into a report
+        raise UserError(f"{path}: not a regular file (a link or something else); {what} are read from the "
+                        "experiment folder's own files only")
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as exc:

@@ -55,6 +55,7 @@ def build_report(out_dir: str | Path) -> Path:
         "primspace report",
         f"{out_dir.resolve().name} — preset {meta.get('preset', '?')} — "
         f"written {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}",
+        root=out_dir,  # figures are embedded only from inside the experiment folder
     )
     for add_section, name in SECTIONS:
         try:

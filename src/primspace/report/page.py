@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import base64
 import html
+import os
+import stat
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -51,9 +53,10 @@ class HtmlReport:
     True
     """
 
-    def __init__(self, title: str, subtitle: str = "") -> None:
+    def __init__(self, title: str, subtitle: str = "", root: str | Path | None = None) -> None:
         self.title = title
         self.subtitle = subtitle
+        self.root = None if root is None else Path(root)  # figures come from inside it, or are left out
         self._parts: list[str] = []
         self._toc: list[tuple[str, str]] = []
 
@@ -80,17 +83,42 @@ class HtmlReport:
         self._parts.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
 
     def figure(self, image: str | Path, caption: str = "") -> None:
-        """Embed a PNG or (animated) GIF file (skipped with a note if it does not exist)."""
+        """Embed a PNG or (animated) GIF file (skipped with a note if it does not exist).
+
+        Only a regular file inside ``root`` (the experiment folder; without one, the
+        figure's own folder) is embedded: a symbolic link, or a file that resolves outside,
+        is left out with a visible note, and what it points to is never read, so no file
+        from elsewhere on the machine ends up in a report that is shared.
+        """
         image = Path(image)
+        refused = self._refused(image)
+        if refused:
+            self.note(f"figure not embedded: {image.name} {refused}", "warn")
+            return
         if not image.exists():
             self.note(f"figure missing: {image.name}", "warn")
             return
         mime = _MIME.get(image.suffix.lower())
         if mime is None:
             raise ValueError(f"{image.name}: only {', '.join(_MIME)} figures can be embedded")
-        data = base64.b64encode(image.read_bytes()).decode("ascii")
+        data = _read_regular(image)
+        if data is None:
+            self.note(f"figure not embedded: {image.name} is not a regular file", "warn")
+            return
+        data = base64.b64encode(data).decode("ascii")
         cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
         self._parts.append(f'<figure><img alt="{html.escape(image.stem)}" src="data:{mime};base64,{data}">{cap}</figure>')
+
+    def _refused(self, image: Path) -> str:
+        """Why ``image`` may not be embedded ("" if it may): a link, or outside ``root``."""
+        if image.is_symlink():
+            return "is a symbolic link (only regular files inside the experiment folder are embedded)"
+        if not image.exists():
+            return ""
+        base = (self.root if self.root is not None else image.parent).resolve()
+        if not image.resolve().is_relative_to(base):
+            return "lies outside the experiment folder (a folder on its path is a symbolic link)"
+        return ""
 
     def code(self, text: str) -> None:
         self._parts.append(f"<pre>{html.escape(text)}</pre>")
@@ -108,6 +136,18 @@ class HtmlReport:
         path = Path(path)
         atomic_write_text(path, self.render())
         return path
+
+
+def _read_regular(path: Path) -> bytes | None:
+    """The bytes of ``path`` if it is a regular file, not following a link at its last
+    component (checked again on the open file), else None; a FIFO does not block."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as fh:
+        return fh.read() if stat.S_ISREG(os.fstat(fh.fileno()).st_mode) else None
 
 
 def _cell(v: Any) -> str:

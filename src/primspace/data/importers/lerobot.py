@@ -21,6 +21,13 @@ with the resampled joints and resized as :mod:`primspace.data.importers.frames` 
 ``dt`` is ``1 / fps`` per input step; an episode's single task (``episodes.jsonl``)
 becomes its label.
 
+What a data set names stays inside its folder: the templates may use only the fields
+``{episode_chunk}``, ``{episode_index}`` (integers, with a width like ``:03d``) and, in
+``video_path``, ``{video_key}``; an absolute template, or a file that resolves outside the
+folder (``..``, a symbolic link), is refused. So are ``fps`` that is not a positive finite
+rate, ``chunks_size`` that is not a positive integer and an ``episode_index`` that is not a
+whole number or is listed twice.
+
 Needs pyarrow and PyAV, the ``video`` extra: ``pip install 'primspace[video]'``.
 Version 3 data sets (many episodes per file) are refused with a message.
 """
@@ -30,13 +37,15 @@ from __future__ import annotations
 import io
 import json
 import os
-from pathlib import Path
+import re
+import string
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Sequence
 
 import numpy as np
 
 from primspace.data.dataset import MotionDataset
-from primspace.data.importers.common import demonstrations
+from primspace.data.importers.common import demonstrations, printable, rate_dt, shown
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames
 from primspace.errors import DataError, UserError, first_line
 
@@ -45,6 +54,14 @@ __all__ = ["import_lerobot", "is_lerobot_dir"]
 _DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
 _VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
 _NOT_JOINTS = ("video", "image", "string")
+# the fields each template may use; the integer ones take a width only (":03d")
+_TEMPLATE_FIELDS = {
+    "data_path": ("episode_chunk", "episode_index"),
+    "video_path": ("episode_chunk", "episode_index", "video_key"),
+}
+_DEFAULTS = {"data_path": _DATA_PATH, "video_path": _VIDEO_PATH}
+_INT_SPEC = re.compile(r"(0?[1-9][0-9]?)?d?")
+_MAX_EPISODES = 1_000_000  # total_episodes beyond this is damage, not a data set
 
 
 def import_lerobot(
@@ -81,6 +98,7 @@ def import_lerobot(
     root = Path(path)
     parquet = _module("pyarrow.parquet", "pyarrow")
     info = _read_info(root)
+    layout = _layout(info, root)
     joints = list(joints) or ["observation.state"]
     for key in joints:
         _feature(info, key, root, joint=True)
@@ -89,25 +107,24 @@ def import_lerobot(
     episodes = _episodes(root, info)
     sequences, widths, frames = [], [], AlignedFrames(length, image_size) if images else None
     for i, (episode, _) in enumerate(episodes):
-        file = root / _episode_path(info, "data_path", _DATA_PATH, episode, root)
+        file = _episode_path(layout, "data_path", episode, root)
         table = _table(parquet, file, joints + ([images] if kind == "image" else []), i)
         columns = [_column(table, key, file, i) for key in joints]
         widths = widths or [c.shape[1] for c in columns]
         sequences.append(np.concatenate(columns, axis=1))
         rows = len(sequences[-1])
         if kind == "video":
-            video = root / _episode_path(info, "video_path", _VIDEO_PATH, episode, root, video_key=images)
+            video = _episode_path(layout, "video_path", episode, root, video_key=images)
             frames.add(rows, lambda idx, f=video, n=rows, i=i: _decode_video(av, f, idx, n, images, i))
         elif kind == "image":
             frames.add(rows, lambda idx, t=table, f=file, i=i: _decode_images(t, images, idx, f, i))
     names = _joint_names(info, joints, widths)
-    return _dataset(root, info, sequences, frames, episodes, length, joints=joints, names=names, images=images)
+    return _dataset(root, layout["dt"], sequences, frames, episodes, length, joints=joints, names=names,
+                    images=images)
 
 
-def _dataset(root, info, sequences, frames, episodes, length, *, joints, names, images) -> MotionDataset:
-    """The :class:`MotionDataset` of the episodes read."""
-    fps = info.get("fps")
-    dt_in = 1.0 / float(fps) if isinstance(fps, (int, float)) and fps > 0 else 1.0
+def _dataset(root, dt_in, sequences, frames, episodes, length, *, joints, names, images) -> MotionDataset:
+    """The :class:`MotionDataset` of the episodes read (``dt_in``: ``1 / fps``)."""
     try:
         labels, label_names = _labels(episodes)
     except DataError as exc:
@@ -143,7 +160,7 @@ def _read_info(root: Path) -> dict:
         raise DataError("not a LeRobot data set directory (no meta/info.json)", path=root)
     try:
         info = json.loads(file.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # ValueError: UnicodeDecodeError, JSONDecodeError
         raise DataError(f"cannot be read as JSON ({first_line(exc)})", path=file) from None
     if not isinstance(info, dict) or not isinstance(info.get("features"), dict):
         raise DataError("holds no 'features' object", path=file)
@@ -161,61 +178,137 @@ def _feature(info: dict, key: str, root: Path, *, joint: bool) -> dict:
     features = info["features"]
     file = root / "meta" / "info.json"
     if key not in features or not isinstance(features[key], dict):
-        raise DataError(f"no feature '{key}'; features: {', '.join(features)}", path=file, field=key)
+        raise DataError(f"no feature '{printable(key)}'; features: {', '.join(map(printable, features))}", path=file,
+                        field=printable(key))
     dtype = str(features[key].get("dtype"))
     if joint and dtype in _NOT_JOINTS:
-        raise DataError(f"is a {dtype} feature, not joint values", path=file, field=key)
+        raise DataError(f"is a {printable(dtype)} feature, not joint values", path=file, field=printable(key))
     if not joint and dtype not in ("video", "image"):
         cameras = [k for k, v in features.items() if isinstance(v, dict) and v.get("dtype") in ("video", "image")]
         raise DataError(
-            f"is a {dtype} feature, not camera frames; camera features: {', '.join(cameras) or 'none'}",
-            path=file, field=key,
+            f"is a {printable(dtype)} feature, not camera frames; camera features: "
+            f"{', '.join(map(printable, cameras)) or 'none'}", path=file, field=printable(key),
         )
     return features[key]
 
 
+def _layout(info: dict, root: Path) -> dict:
+    """``info.json``'s ``fps`` (as ``dt``, seconds per step), ``chunks_size`` and path templates, checked."""
+    file = root / "meta" / "info.json"
+    if "fps" not in info:
+        raise DataError("missing: a LeRobot data set gives its frames per second", path=file, field="fps")
+    chunks = info.get("chunks_size")
+    chunks = 1000 if chunks is None else chunks  # LeRobot's default
+    if isinstance(chunks, bool) or not isinstance(chunks, int) or chunks < 1:
+        raise DataError(f"chunks_size {shown(chunks)} must be a positive whole number (episodes per chunk folder)",
+                        path=file, field="chunks_size")
+    return {"dt": rate_dt(info["fps"], path=file, field="fps"), "chunks": chunks,
+            **{key: _template(info, key, file) for key in _TEMPLATE_FIELDS}}
+
+
+def _template(info: dict, key: str, file: Path) -> str:
+    """The path template ``key`` (LeRobot's default when absent): relative, plain integer fields."""
+    value = info.get(key)
+    if value is None or value == "":
+        return _DEFAULTS[key]
+    if not isinstance(value, str):
+        raise DataError(f"must be a string (a path template), got {shown(value)}", path=file, field=key)
+
+    def fail(why: str) -> DataError:
+        return DataError(f"template {shown(value, 300)} {why}", path=file, field=key)
+
+    if PurePosixPath(value).is_absolute() or PureWindowsPath(value).is_absolute() or PureWindowsPath(value).drive:
+        raise fail("is an absolute path; the files of a data set must lie inside its folder")
+    try:
+        parts = list(string.Formatter().parse(value))
+    except ValueError as exc:
+        raise fail(f"cannot be parsed ({first_line(exc)})") from None
+    allowed = _TEMPLATE_FIELDS[key]
+    for _, name, spec, conversion in parts:
+        if name is None:
+            continue
+        integer = name in allowed and name != "video_key"
+        if name not in allowed or conversion or not (_INT_SPEC.fullmatch(spec) if integer else spec == ""):
+            text = "{" + name + (f"!{conversion}" if conversion else "") + (f":{spec}" if spec else "") + "}"
+            fields = ", ".join("{" + a + "}" for a in allowed)
+            raise fail(f"uses {text}; a template may use only {fields}, the integers with a width like :03d")
+    return value
+
+
+def _episode_path(layout: dict, key: str, episode: int, root: Path, **more) -> Path:
+    """The file of ``episode`` that template ``key`` names: inside ``root``, symbolic links resolved."""
+    template = layout[key]
+    relative = template.format(episode_chunk=episode // layout["chunks"], episode_index=episode, **more)
+    path = root / relative
+    resolved = path.resolve()
+    if not resolved.is_relative_to(root.resolve()):
+        raise DataError(
+            f"template {shown(template, 300)} gives {printable(relative)}, which lies outside the data set folder "
+            f"{root} (it resolves to {printable(str(resolved))})", path=root / "meta" / "info.json", field=key,
+        )
+    return path
+
+
 def _episodes(root: Path, info: dict) -> list[tuple[int, list]]:
-    """``(episode_index, tasks)`` of each episode, in index order."""
+    """``(episode_index, tasks)`` of each episode, in index order; each index once."""
     file = root / "meta" / "episodes.jsonl"
     if not file.is_file():
         total = info.get("total_episodes")
-        if not isinstance(total, int) or total < 1:
-            raise DataError("no meta/episodes.jsonl and no positive 'total_episodes' in meta/info.json", path=root)
+        if isinstance(total, bool) or not isinstance(total, int) or not 1 <= total <= _MAX_EPISODES:
+            raise DataError(f"no meta/episodes.jsonl, and total_episodes {shown(total)} in meta/info.json is not "
+                            f"a whole number from 1 to {_MAX_EPISODES:,}", path=root)
         return [(e, []) for e in range(total)]
-    episodes, number = [], 0
     try:
-        for number, line in enumerate(file.read_text(encoding="utf-8").splitlines(), start=1):
-            if line.strip():
-                record = json.loads(line)
-                episodes.append((int(record["episode_index"]), list(record.get("tasks") or [])))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"line {number}: not an episode record ({first_line(exc)})", path=file) from None
+        lines = file.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"cannot be read ({first_line(exc)})", path=file) from None
+    episodes, first = [], {}
+    for number, line in enumerate(lines, start=1):
+        if line.strip():
+            index, tasks = _episode_record(line, number, file)
+            if index in first:
+                raise DataError(f"line {number}: episode_index {index} is listed twice (first on line "
+                                f"{first[index]})", path=file, field="episode_index")
+            first[index] = number
+            episodes.append((index, tasks))
     if not episodes:
         raise DataError("lists no episodes", path=file)
     return sorted(episodes)
 
 
-def _episode_path(info: dict, template_key: str, default: str, episode: int, root: Path, **more) -> str:
-    chunk = episode // int(info.get("chunks_size") or 1000)
+def _episode_record(line: str, number: int, file: Path) -> tuple[int, list]:
+    """``(episode_index, tasks)`` of line ``number`` of ``episodes.jsonl``."""
     try:
-        return str(info.get(template_key) or default).format(episode_chunk=chunk, episode_index=episode, **more)
-    except (KeyError, IndexError, ValueError) as exc:
-        raise DataError(f"cannot fill in the template ({first_line(exc)})", path=root / "meta" / "info.json",
-                        field=template_key) from None
+        record = json.loads(line)
+    except ValueError as exc:
+        raise DataError(f"line {number}: not an episode record ({first_line(exc)})", path=file) from None
+    if not isinstance(record, dict) or "episode_index" not in record:
+        raise DataError(f"line {number}: not an episode record (a JSON object with an episode_index)", path=file)
+    index, tasks = record["episode_index"], record.get("tasks") or []
+    if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+        raise DataError(f"line {number}: episode_index {shown(index)} is not a whole number >= 0", path=file,
+                        field="episode_index")
+    if not isinstance(tasks, list):
+        raise DataError(f"line {number}: tasks {shown(tasks)} is not a list of task names", path=file, field="tasks")
+    return index, tasks
 
 
 def _table(parquet, file: Path, columns: list[str], index: int):
     """The episode's table, with the ``columns`` checked."""
     if not file.is_file():
         raise DataError("no such file (episode table)", path=file, index=index)
+    import pyarrow
+
     try:
         table = parquet.read_table(file)
-    except (OSError, ValueError) as exc:  # pyarrow's errors subclass these
+        names = table.column_names  # decoded here: a damaged name is a UnicodeDecodeError
+    except (OSError, ValueError, pyarrow.ArrowException) as exc:  # most of pyarrow's subclass the first two
         raise DataError(f"not a readable parquet file ({first_line(exc)})", path=file, index=index) from None
     for key in columns:
-        if key not in table.column_names:
-            raise DataError(f"no column '{key}'; columns: {', '.join(table.column_names)}", path=file, field=key,
-                            index=index)
+        if key not in names:
+            columns_there = ", ".join(map(printable, names))
+            raise DataError(f"no column '{printable(key)}'; columns: {columns_there}", path=file,
+                            field=printable(key), index=index)
     return table
 
 

@@ -28,12 +28,15 @@ from __future__ import annotations
 import os
 import re
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from primspace.data.dataset import MotionDataset
-from primspace.data.importers.common import natural_key, opt_names, parse_labels, resample_located, resampled_dt
+from primspace.data.importers.common import (
+    natural_key, opt_names, parse_labels, printable, resample_located, resampled_dt,
+)
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, check_frames
 from primspace.data.schema import ATTRIBUTES
 from primspace.errors import DataError, first_line
@@ -84,24 +87,48 @@ def import_npz(path: str | os.PathLike, length: int, image_size=DEFAULT_IMAGE_SI
         raise exc.located(path=path) from None
 
 
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip file's first bytes (the second: empty)
+
+
 def _read_archive(path: Path) -> dict:
     if not path.is_file():
         raise DataError("no such file", path=path)
+    with open(path, "rb") as fh:
+        magic = fh.read(6)
+    if not magic.startswith(_ZIP_MAGIC):
+        what = "a single .npy array, not a zip file" if magic == b"\x93NUMPY" else "not a zip file"
+        raise DataError(f"not a readable .npz archive: it is {what} (an npz archive is a zip file of .npy "
+                        "arrays, as np.savez writes)", path=path)
     try:
         archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError) as exc:
         raise DataError(f"not a readable .npz archive ({first_line(exc)})", path=path) from None
     with archive:
-        try:
-            return {key: archive[key] for key in archive.files}
-        except ValueError as exc:  # object arrays need pickle, which we never enable
-            raise DataError(
-                f"holds Python objects ({first_line(exc)}); save each sequence as its own array "
-                "(np.savez(f, *sequences)) or use 'motor' with 'lengths'",
-                path=path,
-            ) from None
-        except (OSError, zipfile.BadZipFile, EOFError) as exc:
-            raise DataError(f"cannot be read, it may be truncated ({first_line(exc)})", path=path) from None
+        return {key: _member(archive, key, path) for key in archive.files}
+
+
+def _member(archive, key: str, path: Path) -> np.ndarray:
+    """The array ``key`` of an open archive; a damaged or non-array member names its key."""
+    field = printable(key)
+    try:
+        value = archive[key]
+    except ValueError as exc:
+        if "allow_pickle" not in str(exc):  # a damaged .npy header
+            raise DataError(f"is not a readable .npy array ({first_line(exc)})", path=path, field=field) from None
+        raise DataError(  # object arrays need pickle, which we never enable
+            f"holds Python objects ({first_line(exc)}); save each sequence as its own array "
+            "(np.savez(f, *sequences)) or use 'motor' with 'lengths'",
+            path=path, field=field,
+        ) from None
+    # a damaged zip: bad deflate data (zlib.error), a version or method field it cannot read
+    except (OSError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError) as exc:
+        raise DataError(f"cannot be read, the archive may be truncated or damaged ({first_line(exc)})", path=path,
+                        field=field) from None
+    except MemoryError:  # a header that declares more than this machine holds
+        raise DataError("declares an array too large to read into memory", path=path, field=field) from None
+    if not isinstance(value, np.ndarray):  # numpy gives a member that is not a .npy file as bytes
+        raise DataError("is not a .npy array (np.savez writes only those)", path=path, field=field)
+    return value
 
 
 def npz_sequences(data: dict) -> list[np.ndarray]:
