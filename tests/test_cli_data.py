@@ -37,6 +37,11 @@ def test_import_refuses_existing_output_and_keeps_it(run_cli, tmp_path):
     res = run_cli("import", "--format", "lasa", "-T", "10", "--out", out)
     assert_user_error(res, str(out), "--overwrite")
     assert out.read_bytes() == b"precious"
+    # --overwrite replaces only an earlier output of the same command (issue 24): not a user's file
+    assert_user_error(run_cli("import", "--format", "lasa", "-T", "10", "--out", out, "--overwrite"), str(out))
+    assert out.read_bytes() == b"precious"
+    out.unlink()
+    assert run_cli("import", "--format", "lasa", "-T", "10", "--out", out).code == 0
     res = run_cli("import", "--format", "lasa", "-T", "10", "--shapes", "Sine", "--out", out, "--overwrite")
     assert res.code == 0 and len(MotionDataset.load(out)) == 7
 

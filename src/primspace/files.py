@@ -7,6 +7,15 @@ temporary file left by a process that was killed (SIGKILL leaves no chance to cl
 up) is removed by the next write of the same target on the same machine: its name
 carries the writer's host and process id (``.NAME.<host>-<pid>.<random>.tmp``).
 
+A write that must not replace anything (no ``--overwrite``) publishes without replacing:
+the finished temporary is renamed onto the target with ``renameat2(RENAME_NOREPLACE)``
+(or, where that is missing, hard-linked to it, ``link`` failing when the target exists;
+or renamed over a placeholder created exclusively), so a target that appeared meanwhile
+(another writer finishing first) is never replaced: the write fails with
+:class:`~primspace.errors.OutputExistsError` instead. Output folders are published alike
+(:func:`atomic_directory`); an existing empty folder is written into in place, never
+swapped for a new one, and refused with one line when it is not writable.
+
 Every output is created with the permissions the user's umask allows (as ``open``
 would), not ``mkstemp``'s private 0600.
 
@@ -18,13 +27,15 @@ what it reads.
 from __future__ import annotations
 
 import contextlib
+import errno
+import functools
 import json
 import os
 import shutil
 import socket
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 from primspace.errors import OutputExistsError, UserError
 
@@ -33,6 +44,9 @@ __all__ = [
     "output_file",
     "check_outside_inputs",
     "atomic_path",
+    "atomic_directory",
+    "rename_noreplace",
+    "check_writable_directory",
     "atomic_write_text",
     "atomic_write_json",
     "temp_prefix",
@@ -63,14 +77,22 @@ def check_output(path: str | os.PathLike, overwrite: bool = False) -> Path:
 
 
 def output_file(
-    text: str | os.PathLike, *, inputs: Iterable = (), overwrite: bool = False, option: str = "--out"
+    text: str | os.PathLike,
+    *,
+    inputs: Iterable = (),
+    overwrite: bool = False,
+    option: str = "--out",
+    writer: str | None = None,
 ) -> Path:
     """The checked path of a command's file output, as the user typed it.
 
     Refused, each in one line: an empty name; ``dir/`` (a trailing separator names a
     directory, so no file called ``dir`` is written) or an existing directory; a path that
     is, contains or lies inside one of ``inputs`` (:func:`check_outside_inputs`); an
-    existing file unless ``overwrite`` (:func:`check_output`).
+    existing file unless ``overwrite`` (:func:`check_output`); with ``writer`` (the
+    command's mark, e.g. ``"primspace show"``), an existing file that is not an earlier
+    output of that command, even with ``overwrite``
+    (:func:`primspace.outputs.check_replaceable`).
     """
     raw = os.fspath(text)
     if not raw.strip():
@@ -79,7 +101,12 @@ def output_file(
         raise UserError(f"{raw}: is a directory; {option} must name a file")
     path = Path(raw)
     check_outside_inputs(path, inputs, option)
-    return check_output(path, overwrite)
+    check_output(path, overwrite)
+    if writer is not None:
+        from primspace.outputs import check_replaceable
+
+        check_replaceable(path, writer, overwrite, option)
+    return path
 
 
 def _within(inner: Path, outer: Path) -> bool:
@@ -169,9 +196,95 @@ def os_error(exc: OSError, path: str | os.PathLike) -> UserError:
     return UserError(f"{where}: cannot write ({exc.strerror or type(exc).__name__})")
 
 
+_AT_FDCWD, _RENAME_NOREPLACE = -100, 1
+# errors that say "this kernel or file system cannot rename without replacing": fall back
+_NOREPLACE_UNSUPPORTED = {errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP, errno.ENOTSUP}
+
+
+@functools.lru_cache(maxsize=1)
+def _renameat2():
+    """libc's ``renameat2`` (Linux, glibc >= 2.28), or None."""
+    try:
+        import ctypes
+
+        function = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError, ImportError):
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    function.restype = ctypes.c_int
+    return function
+
+
+def rename_noreplace(src: str | os.PathLike, dst: str | os.PathLike) -> None:
+    """Rename ``src`` to ``dst`` unless ``dst`` exists; never replace it.
+
+    ``renameat2(RENAME_NOREPLACE)`` where the kernel and file system have it. Otherwise a
+    file is hard-linked to ``dst`` (``link`` fails if ``dst`` exists) and ``src``
+    unlinked, or, where hard links are not allowed, renamed over a placeholder created
+    exclusively (``O_EXCL``); a directory is renamed into a folder made by ``mkdir``
+    (which fails if ``dst`` exists), its entries moved one by one.
+
+    Raises
+    ------
+    FileExistsError
+        If ``dst`` exists; ``src`` is left as it was.
+    """
+    function = _renameat2()
+    if function is not None:
+        import ctypes
+
+        if function(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), _RENAME_NOREPLACE) == 0:
+            return
+        code = ctypes.get_errno()
+        if code not in _NOREPLACE_UNSUPPORTED:
+            raise OSError(code, os.strerror(code), os.fspath(dst))
+    if os.path.isdir(src) and not os.path.islink(src):
+        os.mkdir(dst)
+        _move_entries(Path(src), Path(dst))
+        os.rmdir(src)
+        return
+    try:
+        os.link(src, dst, follow_symlinks=False)
+    except FileExistsError:
+        raise
+    except OSError:  # no hard links here (some network and FAT file systems): claim the name first
+        os.close(os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.replace(src, dst)
+        return
+    os.unlink(src)
+
+
+def _move_entries(src: Path, dst: Path, last: str | None = None) -> None:
+    """Move every entry of ``src`` into ``dst``, none replacing anything (``last`` last)."""
+    for name in sorted((p.name for p in src.iterdir()), key=lambda n: (n == last, n)):
+        rename_noreplace(src / name, dst / name)
+
+
+def check_writable_directory(path: str | os.PathLike) -> None:
+    """Refuse an existing folder this process cannot create files in, in one line.
+
+    Tried, not asked (``os.access`` answers yes to root whatever the mode, and no to
+    some writable network folders): a temporary file is created and removed.
+    """
+    try:
+        fd, name = tempfile.mkstemp(prefix=temp_prefix("probe"), suffix=".tmp", dir=path)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write into this folder ({exc.strerror or type(exc).__name__})") from None
+
+
+def _discard(tmp: Path) -> None:
+    if tmp.is_dir() and not tmp.is_symlink():
+        shutil.rmtree(tmp, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, overwrite: bool = True) -> Iterator[Path]:
-    """Yield a temporary path in the target's directory; rename it over ``path`` on success.
+    """Yield a temporary path in the target's directory; publish it as ``path`` on success.
 
     The temporary file (or directory, if the body creates one there) is removed if the
     body raises, so nothing half-written is left. The parent directory is created.
@@ -181,8 +294,11 @@ def atomic_path(path: str | os.PathLike, overwrite: bool = True) -> Iterator[Pat
     path : path-like
         Final location.
     overwrite : bool, default True
-        If false and ``path`` exists, raise :class:`~primspace.errors.OutputExistsError`
-        before anything is written.
+        True: the temporary is renamed over ``path`` (``os.replace``). False: refused
+        with :class:`~primspace.errors.OutputExistsError` if ``path`` exists before
+        anything is written, and published without replacing
+        (:func:`rename_noreplace`): if ``path`` appeared meanwhile (another writer
+        finished first), the same error, the temporary removed and ``path`` untouched.
     """
     path = check_output(path, overwrite)
     try:
@@ -196,25 +312,103 @@ def atomic_path(path: str | os.PathLike, overwrite: bool = True) -> Iterator[Pat
     tmp = Path(tmp_name)
     try:
         yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        if tmp.is_dir():
-            shutil.rmtree(tmp, ignore_errors=True)
+        if overwrite:
+            os.replace(tmp, path)
         else:
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
+            try:
+                rename_noreplace(tmp, path)
+            except FileExistsError:
+                raise OutputExistsError(path) from None
+    except BaseException:
+        _discard(tmp)
         raise
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (replacing it)."""
-    with atomic_path(path) as tmp:
+@contextlib.contextmanager
+def atomic_directory(
+    path: str | os.PathLike,
+    check: Callable[[Path], Any],
+    owned: Sequence[str] = (),
+    last: str | None = None,
+) -> Iterator[Path]:
+    """Yield a temporary folder beside ``path``; on success its files land in ``path``.
+
+    ``check(path)`` refuses what may not be written (a file; a non-empty folder without
+    overwrite, or one that is not an earlier output of the command): it runs first and
+    again when publishing. Then: a new ``path`` is the temporary folder renamed without
+    replacing (:func:`rename_noreplace`: a folder that appeared meanwhile is re-checked,
+    never replaced); an existing empty folder is written into in place (its inode,
+    owner and mode kept), each file moved in without replacing, so two writers never mix
+    their files; an earlier output that ``check`` accepted (``--overwrite``) gets each
+    new file renamed over the old one and the names in ``owned`` it did not write this
+    time removed, any other file left alone. ``last`` (the file that says the output is
+    complete) is moved last. On failure the temporary folder is removed.
+
+    Raises
+    ------
+    UserError
+        What ``check`` raises; an existing folder that is not writable.
+    """
+    path = Path(path)
+    check(path)
+    try:
+        if path.is_dir():
+            check_writable_directory(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(path)
+        tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(path.name), suffix=".tmp", dir=path.parent))
+        os.chmod(tmp, umask_mode(0o777))
+    except OSError as exc:
+        raise os_error(exc, path) from None
+    try:
+        yield tmp
+        _publish_directory(tmp, path, check, owned, last)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _publish_directory(tmp: Path, path: Path, check: Callable[[Path], Any], owned: Sequence[str], last) -> None:
+    """The publishing step of :func:`atomic_directory` (``check`` run again first)."""
+    check(path)
+    if not path.exists():
+        try:
+            rename_noreplace(tmp, path)
+            return
+        except FileExistsError:  # it appeared meanwhile: the same rules as for one found at the start
+            check(path)
+    if not any(path.iterdir()):
+        moved = []
+        try:
+            for name in sorted((p.name for p in tmp.iterdir()), key=lambda n: (n == last, n)):
+                rename_noreplace(tmp / name, path / name)
+                moved.append(path / name)
+        except FileExistsError:  # another writer is filling the same folder: take back ours, keep theirs
+            for mine in moved:
+                _discard(mine)
+            raise OutputExistsError(path) from None
+        tmp.rmdir()
+        return
+    written = {p.name for p in tmp.iterdir()}
+    for name in owned:
+        if name not in written:
+            with contextlib.suppress(FileNotFoundError):
+                (path / name).unlink()
+    for name in sorted(written, key=lambda n: (n == last, n)):
+        os.replace(tmp / name, path / name)
+    tmp.rmdir()
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, overwrite: bool = True) -> None:
+    """Write ``text`` to ``path`` atomically (replacing it unless ``overwrite`` is false:
+    see :func:`atomic_path`)."""
+    with atomic_path(path, overwrite) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
 
-def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
-    """Write ``obj`` as indented JSON to ``path`` atomically (replacing it)."""
-    atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+def atomic_write_json(path: str | os.PathLike, obj: Any, overwrite: bool = True) -> None:
+    """Write ``obj`` as indented JSON to ``path`` atomically (as :func:`atomic_write_text`)."""
+    atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n", overwrite)
 
 
 @contextlib.contextmanager

@@ -110,7 +110,7 @@ def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
 def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict) -> None:
     """``labels.csv``, ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
     from primspace.cluster import clustering_figure, sweep_figure
-    from primspace.cluster.outputs import atomic_directory, write_json, write_labels_csv, write_sweep_csv
+    from primspace.cluster.outputs import CLUSTER_OUTPUT, atomic_directory, write_json, write_labels_csv, write_sweep_csv
     from primspace.plots import save_figure
 
     n, scores = result.n_samples, result.scores
@@ -122,11 +122,11 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict) 
     with atomic_directory(out, overwrite) as tmp:
         write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true)
         write_json(tmp / "result.json", record)
-        save_figure(figure, tmp / "clustering.png")
+        save_figure(figure, tmp / "clustering.png", writer=CLUSTER_OUTPUT.command)
         if result.sweep is not None:
             write_sweep_csv(tmp / "sweep.csv", result.sweep)
             write_json(tmp / "sweep.json", record["sweep"])
-            save_figure(sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png")
+            save_figure(sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png", writer=CLUSTER_OUTPUT.command)
 
 
 def _print_summary(out: Path, result) -> None:
@@ -289,7 +289,7 @@ def _timeline(path: Path, trained, held, result, window: int, shown: int = 4) ->
     fig = plot_code_timeline(codes, window, lengths, truth, result.padded_step_labels(held.length)[:n], true_bounds,
                              result.boundaries[:n], label_names=list(held.label_names),
                              title=f"{trained.init}: code sequences (q = {trained.model_config.latent_dim}, W = {window})")
-    save_figure(fig, path)
+    save_figure(fig, path, writer="primspace segment")
 
 
 def _segment_summary(scores: dict, n: int) -> str:

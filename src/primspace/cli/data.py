@@ -27,6 +27,12 @@ class ImportFormat(str, Enum):
 
 
 _FRAME_FORMATS = ("robomimic", "lerobot")  # formats that take --joints and --images
+#: The most steps ``import -T`` resamples to: 100 s at 1 kHz. The arrays grow with T (N x T x J
+#: float64 while resampling, N x T x H x W x 3 bytes of frames), so a larger T is a typo that
+#: would end in a memory error, not a data set.
+MAX_LENGTH = 100_000
+# the marks these commands write into their outputs (primspace.outputs): --overwrite replaces only their own
+_IMPORT_MARK, _GENERATE_MARK, _SHOW_MARK = "primspace import", "primspace generate", "primspace show"
 
 
 @app.command("import")
@@ -38,7 +44,10 @@ def import_command(
     format: Optional[ImportFormat] = typer.Option(
         None, "--format", "-f", help="Input format; guessed from SRC when omitted."
     ),
-    length: int = typer.Option(..., "--length", "-T", help="Resample every sequence to T steps."),
+    length: str = typer.Option(
+        ..., "--length", "-T", metavar="T", help=f"Resample every sequence to T steps, 2 to {MAX_LENGTH:,} (memory "
+        "grows with T: N x T x J x 8 bytes, and N x T x H x W x 3 with frames; 100,000 steps are 100 s at 1 kHz)."
+    ),
     out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
     joints: Optional[str] = typer.Option(
         None, "--joints", help="robomimic: obs keys, comma-separated, concatenated in this order (required); "
@@ -53,7 +62,7 @@ def import_command(
     ),
     shapes: Optional[str] = typer.Option(None, help="lasa: comma-separated shape names (default: 26 single-pattern shapes)."),
     velocities: bool = typer.Option(False, help="lasa: add velocities vx, vy as joints."),
-    overwrite: bool = typer.Option(False, help="Replace OUT if it exists."),
+    overwrite: bool = typer.Option(False, help="Replace OUT if it is an earlier import output (nothing else)."),
 ) -> None:
     """Import demonstrations (npz, CSV folder, LASA, robomimic HDF5, LeRobot) into a MotionDataset file.
 
@@ -61,8 +70,9 @@ def import_command(
     """
     from primspace.files import output_file
 
+    length = _parse_length(length)
     source = None if src is None or str(src).lower() == "lasa" else src
-    out = output_file(out, inputs=(source,), overwrite=overwrite)
+    out = output_file(out, inputs=(source,), overwrite=overwrite, writer=_IMPORT_MARK)
     fmt = format.value if format is not None else _guess_format(src)
     _check_import_options(fmt, joints, images, image_size)
     if fmt == "lasa":
@@ -74,7 +84,7 @@ def import_command(
         raise UserError(f"--format {fmt} needs a source path")
     else:
         ds = _import_file(fmt, src, length, joints, images, _parse_image_size(image_size))
-    ds.save(out, overwrite=overwrite)
+    ds.save(out, overwrite=overwrite, writer=_IMPORT_MARK)
     frames = f", frames {ds.image_size[0]}x{ds.image_size[1]}" if ds.has_images else ""
     typer.echo(f"wrote {out}: {len(ds)} samples x {ds.length} steps x {ds.n_joints} joints{frames}")
 
@@ -104,6 +114,20 @@ def _check_import_options(fmt: str, joints, images, image_size) -> None:
     if image_size is not None and (fmt in ("csv", "lasa") or (fmt in _FRAME_FORMATS and not images)):
         raise UserError(f"--image-size {image_size}: there are no frames to resize (--format {fmt}"
                         f"{' without --images' if fmt in _FRAME_FORMATS else ''})")
+
+
+def _parse_length(text: str) -> int:
+    """``-T``: a whole number of steps from 2 to :data:`MAX_LENGTH` (one line otherwise)."""
+    value = text.strip()
+    if not (value.isascii() and value.isdigit()):  # "1e30", "2.5", "-3", "²": not a count of steps
+        raise UserError(f"--length {text}: must be a whole number of steps from 2 to {MAX_LENGTH:,}")
+    if len(value) > 9 or int(value) > MAX_LENGTH:
+        raise UserError(f"--length {text}: at most {MAX_LENGTH:,} steps (100 s at 1 kHz); the arrays grow with T "
+                        "(N x T x J x 8 bytes, N x T x H x W x 3 with frames), a longer T is a typo that would "
+                        "run out of memory")
+    if int(value) < 2:
+        raise UserError(f"--length {text}: must be at least 2 steps (a first and a last)")
+    return int(value)
 
 
 def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
@@ -215,7 +239,8 @@ def generate_command(
         "block_size, primitives, length, jitter ...; see docs/simulator.md).",
     ),
     overwrite: bool = typer.Option(
-        False, "--overwrite", help="Replace OUT if it exists (and discard shards left by a run with other settings)."
+        False, "--overwrite", help="Replace OUT if it is an earlier generate output (and discard shards left by a run "
+        "with other settings)."
     ),
 ) -> None:
     """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file.
@@ -231,7 +256,7 @@ def generate_command(
     from primspace.sim.composite import COMPOSITE_PRESETS
     from primspace.sim.generate import generate_dataset
 
-    out = output_file(out, inputs=(config_file,), overwrite=overwrite)
+    out = output_file(out, inputs=(config_file,), overwrite=overwrite, writer=_GENERATE_MARK)
     if preset in COMPOSITE_PRESETS:
         _generate_composite(out, preset, config_file, (height, width, no_images), workers, backend, address, seed, overwrite)
         return
@@ -326,18 +351,20 @@ def show_command(
     sample: int = typer.Option(0, "--sample", "-i", help="Sample index."),
     out: str = typer.Option(..., "--out", "-o", help="PNG file to write."),
     frames: int = typer.Option(8, "--frames", help="Camera frames in the strip."),
-    overwrite: bool = typer.Option(True, "--overwrite/--no-overwrite", help="Replace OUT if it exists."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite/--no-overwrite", help="Replace OUT if it is an earlier show output (nothing else)."
+    ),
 ) -> None:
     """Draw one sample: a strip of camera frames and its joint curves."""
     from primspace.data.dataset import MotionDataset
     from primspace.files import output_file
     from primspace.plots import plot_sim_sample, save_figure
 
-    out = output_file(out, inputs=(file,), overwrite=overwrite)
     if frames < 1:
         raise UserError(f"--frames {frames}: must be at least 1")
-    ds = MotionDataset.load(file)
+    ds = MotionDataset.load(file)  # the input's errors first (reading writes nothing), then the output's
     if not 0 <= sample < len(ds):
         raise UserError(f"{file}: sample {sample} out of range 0..{len(ds) - 1}")
-    save_figure(plot_sim_sample(ds, sample, n_frames=frames), out)
+    out = output_file(out, inputs=(file,), overwrite=overwrite, writer=_SHOW_MARK)
+    save_figure(plot_sim_sample(ds, sample, n_frames=frames), out, writer=_SHOW_MARK, overwrite=overwrite)
     typer.echo(f"wrote {out}")

@@ -77,6 +77,14 @@ def _judgeable_steps(exp, name: str, steps: tuple[str, ...]) -> tuple[str, ...]:
     return steps
 
 
+def _fit_infer_epochs(text: str) -> tuple[int, int | None]:
+    """``--epochs FIT[,INFER]``: one or two whole numbers (infer None: as fit)."""
+    values = int_list(text, "--epochs")
+    if len(values) > 2:
+        raise UserError(f"--epochs takes at most two values (fit, infer), got {len(values)}: '{text}'")
+    return (values + (None,))[:2]
+
+
 def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None,
                         preset_names: str | None = None) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
@@ -122,7 +130,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             "loss_reduction": None if loss_reduction is None else loss_reduction.value,
         }
         if epochs is not None:
-            fit_epochs, infer_epochs = (int_list(epochs, "--epochs") + (None,))[:2]
+            fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
             overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
         if preset_names is not None:
             from primspace.experiments import presets as experiment_presets
@@ -188,13 +196,12 @@ def summarize_command(
 ) -> None:
     """Write the small summary of an experiment that the docs' tables are generated from
     (`python -m primspace.docs`); run it on the machine that ran the experiment (it records the CPU)."""
-    from primspace.experiments.summary import read_summary, summarize
-    from primspace.files import atomic_write_json, output_file
+    from primspace.experiments.summary import summarize, write_summary
+    from primspace.files import output_file
 
-    path = output_file(out, inputs=(directory,), overwrite=overwrite)
-    if path.exists():
-        read_summary(path)  # --overwrite replaces a summary only, never another file
-    atomic_write_json(path, summarize(directory, name, command, note))
+    # --overwrite replaces a summary only (recognised by its summary_version), never another file
+    path = output_file(out, inputs=(directory,), overwrite=overwrite, writer="primspace summarize")
+    write_summary(path, summarize(directory, name, command, note), overwrite=overwrite)
     typer.echo(f"wrote {path}")
 
 

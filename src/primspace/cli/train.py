@@ -35,6 +35,9 @@ class LossReduction(str, Enum):
     sum = "sum"
 
 
+#: The mark ``reconstruct`` writes into its PNG (primspace.outputs).
+_RECONSTRUCT_MARK = "primspace reconstruct"
+
 _LOSS_REDUCTION_HELP = ("mean: per-element mean squared errors (motor and vision weigh alike); sum: the paper's "
                         "summed squared errors per sample (docs/model.md). Learning rates are not rescaled.")
 
@@ -75,6 +78,17 @@ def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path
     check_outside_inputs(out, (file, indices, other))
     ds = MotionDataset.load(file)
     return ds, (read_indices(indices, ds) if indices is not None else None)
+
+
+def _train_inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path], tc: TrainConfig,
+                  no_images: bool):
+    """:func:`_inputs`, refusing a run with no loss left: ``--motor-weight 0`` without the
+    vision loss (``--no-images``, or data without images) trains on a loss that is 0."""
+    ds, idx = _inputs(out, file, indices, other)
+    if tc.motor_weight == 0 and (no_images or not ds.has_images):
+        why = "with --no-images" if no_images else f"and {file} has no images"
+        raise UserError(f"--motor-weight 0 {why}: no loss is left to train (the loss is 0 at every epoch)")
+    return ds, idx
 
 
 #: The train command's arguments that are TrainConfig fields of the same name.
@@ -140,7 +154,7 @@ def train_command(
     mc = replace(_MC, **{k: given[k] for k in ("latent_dim", "code_window")}, layer_sizes=int_list(layers, "--layers"),
                  taus=float_list(taus, "--taus"), image_channels=int_list(image_channels, "--image-channels"))
     tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
-    ds, idx = _inputs(out, file, indices, weights_from)
+    ds, idx = _train_inputs(out, file, indices, weights_from, tc, no_images)
     configure_process(tc)
     run = fit(
         ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
@@ -198,7 +212,7 @@ def reconstruct_command(
     out: str = typer.Option(..., "--out", "-o", help="The PNG to write."),
     data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
     frames: int = typer.Option(8, "--frames", help="Frames shown per strip."),
-    overwrite: bool = typer.Option(False, "--overwrite"),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier reconstruct output."),
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
     import numpy as np
@@ -206,7 +220,7 @@ def reconstruct_command(
     from primspace.plots import plot_reconstruction, reconstruction_title, save_figure
     from primspace.train import reconstruct
 
-    out, trained, ds, row = run_sample(run, sample, out, data, frames, overwrite)
+    out, trained, ds, row = run_sample(run, sample, out, data, frames, overwrite, writer=_RECONSTRUCT_MARK)
     motor, generated = reconstruct(trained, trained.latents[row : row + 1])  # the model runs here, not in plots
     truth = ds.subset([int(sample)])
     images = None if truth.images is None else np.asarray(truth.images)[0]
@@ -216,13 +230,15 @@ def reconstruct_command(
         joint_names=truth.joint_names, dt=truth.dt, n_frames=frames,
         title=reconstruction_title(sample, primitive, trained.kind, trained.init, trained.model_config.latent_dim),
     )
-    save_figure(fig, out)
+    save_figure(fig, out, writer=_RECONSTRUCT_MARK, overwrite=overwrite)
     typer.echo(f"wrote {out}")
 
 
-def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: int, overwrite: bool, min_frames: int = 1):
-    """What ``reconstruct`` and ``animate`` check and load: the output, ``--frames``, the
-    run, its data file (``--data`` or the run's) and that ``sample`` is one the run used.
+def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: int, overwrite: bool, min_frames: int = 1,
+               *, writer: str):
+    """What ``reconstruct`` and ``animate`` check and load: the output (``--overwrite``
+    replaces only an earlier output marked by ``writer``), ``--frames``, the run, its data
+    file (``--data`` or the run's) and that ``sample`` is one the run used.
 
     Returns
     -------
@@ -242,7 +258,7 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     if path is None:
         raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
     # the data file is an input even when it is the run's (not given as --data): never written over
-    out = output_file(out, inputs=(run, path), overwrite=overwrite)
+    out = output_file(out, inputs=(run, path), overwrite=overwrite, writer=writer)
     ds = MotionDataset.load(path)
     check_run_data(trained, ds)
     rows = np.flatnonzero(trained.indices == int(sample))

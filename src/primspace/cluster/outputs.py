@@ -9,29 +9,32 @@ Layout of ``DIR``::
                       label per sample); at most FIGURE_MAX_POINTS samples, drawn at random
     sweep.csv, sweep.json, sweep.png    with --sweep: tau, R^2, rank and scores per grid value
 
-The directory is built beside ``DIR`` under a temporary name and renamed into place, so a
-failure leaves nothing half-written. An existing empty ``DIR`` is used; a non-empty one is
-refused unless ``overwrite``, and even then unless it is an earlier cluster output: then
-only the files above are replaced, and any other file in ``DIR`` is left alone.
+The directory is built beside ``DIR`` under a temporary name and published without
+replacing anything, so a failure leaves nothing half-written and a ``DIR`` that another
+run published meanwhile is never merged into. An existing empty ``DIR`` is written into in
+place (never swapped for a new folder; refused in one line if it is not writable); a
+non-empty one is refused unless ``overwrite``, and even then unless it is an earlier
+cluster output: then only the files above are replaced, and any other file in ``DIR`` is
+left alone.
 """
 
 from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import io
 import json
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
+from primspace import files
 from primspace.errors import OutputExistsError, UserError
-from primspace.files import atomic_write_json, atomic_write_text, os_error, remove_stale_temporaries, temp_prefix, umask_mode
+from primspace.files import atomic_write_json, atomic_write_text
 
 __all__ = [
     "OutputKind",
@@ -107,36 +110,17 @@ def is_cluster_output(path: Path) -> bool:
 def atomic_directory(path: str | os.PathLike, overwrite: bool = False, kind: OutputKind = CLUSTER_OUTPUT) -> Iterator[Path]:
     """Yield a temporary directory beside ``path``; on success its files land in ``path``.
 
-    A new (or empty) ``path`` is the temporary directory renamed. An earlier cluster
-    output (``overwrite``) gets each new file renamed over the old one and the earlier
-    run's other outputs (:data:`OUTPUT_FILES`, e.g. a sweep not asked for this time)
-    removed; any other file in it is left alone. On failure the temporary directory is
-    removed and ``path`` is untouched.
+    :func:`primspace.files.atomic_directory` with this module's rules
+    (:func:`check_output_directory`, checked again when publishing): a new ``path`` is the
+    temporary directory renamed without replacing anything; an existing empty one is
+    written into in place; an earlier output of ``kind``'s command (``overwrite``) gets
+    each new file renamed over the old one and the earlier run's other outputs
+    (``kind.files``, e.g. a sweep not asked for this time) removed; any other file in it
+    is left alone. On failure the temporary directory is removed and ``path`` is untouched.
     """
-    path = check_output_directory(path, overwrite, kind)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        remove_stale_temporaries(path)
-        tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(path.name), suffix=".tmp", dir=path.parent))
-        os.chmod(tmp, umask_mode(0o777))
-    except OSError as exc:
-        raise os_error(exc, path) from None
-    try:
+    check = functools.partial(check_output_directory, overwrite=overwrite, kind=kind)
+    with files.atomic_directory(path, check, owned=kind.files, last="result.json") as tmp:
         yield tmp
-        if path.is_dir() and any(path.iterdir()):
-            written = {p.name for p in tmp.iterdir()}
-            for name in kind.files:
-                if name not in written:
-                    with contextlib.suppress(FileNotFoundError):
-                        (path / name).unlink()
-            for name in sorted(written, key=lambda n: n == "result.json"):  # result.json last
-                os.replace(tmp / name, path / name)
-            tmp.rmdir()
-        else:
-            os.replace(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def figure_indices(n: int, max_points: int = FIGURE_MAX_POINTS, seed: int = 0) -> np.ndarray:

@@ -10,10 +10,13 @@ Layout of ``OUT``::
     figures/<name>.png     each experiment's figures
     report.html            the report (primspace.report)
 
-Re-running a command with the same ``OUT`` reuses what is there: the data file, finished
-runs (skipped), interrupted runs (resumed from their checkpoints). A different preset or
-data file for an existing ``OUT`` is refused. The file names and their readers are in
-:mod:`primspace.experiments.results` (re-exported here).
+An existing ``OUT`` without ``experiment.json`` is used only when it is empty or holds
+only ``data.h5`` (the data, already made: it is used), in place, never replaced; any
+other folder is refused before anything is written, so an experiment never writes over a
+user's files. Re-running a command with the same ``OUT`` reuses what is there: the data
+file, finished runs (skipped), interrupted runs (resumed from their checkpoints). A
+different preset or data file for an existing ``OUT`` is refused. The file names and
+their readers are in :mod:`primspace.experiments.results` (re-exported here).
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ from primspace.experiments.results import (
     results_file,
 )
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
-from primspace.files import atomic_path, atomic_write_json, check_outside_inputs
+from primspace.files import atomic_path, atomic_write_json, check_outside_inputs, check_writable_directory
 
 __all__ = ["ExperimentDir", "results_file", "read_results", "read_meta"]
 
@@ -87,6 +90,8 @@ class ExperimentDir:
             # the experiment's own generated data.h5 may be named again; any other input stays outside OUT
             check_outside_inputs(self.path, (data,))
         meta_file = self.path / META_FILE
+        if not meta_file.exists():
+            _check_new_folder(self.path)
         if meta_file.exists():
             self.meta = read_meta(self.path)
             if self.meta.get("preset") != preset.name:
@@ -123,6 +128,8 @@ class ExperimentDir:
         return results_file(self.path, name)
 
     def write_results(self, name: str, obj: Any) -> Path:
+        if not (self.path / META_FILE).exists():  # the folder says it is an experiment before it holds anything
+            self.save_meta()
         path = self.results_file(name)
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_json(path, obj)
@@ -133,6 +140,8 @@ class ExperimentDir:
 
     def write_arrays(self, name: str, arrays: dict[str, np.ndarray]) -> Path:
         """Write ``arrays`` to ``OUT/results/<name>.npz`` (compressed, atomically)."""
+        if not (self.path / META_FILE).exists():
+            self.save_meta()
         path = arrays_file(self.path, name)
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
@@ -211,6 +220,21 @@ class ExperimentDir:
         failures.update(result.failures)
         self.save_meta()
         return result
+
+
+def _check_new_folder(path: Path) -> None:
+    """Refuse, before anything is written, an existing folder that is not an experiment
+    directory (no ``experiment.json``) unless it is empty or holds only the experiment's
+    data file (``data.h5``, read and never written over), and one that cannot be written
+    into (it is used in place, never replaced)."""
+    if not path.is_dir():
+        return
+    if any(entry.name != "data.h5" for entry in path.iterdir()):
+        raise UserError(
+            f"{path}: exists and is not an experiment directory (no {META_FILE}); an experiment writes only into "
+            "a new or empty folder or its own: choose another --out"
+        )
+    check_writable_directory(path)
 
 
 def _jsonable(value: Any) -> Any:

@@ -29,6 +29,7 @@ import numpy as np
 from PIL import Image
 
 from primspace.files import atomic_path
+from primspace.outputs import gif_comment
 
 __all__ = ["animation_frames", "save_gif", "draw_animation", "frame_steps", "MAX_FRAMES", "MAX_SIZE", "FRAME_MS"]
 
@@ -169,8 +170,13 @@ def _blit(fig, artists, panels, cursor, steps, dt) -> np.ndarray:
     return out
 
 
-def save_gif(frames: np.ndarray, path: str | os.PathLike, frame_ms: int = FRAME_MS) -> Path:
+def save_gif(frames: np.ndarray, path: str | os.PathLike, frame_ms: int = FRAME_MS, *, writer: str | None = None,
+             overwrite: bool = True) -> Path:
     """Write RGB frames ``(n, h, w, 3)`` as a looping animated GIF, atomically.
+
+    ``writer`` (a command's mark) is stored as the GIF's comment
+    (:func:`primspace.outputs.gif_comment`); ``overwrite=False`` never replaces an
+    existing ``path`` (:func:`primspace.files.atomic_path`).
 
     One palette of at most 255 colours maps every frame without dithering, so unchanged
     pixels keep their colour and Pillow stores them as transparent (an index is left free
@@ -199,16 +205,18 @@ def save_gif(frames: np.ndarray, path: str | os.PathLike, frame_ms: int = FRAME_
         image.putpalette(colours)
         images.append(image)
     path = Path(path)
-    with atomic_path(path) as tmp:
+    with atomic_path(path, overwrite) as tmp:
         images[0].save(
-            tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(frame_ms), loop=0, optimize=True
+            tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(frame_ms), loop=0, optimize=True,
+            **gif_comment(writer),
         )
     return path
 
 
 def draw_animation(path: str | os.PathLike, motor: np.ndarray, generated_motor: np.ndarray | None = None, *,
-                   frame_ms: int = FRAME_MS, **kwargs) -> Path:
-    """:func:`animation_frames` written by :func:`save_gif` to ``path``; keyword arguments
-    as :func:`animation_frames`'s. Returns ``path``."""
+                   frame_ms: int = FRAME_MS, writer: str | None = None, overwrite: bool = True, **kwargs) -> Path:
+    """:func:`animation_frames` written by :func:`save_gif` to ``path`` (``writer``,
+    ``overwrite`` as there); other keyword arguments as :func:`animation_frames`'s.
+    Returns ``path``."""
     frames, _ = animation_frames(motor, generated_motor, **kwargs)
-    return save_gif(frames, path, frame_ms)
+    return save_gif(frames, path, frame_ms, writer=writer, overwrite=overwrite)

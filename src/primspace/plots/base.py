@@ -9,6 +9,7 @@ import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
 from primspace.files import atomic_path
+from primspace.outputs import png_metadata
 
 __all__ = ["save_figure", "INIT_COLORS", "init_color", "label_colors"]
 
@@ -17,12 +18,20 @@ INIT_COLORS = {"zero": "tab:blue", "random": "tab:red", "projection": "tab:green
                "calibrated": "tab:orange"}
 
 
-def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 120) -> Path:
-    """Write ``fig`` as PNG to ``path`` atomically (creating the folder) and close it."""
+def save_figure(
+    fig: Figure, path: str | os.PathLike, dpi: int = 120, *, writer: str | None = None, overwrite: bool = True
+) -> Path:
+    """Write ``fig`` as PNG to ``path`` atomically (creating the folder) and close it.
+
+    ``writer`` (a command's mark, ``"primspace show"``) is stored in a PNG text chunk
+    (:func:`primspace.outputs.png_metadata`); ``overwrite=False`` never replaces an
+    existing ``path``, even one that appears while the figure is written
+    (:func:`primspace.files.atomic_path`).
+    """
     path = Path(path)
     try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight")
+        with atomic_path(path, overwrite) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png", bbox_inches="tight", metadata=png_metadata(writer))
     finally:
         plt.close(fig)
     return path

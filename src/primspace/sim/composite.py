@@ -433,7 +433,8 @@ def generate_composite(config_or_preset="composite-demo", seed: int = 0, out: st
     if out is not None:
         try:
             with DatasetWriter(out, n_samples=config.n_sequences, length=config.length, image_size=config.image_size,
-                               with_labels=True, with_params=True, with_steps=True, overwrite=overwrite, **settings) as writer:
+                               with_labels=True, with_params=True, with_steps=True, overwrite=overwrite,
+                               writer="primspace generate", **settings) as writer:
                 for chunk in _finished(jobs):
                     writer.write(chunk["start"], **arrays_of(chunk))
         except DataError as exc:

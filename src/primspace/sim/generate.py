@@ -208,7 +208,8 @@ def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bo
     failures = []
     published = False
     try:
-        with DatasetWriter(out, overwrite=overwrite, **file_settings(config, seed, config.n_samples)) as writer:
+        with DatasetWriter(out, overwrite=overwrite, writer="primspace generate",
+                           **file_settings(config, seed, config.n_samples)) as writer:
 
             def merge(i: int, info: dict) -> None:
                 writer.copy_from(ranges[i][0], paths[i])

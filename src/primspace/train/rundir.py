@@ -37,7 +37,14 @@ import torch
 from primspace.calibration import CodeCalibration
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import OutputExistsError, UserError
-from primspace.files import atomic_path, atomic_write_json, atomic_write_text, check_outside_inputs, os_error
+from primspace.files import (
+    atomic_path,
+    atomic_write_json,
+    atomic_write_text,
+    check_outside_inputs,
+    check_writable_directory,
+    os_error,
+)
 from primspace.latent import LatentInitializer
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig
@@ -104,6 +111,8 @@ def prepare_run_dir(
     check_outside_inputs(out_dir, inputs)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"{out_dir}: exists and is not a directory")
+    if out_dir.is_dir():
+        check_writable_directory(out_dir)  # used in place (never replaced): refused now, not after loading
     existing = out_dir.is_dir() and any(out_dir.iterdir())
     is_run = (out_dir / CONFIG_NAME).is_file() or (out_dir / CHECKPOINT_NAME).is_file()
     if existing and not is_run:
@@ -131,11 +140,12 @@ def prepare_run_dir(
     return None
 
 
-def start_run_dir(out_dir: Path) -> None:
-    """Make ``out_dir`` ready for a new run: remove an earlier run's files (only those a
-    run writes: anything else in the directory stays) and create it."""
+def start_run_dir(out_dir: Path, remove: bool = True) -> None:
+    """Make ``out_dir`` ready for a new run: with ``remove``, remove an earlier run's files
+    (only those a run writes: anything else in the directory stays); create it (an
+    existing folder is used in place)."""
     try:
-        if out_dir.is_dir():
+        if remove and out_dir.is_dir():
             for name in RUN_FILES:
                 with contextlib.suppress(FileNotFoundError):
                     (out_dir / name).unlink()
@@ -352,16 +362,42 @@ def write_run(out_dir: str | Path, run: TrainedRun, *, overwrite: bool = False, 
 # ------------------------------------------------------------------------ the files
 
 
+def _run_identity(out_dir: Path) -> tuple:
+    """Which run ``out_dir`` holds now: the inode and modification time of its config and checkpoint."""
+    found = []
+    for name in (CONFIG_NAME, CHECKPOINT_NAME):
+        try:
+            st = (out_dir / name).stat()
+            found.append((st.st_ino, st.st_mtime_ns))
+        except OSError:
+            found.append(None)
+    return tuple(found)
+
+
 class RunDirectory:
-    """The files of one run as training writes them (config, metrics, checkpoint, codes)."""
+    """The files of one run as training writes them (config, metrics, checkpoint, codes).
+
+    Made right after :func:`prepare_run_dir` approved ``path``, it remembers which run
+    was there (none, or the earlier run an overwrite replaces): :meth:`begin` refuses to
+    start if another run appeared or changed meanwhile, and never removes files of a run
+    it was not asked to replace.
+    """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
+        self._found = _run_identity(self.path)
 
     def begin(self, config: dict, initial_codes: np.ndarray) -> None:
-        """Start a new run: remove an earlier run's files, write the config and the initial codes."""
-        start_run_dir(self.path)
-        atomic_write_json(self.path / CONFIG_NAME, config)
+        """Start a new run: remove the earlier run's files (only those of the run that was
+        there when this object was made), write the config (never over one that appeared
+        meanwhile) and the initial codes."""
+        if _run_identity(self.path) != self._found:
+            raise UserError(f"{self.path}: another run started writing here meanwhile; choose another out_dir")
+        start_run_dir(self.path, remove=self._found != (None, None))
+        try:
+            atomic_write_json(self.path / CONFIG_NAME, config, overwrite=False)
+        except OutputExistsError:
+            raise UserError(f"{self.path}: another run started writing here meanwhile; choose another out_dir") from None
         save_npy(self.path / LATENTS_INIT_NAME, np.asarray(initial_codes))
         atomic_write_text(self.path / METRICS_NAME, "")
 
