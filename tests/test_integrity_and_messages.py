@@ -302,3 +302,15 @@ def test_inverse_transform_checks_its_codes(decoder, Z, fragment):
 def test_inverse_transform_still_decodes(decoder):
     motor, frames = decoder.inverse_transform(decoder.codes_.astype(np.float64))
     assert motor.shape[0] == len(decoder.codes_) and frames is None
+
+
+def test_fit_with_nothing_to_learn_is_refused_from_python_too(tmp_path):
+    """The library refuses what the command line refuses: motor_weight 0 and no vision loss."""
+    from test_train import SMALL, primitives
+
+    from primspace.train import TrainConfig, fit
+
+    with pytest.raises(UserError, match="motor_weight is 0 and no vision loss"):
+        fit(primitives(2, seed=0), tmp_path / "run", model_config=SMALL, train_config=TrainConfig(epochs=1, motor_weight=0),
+            progress=False)
+    assert not (tmp_path / "run").exists()

@@ -33,6 +33,7 @@ from primspace.train.checks import (
     check_init,
     check_initial_latents,
     check_scaler,
+    check_something_to_train,
     fit_model_config,
     run_name,
     select,
@@ -139,6 +140,7 @@ def fit(
     check_scaler(scaler, parent, data)
     mc = fit_model_config(model_config, parent, data, images)
     use_images = uses_images(mc, data, tc, images, where=None if parent is None else run_name(parent))
+    check_something_to_train(tc, use_images)
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     config = run_config("fit", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config["scaler"] = None if scaler is None else scaler.to_dict()
@@ -236,6 +238,7 @@ def infer(
     mc = parent.model_config
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     use_images = uses_images(mc, data, tc)
+    check_something_to_train(tc, use_images)
     config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
     device = resolve_device(tc.device, tc.amp)

@@ -99,3 +99,11 @@ def check_data_fits(data: MotionDataset, mc: ModelConfig, use_images: bool) -> N
 
 def run_name(run: TrainedRun) -> str:
     return str(run.run_dir) if run.run_dir is not None else "the given run"
+
+
+def check_something_to_train(tc, use_images: bool) -> None:
+    """Refuse a run whose loss is identically 0: no motor weight and no vision trained
+    (``motor_weight=0`` on data without images, or with images turned off)."""
+    if tc.motor_weight == 0 and not use_images:
+        raise UserError("motor_weight is 0 and no vision loss is trained (no images, images off, or vision_weight 0): "
+                        "the loss would be 0 at every step; give motor_weight > 0 or train with images")
