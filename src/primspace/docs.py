@@ -177,10 +177,13 @@ def render_summary(summary: dict) -> str:
     outcome = _outcome_rows(res)
     if outcome:
         q = (res.get("clustering") or res.get("success") or {}).get("latent_dim")
-        out += ["", f"At q = {q}: success rate of the generated eval motions judged by the simulator (mean ± std over "
-                    "seeds; pooled over seeds with its Wilson 95 % interval), and clustering accuracy of the codes "
-                    f"(R² = {preset.get('cluster_r2')}).", "",
-                _table(["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"], outcome)]
+        columns = ["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"]
+        keep = [0, 1] + ([2, 3] if res.get("success") else []) + ([4] if res.get("clustering") else [])
+        judged = ("success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
+                  "over seeds with its Wilson 95 % interval), and " if res.get("success") else "")
+        out += ["", f"At q = {q}: {judged}clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; "
+                    "mean ± std over seeds [range]).", "",
+                _table([columns[i] for i in keep], [[row[i] for i in keep] for row in outcome])]
     if "inter" in res:
         out += ["", f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):", "",
                 _table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"]))]

@@ -305,7 +305,8 @@ CLAIMS: tuple[Claim, ...] = (
     Claim("clustering", "clustering", "Affine subspace clustering of latent space, Fig. arm_clustering",
           "They yield similar results, meaning even without presenting motion information for initial values of "
           "latent variables, they self-organize in a union of close to linear manifolds.",
-          f"clustering accuracy of zero and projection codes (q = 40, R² = 0.9999) within {SIMILAR_ACCURACY:g}, and "
+          f"clustering accuracy of zero and projection codes (at the clustered q, the paper's 40; R² = 0.9999) within "
+          f"{SIMILAR_ACCURACY:g}, and "
           f"both at least halfway from chance (1/k) to 1; partly: similar but not both above that",
           f"within {SIMILAR_ACCURACY:g}; >= chance + {ORGANISED_SHARE:g}(1 - chance)", 2, _clustering_similar,
           _v1("clustering")),
