@@ -237,7 +237,7 @@ def headline(summaries: dict[str, dict]) -> str:
         verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
         held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
         parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}{extra}; of the {len(verdicts)} "
-                     f"sentences of the paper checked, {held} hold in every seed")
+                     f"sentences of the paper checked, {held} {'holds' if held == 1 else 'hold'} in every seed")
     return ("Results, mean ± std over seeds, generated from the stored summaries (docs/reproduce.md has the tables, "
             "the commands and every claim seed by seed): " + "; ".join(parts) + ".")
 
