@@ -23,6 +23,7 @@ import sys
 import numpy as np
 import pytest
 from conftest import assert_user_error
+from test_output_safety import data_file  # noqa: F401 (the shared fixture: a small motor-only data set)
 
 from primspace.data import MotionDataset
 from primspace.errors import OutputExistsError
@@ -44,17 +45,6 @@ def _npz(path, seed):
 @pytest.fixture
 def npz_pair(tmp_path):
     return _npz(tmp_path / "a.npz", 0), _npz(tmp_path / "b.npz", 1)
-
-
-@pytest.fixture
-def data_file(tmp_path):
-    rng = np.random.default_rng(1)
-    t = np.linspace(0, 1, 10)
-    a = rng.uniform(0.5, 1.5, (8, 1, 1))
-    motor = np.concatenate([a * np.sin(4 * t)[None, :, None], a**2 * t[None, :, None]], 2)
-    path = tmp_path / "d.h5"
-    MotionDataset(motor, labels=np.arange(8) % 2, dt=0.1).save(path)
-    return path
 
 
 @pytest.fixture
