@@ -37,7 +37,7 @@ SUMMARY_DIR = Path("docs") / "results"
 #: Each generated block: the file it lives in.
 TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.md"}
 
-#: The order summaries are shown in (others follow, by name).
+#: The order summaries are shown in (others follow, by name); README's headline shows these only.
 ORDER = ("paper", "paper-images", "demo", "lasa")
 
 
@@ -179,10 +179,11 @@ def render_summary(summary: dict) -> str:
         q = (res.get("clustering") or res.get("success") or {}).get("latent_dim")
         columns = ["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"]
         keep = [0, 1] + ([2, 3] if res.get("success") else []) + ([4] if res.get("clustering") else [])
-        judged = ("success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
-                  "over seeds with its Wilson 95 % interval), and " if res.get("success") else "")
-        out += ["", f"At q = {q}: {judged}clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; "
-                    "mean ± std over seeds [range]).", "",
+        said = (["success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
+                 "over seeds with its Wilson 95 % interval)"] if res.get("success") else []) + (
+                [f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± std over seeds [range])"]
+                if res.get("clustering") else [])
+        out += ["", f"At q = {q}: {', and '.join(said)}.", "",
                 _table([columns[i] for i in keep], [[row[i] for i in keep] for row in outcome])]
     if "inter" in res:
         out += ["", f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):", "",
@@ -220,6 +221,8 @@ def headline(summaries: dict[str, dict]) -> str:
     parts = []
     for name, s in summaries.items():
         intra = s["results"].get("intra")
+        if name not in ORDER:
+            continue  # ablations (other losses, tuning) stay in docs/reproduce.md
         if not intra:
             continue
         by = _final_by(intra)
