@@ -39,7 +39,8 @@ import torch
 
 from primspace.errors import UserError
 
-__all__ = ["INIT_METHODS", "CALIBRATED", "CALIBRATABLE", "START_METHODS", "LatentInitializer", "LatentTable", "appendix_a_check"]
+__all__ = ["INIT_METHODS", "CALIBRATED", "CALIBRATABLE", "START_METHODS", "NEAREST", "INFER_STARTS", "LatentInitializer",
+           "LatentTable", "appendix_a_check", "appendix_a_observed"]
 
 #: The initialisation strategies, in the order figures show them.
 INIT_METHODS = ("zero", "random", "projection", "pca")
@@ -53,6 +54,13 @@ CALIBRATABLE = ("projection", "pca")
 
 #: Every way codes can start: the initialisers, then the calibrated start.
 START_METHODS = INIT_METHODS + (CALIBRATED,)
+
+#: A start for inference only: the fitted code of the fitted demonstration whose (observed)
+#: motor is nearest (:mod:`primspace.train.observe`); meaningful only with a fitted parent run.
+NEAREST = "nearest"
+
+#: The starts :func:`primspace.train.infer` accepts: every start, then ``nearest``.
+INFER_STARTS = START_METHODS + (NEAREST,)
 
 
 # ---------------------------------------------------------------------- initialiser
@@ -146,7 +154,7 @@ class LatentInitializer:
             self.projection_ = None
         return self
 
-    def transform(self, scaled_motor, *, random_state: int | None = None) -> np.ndarray:
+    def transform(self, scaled_motor, *, random_state: int | None = None, observed=None) -> np.ndarray:
         """Initial codes ``(n, q)`` (float32) for sequences ``(n, T, J)``.
 
         Parameters
@@ -155,6 +163,13 @@ class LatentInitializer:
         random_state : int, optional
             Seed of the draws of method ``random`` (default: this initialiser's seed).
             Give a different one for a new data set so its codes are fresh draws.
+        observed : array-like of bool, shape (n, T), optional
+            The observed steps (inference from a prefix, :mod:`primspace.train.observe`):
+            the codes of the observed part, ``P (M ⊙ (m − mean))`` with the unobserved
+            steps set to zero after centring (``mean`` is 0 for ``projection``: ``P``
+            applied to the zero-filled sequence, for which Appendix A holds,
+            :func:`appendix_a_observed`). With a window the padded last steps copy the
+            last step's mask as they copy its values. None: every step.
         """
         self._check_fitted()
         x = self._rows(scaled_motor)
@@ -171,7 +186,11 @@ class LatentInitializer:
             seed = self.random_state if random_state is None else random_state
             z = np.random.default_rng(seed).standard_normal((n, q))
         else:  # with a window: each window's code, window-major per sample
-            z = ((x - self.mean_) @ self.projection_.T).reshape(n, q)
+            centred = x - self.mean_
+            if observed is not None:
+                mask = np.broadcast_to(np.asarray(observed, dtype=np.float64)[..., None], np.shape(scaled_motor))
+                centred = centred * self._rows(mask)
+            z = (centred @ self.projection_.T).reshape(n, q)
         return z.astype(np.float32)
 
     def _rows(self, scaled_motor) -> np.ndarray:
@@ -379,3 +398,39 @@ def appendix_a_check(
         "n_draws": int(n_draws),
         "latent_dim": q,
     }
+
+
+def appendix_a_observed(a, b, observed, latent_dim: int, **kwargs) -> dict:
+    """Appendix A for the observed part of two sequences (inference from a prefix).
+
+    With ``M`` the observation mask, ``a_obs = M ⊙ a`` and ``b_obs = M ⊙ b`` are the
+    sequences with their unobserved steps set to zero, and the start of inference from
+    what was observed is ``P a_obs`` (:meth:`LatentInitializer.transform` with
+    ``observed``). Appendix A holds for any pair of vectors, so for these:
+    ``E[P a_obs · P b_obs] = a_obs · b_obs`` (eq. ``exp_prod``) and
+    ``Var ≤ (3|a_obs|²|b_obs|² − (a_obs·b_obs)²)/q`` (eq. ``var_prod``). Scalar products
+    of the observed parts, not of the whole motions, are what the start keeps.
+
+    Parameters
+    ----------
+    a, b : array-like of shape (T, J) or (T,)
+        Two sequences (time first).
+    observed : array-like of bool, shape (T,)
+        The observed steps.
+    latent_dim : int
+        q.
+    **kwargs
+        Passed to :func:`appendix_a_check` (``n_draws``, ``random_state``, ``block``).
+
+    Returns
+    -------
+    dict
+        :func:`appendix_a_check`'s, for ``a_obs`` and ``b_obs``.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    m = np.asarray(observed, dtype=np.float64)
+    if a.shape != b.shape or m.shape != a.shape[:1]:
+        raise UserError(f"a {a.shape}, b {b.shape} and observed {m.shape} must share their first axis (steps)")
+    m = m.reshape(m.shape + (1,) * (a.ndim - 1))
+    return appendix_a_check(a * m, b * m, latent_dim, **kwargs)

@@ -23,7 +23,7 @@ import torch
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import UserError
 from primspace.calibration import CodeCalibration
-from primspace.latent import CALIBRATABLE, CALIBRATED, LatentInitializer, LatentTable
+from primspace.latent import CALIBRATABLE, CALIBRATED, INFER_STARTS, NEAREST, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
@@ -38,6 +38,7 @@ from primspace.train.checks import (
     run_name,
     select,
 )
+from primspace.train.observe import Observation, observation_record, observed_start, observing_args
 from primspace.train.run import TrainedRun
 from primspace.train.rundir import (
     RunDirectory,
@@ -187,6 +188,9 @@ def infer(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool | None = None,
+    observe=None,
+    observe_frames=None,
+    fitted_data: MotionDataset | None = None,
     **overrides: Any,
 ) -> TrainedRun:
     """Find codes for new samples with the trained weights θ frozen (the paper's evaluation).
@@ -209,7 +213,8 @@ def infer(
         data, ``projection`` with a new ``P`` from ``seed``). ``calibrated``: the run's
         initialiser, its codes mapped by the run's calibration (``B P m + c``, ridge from
         the training samples' initial to fitted codes; runs fitted with ``projection`` or
-        ``pca`` init have one, :mod:`primspace.calibration`).
+        ``pca`` init have one, :mod:`primspace.calibration`). ``nearest``: the fitted code
+        of the fitted demonstration whose motor is nearest (over the observed steps).
     indices : array-like of int, optional
         Samples of ``dataset`` to use.
     train_config : TrainConfig, optional
@@ -220,6 +225,16 @@ def infer(
         ``init`` (e.g. to try another start with the same weights).
     resume, overwrite, progress
         As in :func:`fit`.
+    observe : float, int or "none", optional
+        Infer from a prefix of each motion (:mod:`primspace.train.observe`): a fraction in
+        (0, 1] of each sample's valid steps (rounded up, at least one), a number of steps,
+        or ``"none"`` (no joints: frames only). The loss counts the observed entries only
+        and the starts read the observed part. None: every step.
+    observe_frames : float, int, "first" or "none", optional
+        The same for the frames (default: as ``observe``); ``"first"``: the first frame.
+    fitted_data : MotionDataset, optional
+        The data set ``run`` was fitted on, for the starts that read its demonstrations
+        (``nearest``; ``calibrated`` under ``observe``). Default: the run's data file.
 
     Returns
     -------
@@ -232,14 +247,16 @@ def infer(
     except TypeError as exc:
         raise UserError(f"unknown train config override ({exc})") from None
     init = init or parent.init
-    check_init(init)
+    check_init(init, INFER_STARTS)
     check_calibrated(init, parent)
+    observation = Observation.build(observe, observe_frames)
     data, idx = select(dataset, indices)
     mc = parent.model_config
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     use_images = uses_images(mc, data, tc)
     check_something_to_train(tc, use_images)
     config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
+    config.update(observation_record(observation, data, use_images, mc.has_images))
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
@@ -251,14 +268,17 @@ def infer(
         table = LatentTable.from_state_dict(parts.latents, device)
     else:
         scaled = parent.scaler.transform(data.motor)
-        initializer = _initializer(init, parent, mc, scaled, seeds)
-        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents).astype(np.float32)
+        observing = observing_args(init, observation, data, fitted_data)
+        seen = scaled if observing is None else scaled * observing["observed"][..., None]  # what a new pca fits
+        initializer = _initializer(init, parent, mc, seen, seeds)
+        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents,
+                             observing).astype(np.float32)
         table = LatentTable(torch.from_numpy(codes).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
     session = Session(
         store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"], calibration=parent.calibration,
+        frames_seed=seeds["frames"], calibration=parent.calibration, observation=observation,
     )
     session.run(ckpt, progress, label="infer")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -397,11 +417,15 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
 
 
 def _start_codes(init: str, parent: TrainedRun | None, initializer: LatentInitializer, scaled, seed: int,
-                 initial_latents: np.ndarray | None = None) -> np.ndarray:
+                 initial_latents: np.ndarray | None = None, observing: dict | None = None) -> np.ndarray:
     """The starting codes (float64): the initialiser's, mapped by the parent's calibration for
-    ``calibrated``; rows of ``initial_latents`` without NaN replace them."""
-    codes = initializer.transform(scaled, random_state=seed)
-    codes = (parent.calibration.transform(codes) if init == CALIBRATED else codes).astype(np.float64)
+    ``calibrated``; rows of ``initial_latents`` without NaN replace them. ``observing``: the
+    arguments of :func:`~primspace.train.observe.observed_start` (under an observation, or ``nearest``)."""
+    if observing is None:
+        codes = initializer.transform(scaled, random_state=seed)
+        codes = (parent.calibration.transform(codes) if init == CALIBRATED else codes).astype(np.float64)
+    else:
+        codes = observed_start(init, parent, initializer, scaled, seed=seed, **observing)
     if initial_latents is not None:
         given = ~np.isnan(initial_latents).any(axis=1)
         codes[given] = initial_latents[given]
@@ -418,7 +442,7 @@ def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: 
 def _initializer(init: str, parent: TrainedRun | None, mc: ModelConfig, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
     """The parent's initialiser for the same init (its ``P``); otherwise one fitted here
     (one code per window of ``mc.code_window`` steps when set)."""
-    if parent is not None and init in (parent.init, CALIBRATED):
+    if parent is not None and init in (parent.init, CALIBRATED, NEAREST):
         return parent.initializer
     return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
 

@@ -16,9 +16,11 @@ __all__ = ["check_init", "check_calibrated", "check_scaler", "fit_model_config",
            "check_data_fits", "run_name"]
 
 
-def check_init(init: str) -> None:
-    if init not in START_METHODS:
-        raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(START_METHODS)}")
+def check_init(init: str, starts: tuple[str, ...] = START_METHODS) -> None:
+    """Refuse a start that is not one of ``starts`` (``fit``: :data:`~primspace.latent.START_METHODS`;
+    ``infer`` adds ``nearest``)."""
+    if init not in starts:
+        raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(starts)}")
 
 
 def check_calibrated(init: str, parent: TrainedRun | None) -> None:

@@ -97,6 +97,7 @@ class AutoDecoder(BaseEstimator):
         )
         self.codes_ = self.run_.latents
         self.history_ = self.run_.history
+        self.fit_data_ = X  # the fitted demonstrations, for the starts that read them (nearest, calibrated under observe)
         return self
 
     def fit_transform(self, X: MotionDataset, y=None, **fit_params) -> np.ndarray:
@@ -110,6 +111,8 @@ class AutoDecoder(BaseEstimator):
         epochs: int | None = None,
         init: str | None = None,
         checkpoint_dir: str | os.PathLike | None = None,
+        observe=None,
+        observe_frames=None,
         **overrides,
     ) -> np.ndarray:
         """Codes for the samples of ``X`` with θ frozen (the paper's evaluation), in ``X``'s order.
@@ -121,7 +124,13 @@ class AutoDecoder(BaseEstimator):
         init : str, optional
             How the new codes start (default: the fit's init, with its ``P``);
             ``"calibrated"``: ``P m`` mapped by the fit's ridge calibration onto where the
-            fitted codes went (fits with ``projection`` or ``pca`` init).
+            fitted codes went (fits with ``projection`` or ``pca`` init); ``"nearest"``: the
+            fitted code of the fitted sample whose (observed) motor is nearest.
+        observe, observe_frames : optional
+            Infer from a prefix of each motion: a fraction in (0, 1] of the valid steps, a
+            number of steps, ``"none"``; frames also ``"first"`` (:func:`~primspace.train.infer`).
+            The starts that read the fitted samples use those given to ``fit`` (after
+            :meth:`load`: the run's data file).
         checkpoint_dir : path-like, optional
             Write the inference as a run directory (default: in memory).
         **overrides
@@ -130,7 +139,8 @@ class AutoDecoder(BaseEstimator):
         run = self._fitted()
         self.inference_ = infer(
             run, X, checkpoint_dir, epochs=run.train_config.epochs if epochs is None else epochs,
-            init=init, progress=self.progress, **overrides,
+            init=init, progress=self.progress, observe=observe, observe_frames=observe_frames,
+            fitted_data=getattr(self, "fit_data_", None), **overrides,
         )
         return self.inference_.latents
 

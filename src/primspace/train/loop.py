@@ -27,6 +27,7 @@ from primspace.latent import LatentInitializer, LatentTable
 from primspace.model import MTRNNDecoder
 from primspace.progress import progress_bar
 from primspace.train.config import TrainConfig, TrainingDivergedError, lr_factor
+from primspace.train.observe import observation_masks
 from primspace.train.rundir import RunDirectory, checkpoint_state, restore_rng, unpack_checkpoint
 
 __all__ = ["DataTensors", "Session", "batch_loss", "evaluate_loop", "epoch_values"]
@@ -34,14 +35,25 @@ __all__ = ["DataTensors", "Session", "batch_loss", "evaluate_loop", "epoch_value
 
 @dataclass
 class DataTensors:
-    """Training targets on the device: scaled motor (float32) and frames (uint8, converted per batch)."""
+    """Training targets on the device: scaled motor (float32) and frames (uint8, converted per batch).
+
+    ``mask`` marks the valid steps (padding); ``motor_mask`` and ``frame_mask``, when set,
+    the observed ones of each modality (inference from a part of each motion,
+    :mod:`primspace.train.observe`), padding included. The loss counts the entries of
+    :meth:`motor_steps` / :meth:`frame_steps` only.
+    """
 
     motor: torch.Tensor  # (N, T, J) float32, scaled to [-1, 1]
     images: torch.Tensor | None  # (N, T, H, W, 3) uint8
     mask: torch.Tensor | None = None  # (N, T) float32, 1 at valid steps; None: every step
+    motor_mask: torch.Tensor | None = None  # (N, T) float32, 1 at observed valid steps; None: ``mask``
+    frame_mask: torch.Tensor | None = None  # the same for the frames
 
     @classmethod
-    def build(cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device) -> "DataTensors":
+    def build(cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device,
+              observation=None) -> "DataTensors":
+        """The tensors of ``data``; ``observation`` (:class:`~primspace.train.observe.Observation`)
+        sets the observed masks (a modality observed at every valid step keeps ``mask``)."""
         motor = torch.from_numpy(np.ascontiguousarray(scaler.transform(data.motor), dtype=np.float32)).to(device)
         images = None
         if use_images:
@@ -50,7 +62,25 @@ class DataTensors:
         mask = None
         if data.lengths is not None:
             mask = torch.from_numpy(valid_steps(data.lengths, data.length).astype(np.float32)).to(device)
-        return cls(motor, images, mask)
+        tensors = cls(motor, images, mask)
+        if observation is not None:
+            valid = observation_masks(None, data)[0]
+            motor_mask, frame_mask = (None if np.array_equal(m, valid) else torch.from_numpy(m.astype(np.float32)).to(device)
+                                      for m in observation_masks(observation, data))
+            tensors.motor_mask, tensors.frame_mask = motor_mask, frame_mask
+        return tensors
+
+    def motor_steps(self) -> torch.Tensor | None:
+        """The motor entries the loss counts (N, T) (None: every one)."""
+        return self.mask if self.motor_mask is None else self.motor_mask
+
+    def frame_steps(self) -> torch.Tensor | None:
+        """The frames the loss counts (N, T) (None: every one)."""
+        return self.mask if self.frame_mask is None else self.frame_mask
+
+
+def _rows(mask: torch.Tensor | None, idx: torch.Tensor) -> torch.Tensor | None:
+    return None if mask is None else mask.index_select(0, idx)
 
 
 def _mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
@@ -99,19 +129,19 @@ def batch_loss(
     """
     summed = tc.loss_reduction == "sum"
     use_images = tensors.images is not None
-    mask = None if tensors.mask is None else tensors.mask.index_select(0, idx)
+    mask, motor_mask = _rows(tensors.mask, idx), _rows(tensors.motor_steps(), idx)
     with autocast:
         out = model(z, images=use_images, frame_steps=steps if use_images else None)
     if summed:
-        motor_term, motor = _sse(out.motor.float(), tensors.motor.index_select(0, idx), mask)
+        motor_term, motor = _sse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask)
     else:
-        motor = motor_term = _mse(out.motor.float(), tensors.motor.index_select(0, idx), mask)
+        motor = motor_term = _mse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask)
     if use_images:
-        frame_mask = mask
+        frame_mask = _rows(tensors.frame_steps(), idx)
         if steps is None:
             target = tensors.images.index_select(0, idx)
         else:
-            frame_mask = None if mask is None else mask.gather(1, steps)
+            frame_mask = None if frame_mask is None else frame_mask.gather(1, steps)
             n, t = tensors.images.shape[:2]
             rows = (idx.unsqueeze(1) * t + steps).reshape(-1)
             target = tensors.images.view(n * t, *tensors.images.shape[2:]).index_select(0, rows)
@@ -180,14 +210,14 @@ class Session:
         self, *, store: RunDirectory | None, config: dict, model: MTRNNDecoder, theta_opt, table: LatentTable,
         scaler: JointScaler, initializer: LatentInitializer, data: MotionDataset, use_images: bool,
         tc: TrainConfig, device: torch.device, shuffle_seed: int, frames_seed: int = 0,
-        calibrate=None, calibration=None,
+        calibrate=None, calibration=None, observation=None,
     ) -> None:
         # calibrate: codes -> CodeCalibration, fitted when the last epoch is done (fit);
         # calibration: a map carried as is (infer: the trained run's)
         self.calibrate, self.calibration = calibrate, calibration
         self.store, self.config, self.model, self.theta_opt = store, config, model, theta_opt
         self.table, self.scaler, self.initializer, self.tc, self.device = table, scaler, initializer, tc, device
-        self.tensors = DataTensors.build(data, scaler, use_images, device)
+        self.tensors = DataTensors.build(data, scaler, use_images, device, observation)
         self.use_images = use_images
         self.generator = torch.Generator().manual_seed(shuffle_seed)
         length = self.tensors.motor.shape[1]

@@ -60,6 +60,11 @@ class TrainedRun:
         The map from the initialiser's codes to the fitted codes (``init="calibrated"``):
         fitted at the end of a ``fit`` whose initialiser is ``projection`` or ``pca``, carried
         by the runs inferred from it; None otherwise.
+    observed_calibrations : dict
+        Calibration maps for inference from a part of each motion (``init="calibrated"``
+        with ``observe=``), keyed by the observation rule
+        (:func:`primspace.train.observe.observed_calibration`): fitted on first use, kept in
+        memory only (not saved with the run).
     """
 
     run_dir: Path | None
@@ -80,6 +85,7 @@ class TrainedRun:
     config: dict = field(repr=False, default_factory=dict)
     state: dict | None = field(repr=False, default=None)
     calibration: CodeCalibration | None = field(repr=False, default=None)
+    observed_calibrations: dict = field(repr=False, compare=False, default_factory=dict)
 
     @property
     def final_loss(self) -> float | None:

@@ -4,7 +4,8 @@ its checkpoint's keys.
 A run directory holds::
 
     config.json       kind (fit / infer), init, model and train configs, data (path,
-                      sample indices, SHA-1 of the samples' joints), parent run, scaler
+                      sample indices, SHA-1 of the samples' joints), parent run, scaler,
+                      the observation rule of an inference from a prefix (``observe``)
     metrics.jsonl     one line per epoch
     checkpoint.pt     model, optimiser, codes and their optimiser, scaler, initialiser,
                       RNG states, epoch (written atomically)
@@ -161,7 +162,7 @@ def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
     # a run saved before a field existed has that field's default (which gives its numbers)
     saved = saved | {"model": ModelConfig.from_dict(saved["model"]).to_dict(),
                      "train": TrainConfig.from_dict(saved["train"]).to_dict()}
-    for key in ("kind", "init", "parent", "scaler"):
+    for key in ("kind", "init", "parent", "scaler", "observe"):  # observe: the rule of an inference from a prefix
         if saved.get(key) != given.get(key):
             fail(key, saved.get(key), given.get(key))
     for key, value in given["model"].items():
