@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.experiments.claims import check_claims
+from primspace.experiments.claims import check_claims, eighth_loss
 from primspace.experiments.results import LEARNED_CODES, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
@@ -135,8 +135,7 @@ def _inter_rows(inter: dict) -> list[list[str]]:
     rows = []
     for init, runs in by.items():
         seeds = sorted({r.get("seed", 0) for r in runs})
-        eighth = [min(r["phase2"], key=lambda h: abs(h["epoch"] - max(1, round(r["phase2"][-1]["epoch"] / 8))))["loss"]
-                  for r in runs]
+        eighth = [eighth_loss(r["phase2"]) for r in runs]
         rows.append([init, f"{len(runs)} ({len(seeds)} seeds)", mean_spread([r["phase2"][0]["loss"] for r in runs], rng=False),
                      mean_spread(eighth, rng=False), mean_spread([_last(r["phase2"]) for r in runs])])
     return rows

@@ -44,7 +44,7 @@ from primspace.experiments.claim_rules_v1 import CLAIMS_V1, _by_q, _need  # the 
 from primspace.experiments.results import LEARNED_CODES, read_results
 from primspace.stats import wilson_interval
 
-__all__ = ["Outcome", "Claim", "CLAIMS", "RULES_VERSION", "check_claims", "claims_table", "PARTLY"]
+__all__ = ["Outcome", "Claim", "CLAIMS", "RULES_VERSION", "check_claims", "claims_table", "eighth_loss", "PARTLY"]
 
 #: The version of the rule set as a whole (the highest version of any rule).
 RULES_VERSION = 2
@@ -234,13 +234,18 @@ def _paired_lower(a: dict, b: dict) -> tuple[float, int]:
     return (float(np.mean([b[k] < a[k] for k in keys])) if keys else float("nan")), len(keys)
 
 
+def eighth_loss(curve: list[dict]) -> float:
+    """The loss an eighth of the way through a curve (at least epoch 1): the inter claim's
+    "convergence speed" (a stored summary keeps this epoch)."""
+    eighth = max(1, round(curve[-1]["epoch"] / 8))
+    return min(curve, key=lambda h: abs(h["epoch"] - eighth))["loss"]
+
+
 def _inter_improved(results: dict) -> Outcome:
     by: dict[str, dict] = {}
     for r in results["runs"]:
         points = [h for h in r["phase2"] if h.get("loss") is not None]
-        eighth = max(1, round(points[-1]["epoch"] / 8))  # a stored summary keeps this epoch
-        early = min(points, key=lambda h: abs(h["epoch"] - eighth))["loss"]
-        by.setdefault(r["init"], {})[(r["fold"], r.get("seed", 0))] = (early, points[-1]["loss"])
+        by.setdefault(r["init"], {})[(r["fold"], r.get("seed", 0))] = (eighth_loss(points), points[-1]["loss"])
     if not _need(by, "zero", "projection"):
         return Outcome(None, "needs zero and projection folds")
     z, p = by["zero"], by["projection"]
