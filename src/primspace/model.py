@@ -155,7 +155,7 @@ class MTRNNLayer(nn.Module):
         d = d0.unsqueeze(1)  # (B, 1, k)
         out = []
         for _ in range(length):
-            d = self._norm(torch.lerp(d, torch.baddbmm(c, d, M), rate))
+            d = self._norm(torch.lerp(d, torch.baddbmm(c, d, M).to(d.dtype), rate))  # autocast: bf16 product, fp32 state
             out.append(d)
         return torch.cat(out, dim=1)
 
@@ -172,7 +172,7 @@ class MTRNNLayer(nn.Module):
         out = []
         for u_t, c_t in zip(u1, c):
             outer = (d.unsqueeze(2) * u_t.unsqueeze(1)).view(b, -1)  # d_j u'_l
-            d = self._norm(torch.lerp(d, torch.addmm(c_t, outer, packed), rate))
+            d = self._norm(torch.lerp(d, torch.addmm(c_t, outer, packed).to(d.dtype), rate))
             out.append(d)
         return torch.stack(out, dim=1)
 
