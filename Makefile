@@ -23,7 +23,7 @@ $(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
 	touch $@
 
 $(VENV)/.installed-test: $(VENV)/.installed
-	$(PIP) install --quiet -e '.[test,ray,video]'
+	$(PIP) install --quiet -e '.[test,ray,video,predict]'
 	touch $@
 
 install: $(VENV)/.installed

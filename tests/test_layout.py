@@ -30,6 +30,8 @@ FORBIDDEN = {
     "cluster": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "probe": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "segmentation": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    # the peers of prediction (ProMP, nearest neighbour, mean motion): they see motion arrays only
+    "peers": ("sim", "latent", "model", "train", "cluster", "experiments", "report", "demo", "cli"),
     "model_config": ("model", "latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "model": ("latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "latent": ("model", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),

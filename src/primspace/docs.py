@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments.claims import check_claims, eighth_loss
-from primspace.experiments.results import LEARNED_CODES, tuning_table
+from primspace.experiments.results import LEARNED_CODES, predict_error_table, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
 
@@ -35,7 +35,8 @@ __all__ = ["g", "mean_spread", "render_summary", "render_comparison", "headline"
 SUMMARY_DIR = Path("docs") / "results"
 
 #: Each generated block: the file it lives in.
-TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.md"}
+TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.md",
+           "predict": Path("docs") / "predict.md"}
 
 #: The order summaries are shown in (others follow, by name); README's headline shows these only.
 ORDER = ("paper", "paper-images", "demo", "lasa")
@@ -292,7 +293,23 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     parts += [render_comparison(summaries[a], summaries[b], what) for a, b, what in COMPARISONS
               if a in summaries and b in summaries]
     results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
-    return {"headline": headline(summaries), "results": results}
+    predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
+    return {"headline": headline(summaries), "results": results,
+            "predict": predicted or "No stored prediction summaries yet (docs/results/)."}
+
+
+def render_predict(summary: dict) -> str:
+    """The prediction table of one summary (``primspace experiment predict``)."""
+    pr, seeds = summary["results"]["predict"], summary.get("preset", {}).get("seeds", [])
+    columns, rows = predict_error_table(pr)
+    cpu = summary.get("cpu", {})
+    return "\n".join([
+        f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
+        f"primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
+        f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
+        "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
+        + ("; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."),
+        "", _table(columns, [[str(c) for c in row] for row in rows])])
 
 
 def replace_blocks(text: str, new: dict[str, str], path: Path | str = "") -> str:

@@ -9,6 +9,7 @@ from primspace.cli import data  # noqa: F401, I001
 from primspace.cli import cluster  # noqa: F401
 from primspace.cli import train  # noqa: F401
 from primspace.cli import animate  # noqa: F401
+from primspace.cli import predict  # noqa: F401
 from primspace.cli import experiments  # noqa: F401
 from primspace.cli.app import app, main
 

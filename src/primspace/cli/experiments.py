@@ -180,6 +180,12 @@ _experiment_command(
     ("tuning:run_tune",), "tuning_table",
 )
 _experiment_command(
+    "predict", "Predict the rest of each motion from its beginning (10, 25, 50 % observed): primspace's starts "
+    "against ProMP conditioning (given the labels), the nearest neighbour and the mean motion, on the intra split "
+    "over seeds; judged in the simulator where it can (runs intra if needed; docs/predict.md).",
+    ("prediction:run_predict",), "predict_error_table",
+)
+_experiment_command(
     "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
     ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"), None,
 )

@@ -418,3 +418,29 @@ def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], l
                          f"{setting['validation_loss']:.3g}", _mean_std(s), _mean_std(t)])
     return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
             "final eval loss, tuned"], rows
+
+
+def predict_error_table(results: dict) -> tuple[list[str], list[list]]:
+    """Predict: rows method (primspace's starts, then the peers); columns the observed
+    fractions: MSE of the unobserved steps, mean ± std over seeds (and success where judged)."""
+    fractions = [f"{f:g}" for f in results["fractions"]]
+    table = results["table"]
+    judged = results.get("judged") and any("1" in cells for cells in table.values())
+    columns = ["method"] + [f"MSE, {float(f):.0%} observed" for f in fractions]
+    if results.get("judged"):
+        columns += [f"success, {float(f):.0%}" for f in fractions + (["1"] if judged else [])]
+    rows = []
+    for method, cells in table.items():
+        row = [method] + [_mean_std(cells.get(f, {}).get("mse")) for f in fractions]
+        if results.get("judged"):
+            row += [_mean_std(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])]
+        rows.append(row)
+    return columns, rows
+
+
+def _mean_std(cell, digits: int = 4) -> str:
+    """``[mean, std, n]`` as "mean ± std" (n > 1) or "mean"; "–" for none."""
+    if not cell:
+        return "–"
+    mean, std, n = cell
+    return f"{mean:.{digits}g} ± {std:.{digits - 2 if digits > 2 else 1}g}" if n > 1 else f"{mean:.{digits}g}"

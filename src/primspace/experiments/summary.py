@@ -138,6 +138,10 @@ def _tune(t: dict) -> dict:
         "tuned": {"runs": [_intra(x) for x in t.get("tuned", {}).get("runs", [])]}}
 
 
+def _predict(p: dict) -> dict:
+    return {k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table", "failures")}
+
+
 _REDUCERS = {
     "intra": lambda r: {"runs": [_intra(x) for x in r.get("runs", [])], "failures": r.get("failures", {}),
                         "splits": r.get("splits", {}), "label_names": r.get("label_names")},
@@ -146,6 +150,7 @@ _REDUCERS = {
     "inter": _inter,
     "probe": _probe,
     "tune": _tune,
+    "predict": _predict,
 }
 
 
@@ -169,7 +174,7 @@ def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> d
         ``summary_version``, ``name``, ``command``, ``note``, ``primspace`` (the version
         that made the runs), ``cpu`` (:func:`cpu_class` of this machine: run it where the
         runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
-        ``results`` by experiment name (intra, success, clustering, inter, probe, tune: those run).
+        ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict: those run).
     """
     meta = read_meta(out_dir)
     results = {}

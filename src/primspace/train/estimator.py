@@ -144,6 +144,32 @@ class AutoDecoder(BaseEstimator):
         )
         return self.inference_.latents
 
+    def predict(self, X: MotionDataset, *, observe=0.25, observe_frames=None, init: str = "mixture",
+                epochs: int | None = None, continuity: bool = True, **overrides):
+        """The rest of each motion of ``X`` from its observed beginning (issue 25; docs/predict.md).
+
+        The code is found from the observed entries only (``init``: ``"mixture"``, the
+        posterior mean over the fitted codes, or a start followed by ``epochs`` of
+        gradient inference, :func:`primspace.train.predict.predict`); the decoder's whole
+        sequence is the prediction. ``continuity``: the residual at the last observed step
+        decays to zero at the end.
+
+        Returns
+        -------
+        (motor, frames)
+            Joint values in physical units (n, T, J) float32 and frames (n, T, H, W, 3)
+            uint8 (None without an image head). The :class:`~primspace.train.predict.Prediction`
+            with the errors of the unobserved steps is kept as ``prediction_``.
+        """
+        from primspace.train.predict import DEFAULT_PREDICT_EPOCHS, predict
+
+        self.prediction_ = predict(
+            self._fitted(), X, observe=observe, observe_frames=observe_frames, init=init,
+            epochs=DEFAULT_PREDICT_EPOCHS if epochs is None else epochs, fitted_data=getattr(self, "fit_data_", None),
+            continuity=continuity, progress=self.progress, **overrides,
+        )
+        return self.prediction_.motor, self.prediction_.frames
+
     def inverse_transform(self, Z: np.ndarray, *, images: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Decode codes ``Z`` (n, latent_dim): joint values in physical units (n, T, J)
         float32, and frames (n, T, H, W, 3) uint8 (None without an image head or with

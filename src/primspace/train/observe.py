@@ -38,7 +38,7 @@ from primspace.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitialize
 from primspace.train.rundir import check_run_data
 
 __all__ = ["Observation", "NOTHING", "FIRST", "observation_masks", "observation_record", "observing_args",
-           "observed_start", "observed_calibration", "nearest_codes"]
+           "observed_start", "observed_calibration", "nearest_codes", "fitted_samples"]
 
 #: ``observe`` / ``observe_frames`` value: nothing of that modality is observed.
 NOTHING = "none"
@@ -187,7 +187,7 @@ def observed_start(init: str, parent, initializer: LatentInitializer, scaled: np
     fitted on (default: its data file).
     """
     if init == NEAREST:
-        data = _fitted_data(parent, fitted_data)
+        data = fitted_samples(parent, fitted_data)
         fitted, valid = parent.scaler.transform(data.motor), observation_masks(None, data)[0]
         return nearest_codes(scaled, observed, fitted, valid, parent.latents)
     if observation is not None and observation.motor == NOTHING and init != "zero" and init != "random":
@@ -213,7 +213,7 @@ def observed_calibration(parent, observation: Observation | None, fitted_data: M
         if parent.initializer.method not in CALIBRATABLE:
             raise UserError(f"init 'calibrated' needs a run fitted with projection or pca init, not "
                             f"'{parent.initializer.method}'")
-        data = _fitted_data(parent, fitted_data)
+        data = fitted_samples(parent, fitted_data)
         scaled = parent.scaler.transform(data.motor)
         motor_mask, _ = observation_masks(observation, data)
         initial = parent.initializer.transform(scaled, observed=motor_mask)
@@ -253,7 +253,7 @@ def nearest_codes(scaled: np.ndarray, observed: np.ndarray, fitted: np.ndarray, 
     return np.asarray(fitted_codes, dtype=np.float64)[np.argmin(dist, axis=1)]
 
 
-def _fitted_data(parent, fitted_data: MotionDataset | None) -> MotionDataset:
+def fitted_samples(parent, fitted_data: MotionDataset | None) -> MotionDataset:
     """The parent's own samples (checked against its record): from ``fitted_data`` or its data file."""
     if fitted_data is None:
         if parent.data_path is None:

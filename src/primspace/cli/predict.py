@@ -1,0 +1,127 @@
+"""Prediction command: predict (the rest of each motion from its observed beginning; docs/predict.md)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from primspace.cli.app import app
+from primspace.errors import UserError
+
+#: The mark ``predict`` writes into its data file and figure (primspace.outputs).
+PREDICT_MARK = "primspace predict"
+#: The files of a ``primspace predict`` output directory (result.json last: it says the output is complete).
+PREDICT_FILES = ("predicted.h5", "prediction.png", "result.json")
+_SHOWN = 4
+
+
+def parse_amount(text: str, option: str, words: tuple[str, ...]):
+    """``--observe`` / ``--observe-frames``: ``0.25`` (a fraction: has a point or an
+    exponent), ``10`` (steps), or one of ``words``; one line naming ``option`` otherwise."""
+    text = text.strip()
+    if text in words:
+        return text
+    try:
+        return float(text) if any(c in text for c in ".eE") else int(text)
+    except ValueError:
+        allowed = " or ".join(repr(w) for w in words)
+        raise UserError(f"{option} {text!r}: give a fraction with a decimal point (0.25), a number of steps (10) "
+                        f"or {allowed}") from None
+
+
+def _shown_titles(dataset, indices) -> list[str]:
+    names = dataset.label_names
+    titles = []
+    for i in indices:
+        label = None if dataset.labels is None else int(dataset.labels[i])
+        name = names[label] if names is not None and label is not None and 0 <= label < len(names) else None
+        titles.append(f"sample {int(i)}" + (f" ({name})" if name else ""))
+    return titles
+
+
+def _judged(predicted_dataset) -> dict | None:
+    """Success of the predicted motions in the simulator, when the data can be judged (else None)."""
+    from primspace.errors import DataError
+    from primspace.sim.success import check_judgeable, evaluate_dataset, success_rates
+
+    try:
+        check_judgeable(predicted_dataset)
+    except DataError:
+        return None
+    results = evaluate_dataset(predicted_dataset)
+    return {"rates": success_rates(results), "per_sample": [bool(r.success) for r in results]}
+
+
+def _write_outputs(tmp: Path, prediction, dataset, judged: dict | None, command: dict) -> dict:
+    """predicted.h5, prediction.png and result.json into ``tmp``; the result's dict."""
+    from primspace.plots import plot_predictions, save_figure
+
+    data = dataset.subset(prediction.indices)
+    prediction.to_dataset(dataset).save(tmp / "predicted.h5", writer=PREDICT_MARK)
+    shown = list(range(min(_SHOWN, len(data))))
+    fig = plot_predictions(data.motor[shown], prediction.motor[shown], prediction.motor_observed[shown],
+                           titles=_shown_titles(dataset, prediction.indices[shown]), joint_names=data.joint_names,
+                           dt=data.dt)
+    save_figure(fig, tmp / "prediction.png", writer=PREDICT_MARK)
+    per_sample = {name: [None if not float(v) == float(v) else float(v) for v in values]
+                  for name, values in prediction.errors.items()}
+    result = {**prediction.summary(), "command": command, "indices": [int(i) for i in prediction.indices],
+              "per_sample": per_sample, "success": judged, "writer": PREDICT_MARK}
+    (tmp / "result.json").write_text(json.dumps(result, indent=2))
+    return result
+
+
+@app.command("predict")
+def predict_command(
+    run: Path = typer.Argument(..., help="A fitted run directory (its weights are frozen)."),
+    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the motions to predict."),
+    out: Path = typer.Option(..., "--out", "-o", help="The folder to write (predicted.h5, result.json, prediction.png)."),
+    observe: str = typer.Option("0.25", "--observe", help="Observed joints: a fraction of each motion's valid steps "
+                                "(0.25), a number of steps (10), or none (frames only)."),
+    observe_frames: Optional[str] = typer.Option(None, "--observe-frames", help="Observed frames: a fraction, a "
+                                                 "number of steps, first (the first frame) or none. Default: as --observe."),
+    init: Optional[str] = typer.Option(None, "--init", help="The start: zero, random, projection, pca, calibrated, "
+                                       "nearest (default: the run's)."),
+    epochs: int = typer.Option(100, "--epochs", help="Inference epochs on the observed entries (0: the start as it is)."),
+    indices: Optional[Path] = typer.Option(None, "--indices", help="Samples of FILE to predict (.npy or text)."),
+    fitted: Optional[Path] = typer.Option(None, "--fitted-data", help="The data file the run was fitted on "
+                                          "(default: the run's own), for --init nearest and calibrated."),
+    latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
+    threads: Optional[int] = typer.Option(None, "--threads"),
+    no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
+) -> None:
+    """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded."""
+    from primspace.cluster.outputs import OutputKind, atomic_directory
+    from primspace.data.dataset import MotionDataset
+    from primspace.data.indices import read_indices
+    from primspace.files import check_outside_inputs
+    from primspace.train import TrainConfig, configure_process
+    from primspace.train.observe import FIRST, NOTHING
+    from primspace.train.predict import predict
+
+    motor = parse_amount(observe, "--observe", (NOTHING,))
+    frames = None if observe_frames is None else parse_amount(observe_frames, "--observe-frames", (FIRST, NOTHING))
+    check_outside_inputs(out, (file, indices, run, fitted))
+    kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
+    dataset = MotionDataset.load(file)
+    idx = read_indices(indices, dataset) if indices is not None else None
+    fitted_data = MotionDataset.load(fitted) if fitted is not None else None
+    overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
+    configure_process(TrainConfig(threads=threads).validate())
+    with atomic_directory(out, overwrite, kind) as tmp:
+        prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, epochs=epochs, indices=idx,
+                             fitted_data=fitted_data, threads=threads, **overrides)
+        judged = None if no_judge else _judged(prediction.to_dataset(dataset))
+        command = {"run": str(run), "data": str(file), "observe": motor, "observe_frames": frames, "init": init,
+                   "epochs": epochs}
+        result = _write_outputs(tmp, prediction, dataset, judged, command)
+    means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
+    line = f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
+    if judged is not None:
+        line += "; success " + ", ".join(f"{p} {r:.2f}" for p, r in judged["rates"].items())
+    typer.echo(line)

@@ -1,0 +1,473 @@
+"""The peers that primspace's motion prediction is measured against (issue 25).
+
+The task: a test demonstration's first steps are observed (a boolean mask ``observed``
+``(n, T)``, a prefix of its valid steps); predict the rest. Every peer is fitted on motor
+arrays ``(n, T, J)`` (already scaled by the caller, e.g. to [-1, 1]) with optional
+``lengths`` (steps at and after a sample's length are padding: absent) and integer
+``labels`` (its primitive), and returns the whole predicted sequence ``(n_test, T, J)``,
+the observed part included. A peer's ``predict`` reads the observed steps of ``motor``
+only: the unobserved ones are set to zero before anything looks at them (they may even be
+NaN).
+
+* :class:`ProMPPeer`: a Probabilistic Movement Primitive (the maintained
+  ``movement-primitives`` package, extra ``predict``), one per primitive (``per_label``:
+  it is given the test sample's true label) or one for all; its weight distribution is
+  conditioned on every observed step.
+* :class:`NearestPeer`: the fitted demonstration nearest on the observed steps, whole.
+* :class:`MeanMotionPeer`: the mean motion of the sample's primitive (or of all).
+* :func:`unobserved_mse`: the error of a prediction, the one place it is defined (the
+  primspace prediction is scored by the same function).
+* :func:`best_noise`: the ProMP's observation noise chosen *on the answer*.
+* :func:`observed_prefix`: the mask of the first ``ceil(fraction * length)`` steps.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from primspace.errors import UserError
+
+__all__ = [
+    "ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise", "unobserved_mse",
+    "observed_prefix",
+]
+
+_PROMP_MISSING = "the ProMP peer needs the movement-primitives package: pip install 'primspace[predict]'"
+
+
+def _promp_class():
+    """The package's ``ProMP`` class, imported on first use."""
+    try:
+        from movement_primitives.promp import ProMP
+    except ImportError as exc:
+        raise UserError(_PROMP_MISSING) from exc
+    return ProMP
+
+
+def _phase(length: int) -> np.ndarray:
+    """Phase in [0, 1] over ``length`` valid steps (a fresh array: the package divides in place)."""
+    return np.linspace(0.0, 1.0, int(length))
+
+
+def _as_motor(motor, name: str = "motor") -> np.ndarray:
+    arr = np.asarray(motor, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1] == 0 or arr.shape[2] == 0:
+        raise UserError(f"{name} must be a non-empty (n, T, J) array, got shape {arr.shape}")
+    return arr
+
+
+def _as_lengths(lengths, n: int, steps: int) -> np.ndarray:
+    if lengths is None:
+        return np.full(n, steps, dtype=np.int64)
+    arr = np.asarray(lengths)
+    if arr.shape != (n,):
+        raise UserError(f"lengths must have shape ({n},) like motor's first axis, got {arr.shape}")
+    if arr.size and (not np.all(np.equal(np.mod(arr, 1), 0)) or arr.min() < 1 or arr.max() > steps):
+        raise UserError(f"lengths must be whole numbers in [1, {steps}] (T = {steps})")
+    return arr.astype(np.int64)
+
+
+def _as_labels(labels, n: int) -> np.ndarray | None:
+    if labels is None:
+        return None
+    arr = np.asarray(labels)
+    if arr.shape != (n,):
+        raise UserError(f"labels must have shape ({n},) like motor's first axis, got {arr.shape}")
+    if arr.size and not np.issubdtype(arr.dtype, np.integer):
+        raise UserError(f"labels must be integers, got dtype {arr.dtype}")
+    return arr.astype(np.int64)
+
+
+def _valid(lengths: np.ndarray, steps: int) -> np.ndarray:
+    """``(n, T)``: True on the valid (not padding) steps."""
+    return np.arange(steps)[None, :] < lengths[:, None]
+
+
+def _as_observed(observed, shape: tuple[int, int], valid: np.ndarray) -> np.ndarray:
+    arr = np.asarray(observed)
+    if arr.shape != shape:
+        raise UserError(f"observed must have shape (n, T) = {shape} like motor's first two axes, got {arr.shape}")
+    if arr.dtype != bool:
+        raise UserError(f"observed must be a boolean mask, got dtype {arr.dtype}")
+    bad = np.flatnonzero(np.any(arr & ~valid, axis=1))
+    if bad.size:
+        raise UserError(f"observed marks padding steps (at or after the length) of sample {int(bad[0])}")
+    return arr
+
+
+def observed_prefix(n: int, steps: int, fraction: float, lengths=None) -> np.ndarray:
+    """The mask ``(n, T)`` of the first ``ceil(fraction * length)`` steps of each sample.
+
+    Parameters
+    ----------
+    n, steps : int
+        Samples and T.
+    fraction : float
+        In [0, 1]; ``ceil`` is taken with a 1e-9 tolerance, so ``0.1 * 100`` is 10 steps.
+    lengths : array-like of int, optional
+        Valid steps per sample (default T each): the prefix is a fraction of these.
+    """
+    if not 0.0 <= fraction <= 1.0:
+        raise UserError(f"the observed fraction must be in [0, 1], got {fraction}")
+    lengths = _as_lengths(lengths, n, steps)
+    counts = np.array([math.ceil(fraction * length - 1e-9) for length in lengths], dtype=np.int64)
+    return np.arange(steps)[None, :] < counts[:, None]
+
+
+def unobserved_mse(predicted, truth, observed, lengths=None) -> np.ndarray:
+    """Per-sample mean squared error over the valid, unobserved steps (all joints).
+
+    This is the one definition of the prediction error: the peers and primspace's own
+    prediction are scored by it.
+
+    Parameters
+    ----------
+    predicted, truth : array-like, shape (n, T, J)
+    observed : array-like of bool, shape (n, T)
+        The steps that were given to the predictor: not scored.
+    lengths : array-like of int, optional
+        Valid steps per sample; steps at or after it are padding and not scored.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The mean over the scored steps and joints; NaN for a sample with none.
+    """
+    predicted = _as_motor(predicted, "predicted")
+    truth = _as_motor(truth, "truth")
+    if predicted.shape != truth.shape:
+        raise UserError(f"predicted has shape {predicted.shape} but truth has {truth.shape}")
+    n, steps, joints = truth.shape
+    valid = _valid(_as_lengths(lengths, n, steps), steps)
+    observed = np.asarray(observed)
+    if observed.shape != (n, steps):
+        raise UserError(f"observed must have shape (n, T) = {(n, steps)}, got {observed.shape}")
+    scored = valid & ~observed.astype(bool)
+    sq = np.where(scored[..., None], (predicted - truth) ** 2, 0.0).sum(axis=(1, 2))
+    count = scored.sum(axis=1) * joints
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, sq / np.maximum(count, 1), np.nan)
+
+
+class _Peer:
+    """What the peers share: checking the fitted and the queried data, label groups."""
+
+    per_label: bool = True
+
+    def _fit_data(self, motor, labels, lengths):
+        motor = _as_motor(motor)
+        n, steps, joints = motor.shape
+        lengths = _as_lengths(lengths, n, steps)
+        labels = _as_labels(labels, n)
+        if self.per_label and labels is None:
+            raise UserError(f"{type(self).__name__}(per_label=True) needs the labels of the fitted demonstrations")
+        if not np.all(np.isfinite(motor[_valid(lengths, steps)])):
+            raise UserError("motor contains NaN or inf on valid steps")
+        return motor, labels, lengths
+
+    def _groups(self, labels, n: int) -> dict:
+        """Fitted label (or None for all) -> the indices of its demonstrations."""
+        if not self.per_label:
+            return {None: np.arange(n)}
+        return {int(lab): np.flatnonzero(labels == lab) for lab in np.unique(labels)}
+
+    def _fitted(self, motor: np.ndarray) -> None:
+        """Mark the peer fitted (the last thing ``fit`` does)."""
+        self.n_steps_, self.n_joints_ = motor.shape[1], motor.shape[2]
+
+    def _query(self, motor, observed, labels, lengths, same_steps: bool = True):
+        """Checked query data; the unobserved steps of ``motor`` are zeroed (never read)."""
+        if not hasattr(self, "n_joints_"):
+            raise UserError(f"{type(self).__name__}: call fit before predict")
+        motor = _as_motor(motor)
+        n, steps, joints = motor.shape
+        if joints != self.n_joints_:
+            raise UserError(f"motor has {joints} joints but the peer was fitted on {self.n_joints_}")
+        if same_steps and steps != self.n_steps_:
+            raise UserError(f"motor has T = {steps} steps but the peer was fitted on T = {self.n_steps_}")
+        lengths = _as_lengths(lengths, n, steps)
+        observed = _as_observed(observed, (n, steps), _valid(lengths, steps))
+        labels = _as_labels(labels, n)
+        if self.per_label:
+            if labels is None:
+                raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
+            unknown = sorted(set(labels.tolist()) - set(self._fitted_labels()))
+            if unknown:
+                raise UserError(f"label(s) {unknown} have no fitted demonstration")
+        seen = np.where(observed[..., None], motor, 0.0)
+        if not np.all(np.isfinite(seen)):
+            raise UserError("motor contains NaN or inf on observed steps")
+        return seen, observed, labels, lengths
+
+    def _key(self, labels, i: int):
+        return int(labels[i]) if self.per_label else None
+
+
+class ProMPPeer(_Peer):
+    """ProMP conditioning (``movement-primitives``): one ProMP per primitive, or one for all.
+
+    Fitting: the package's ``ProMP(J, n_basis).imitate`` (its EM) on each group's
+    demonstrations, time as phase in [0, 1] over each demonstration's valid steps
+    (``np.linspace(0, 1, T_i)``). With two demonstrations a group's spread is rank one,
+    but the package's EM adds the per-demonstration posterior covariances, so the
+    weight covariance it returns is full rank (smallest eigenvalues about 1e-7 on LASA):
+    it is kept as it is. ``ridge`` (default 0: none) adds ``ridge * I`` to it.
+
+    Prediction: the group's weight distribution (``per_label``: the test sample's true
+    label, which it is given) conditioned on every observed step with the package's
+    ``condition_position`` (one Gaussian update per step, ``y_cov = noise * I``, at the
+    step's phase over the test sample's valid steps); the result is the conditioned mean
+    over the valid steps, the last step held over the padding. This is the sequential
+    form of conditioning on all observed steps at once; it takes a fraction of a second
+    for LASA's 130 test samples, so no separate batch form is written.
+
+    Parameters
+    ----------
+    n_basis : int
+        Basis functions (weights) per joint.
+    noise : float
+        Observation noise variance of the conditioning (> 0); see :func:`best_noise`.
+    per_label : bool
+        One ProMP per label (labels needed in fit and predict) or one for all shapes.
+    ridge : float
+        Added to the diagonal of each fitted weight covariance.
+    n_iter : int
+        Most EM iterations of ``imitate``.
+    """
+
+    def __init__(self, n_basis: int = 15, noise: float = 1e-3, per_label: bool = True, ridge: float = 0.0,
+                 n_iter: int = 1000) -> None:
+        if int(n_basis) < 2:
+            raise UserError(f"n_basis must be at least 2, got {n_basis}")
+        _check_noise(noise)
+        if ridge < 0:
+            raise UserError(f"ridge must be >= 0, got {ridge}")
+        self.n_basis, self.noise, self.per_label = int(n_basis), float(noise), bool(per_label)
+        self.ridge, self.n_iter = float(ridge), int(n_iter)
+
+    def fit(self, motor, labels=None, lengths=None) -> "ProMPPeer":
+        """Fit one ProMP per label (or one for all) on the valid steps; returns self."""
+        promp_cls = _promp_class()
+        motor, labels, lengths = self._fit_data(motor, labels, lengths)
+        if lengths.min() < 2:
+            raise UserError("the ProMP peer needs at least 2 valid steps per demonstration")
+        self.promps_ = {}
+        for key, idx in self._groups(labels, len(motor)).items():
+            promp = promp_cls(motor.shape[2], self.n_basis)
+            promp.imitate([_phase(lengths[i]) for i in idx], [motor[i, : lengths[i]] for i in idx],
+                          n_iter=self.n_iter)
+            if self.ridge:
+                promp.weight_cov = promp.weight_cov + self.ridge * np.eye(promp.n_weights)
+            self.promps_[key] = promp
+        self._fitted(motor)
+        return self
+
+    def _fitted_labels(self):
+        return [k for k in self.promps_ if k is not None]
+
+    def conditioned(self, key, steps_y: np.ndarray, phases: np.ndarray, noise: float | None = None):
+        """The package ProMP of group ``key`` conditioned on positions ``steps_y`` at ``phases``.
+
+        Parameters
+        ----------
+        key : int or None
+            The label (None when ``per_label`` is False).
+        steps_y : ndarray, shape (m, J)
+            The observed positions.
+        phases : ndarray, shape (m,)
+            Their phases in [0, 1].
+        noise : float, optional
+            Observation noise variance (default ``self.noise``).
+        """
+        noise = self.noise if noise is None else _check_noise(noise)
+        promp = self.promps_[key]
+        cov = noise * np.eye(self.n_joints_)
+        for y, t in zip(steps_y, phases):
+            promp = promp.condition_position(y, y_cov=cov, t=float(t), t_max=1.0)
+        return promp
+
+    def predict(self, motor, observed, labels=None, lengths=None, noise: float | None = None) -> np.ndarray:
+        """Conditioned mean motion ``(n, T, J)`` given each sample's observed steps.
+
+        Parameters
+        ----------
+        motor : array-like, shape (n, T, J)
+            The test samples; only the observed steps are read.
+        observed : array-like of bool, shape (n, T)
+        labels : array-like of int, optional
+            The test samples' true labels (needed when ``per_label``).
+        lengths : array-like of int, optional
+            Valid steps per test sample (the phase runs over these).
+        noise : float, optional
+            Overrides ``self.noise`` for this call.
+        """
+        seen, observed, labels, lengths = self._query(motor, observed, labels, lengths, same_steps=False)
+        if lengths.min() < 2:
+            raise UserError("the ProMP peer needs at least 2 valid steps per test sample")
+        out = np.empty_like(seen)
+        for i in range(len(seen)):
+            phase = _phase(lengths[i])
+            steps = np.flatnonzero(observed[i])
+            promp = self.conditioned(self._key(labels, i), seen[i, steps], phase[steps], noise)
+            mean = promp.mean_trajectory(_phase(lengths[i]))
+            out[i, : lengths[i]] = mean
+            out[i, lengths[i]:] = mean[-1]
+        return out
+
+
+def _check_noise(noise) -> float:
+    try:
+        value = float(noise)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise UserError(f"noise must be a positive number (a variance), got {noise!r}")
+    return value
+
+
+class NearestPeer(_Peer):
+    """The fitted demonstration nearest to the test sample on its observed steps, whole.
+
+    Distance: the mean squared difference (over joints and the observed steps that are
+    valid in the fitted demonstration too); a demonstration sharing no such step is never
+    chosen; ties go to the first. The returned sequence is the demonstration's, all ``T``
+    steps (its padding included), not the observed steps pasted in.
+
+    Parameters
+    ----------
+    per_label : bool
+        Search only the test sample's own label (labels needed), default all.
+    """
+
+    def __init__(self, per_label: bool = False) -> None:
+        self.per_label = bool(per_label)
+
+    def fit(self, motor, labels=None, lengths=None) -> "NearestPeer":
+        """Keep the demonstrations (valid steps and labels); returns self."""
+        motor, labels, lengths = self._fit_data(motor, labels, lengths)
+        self.motor_, self.labels_, self.lengths_ = motor.copy(), labels, lengths
+        self._fitted(motor)
+        return self
+
+    def _fitted_labels(self):
+        return [] if self.labels_ is None else np.unique(self.labels_).tolist()
+
+    def neighbours(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
+        """Index (into the fitted demonstrations) of each test sample's nearest one."""
+        seen, observed, labels, lengths = self._query(motor, observed, labels, lengths)
+        valid_fit = _valid(self.lengths_, self.n_steps_)
+        chosen = np.empty(len(seen), dtype=np.int64)
+        for i in range(len(seen)):
+            both = valid_fit & observed[i][None, :]
+            sq = np.where(both, ((self.motor_ - seen[i][None]) ** 2).mean(axis=2), 0.0).sum(axis=1)
+            count = both.sum(axis=1)
+            dist = np.where(count > 0, sq / np.maximum(count, 1), np.inf)
+            if self.per_label:
+                dist[self.labels_ != labels[i]] = np.inf
+            if not np.isfinite(dist).any():
+                raise UserError(f"test sample {i} shares no observed step with any fitted demonstration")
+            chosen[i] = int(np.argmin(dist))
+        return chosen
+
+    def predict(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
+        """The nearest fitted demonstration of each test sample, ``(n, T, J)``."""
+        return self.motor_[self.neighbours(motor, observed, labels, lengths)].copy()
+
+
+class MeanMotionPeer(_Peer):
+    """The mean motion of the test sample's primitive (or of all), its observed steps ignored.
+
+    The mean at a step is over the fitted demonstrations valid at that step; a step none
+    covers holds the last covered mean.
+
+    Parameters
+    ----------
+    per_label : bool
+        The mean of the sample's own label (labels needed, default) or of all.
+    """
+
+    def __init__(self, per_label: bool = True) -> None:
+        self.per_label = bool(per_label)
+
+    def fit(self, motor, labels=None, lengths=None) -> "MeanMotionPeer":
+        """Compute the mean motion per label (or of all); returns self."""
+        motor, labels, lengths = self._fit_data(motor, labels, lengths)
+        steps = motor.shape[1]
+        valid = _valid(lengths, steps)
+        self.means_ = {}
+        for key, idx in self._groups(labels, len(motor)).items():
+            count = valid[idx].sum(axis=0)
+            total = np.where(valid[idx][..., None], motor[idx], 0.0).sum(axis=0)
+            mean = total / np.maximum(count, 1)[:, None]
+            last = np.maximum.accumulate(np.where(count > 0, np.arange(steps), 0))
+            self.means_[key] = mean[last]
+        self._fitted(motor)
+        return self
+
+    def _fitted_labels(self):
+        return [k for k in self.means_ if k is not None]
+
+    def predict(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
+        """The mean motion of each test sample's label (or of all), ``(n, T, J)``."""
+        _, _, labels, _ = self._query(motor, observed, labels, lengths)
+        return np.stack([self.means_[self._key(labels, i)] for i in range(len(observed))])
+
+
+class NoiseChoice(NamedTuple):
+    """The result of :func:`best_noise`.
+
+    Attributes
+    ----------
+    noise : float
+        The candidate with the lowest mean unobserved MSE (the first on a tie).
+    predicted : ndarray, shape (n, T, J)
+        The prediction with that noise.
+    mse : ndarray, shape (n,)
+        Its per-sample :func:`unobserved_mse`.
+    scores : dict
+        Candidate -> mean unobserved MSE over the samples (NaN ones left out).
+    """
+
+    noise: float
+    predicted: np.ndarray
+    mse: np.ndarray
+    scores: dict
+
+
+def best_noise(peer: ProMPPeer, motor, observed, labels=None, lengths=None,
+               candidates: Sequence[float] = (1e-4, 1e-3, 1e-2)) -> NoiseChoice:
+    """The ProMP's observation noise chosen as the best of ``candidates`` *on the answer*.
+
+    Each candidate predicts the test samples and is scored by the mean
+    :func:`unobserved_mse` of the very steps it predicts: the choice sees the test set's
+    unobserved steps, so the result **flatters the peer** (an upper bound on what it
+    would do with the noise chosen on held-out data). ``peer.noise`` is left unchanged.
+
+    Parameters
+    ----------
+    peer : ProMPPeer
+        Fitted.
+    motor : array-like, shape (n, T, J)
+        The test samples, whole: the truth the candidates are scored on.
+    observed, labels, lengths
+        As for :meth:`ProMPPeer.predict`.
+    candidates : sequence of float
+        Noise variances to try.
+    """
+    if len(candidates) == 0:
+        raise UserError("best_noise needs at least one candidate noise")
+    best = None
+    scores = {}
+    for candidate in candidates:
+        noise = _check_noise(candidate)
+        predicted = peer.predict(motor, observed, labels=labels, lengths=lengths, noise=noise)
+        mse = unobserved_mse(predicted, motor, observed, lengths)
+        if np.all(np.isnan(mse)):
+            raise UserError("best_noise: no test sample has an unobserved valid step to score")
+        scores[noise] = float(np.nanmean(mse))
+        if best is None or scores[noise] < scores[best.noise]:
+            best = NoiseChoice(noise, predicted, mse, scores)
+    return best

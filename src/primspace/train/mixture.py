@@ -1,0 +1,142 @@
+"""The fitted codes as a prior for prediction: a mixture over decoded candidates (issue 25).
+
+Inferring a code from the beginning of a motion by gradient descent fits the observed
+part and leaves the rest anywhere: nothing holds the code near the codes the decoder was
+trained on (docs/predict.md, *What a first try shows*). ProMPs win that comparison by
+their prior, a Gaussian over trajectories per primitive, given the labels. primspace has
+its own prior without labels: the fitted codes themselves. :class:`CodeMixture` makes it a
+mixture whose components are
+
+* every fitted code ``z_i``, and
+* points on the segments from each ``z_i`` towards its ``k`` nearest fitted codes (in code
+  space, ``z_i + a (z_j - z_i)`` for ``a`` in :data:`SEGMENT_POINTS`, a little beyond
+  both ends too): the paper's observation that codes of one primitive lie near a common
+  affine subspace (*Clustering*), used without knowing which codes share a primitive,
+
+each decoded once, ``d(θ, c)``. Given the observed entries ``x_obs`` of a new motion,
+component ``c`` has the likelihood ``exp(-||x_obs - d(θ, c)_obs||² / (2σ²))`` (equal prior
+weights); the prediction is the posterior mean of the decoded sequences, the optimum
+for a squared error when the prefix leaves the primitive ambiguous, and the code
+returned is the posterior mode. ``σ²`` is chosen without the answer: by leave-one-out
+prediction of the fitted demonstrations themselves (:meth:`CodeMixture.choose_noise`).
+
+:func:`continuity_correction` then removes the jump at the last observed step: the
+residual there decays linearly to zero at the end of the motion (ProMP conditioning
+passes through the observed points in the same way). It is ours, not the paper's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from primspace.errors import UserError
+
+__all__ = ["CodeMixture", "continuity_correction", "SEGMENT_POINTS", "NOISE_GRID", "NEIGHBOURS"]
+
+#: Where the candidates sit on the segment from a fitted code to a neighbour (0: the code; 1: the neighbour).
+SEGMENT_POINTS = (-0.25, 0.25, 0.5, 0.75, 1.25)
+#: Nearest fitted codes each code is joined to.
+NEIGHBOURS = 5
+#: σ² tried by :meth:`CodeMixture.choose_noise` (scaled units, per observed entry summed).
+NOISE_GRID = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2)
+
+
+def _sq_distances(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(n, c): Σ over the entries where ``mask`` (n, T) is set of (a_n - b_c)², for a (n, T, J), b (c, T, J)."""
+    j = a.shape[2]
+    m = np.repeat(mask.astype(np.float64), j, axis=1)
+    af, bf = a.reshape(len(a), -1) * m, b.reshape(len(b), -1)
+    return np.maximum((af**2).sum(1, keepdims=True) + m @ (bf**2).T - 2.0 * af @ bf.T, 0.0)
+
+
+class CodeMixture:
+    """Candidates built from a run's fitted codes and their decoded (scaled) motor sequences.
+
+    Parameters
+    ----------
+    codes : ndarray (m, q)
+        The fitted codes.
+    decode : callable
+        ``decode(Z) -> (len(Z), T, J)`` scaled motor (the run's decoder).
+    neighbours : int
+        Nearest fitted codes each code is joined to (capped at m - 1).
+    points : sequence of float
+        Positions on each segment.
+    """
+
+    def __init__(self, codes: np.ndarray, decode, neighbours: int = NEIGHBOURS, points=SEGMENT_POINTS):
+        codes = np.asarray(codes, dtype=np.float64)
+        if codes.ndim != 2 or len(codes) < 1:
+            raise UserError(f"the mixture needs fitted codes (m, q), got shape {codes.shape}")
+        k = min(int(neighbours), len(codes) - 1)
+        rows, sources = [codes], [np.stack([np.arange(len(codes))] * 2, axis=1)]
+        if k > 0:
+            d2 = ((codes[:, None] - codes[None]) ** 2).sum(-1)
+            np.fill_diagonal(d2, np.inf)
+            near = np.argsort(d2, axis=1, kind="stable")[:, :k]
+            for a in points:
+                rows.append((codes[:, None] * (1.0 - a) + codes[near] * a).reshape(-1, codes.shape[1]))
+                sources.append(np.stack([np.repeat(np.arange(len(codes)), k), near.reshape(-1)], axis=1))
+        self.candidates = np.concatenate(rows)
+        self.sources = np.concatenate(sources)  # (c, 2): the fitted codes each candidate is built from
+        self.decoded = np.asarray(decode(self.candidates), dtype=np.float64)
+        self.noise: float | None = None
+
+    def weights(self, scaled: np.ndarray, observed: np.ndarray, noise: float, exclude: np.ndarray | None = None):
+        """(n, c) posterior weights of the candidates given the observed entries."""
+        energy = _sq_distances(scaled, self.decoded, observed) / (2.0 * noise)
+        if exclude is not None:
+            energy = np.where(exclude, np.inf, energy)
+        energy -= energy.min(axis=1, keepdims=True)
+        w = np.exp(-energy)
+        return w / w.sum(axis=1, keepdims=True)
+
+    def predict(self, scaled: np.ndarray, observed: np.ndarray, noise: float | None = None):
+        """Posterior-mean sequences (n, T, J, scaled) and posterior-mode codes (n, q)."""
+        noise = self.noise if noise is None else noise
+        if noise is None:
+            raise UserError("the mixture's noise is not chosen: call choose_noise() or give noise=")
+        w = self.weights(scaled, observed, noise)
+        return np.einsum("nc,ctj->ntj", w, self.decoded), self.candidates[np.argmax(w, axis=1)]
+
+    def choose_noise(self, fitted_scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray,
+                     grid=NOISE_GRID) -> dict:
+        """σ² of :data:`NOISE_GRID` whose leave-one-out prediction of the fitted demonstrations
+        is best (each predicted from the candidates not built from it, then
+        :func:`continuity_correction`); sets and returns ``{"noise": σ², "loo": {σ²: MSE}}``.
+
+        ``fitted_scaled`` (m, T, J) are the demonstrations of the codes, ``observed`` (m, T)
+        their observed steps under the rule being predicted, ``valid`` their valid steps.
+        """
+        m = len(fitted_scaled)
+        own = np.arange(m)[:, None]
+        exclude = (self.sources[None, :, 0] == own) | (self.sources[None, :, 1] == own)
+        scores = {}
+        for noise in grid:
+            w = self.weights(fitted_scaled, observed, noise, exclude)
+            pred = continuity_correction(np.einsum("nc,ctj->ntj", w, self.decoded), fitted_scaled, observed, valid)
+            left = (valid & ~observed)[..., None]
+            err = ((pred - fitted_scaled) ** 2 * left).sum((1, 2)) / np.maximum(left.sum((1, 2)) * pred.shape[2], 1)
+            scores[float(noise)] = float(err[left.any((1, 2))].mean()) if left.any() else 0.0
+        self.noise = min(scores, key=scores.get)
+        return {"noise": self.noise, "loo": scores}
+
+
+def continuity_correction(predicted: np.ndarray, scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray):
+    """Add the residual at each sample's last observed step, decaying linearly to zero at its
+    last valid step, to the unobserved steps (scaled units; observed steps unchanged).
+
+    ``predicted``, ``scaled`` (n, T, J); ``observed``, ``valid`` (n, T) bool (a prefix).
+    """
+    out = np.array(predicted, dtype=np.float64, copy=True)
+    t = np.arange(out.shape[1])
+    for i in range(len(out)):
+        seen = np.flatnonzero(observed[i])
+        end = np.flatnonzero(valid[i])
+        if not seen.size or not end.size or seen[-1] >= end[-1]:
+            continue
+        s, e = seen[-1], end[-1]
+        ramp = np.clip(1.0 - (t - s) / (e - s), 0.0, 1.0)
+        rest = (t > s) & valid[i]
+        out[i, rest] += ramp[rest, None] * (scaled[i, s] - out[i, s])
+    return out

@@ -1,0 +1,208 @@
+"""Predicting the rest of a motion (issue 25, items 2 and 6): `predict`, the mixture over
+the fitted codes, the continuity correction, the predicted data set and `primspace predict`."""
+
+import json
+
+import numpy as np
+import pytest
+
+from primspace.data import MotionDataset
+from primspace.errors import UserError
+from primspace.peers import unobserved_mse
+from primspace.train import TrainConfig, fit
+from primspace.train.mixture import CodeMixture, continuity_correction
+from primspace.train.predict import MIXTURE, predict
+from conftest import assert_user_error
+from test_train import SMALL, primitives
+
+FAST = dict(batch_size=12, threads=1)
+
+
+@pytest.fixture(scope="module")
+def train_set():
+    return primitives(8, seed=0)
+
+
+@pytest.fixture(scope="module")
+def eval_set():
+    return primitives(4, seed=100)
+
+
+@pytest.fixture(scope="module")
+def trained(train_set):
+    return fit(train_set, model_config=SMALL, train_config=TrainConfig(epochs=30, **FAST), init="projection",
+               progress=False)
+
+
+@pytest.fixture(scope="module")
+def image_set():
+    return primitives(3, seed=3, T=12, J=3, images=True)
+
+
+@pytest.fixture(scope="module")
+def image_run(image_set):
+    return fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=2, **FAST), progress=False)
+
+
+# ------------------------------------------------------------------ the mixture
+
+
+def test_continuity_correction_closes_the_gap_and_leaves_the_observed_part():
+    pred = np.zeros((2, 5, 1))
+    truth = np.ones((2, 5, 1))
+    observed = np.array([[1, 1, 0, 0, 0], [1, 0, 0, 0, 0]], bool)
+    valid = np.array([[1, 1, 1, 1, 1], [1, 1, 1, 0, 0]], bool)
+    out = continuity_correction(pred, truth, observed, valid)
+    assert out[0, :, 0].tolist() == pytest.approx([0, 0, 2 / 3, 1 / 3, 0])  # residual 1 at step 1, 0 at the end
+    assert out[1, :, 0].tolist() == pytest.approx([0, 0.5, 0, 0, 0])  # ends at the last valid step; padding untouched
+    assert (pred == 0).all()  # the input is not changed
+
+
+def test_the_mixture_recovers_a_decoded_candidate_and_weighs_by_the_observed_part():
+    grid = np.linspace(0, 1, 20)
+
+    def decode(codes):  # a line per code: offset + slope * t, (n, 20, 1)
+        return codes[:, None, :1] + codes[:, None, 1:2] * grid[None, :, None]
+
+    codes = np.array([[0.0, 1.0], [0.0, -1.0], [2.0, 0.0]])
+    mixture = CodeMixture(codes, decode, neighbours=1, points=(0.5,))
+    assert len(mixture.candidates) == 3 + 3  # the codes and one midpoint per code
+    truth = decode(codes[[0, 2]])
+    observed = np.zeros((2, 20), bool)
+    observed[:, :8] = True
+    scaled, modes = mixture.predict(truth, observed, noise=1e-4)
+    np.testing.assert_allclose(scaled, truth, atol=1e-6)  # each prefix names its own line
+    np.testing.assert_allclose(modes, codes[[0, 2]])
+    wide, _ = mixture.predict(truth[:1], np.eye(1, 20, dtype=bool), noise=10.0)  # one step, both lines start at 0
+    assert abs(wide[0, -1, 0] - truth[0, -1, 0]) > 0.3  # an ambiguous prefix averages the candidates
+    with pytest.raises(UserError, match="noise"):
+        CodeMixture(codes, decode).predict(truth, observed)
+
+
+def test_choose_noise_uses_the_fitted_demonstrations_only(trained, train_set):
+    scaled = trained.scaler.transform(train_set.motor)
+    decode_calls = []
+
+    def decode(codes):
+        decode_calls.append(len(codes))
+        return scaled[np.argmin(((codes[:, None] - trained.latents[None]) ** 2).sum(-1), axis=1)]
+
+    mixture = CodeMixture(trained.latents, decode)
+    observed = np.zeros(scaled.shape[:2], bool)
+    observed[:, :10] = True
+    choice = mixture.choose_noise(scaled, observed, np.ones_like(observed))
+    assert choice["noise"] in choice["loo"] and mixture.noise == choice["noise"]
+    assert decode_calls == [len(mixture.candidates)]  # decoded once
+
+
+# ------------------------------------------------------------------ predict
+
+
+@pytest.mark.parametrize("init", ["projection", "nearest", MIXTURE])
+def test_predict_measures_the_unobserved_steps_only(trained, train_set, eval_set, init):
+    p = predict(trained, eval_set, observe=0.3, init=init, epochs=5, fitted_data=train_set, frames=False)
+    assert p.motor.shape == eval_set.motor.shape and p.codes.shape == (len(eval_set), SMALL.latent_dim)
+    assert p.motor_observed.sum(axis=1).tolist() == [9] * len(eval_set)  # ceil(0.3 * 30)
+    scaler = trained.scaler
+    expect = unobserved_mse(scaler.transform(p.motor), scaler.transform(eval_set.motor), p.motor_observed)
+    np.testing.assert_allclose(p.errors["motor_mse"], expect, rtol=1e-5)
+    assert np.isfinite(p.errors["motor_mse"]).all() and p.summary()["mean"]["motor_mse"] > 0
+
+
+def test_more_observed_predicts_better_with_the_mixture(trained, train_set, eval_set):
+    early = predict(trained, eval_set, observe=0.1, init=MIXTURE, fitted_data=train_set, frames=False)
+    late = predict(trained, eval_set, observe=0.6, init=MIXTURE, fitted_data=train_set, frames=False)
+    assert late.summary()["mean"]["motor_mse"] < early.summary()["mean"]["motor_mse"]
+
+
+def test_continuity_lowers_the_error_right_after_the_observed_part(trained, train_set, eval_set):
+    kw = dict(observe=0.5, init="nearest", epochs=0, fitted_data=train_set, frames=False)
+    plain, joined = predict(trained, eval_set, **kw), predict(trained, eval_set, continuity=True, **kw)
+    truth, s = trained.scaler.transform(eval_set.motor), 15
+    gap = lambda p: np.abs(trained.scaler.transform(p.motor)[:, s] - truth[:, s]).mean()  # noqa: E731
+    assert gap(joined) < gap(plain)
+    np.testing.assert_allclose(joined.motor[:, :s], plain.motor[:, :s], rtol=1e-5, atol=1e-6)
+
+
+def test_same_seed_same_prediction(trained, train_set, eval_set):
+    a = predict(trained, eval_set, observe=0.5, init="projection", epochs=5, frames=False)
+    b = predict(trained, eval_set, observe=0.5, init="projection", epochs=5, frames=False)
+    assert np.array_equal(a.motor, b.motor) and np.array_equal(a.codes, b.codes)
+
+
+def test_the_prediction_is_a_data_set_of_the_same_schema(trained, eval_set, tmp_path):
+    p = predict(trained, eval_set, observe=0.5, init="zero", epochs=3, indices=[3, 1], frames=False)
+    ds = p.to_dataset(eval_set)
+    assert ds.labels.tolist() == eval_set.labels[[3, 1]].tolist()
+    np.testing.assert_array_equal(ds.motor, p.motor)
+    back = MotionDataset.load(ds.save(tmp_path / "p.h5"))
+    np.testing.assert_array_equal(back.motor, p.motor)
+    assert "predicted by primspace" in back.source
+
+
+def test_frames_are_predicted_and_scored_on_the_unobserved_frames(image_run, image_set):
+    p = predict(image_run, image_set, observe=0.5, observe_frames="first", init="zero", epochs=2)
+    assert p.frames.shape == image_set.images.shape and p.frames.dtype == np.uint8
+    assert p.frames_observed.sum(axis=1).tolist() == [1] * len(image_set)
+    assert (p.errors["vision_mse"] > 0).all() and np.allclose(p.errors["psnr"], 10 * np.log10(1 / p.errors["vision_mse"]))
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(observe=0), "at least 1 step"),
+    (dict(observe=1.5), r"\(0, 1\]"),
+    (dict(observe=None), "nothing to predict"),
+    (dict(observe=0.5, init="oracle"), "unknown start"),
+    (dict(observe=0.5, observe_frames="first"), "has no frames"),
+    (dict(observe="none", observe_frames=None), "nothing to infer"),
+])
+def test_bad_requests_are_refused_in_one_line(trained, eval_set, kw, match):
+    with pytest.raises(UserError, match=match):
+        predict(trained, eval_set, epochs=1, **kw)
+
+
+# ------------------------------------------------------------------ the command
+
+
+def test_predict_command_writes_data_result_and_figure(run_cli, train_set, eval_set, tmp_path):
+    run_dir, data = tmp_path / "run", tmp_path / "data.h5"
+    train_set.save(tmp_path / "train.h5")
+    fit(MotionDataset.load(tmp_path / "train.h5"), run_dir, model_config=SMALL,
+        train_config=TrainConfig(epochs=5, **FAST), progress=False)
+    eval_set.save(data)
+    out = tmp_path / "pred"
+    args = ["predict", run_dir, data, "--observe", "0.25", "--init", "mixture", "--out", out]
+    res = run_cli(*args)
+    assert res.code == 0, res.err
+    assert "motions predicted" in res.out
+    result = json.loads((out / "result.json").read_text())
+    assert result["n"] == len(eval_set) and result["mean"]["motor_mse"] > 0 and result["success"] is None
+    assert len(result["per_sample"]["motor_mse"]) == len(eval_set)
+    assert MotionDataset.load(out / "predicted.h5").motor.shape == eval_set.motor.shape
+    assert (out / "prediction.png").stat().st_size > 1000
+    assert_user_error(run_cli(*args), "exists")  # never replaced without --overwrite
+    assert run_cli(*args, "--overwrite").code == 0
+
+
+@pytest.mark.parametrize("flags, match", [
+    (["--observe", "0"], "at least 1 step"),
+    (["--observe", "1.5"], "(0, 1]"),
+    (["--observe", "half"], "--observe 'half'"),
+    (["--observe", "0.5", "--observe-frames", "first"], "has no frames"),
+])
+def test_predict_command_refuses_bad_input_with_exit_2(run_cli, eval_set, tmp_path, flags, match):
+    run_dir, data = tmp_path / "run", tmp_path / "data.h5"
+    fit(eval_set, run_dir, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), progress=False)
+    eval_set.save(data)
+    assert_user_error(run_cli("predict", run_dir, data, "--out", tmp_path / "o", *flags), match)
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_estimator_predicts_in_physical_units(train_set, eval_set):
+    from primspace.train import AutoDecoder
+
+    model = AutoDecoder(model_config=SMALL, train_config=TrainConfig(epochs=10, **FAST), init="projection",
+                        progress=False).fit(train_set)
+    motor, frames = model.predict(eval_set, observe=0.5)
+    assert motor.shape == eval_set.motor.shape and frames is None
+    assert model.prediction_.init == MIXTURE and np.isfinite(model.prediction_.errors["motor_mse"]).all()
+    np.testing.assert_allclose(motor[:, :1], eval_set.motor[:, :1], atol=np.ptp(eval_set.motor))  # physical scale
