@@ -431,14 +431,14 @@ def predict_error_table(results: dict) -> tuple[list[str], list[list]]:
         columns += [f"success, {float(f):.0%}" for f in fractions + (["1"] if judged else [])]
     rows = []
     for method, cells in table.items():
-        row = [method] + [_mean_std(cells.get(f, {}).get("mse")) for f in fractions]
+        row = [method] + [_cell_text(cells.get(f, {}).get("mse")) for f in fractions]
         if results.get("judged"):
-            row += [_mean_std(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])]
+            row += [_cell_text(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])]
         rows.append(row)
     return columns, rows
 
 
-def _mean_std(cell, digits: int = 4) -> str:
+def _cell_text(cell, digits: int = 4) -> str:
     """``[mean, std, n]`` as "mean ± std" (n > 1) or "mean"; "–" for none."""
     if not cell:
         return "–"
