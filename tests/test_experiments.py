@@ -555,3 +555,21 @@ def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_p
         ExperimentDir(exp.path, replace(TINY, inits=("zero",)))
     with pytest.raises(UserError, match="made with other settings"):
         ExperimentDir(exp.path, replace(more, fit_epochs=4))
+
+
+def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
+    """`experiment predict`: every start and peer at every fraction, judged on simulator data, resumable."""
+    from primspace.experiments.prediction import PEERS, run_predict
+
+    exp = finished[0]
+    results = run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)
+    table = results["table"]
+    assert set(table) == {"zero", "mixture", "mixture (no continuity)", "mixture (labels; diagnostic)", *PEERS}
+    for method, cells in table.items():
+        assert set(cells) >= {"0.25", "0.5"}, method
+        assert all(np.isfinite(cells[k]["mse"][0]) and cells[k]["mse"][2] == 1 for k in ("0.25", "0.5"))
+    assert results["judged"] and "1" in table["mixture"] and 0 <= table["mixture"]["1"]["success"][0] <= 1
+    assert table["mean motion (labels)"]["0.5"]["mse"][0] > 0
+    assert_figure(exp.figure("predict_errors"))
+    assert "Predicting the rest of a motion" in build_report(exp.path).read_text()
+    assert run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)["table"] == table

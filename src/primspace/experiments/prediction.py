@@ -74,12 +74,17 @@ def _given_labels(fit, fitted: MotionDataset, test: MotionDataset, noises: dict)
 def _peer_predictions(fitted_scaled, fitted, test_scaled, test, observed) -> dict:
     """Scaled predictions of each peer (the ProMPs' noise chosen on the answer)."""
     from primspace.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+    from primspace.train.observe import observation_masks
 
     lf, lt = fitted.lengths, test.lengths
     out = {}
+    left = (observation_masks(None, test)[0] & ~observed).any()
     for name, per_label in (("promp (labels)", True), ("promp (one for all)", False)):
         peer = ProMPPeer(per_label=per_label).fit(fitted_scaled, fitted.labels, lf)
-        out[name] = best_noise(peer, test_scaled, observed, test.labels, lt).predicted
+        if left:
+            out[name] = best_noise(peer, test_scaled, observed, test.labels, lt).predicted
+        else:  # everything observed (the judge's 100 %): no answer to choose the noise on, the default
+            out[name] = peer.predict(test_scaled, observed, test.labels, lt)
     out["nearest neighbour"] = NearestPeer().fit(fitted_scaled, fitted.labels, lf).predict(test_scaled, observed, test.labels, lt)
     out["mean motion (labels)"] = MeanMotionPeer().fit(fitted_scaled, fitted.labels, lf).predict(
         test_scaled, observed, test.labels, lt)
@@ -156,7 +161,24 @@ def run_predict(exp: ExperimentDir, fractions=PREDICT_FRACTIONS, starts=PREDICT_
                "epochs": int(epochs), "judged": judge, "by_seed": by_seed, "failures": grid.failures,
                "table": predict_table(by_seed)}
     exp.write_results("predict", results)
+    _figure(exp, results)
     return results
+
+
+def _figure(exp: ExperimentDir, results: dict) -> None:
+    """figures/predict_errors.png: mean MSE of the rest against the observed fraction, per method."""
+    from primspace.plots import plot_prediction_errors, save_figure
+
+    keys = [f"{f:g}" for f in results["fractions"]]
+    means, spreads = {}, {}
+    for method, cells in results["table"].items():
+        if all(cells.get(k, {}).get("mse") for k in keys):
+            means[method] = [cells[k]["mse"][0] for k in keys]
+            spreads[method] = [cells[k]["mse"][1] for k in keys]
+    if means:
+        save_figure(plot_prediction_errors(results["fractions"], means, spreads,
+                                           title=f"q = {results['latent_dim']}, mean ± std over seeds"),
+                    exp.figure("predict_errors"))
 
 
 def _judgeable(data: MotionDataset) -> bool:

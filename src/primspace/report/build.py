@@ -28,6 +28,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.success, "success"),
     (sections.inter, "inter"),
     (sections.tuning, "tune"),
+    (sections.prediction, "predict"),
     (sections.composite, "composite"),
     (sections.latent_figures, "intra"),
     (sections.animations, "intra_animation"),

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from primspace.experiments.claims import check_claims, claims_table
 from primspace.experiments.results import (
+    predict_error_table,
     ANIMATION_RESULTS,
     IMAGE_STRIPS,
     INITIAL_CODES,
@@ -265,6 +266,28 @@ def tuning(out_dir: Path, report: HtmlReport) -> None:
     report.table(columns, rows)
     if results["failures"]:
         report.note(f"{len(results['failures'])} tuning run(s) failed: " + "; ".join(results["failures"]), "warn")
+
+
+def prediction(out_dir: Path, report: HtmlReport) -> None:
+    """Predicting the rest of a motion: error (and success) against the observed fraction, per start and peer."""
+    results = read_results(out_dir, "predict")
+    if results is None:
+        return
+    report.section("Predicting the rest of a motion")
+    report.paragraph(
+        f"Each evaluation motion's first 10, 25 and 50 % are observed and the rest predicted, with θ of the projection "
+        f"fit at q = {results['latent_dim']} frozen (docs/predict.md). primspace's starts: gradient inference on the "
+        f"observed entries ({results['epochs']} epochs) from zero, projection, calibrated or nearest, or the mixture "
+        "over the fitted codes (no gradient); each with the continuity correction. The peers on the same split: "
+        "ProMP conditioning given the labels, one ProMP for all, the nearest fitted demonstration, the mean motion "
+        "of the primitive (given the label); the ProMPs' noise chosen on the answer. MSE of the unobserved steps, "
+        "mean ± std over seeds" + ("; success as judged by the simulator (at 100 % nothing is left to predict)."
+                                   if results.get("judged") else "."))
+    columns, rows = predict_error_table(results)
+    report.table(columns, rows)
+    report.figure(figure_file(out_dir, "predict_errors"), "Error of the unobserved steps against the observed fraction.")
+    if results["failures"]:
+        report.note(f"{len(results['failures'])} prediction point(s) failed: " + "; ".join(results["failures"]), "warn")
 
 
 def composite(out_dir: Path, report: HtmlReport) -> None:
