@@ -206,3 +206,15 @@ def test_the_estimator_predicts_in_physical_units(train_set, eval_set):
     assert motor.shape == eval_set.motor.shape and frames is None
     assert model.prediction_.init == MIXTURE and np.isfinite(model.prediction_.errors["motor_mse"]).all()
     np.testing.assert_allclose(motor[:, :1], eval_set.motor[:, :1], atol=np.ptp(eval_set.motor))  # physical scale
+
+
+def test_online_prediction_reports_latency_and_the_error_against_time(run_cli, trained, train_set, eval_set, tmp_path):
+    p = predict(trained, eval_set, observe=0.5, init="nearest", online=2, fitted_data=train_set, frames=False)
+    online = p.details["online"]
+    assert online["steps_observed"] == 15 and online["iterations"] == 2 and online["latency_ms_mean"] > 0
+    assert len(online["remaining_error"]) == eval_set.length and online["remaining_error"][-1] is None  # nothing left
+    assert np.isfinite(p.errors["motor_mse"]).all()
+    with pytest.raises(UserError, match="not 'mixture'"):
+        predict(trained, eval_set, observe=0.5, init=MIXTURE, online=2, fitted_data=train_set)
+    with pytest.raises(UserError, match="iterations"):
+        predict(trained, eval_set, observe=0.5, init="zero", online=-1)

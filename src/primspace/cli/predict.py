@@ -92,6 +92,10 @@ def predict_command(
     latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
     threads: Optional[int] = typer.Option(None, "--threads"),
+    online: bool = typer.Option(False, "--online", help="Steps arrive one at a time: --iterations inference steps "
+                                "after each, warm-started (predictive coding); result.json gets the latency per step "
+                                "and the error of the rest after each step."),
+    iterations: int = typer.Option(5, "--iterations", help="With --online: inference iterations per arriving step."),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
 ) -> None:
@@ -115,13 +119,17 @@ def predict_command(
     configure_process(TrainConfig(threads=threads).validate())
     with atomic_directory(out, overwrite, kind) as tmp:
         prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, epochs=epochs, indices=idx,
-                             fitted_data=fitted_data, threads=threads, **overrides)
+                             fitted_data=fitted_data, threads=threads, online=iterations if online else None,
+                             **overrides)
         judged = None if no_judge else _judged(prediction.to_dataset(dataset))
         command = {"run": str(run), "data": str(file), "observe": motor, "observe_frames": frames, "init": init,
-                   "epochs": epochs}
+                   "epochs": epochs, "online": iterations if online else None}
         result = _write_outputs(tmp, prediction, dataset, judged, command)
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     line = f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
+    if online:
+        o = prediction.details["online"]
+        line += f"; online, {o['iterations']} iterations per step: {o['latency_ms_mean']:.1f} ms per step"
     if judged is not None:
         line += "; success " + ", ".join(f"{p} {r:.2f}" for p, r in judged["rates"].items())
     typer.echo(line)

@@ -152,6 +152,26 @@ def _mixture(parent: TrainedRun, data: MotionDataset, observation: Observation, 
     return codes.astype(np.float32), scaled, predicted_frames, details
 
 
+def _online(parent: TrainedRun, data: MotionDataset, observation: Observation, init, iterations: int, fitted_data,
+            frames: bool, overrides: dict):
+    """Codes after the observed steps arrived one at a time (:func:`~primspace.train.online.infer_online`,
+    ``iterations`` per step), their decoding, and the error of the remaining steps against time."""
+    from primspace.train.online import infer_online
+
+    if observation.motor == NOTHING or observation.frames != observation.motor:
+        raise UserError("online prediction observes joints and frames together, a step at a time: give --observe "
+                        "only (not --observe-frames, not 'none')")
+    result = infer_online(parent, data, iterations=iterations, init=init, fitted_data=fitted_data,
+                          latent_lr=overrides.get("latent_lr"), seed=overrides.get("seed"))
+    seen = int(observation_masks(observation, data)[0].sum(axis=1).max())
+    codes = result.codes[:, result.column(seen)]
+    motor, predicted_frames = reconstruct(parent, codes, images=frames)
+    details = {"online": {"iterations": int(iterations), "steps_observed": seen,
+                          "latency_ms_mean": 1e3 * result.latency_mean, "latency_ms_p95": 1e3 * result.latency_p95,
+                          "remaining_error": [None if not np.isfinite(e) else float(e) for e in result.mean_error]}}
+    return codes.astype(np.float32), parent.scaler.transform(motor), predicted_frames, details
+
+
 def predict(
     run: TrainedRun | str | os.PathLike,
     dataset: MotionDataset,
@@ -164,6 +184,7 @@ def predict(
     fitted_data: MotionDataset | None = None,
     frames: bool = True,
     continuity: bool = False,
+    online: int | None = None,
     progress: bool | None = None,
     **overrides,
 ) -> Prediction:
@@ -195,6 +216,12 @@ def predict(
         ``mixture``; default: the run's data file).
     frames : bool
         Decode the frames too (runs with an image head).
+    online : int, optional
+        Predictive coding a step at a time (:mod:`primspace.train.online`): the steps
+        arrive one by one, ``online`` inference iterations after each, warm-started from
+        the previous code; the prediction is the one after the last observed step (the
+        same number of steps for every sample: the largest observed prefix). ``details``
+        then holds the latency per step and the error of the remaining steps after each.
     continuity : bool
         Apply :func:`~primspace.train.mixture.continuity_correction` to the motor (the
         residual at the last observed step, decaying to zero at the end).
@@ -223,7 +250,14 @@ def predict(
     motor_observed, frames_observed = observation_masks(observation, data)
     want_frames = frames and parent.model_config.has_images
     scaler, details = parent.scaler, {}
-    if init == MIXTURE:
+    if online is not None:
+        if init == MIXTURE:
+            raise UserError("online prediction runs gradient steps: start it by zero, random, projection, pca, "
+                            "calibrated or nearest, not 'mixture'")
+        codes, scaled, predicted_frames, details = _online(parent, data, observation, init, online, fitted_data,
+                                                           want_frames, overrides)
+        epochs, init = 0, init or parent.init
+    elif init == MIXTURE:
         codes, scaled, predicted_frames, details = _mixture(parent, data, observation, fitted_data, want_frames)
         epochs = 0
     else:

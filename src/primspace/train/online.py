@@ -1,0 +1,409 @@
+"""Online inference as predictive coding (issue 25, item 3): the code follows a motion as its steps arrive.
+
+The paper's Background describes predictive coding: "Predicted information is compared
+with the real one and internal state is corrected based on the error". Here the internal
+state is the code ``z`` of each demonstration, the prediction is the decoder's whole
+sequence ``d(θ, z)``, and the real information is the prefix of the motion seen so far.
+After each arriving step ``t`` (a counter shared by the samples of a data set, which are
+processed together as one batch, each within its own valid length):
+
+1. ``k`` iterations of the row-wise Adam of :func:`~primspace.train.infer`
+   (:class:`~primspace.latent.LatentTable`: the run's ``latent_lr``, Adam's betas) on the
+   codes, θ frozen, with the loss of ``infer(..., observe=t)``
+   (:func:`~primspace.train.loop.batch_loss`: the motor MSE over each sample's observed
+   valid entries, plus the vision term over its observed frames when the run uses
+   frames), warm-started from the code after step ``t - 1``. By default each step's
+   Adam starts afresh (moments reset) on the warm code; ``carry_moments=True`` runs
+   one Adam along the stream instead;
+2. one decode: the motor prediction of the whole sequence, steps ``t+1..T`` being the
+   forecast.
+
+The code before the first step comes from the chosen start under an observation of
+``start_step`` steps (:func:`~primspace.train.observe.observed_start`, exactly the start
+of ``infer(..., observe=start_step)``).
+
+Differences from :func:`~primspace.train.infer`: the learning rate is constant (infer's
+cosine schedule runs over epochs, and a stream has none); the vision term is computed on
+every observed frame (infer may draw ``vision_frames`` of them); float32 (no autocast);
+no run directory, no checkpoint, no data loader: a plain torch loop over the model. The
+decoder is causal, so the iterations run the recurrence over the observed prefix only
+(``t / T`` of a full pass; not with a code window); a step costs ``k`` forward/backward
+passes over ``t`` steps and one motor-only forward pass over ``T``.
+
+The error of the remaining steps is :func:`primspace.peers.unobserved_mse` (motor MSE in
+scaled units over each sample's valid steps after ``t``), the measure that
+:func:`offline_errors` applies to ``infer(..., observe=t)``, and the peers of prediction
+theirs, so that they all read alike.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+from primspace.data import MotionDataset
+from primspace.errors import UserError
+from primspace.latent import INFER_STARTS, LatentTable
+from primspace.peers import unobserved_mse
+from primspace.progress import progress_bar
+from primspace.train.api import _initializer, _seeds, _start_codes, as_run, infer, uses_images
+from primspace.train.checks import check_calibrated, check_data_fits, check_init
+from primspace.train.config import resolve_device
+from primspace.train.loop import DataTensors, autocast_for, batch_loss
+from primspace.train.observe import Observation, observing_args
+from primspace.train.run import TrainedRun
+
+__all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors"]
+
+
+# ----------------------------------------------------------------------- the measure
+
+
+def _mean_over_samples(errors: np.ndarray) -> np.ndarray:
+    """The mean over samples (axis 0) of the finite errors; NaN where there are none."""
+    finite = np.isfinite(errors)
+    counts = finite.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, np.where(finite, errors, 0.0).sum(axis=0) / counts, np.nan)
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass
+class OnlineResult:
+    """What :func:`infer_online` returns: codes, forecast errors and latency after each step.
+
+    Attributes
+    ----------
+    steps : ndarray (S,) int
+        The steps observed, ``start_step..T``: column ``s`` is "after step ``steps[s]``".
+    codes : ndarray (n, S, q) float32
+        Each sample's code after each step (the internal state, corrected by the error).
+    start_codes : ndarray (n, q) float32
+        The codes before the first step (the chosen start).
+    errors : ndarray (n, S) float64
+        Motor MSE (scaled units) of the prediction of the remaining valid steps ``> t``
+        (:func:`~primspace.peers.unobserved_mse`); NaN for a sample with none left.
+    latency : ndarray (S,) float64
+        Seconds of each arriving step: its ``k`` iterations and the decode
+        (``time.perf_counter``; CUDA synchronised).
+    prediction : ndarray (n, T, J) float32
+        The final prediction, in physical units (the run's scaler inverted).
+    iterations : int
+    init : str
+    latent_lr : float
+    """
+
+    steps: np.ndarray
+    codes: np.ndarray
+    start_codes: np.ndarray
+    errors: np.ndarray
+    latency: np.ndarray
+    prediction: np.ndarray
+    iterations: int
+    init: str
+    latent_lr: float
+
+    @property
+    def mean_error(self) -> np.ndarray:
+        """(S,) the mean over samples of :attr:`errors` (samples with steps left; NaN if none)."""
+        return _mean_over_samples(self.errors)
+
+    @property
+    def latency_mean(self) -> float:
+        """Mean seconds per arriving step."""
+        return float(np.mean(self.latency))
+
+    @property
+    def latency_p95(self) -> float:
+        """95th percentile of the seconds per arriving step."""
+        return float(np.percentile(self.latency, 95))
+
+    def column(self, t: int) -> int:
+        """The column of :attr:`codes` / :attr:`errors` after step ``t``."""
+        hits = np.flatnonzero(self.steps == int(t))
+        if not hits.size:
+            raise UserError(f"step {t} was not recorded (steps {int(self.steps[0])}..{int(self.steps[-1])})")
+        return int(hits[0])
+
+    def error_at(self, t: int) -> float:
+        """The mean error of the remaining steps after step ``t``."""
+        return float(self.mean_error[self.column(t)])
+
+
+# ------------------------------------------------------------------------- the loop
+
+
+class OnlineInference:
+    """The codes of a batch of demonstrations, corrected as their steps arrive (predictive coding).
+
+    "Predicted information is compared with the real one and internal state is corrected
+    based on the error" (paper, Background): each :meth:`step` observes one more step,
+    corrects the codes by ``iterations`` Adam iterations on the error of the steps seen
+    so far, and returns the decoder's prediction of the whole sequence.
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+        The trained run (θ frozen; its scaler, initialiser, ``latent_lr`` and loss).
+    data : MotionDataset
+        The demonstrations, with the run's T and J (and frames of its size if used). Only
+        the steps observed so far ever reach the loss; padding never does.
+    iterations : int
+        k >= 0, the iterations per arriving step (0: the codes stay the start).
+    init : str, optional
+        The start (:func:`~primspace.train.infer`'s ``init``; default: the run's), under
+        an observation of ``start_step`` steps.
+    start_step : int
+        The first step to arrive is ``start_step`` (1..T): the start reads steps
+        ``1..start_step``.
+    latent_lr : float, optional
+        Constant learning rate of the codes (default: the run's ``latent_lr``).
+    fitted_data : MotionDataset, optional
+        The run's training data, for the starts that read it (``nearest``, ``calibrated``).
+    device : str
+    images : bool, optional
+        Use the frames (default: when the run has an image head and the data has frames,
+        :func:`~primspace.train.uses_images`).
+    seed : int, optional
+        Seed of a ``random`` start (default: the run's, as :func:`~primspace.train.infer`).
+    carry_moments : bool
+        False (default): each arriving step runs a fresh Adam (moments and bias
+        correction reset) from the warm code; True: one Adam runs along the stream, its
+        moments carried from step to step. The fresh one forecast better at every ``k``
+        on ``benchmarks/bench_online.py`` (old moments damp and misdirect the steps
+        that follow new evidence).
+    """
+
+    def __init__(self, run: TrainedRun | str | os.PathLike, data: MotionDataset, *, iterations: int,
+                 init: str | None = None, start_step: int = 1, latent_lr: float | None = None,
+                 fitted_data: MotionDataset | None = None, device: str = "cpu", images: bool | None = None,
+                 seed: int | None = None, carry_moments: bool = False) -> None:
+        parent = as_run(run)
+        if not isinstance(data, MotionDataset):
+            raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
+        self.iterations = _check_whole("iterations", iterations, 0)
+        self.carry_moments = bool(carry_moments)
+        self.init = parent.init if init is None else init
+        check_init(self.init, INFER_STARTS)
+        check_calibrated(self.init, parent)
+        lr = _check_lr(parent.train_config.latent_lr if latent_lr is None else latent_lr)
+        self.tc = replace(parent.train_config, latent_lr=lr, amp=False,
+                          seed=parent.train_config.seed if seed is None else _check_whole("seed", seed, 0))
+        self.use_images = uses_images(parent.model_config, data, self.tc, images)
+        self.length, self.n = data.length, len(data)
+        self.start_step = _check_whole("start_step", start_step, 1)
+        if self.start_step > self.length:
+            raise UserError(f"start_step must be in 1..T={self.length}, got {start_step}")
+        self.run, self.device = parent, resolve_device(device)
+        self.lengths = np.full(self.n, self.length) if data.lengths is None else np.asarray(data.lengths)
+        scaled = parent.scaler.transform(data.motor)
+        start = _start(parent, self.init, data, scaled, self.start_step, fitted_data, self.tc.seed)
+        self.table = LatentTable(torch.from_numpy(start.astype(np.float32)).to(self.device), lr)
+        self.start_codes = self.table.numpy()
+        self.model = copy.deepcopy(parent.model).to(self.device).eval().requires_grad_(False)
+        self.tensors = DataTensors.build(data, parent.scaler, self.use_images, self.device)
+        self.truth = self.tensors.motor.cpu().numpy()
+        self._full = self.model.config
+        self._valid = torch.ones(self.n, self.length, device=self.device) if self.tensors.mask is None \
+            else self.tensors.mask
+        self._arange = torch.arange(self.length, device=self.device)
+        self._idx = torch.arange(self.n, device=self.device)
+        self._autocast = autocast_for(self.tc, self.device)
+        self.t = self.start_step - 1
+
+    @property
+    def codes(self) -> np.ndarray:
+        """The current codes (n, q) float32."""
+        return self.table.numpy()
+
+    def step(self) -> torch.Tensor:
+        """Observe step ``t + 1``: correct the codes on the error of steps ``1..t+1``, then predict.
+
+        Returns
+        -------
+        Tensor (n, T, J)
+            The decoder's motor prediction of the whole sequence (scaled units, on the
+            device); the steps after the one observed are the forecast.
+        """
+        if self.t >= self.length:
+            raise UserError(f"all T={self.length} steps have been observed")
+        self.t += 1
+        if self.iterations:
+            if not self.carry_moments:  # a fresh Adam for this step, on the warm code
+                for moment in (self.table.exp_avg, self.table.exp_avg_sq, self.table.steps):
+                    moment.zero_()
+            seen = self._targets(self.t)
+            try:
+                for _ in range(self.iterations):
+                    z = self.table.batch(self._idx)
+                    loss, _ = batch_loss(self.model, z, self._idx, seen, self.tc, self._autocast)
+                    loss.backward()
+                    # the batch mean scaled z.grad by 1/n: each code steps on its own sample's gradient, as in infer
+                    self.table.step(self._idx, z.grad.mul_(self.n))
+            finally:
+                self.model.config = self._full
+        with torch.no_grad():
+            return self.model(self.table.codes, images=False).motor
+
+    def _targets(self, t: int) -> DataTensors:
+        """The targets and masks of the loss after step ``t``: ``infer(..., observe=t)``'s loss.
+
+        The decoder is causal (step ``t`` reads steps ``<= t`` only) and the loss counts the
+        observed steps only, so the iterations decode the observed prefix (this module's
+        copy of the model set to ``t`` steps; :meth:`step` sets it back): each sample's
+        mean over its valid steps ``<= t``, at ``t / T`` of a full pass. A model with a code
+        window (its K codes tie it to T steps) decodes all T, the unobserved ones masked.
+        """
+        whole = self.tensors
+        if self._full.code_window is not None or t >= self.length:
+            observed = None if t >= int(self.lengths.max()) else self._valid * (self._arange < t)
+            return DataTensors(whole.motor, whole.images, whole.mask, observed, observed)
+        self.model.config = replace(self._full, length=t)
+        mask = None if whole.mask is None else whole.mask[:, :t]
+        return DataTensors(whole.motor[:, :t], None if whole.images is None else whole.images[:, :t], whole.mask,
+                           mask, mask)
+
+
+def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, iterations: int,
+                 init: str | None = None, start_step: int = 1, latent_lr: float | None = None,
+                 fitted_data: MotionDataset | None = None, device: str = "cpu", images: bool | None = None,
+                 seed: int | None = None, carry_moments: bool = False, progress: bool | None = None) -> OnlineResult:
+    """Online inference over a data set: steps ``start_step..T`` arrive one at a time.
+
+    After each step, the codes are corrected on the error of the steps seen so far
+    ("Predicted information is compared with the real one and internal state is
+    corrected based on the error", paper, Background) and the decoder predicts the whole
+    sequence; the error of the prediction of the remaining steps is recorded with the
+    codes and the latency (:class:`OnlineInference` does the steps).
+
+    Parameters
+    ----------
+    run, data, iterations, init, start_step, latent_lr, fitted_data, device, images, seed, carry_moments
+        As :class:`OnlineInference`.
+    progress : bool, optional
+        Progress bar (default: when stderr is a terminal).
+
+    Returns
+    -------
+    OnlineResult
+    """
+    online = OnlineInference(run, data, iterations=iterations, init=init, start_step=start_step,
+                             latent_lr=latent_lr, fitted_data=fitted_data, device=device, images=images, seed=seed,
+                             carry_moments=carry_moments)
+    steps = np.arange(online.start_step, online.length + 1)
+    codes = np.empty((online.n, len(steps), online.start_codes.shape[1]), dtype=np.float32)
+    errors = np.empty((online.n, len(steps)))
+    latency = np.empty(len(steps))
+    sync = torch.cuda.synchronize if online.device.type == "cuda" else (lambda: None)
+    with progress_bar(len(steps), "online", enabled=progress) as advance:
+        for s, t in enumerate(steps):
+            sync()
+            t0 = time.perf_counter()
+            predicted = online.step()
+            sync()
+            latency[s] = time.perf_counter() - t0
+            predicted = predicted.cpu().numpy()
+            codes[:, s] = online.codes
+            errors[:, s] = unobserved_mse(predicted, online.truth, _prefix_mask(online.n, online.length, t),
+                                          online.lengths)
+            advance()
+    prediction = online.run.scaler.inverse_transform(predicted).astype(np.float32)
+    return OnlineResult(steps=steps, codes=codes, start_codes=online.start_codes, errors=errors, latency=latency,
+                        prediction=prediction, iterations=online.iterations, init=online.init,
+                        latent_lr=online.tc.latent_lr)
+
+
+# ---------------------------------------------------------------- the offline figure
+
+
+def offline_errors(run: TrainedRun | str | os.PathLike, data: MotionDataset, steps, *, epochs: int,
+                   init: str | None = None, fitted_data: MotionDataset | None = None, **overrides) -> dict:
+    """The error of the remaining steps after offline inference from the first ``t`` steps, for a few ``t``.
+
+    The reference for the online figures: for each ``t``, ``infer(run, data,
+    observe=t, epochs=epochs, init=init)`` (its start, loss and schedule), its codes
+    decoded, and the prediction of the valid steps after ``t`` compared with the real
+    ones (:func:`~primspace.peers.unobserved_mse`, the online measure): the internal state corrected by
+    the error to convergence rather than step by step.
+
+    Parameters
+    ----------
+    run, data
+        As :func:`infer_online`.
+    steps : iterable of int
+        The ``t`` (1..T) to infer from.
+    epochs : int
+        Epochs of each offline inference (enough to converge).
+    init, fitted_data
+        As :func:`~primspace.train.infer`.
+    **overrides
+        Train config overrides of :func:`~primspace.train.infer` (``latent_lr``,
+        ``batch_size``, ``device``, ``seed`` ...).
+
+    Returns
+    -------
+    dict
+        ``steps`` (S,) int, ``errors`` (n, S) float64 (NaN: no step left), ``mean_error`` (S,),
+        ``codes`` (n, S, q) float32.
+    """
+    parent = as_run(run)
+    if not isinstance(data, MotionDataset):
+        raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
+    check_data_fits(data, parent.model_config, False)
+    steps = np.asarray([_check_whole("steps", t, 1) for t in np.atleast_1d(np.asarray(steps, dtype=object))])
+    if steps.size == 0 or steps.max() > data.length:
+        raise UserError(f"steps must be one or more steps in 1..T={data.length}, got {steps.tolist()}")
+    truth = parent.scaler.transform(data.motor)
+    errors, codes = [], []
+    for t in steps:
+        inferred = infer(parent, data, epochs=epochs, init=init, observe=int(t), fitted_data=fitted_data,
+                         progress=False, **overrides)
+        with torch.no_grad():
+            predicted = parent.model(torch.from_numpy(inferred.latents), images=False).motor.numpy()
+        errors.append(unobserved_mse(predicted, truth, _prefix_mask(len(data), data.length, t), data.lengths))
+        codes.append(inferred.latents)
+    errors = np.stack(errors, axis=1)
+    return {"steps": steps, "errors": errors, "mean_error": _mean_over_samples(errors),
+            "codes": np.stack(codes, axis=1)}
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _start(parent: TrainedRun, init: str, data: MotionDataset, scaled: np.ndarray, start_step: int,
+           fitted_data: MotionDataset | None, seed: int) -> np.ndarray:
+    """The codes before the first step: ``infer(..., observe=start_step)``'s start (its initialiser
+    rule and seed, :func:`~primspace.train.observe.observed_start`)."""
+    observation = Observation.build(int(start_step))
+    observing = observing_args(init, observation, data, fitted_data)
+    seen = scaled * observing["observed"][..., None]  # what a new pca fits, as infer
+    seeds = _seeds(seed)
+    initializer = _initializer(init, parent, parent.model_config, seen, seeds)
+    return _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], None, observing)
+
+
+def _prefix_mask(n: int, length: int, t: int) -> np.ndarray:
+    """(n, T) bool: steps ``1..t`` observed (a sample's padding is left out by its length)."""
+    return np.broadcast_to(np.arange(length) < t, (n, length))
+
+
+def _check_whole(name: str, value, least: int) -> int:
+    """``value`` as an int >= ``least`` (not a bool, not a float), or one UserError."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < least:
+        raise UserError(f"{name} must be a whole number >= {least}, got {value!r}")
+    return int(value)
+
+
+def _check_lr(value) -> float:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(value) or value <= 0:
+        raise UserError(f"latent_lr must be a finite number > 0, got {value!r}")
+    return float(value)
