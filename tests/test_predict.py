@@ -218,3 +218,21 @@ def test_online_prediction_reports_latency_and_the_error_against_time(run_cli, t
         predict(trained, eval_set, observe=0.5, init=MIXTURE, online=2, fitted_data=train_set)
     with pytest.raises(UserError, match="iterations"):
         predict(trained, eval_set, observe=0.5, init="zero", online=-1)
+
+
+def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
+    """The README's path for one's own demonstrations: a CSV folder imported, fitted, predicted."""
+    data = primitives(4, seed=7, T=20, J=3)
+    for i, (motion, label) in enumerate(zip(data.motor, data.labels)):
+        folder = tmp_path / "csv" / f"prim{label}"
+        folder.mkdir(parents=True, exist_ok=True)
+        rows = "\n".join(",".join(f"{v:.6f}" for v in step) for step in motion)
+        (folder / f"demo{i}.csv").write_text("j0,j1,j2\n" + rows + "\n")
+    assert run_cli("import", tmp_path / "csv", "--format", "csv", "--length", "20", "--out", tmp_path / "d.h5").code == 0
+    assert run_cli("train", tmp_path / "d.h5", "--epochs", "3", "--latent-dim", "4", "--out", tmp_path / "run").code == 0
+    res = run_cli("predict", tmp_path / "run", tmp_path / "d.h5", "--observe", "5", "--init", "nearest", "--epochs", "2",
+                  "--out", tmp_path / "pred")
+    assert res.code == 0, res.err
+    result = json.loads((tmp_path / "pred" / "result.json").read_text())
+    assert result["observe"] == {"motor": 5, "frames": 5} and result["mean"]["motor_mse"] > 0
+    assert MotionDataset.load(tmp_path / "pred" / "predicted.h5").label_names == MotionDataset.load(tmp_path / "d.h5").label_names
