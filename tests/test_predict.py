@@ -16,32 +16,8 @@ from conftest import assert_user_error
 from test_train import SMALL, primitives
 
 FAST = dict(batch_size=12, threads=1)
-
-
-@pytest.fixture(scope="module")
-def train_set():
-    return primitives(8, seed=0)
-
-
-@pytest.fixture(scope="module")
-def eval_set():
-    return primitives(4, seed=100)
-
-
-@pytest.fixture(scope="module")
-def trained(train_set):
-    return fit(train_set, model_config=SMALL, train_config=TrainConfig(epochs=30, **FAST), init="projection",
-               progress=False)
-
-
-@pytest.fixture(scope="module")
-def image_set():
-    return primitives(3, seed=3, T=12, J=3, images=True)
-
-
-@pytest.fixture(scope="module")
-def image_run(image_set):
-    return fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=2, **FAST), progress=False)
+# the small runs of the observation tests, shared (pytest registers the imported fixtures here)
+from test_observe import eval_set, image_run, image_set, train_set, trained  # noqa: E402, F401
 
 
 # ------------------------------------------------------------------ the mixture
