@@ -212,3 +212,11 @@ def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
     result = json.loads((tmp_path / "pred" / "result.json").read_text())
     assert result["observe"] == {"motor": 5, "frames": 5} and result["mean"]["motor_mse"] > 0
     assert MotionDataset.load(tmp_path / "pred" / "predicted.h5").label_names == MotionDataset.load(tmp_path / "d.h5").label_names
+
+
+def test_the_mixture_is_decoded_once_per_run(trained, train_set, eval_set):
+    first = predict(trained, eval_set, observe=0.2, init=MIXTURE, fitted_data=train_set, frames=False)
+    built = trained.mixture
+    second = predict(trained, eval_set, observe=0.6, init=MIXTURE, fitted_data=train_set, frames=False)
+    assert built is not None and trained.mixture is built  # the second fraction reuses the decoded candidates
+    assert first.details["mixture"]["candidates"] == second.details["mixture"]["candidates"] == len(built.candidates)

@@ -55,12 +55,13 @@ def _judged(predicted_dataset) -> dict | None:
     return {"rates": success_rates(results), "per_sample": [bool(r.success) for r in results]}
 
 
-def _write_outputs(tmp: Path, prediction, dataset, judged: dict | None, command: dict) -> dict:
-    """predicted.h5, prediction.png and result.json into ``tmp``; the result's dict."""
+def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | None, command: dict) -> dict:
+    """predicted.h5 (``predicted``: the prediction as a data set), prediction.png and
+    result.json into ``tmp``; the result's dict."""
     from primspace.plots import plot_predictions, save_figure
 
     data = dataset.subset(prediction.indices)
-    prediction.to_dataset(dataset).save(tmp / "predicted.h5", writer=PREDICT_MARK)
+    predicted.save(tmp / "predicted.h5", writer=PREDICT_MARK)
     shown = list(range(min(_SHOWN, len(data))))
     fig = plot_predictions(data.motor[shown], prediction.motor[shown], prediction.motor_observed[shown],
                            titles=_shown_titles(dataset, prediction.indices[shown]), joint_names=data.joint_names,
@@ -121,10 +122,11 @@ def predict_command(
         prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, epochs=epochs, indices=idx,
                              fitted_data=fitted_data, threads=threads, online=iterations if online else None,
                              **overrides)
-        judged = None if no_judge else _judged(prediction.to_dataset(dataset))
+        predicted = prediction.to_dataset(dataset)
+        judged = None if no_judge else _judged(predicted)
         command = {"run": str(run), "data": str(file), "observe": motor, "observe_frames": frames, "init": init,
                    "epochs": epochs, "online": iterations if online else None}
-        result = _write_outputs(tmp, prediction, dataset, judged, command)
+        result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     line = f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
     if online:

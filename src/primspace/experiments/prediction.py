@@ -52,14 +52,11 @@ def _judge(test: MotionDataset, motor: np.ndarray) -> dict:
 def _given_labels(fit, fitted: MotionDataset, test: MotionDataset, noises: dict):
     """The mixture restricted to each test sample's own primitive (a diagnostic: it is given
     the labels, as the ProMP peer is): candidates built from fitted codes of that label only."""
-    from primspace.train import reconstruct
-    from primspace.train.mixture import CodeMixture, continuity_correction
+    from primspace.train.mixture import continuity_correction
     from primspace.train.observe import Observation, observation_masks
+    from primspace.train.predict import code_mixture
 
-    def decode(codes):
-        return fit.scaler.transform(reconstruct(fit, codes.astype(np.float32), images=False, batch_size=1024)[0])
-
-    mixture = CodeMixture(fit.latents, decode)
+    mixture = code_mixture(fit)  # the one the label-free rows decoded
     source_labels = fitted.labels[mixture.sources]
     other = ~((source_labels[None, :, 0] == test.labels[:, None]) & (source_labels[None, :, 1] == test.labels[:, None]))
     scaled, valid = fit.scaler.transform(test.motor), observation_masks(None, test)[0]

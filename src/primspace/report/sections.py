@@ -79,7 +79,7 @@ def summary(out_dir: Path, report: HtmlReport) -> None:
             "evaluation loss is not below both zero and random initialisation). " + text, "warn",
         )
     if results["failures"]:
-        report.note(f"{len(results['failures'])} run(s) failed: " + "; ".join(f"{k}: {v}" for k, v in results["failures"].items()), "warn")
+        _failures(report, results["failures"], "run(s)", detail=True)
 
 
 def claims(out_dir: Path, report: HtmlReport) -> None:
@@ -243,7 +243,7 @@ def inter(out_dir: Path, report: HtmlReport) -> None:
     columns, rows = inter_table(results)
     report.table(columns, rows)
     if results["failures"]:
-        report.note(f"{len(results['failures'])} fold run(s) failed: " + "; ".join(results["failures"]), "warn")
+        _failures(report, results["failures"], "fold run(s)")
 
 
 def tuning(out_dir: Path, report: HtmlReport) -> None:
@@ -265,7 +265,13 @@ def tuning(out_dir: Path, report: HtmlReport) -> None:
     columns, rows = tuning_table(results, read_results(out_dir, "intra"))
     report.table(columns, rows)
     if results["failures"]:
-        report.note(f"{len(results['failures'])} tuning run(s) failed: " + "; ".join(results["failures"]), "warn")
+        _failures(report, results["failures"], "tuning run(s)")
+
+
+def _failures(report: HtmlReport, failures: dict, what: str, detail: bool = False) -> None:
+    """A warning naming the failed grid points (with their errors when ``detail``)."""
+    named = (f"{k}: {v}" for k, v in failures.items()) if detail else failures
+    report.note(f"{len(failures)} {what} failed: " + "; ".join(named), "warn")
 
 
 def prediction(out_dir: Path, report: HtmlReport) -> None:
@@ -287,7 +293,7 @@ def prediction(out_dir: Path, report: HtmlReport) -> None:
     report.table(columns, rows)
     report.figure(figure_file(out_dir, "predict_errors"), "Error of the unobserved steps against the observed fraction.")
     if results["failures"]:
-        report.note(f"{len(results['failures'])} prediction point(s) failed: " + "; ".join(results["failures"]), "warn")
+        _failures(report, results["failures"], "prediction point(s)")
 
 
 def composite(out_dir: Path, report: HtmlReport) -> None:
@@ -311,7 +317,7 @@ def composite(out_dir: Path, report: HtmlReport) -> None:
         report.figure(path, "Code sequences of held-out demonstrations (heat map: code values per window), true "
                       "(solid) and found (dashed) boundaries, true and found labels (found colours are cluster ids).")
     if results["failures"]:
-        report.note(f"{len(results['failures'])} run(s) failed: " + "; ".join(results["failures"]), "warn")
+        _failures(report, results["failures"], "run(s)")
 
 
 def latent_figures(out_dir: Path, report: HtmlReport) -> None:

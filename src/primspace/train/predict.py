@@ -40,7 +40,7 @@ from primspace.train.mixture import CodeMixture, continuity_correction
 from primspace.train.observe import NOTHING, Observation, fitted_samples, observation_masks
 from primspace.train.run import TrainedRun
 
-__all__ = ["Prediction", "predict", "frame_errors", "DEFAULT_PREDICT_EPOCHS", "MIXTURE", "PREDICT_STARTS"]
+__all__ = ["Prediction", "predict", "code_mixture", "frame_errors", "DEFAULT_PREDICT_EPOCHS", "MIXTURE", "PREDICT_STARTS"]
 
 #: Inference epochs of :func:`predict` when none are given (θ frozen, codes only).
 DEFAULT_PREDICT_EPOCHS = 100
@@ -131,22 +131,32 @@ def frame_errors(predicted: np.ndarray, truth: np.ndarray, observed: np.ndarray,
     return mse, psnr
 
 
+def code_mixture(parent: TrainedRun) -> CodeMixture:
+    """The run's :class:`~primspace.train.mixture.CodeMixture` (its fitted codes' candidates,
+    decoded once): built on first use and kept on the run (``parent.mixture``), so the
+    predictions of several observed fractions decode the candidates once."""
+    if parent.mixture is None:
+        scaler = parent.scaler
+
+        def decode(codes):
+            return scaler.transform(reconstruct(parent, codes.astype(np.float32), images=False, batch_size=1024)[0])
+
+        parent.mixture = CodeMixture(parent.latents, decode)
+    return parent.mixture
+
+
 def _mixture(parent: TrainedRun, data: MotionDataset, observation: Observation, fitted_data, frames: bool):
     """Codes (posterior modes), scaled motor (posterior means), frames and the noise choice
     of the mixture start (:class:`~primspace.train.mixture.CodeMixture`)."""
     if observation.motor == NOTHING:
         raise UserError("init 'mixture' weighs the fitted codes by the observed joints, and observe='none' observes "
                         "none: start by 'zero' or 'random'")
-    scaler = parent.scaler
-
-    def decode(codes):
-        return scaler.transform(reconstruct(parent, codes.astype(np.float32), images=False, batch_size=1024)[0])
-
-    mixture = CodeMixture(parent.latents, decode)
+    scaler, mixture = parent.scaler, code_mixture(parent)
     fitted = fitted_samples(parent, fitted_data)
     fitted_observed = observation_masks(observation, fitted)[0]
     choice = mixture.choose_noise(scaler.transform(fitted.motor), fitted_observed, observation_masks(None, fitted)[0])
-    scaled, codes = mixture.predict(scaler.transform(data.motor), observation_masks(observation, data)[0])
+    scaled, codes = mixture.predict(scaler.transform(data.motor), observation_masks(observation, data)[0],
+                                    noise=choice["noise"])
     predicted_frames = reconstruct(parent, codes.astype(np.float32), images=True)[1] if frames else None
     details = {"mixture": {"candidates": int(len(mixture.candidates)), **choice}}
     return codes.astype(np.float32), scaled, predicted_frames, details

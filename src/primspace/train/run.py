@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -65,6 +66,9 @@ class TrainedRun:
         with ``observe=``), keyed by the observation rule
         (:func:`primspace.train.observe.observed_calibration`): fitted on first use, kept in
         memory only (not saved with the run).
+    mixture : CodeMixture or None
+        The fitted codes' decoded candidates for prediction (``init="mixture"``,
+        :func:`primspace.train.predict.code_mixture`): built on first use, kept in memory only.
     """
 
     run_dir: Path | None
@@ -86,6 +90,7 @@ class TrainedRun:
     state: dict | None = field(repr=False, default=None)
     calibration: CodeCalibration | None = field(repr=False, default=None)
     observed_calibrations: dict = field(repr=False, compare=False, default_factory=dict)
+    mixture: Any = field(repr=False, compare=False, default=None)
 
     @property
     def final_loss(self) -> float | None:
