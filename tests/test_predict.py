@@ -220,3 +220,15 @@ def test_the_mixture_is_decoded_once_per_run(trained, train_set, eval_set):
     second = predict(trained, eval_set, observe=0.6, init=MIXTURE, fitted_data=train_set, frames=False)
     assert built is not None and trained.mixture is built  # the second fraction reuses the decoded candidates
     assert first.details["mixture"]["candidates"] == second.details["mixture"]["candidates"] == len(built.candidates)
+
+
+def test_predict_overwrite_never_replaces_what_it_did_not_write(run_cli, eval_set, tmp_path):
+    run_dir, data = tmp_path / "run", tmp_path / "data.h5"
+    eval_set.save(data)
+    fit(MotionDataset.load(data), run_dir, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), progress=False)
+    foreign = tmp_path / "notes"
+    foreign.mkdir()
+    (foreign / "result.json").write_text('{"mine": 1}')
+    res = run_cli("predict", run_dir, data, "--observe", "0.5", "--epochs", "1", "--out", foreign, "--overwrite")
+    assert_user_error(res, "not a primspace predict output")
+    assert (foreign / "result.json").read_text() == '{"mine": 1}' and len(list(foreign.iterdir())) == 1
