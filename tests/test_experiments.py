@@ -564,7 +564,8 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     exp = finished[0]
     results = run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)
     table = results["table"]
-    assert set(table) == {"zero", "mixture", "mixture (no continuity)", "mixture (labels; diagnostic)", *PEERS}
+    assert set(table) == {"zero", "mixture", "mixture (posterior mean)", "mixture (no continuity)",
+                          "mixture (labels; diagnostic)", *PEERS}
     for method, cells in table.items():
         assert set(cells) >= {"0.25", "0.5"}, method
         assert all(np.isfinite(cells[k]["mse"][0]) and cells[k]["mse"][2] == 1 for k in ("0.25", "0.5"))

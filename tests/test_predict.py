@@ -10,7 +10,7 @@ from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.peers import unobserved_mse
 from primspace.train import TrainConfig, fit
-from primspace.train.mixture import CodeMixture, continuity_correction
+from primspace.train.mixture import NOISE_GRID, CodeMixture, continuity_correction
 from primspace.train.predict import MIXTURE, predict
 from conftest import assert_user_error
 from test_train import SMALL, primitives
@@ -55,6 +55,50 @@ def test_the_mixture_recovers_a_decoded_candidate_and_weighs_by_the_observed_par
         CodeMixture(codes, decode).predict(truth, observed)
 
 
+def _lines(codes, grid=np.linspace(0, 1, 20)):  # a line per code: offset + slope * t, (n, 20, 1)
+    return codes[:, None, :1] + codes[:, None, 1:2] * grid[None, :, None]
+
+
+def test_the_conditioned_ensemble_is_gaussian_conditioning_and_finds_a_motion_between_candidates():
+    offsets, slopes = np.meshgrid(np.linspace(-1, 1, 5), np.linspace(-1, 1, 5))
+    codes = np.stack([offsets.ravel(), slopes.ravel()], axis=1)
+    mixture = CodeMixture(codes, _lines, neighbours=0)
+    truth = _lines(np.array([[0.3, 0.7]]))  # between the candidates
+    observed = np.zeros((1, 20), bool)
+    observed[:, :6] = True
+    w = mixture.weights(truth, observed, noise=0.1)
+    mean, conditioned = mixture.posterior_mean(w), mixture.conditioned(w, truth, observed, 1e-6)
+    left = ~observed[0]
+    assert np.abs(conditioned[0, left] - truth[0, left]).max() < 1e-3  # a line is fixed by its beginning
+    assert np.abs(mean[0, left] - truth[0, left]).max() > 0.05  # the average of the candidates is not
+    # the same as conditioning the weighted Gaussian in the sequence's own space
+    y = mixture.decoded.reshape(len(codes), -1)
+    mu = w[0] @ y
+    cov = (w[0][:, None] * (y - mu)).T @ (y - mu)
+    o, r = observed[0], 1e-3
+    expect = mu + cov[:, o] @ np.linalg.solve(cov[np.ix_(o, o)] + r * np.eye(o.sum()), truth[0, o, 0] - mu[o])
+    np.testing.assert_allclose(mixture.conditioned(w, truth, observed, r)[0, :, 0], expect, atol=1e-8)
+
+
+def test_the_noise_choice_may_take_the_conditioning_and_predict_follows_it():
+    offsets, slopes = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-1, 1, 6))
+    codes = np.stack([offsets.ravel(), slopes.ravel()], axis=1)
+    mixture = CodeMixture(codes, _lines, neighbours=2, points=(0.5,))
+    fitted = _lines(codes)
+    observed = np.zeros(fitted.shape[:2], bool)
+    observed[:, :5] = True
+    choice = mixture.choose_noise(fitted, observed, np.ones_like(observed), grid=(1e-3, 1e-1),
+                                  conditions=(None, 1e-4))
+    assert set(choice["loo"]) == {"0.001/none", "0.001/0.0001", "0.1/none", "0.1/0.0001"}
+    assert choice["condition"] == 1e-4  # lines are a linear family: conditioning predicts them best
+    truth = _lines(np.array([[0.1, -0.35]]))
+    chosen, _ = mixture.predict(truth, observed[:1])
+    mean, _ = mixture.predict(truth, observed[:1], condition=None)
+    assert np.abs(chosen - truth).max() < 0.1 * np.abs(mean - truth).max()
+    only_mean = mixture.choose_noise(fitted, observed, np.ones_like(observed), grid=(1e-3,), conditions=(None,))
+    assert only_mean["condition"] is None and mixture.condition is None
+
+
 def test_choose_noise_uses_the_fitted_demonstrations_only(trained, train_set):
     scaled = trained.scaler.transform(train_set.motor)
     decode_calls = []
@@ -67,7 +111,8 @@ def test_choose_noise_uses_the_fitted_demonstrations_only(trained, train_set):
     observed = np.zeros(scaled.shape[:2], bool)
     observed[:, :10] = True
     choice = mixture.choose_noise(scaled, observed, np.ones_like(observed))
-    assert choice["noise"] in choice["loo"] and mixture.noise == choice["noise"]
+    assert mixture.noise == choice["noise"] in NOISE_GRID and mixture.condition == choice["condition"]
+    assert min(choice["loo"], key=choice["loo"].get).split("/")[0] == f"{choice['noise']:g}"
     assert decode_calls == [len(mixture.candidates)]  # decoded once
 
 

@@ -5,9 +5,10 @@ For each seed, the intra experiment's projection fit at the focus q (its θ froz
 evaluation samples: each sample's first ``f`` of its valid steps is observed, the rest is
 predicted, for ``f`` in :data:`PREDICT_FRACTIONS`. primspace's starts (gradient inference
 on the observed entries from ``zero``, ``projection``, ``calibrated``, ``nearest``, or no
-gradient at all: ``mixture``, the posterior mean over the fitted codes,
+gradient at all: ``mixture``, the posterior over the fitted codes,
 :mod:`primspace.train.mixture`), each with the continuity correction; ``mixture`` also
-without it. The peers, on the same split, scaled the same way (:mod:`primspace.peers`):
+without it, and as its posterior mean alone (no ensemble conditioning). The peers, on
+the same split, scaled the same way (:mod:`primspace.peers`):
 ProMP conditioning *given the labels* (one per primitive) and one ProMP for all, each
 with its observation noise chosen on the answer (flattering them); the nearest fitted
 demonstration on the observed steps; the mean motion of the sample's primitive (given
@@ -36,8 +37,12 @@ PREDICT_FRACTIONS = (0.1, 0.25, 0.5)
 PREDICT_STARTS_GRID = ("zero", "projection", "calibrated", "nearest", "mixture")
 #: The peers' names in the results (labels: the peer is given the test sample's primitive).
 PEERS = ("promp (labels)", "promp (one for all)", "nearest neighbour", "mean motion (labels)")
-#: Bumped when a grid point's content changes: points of another version are not reused.
-PREDICT_VERSION = 2
+#: The mixture's rows: (name, continuity correction, ensemble conditioning allowed).
+POSTERIOR_MEAN = "mixture (posterior mean)"
+MIXTURE_VARIANTS = (("mixture", True, True), (POSTERIOR_MEAN, True, False), ("mixture (no continuity)", False, True))
+#: Bumped when a grid point's content changes: points of another version are not reused
+#: (3: the mixture may condition its ensemble; its posterior mean alone is a row of its own).
+PREDICT_VERSION = 3
 #: Inference epochs of the gradient starts.
 PREDICT_EPOCHS = 200
 
@@ -51,7 +56,8 @@ def _judge(test: MotionDataset, motor: np.ndarray) -> dict:
 
 def _given_labels(fit, fitted: MotionDataset, test: MotionDataset, noises: dict):
     """The mixture restricted to each test sample's own primitive (a diagnostic: it is given
-    the labels, as the ProMP peer is): candidates built from fitted codes of that label only."""
+    the labels, as the ProMP peer is): candidates built from fitted codes of that label only,
+    their posterior mean (no ensemble conditioning)."""
     from primspace.train.mixture import continuity_correction
     from primspace.train.observe import Observation, observation_masks
     from primspace.train.predict import code_mixture
@@ -106,13 +112,13 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
         key = f"{f:g}"
         observed = observation_masks(Observation.build(f), test)[0]
         for start in starts:
-            variants = ((start, True), ("mixture (no continuity)", False)) if start == "mixture" else ((start, True),)
-            for name, continuity in variants:
+            for name, continuity, condition in MIXTURE_VARIANTS if start == "mixture" else ((start, True, True),):
                 p = predict(fit, data, observe=f, init=start, epochs=epochs, indices=test_idx, fitted_data=data,
-                            frames=False, continuity=continuity, progress=False)
+                            frames=False, continuity=continuity, condition=condition, progress=False)
                 entry = {"mse": _mean(p.errors["motor_mse"])}
                 if "mixture" in p.details:
                     entry["noise"] = p.details["mixture"]["noise"]
+                    entry["condition"] = p.details["mixture"]["condition"]
                 if judge:
                     entry["success"] = _judge(test, p.motor)
                 table.setdefault(name, {})[key] = entry
@@ -121,8 +127,8 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
             if judge:
                 entry["success"] = _judge(test, scaler.inverse_transform(scaled).astype(np.float32))
             table.setdefault(name, {})[key] = entry
-    if "mixture" in table:  # the same noise as the label-free mixture chose
-        noises = {k: v["noise"] for k, v in table["mixture"].items()}
+    if POSTERIOR_MEAN in table:  # the same noise as the label-free posterior mean chose
+        noises = {k: v["noise"] for k, v in table[POSTERIOR_MEAN].items()}
         for key, scaled in _given_labels(fit, fitted, test, noises).items():
             observed = observation_masks(Observation.build(float(key)), test)[0]
             table.setdefault("mixture (labels; diagnostic)", {})[key] = {

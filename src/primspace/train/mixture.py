@@ -17,7 +17,20 @@ each decoded once, ``d(θ, c)``. Given the observed entries ``x_obs`` of a new m
 component ``c`` has the likelihood ``exp(-||x_obs - d(θ, c)_obs||² / (2σ²))`` (equal prior
 weights); the prediction is the posterior mean of the decoded sequences, the optimum
 for a squared error when the prefix leaves the primitive ambiguous, and the code
-returned is the posterior mode. ``σ²`` is chosen without the answer: by leave-one-out
+returned is the posterior mode.
+
+**Ensemble conditioning** (``condition=r``, :meth:`CodeMixture.conditioned`): the
+posterior-weighted candidates are also an ensemble with a mean ``μ`` and a covariance
+``Σ = Σ_c w_c (d_c - μ)(d_c - μ)ᵀ``; conditioning that Gaussian on the observed entries
+with an observation noise ``r`` per entry,
+``μ + Σ_{·o} (Σ_oo + r I)⁻¹ (x_obs - μ_o)`` (the update of an ensemble Kalman filter, and
+what ProMP conditioning does with its own Gaussian prior over trajectories), moves the
+prediction *between* the candidates, along the directions in which nearby candidates
+differ, instead of averaging them. It is computed in the ensemble's space (the
+:data:`ENSEMBLE` candidates of largest weight): ``μ + Aᵀ (A_o A_oᵀ + r I)⁻¹ A_o (x_obs - μ_o)``
+with ``A`` the weighted deviations, ``√w_c (d_c - μ)``.
+
+``σ²`` and ``r`` (or no conditioning) are chosen without the answer: by leave-one-out
 prediction of the fitted demonstrations themselves (:meth:`CodeMixture.choose_noise`).
 
 :func:`continuity_correction` then removes the jump at the last observed step: the
@@ -31,7 +44,8 @@ import numpy as np
 
 from primspace.errors import UserError
 
-__all__ = ["CodeMixture", "continuity_correction", "SEGMENT_POINTS", "NOISE_GRID", "NEIGHBOURS"]
+__all__ = ["CodeMixture", "continuity_correction", "SEGMENT_POINTS", "NOISE_GRID", "CONDITION_GRID", "NEIGHBOURS",
+           "ENSEMBLE"]
 
 #: Where the candidates sit on the segment from a fitted code to a neighbour (0: the code; 1: the neighbour).
 SEGMENT_POINTS = (-0.25, 0.25, 0.5, 0.75, 1.25)
@@ -39,6 +53,11 @@ SEGMENT_POINTS = (-0.25, 0.25, 0.5, 0.75, 1.25)
 NEIGHBOURS = 5
 #: σ² tried by :meth:`CodeMixture.choose_noise` (scaled units, per observed entry summed).
 NOISE_GRID = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2)
+#: Observation noise ``r`` (per entry, scaled units²) of the ensemble conditioning tried by
+#: :meth:`CodeMixture.choose_noise`; None: the posterior mean, not conditioned.
+CONDITION_GRID = (None, 1e-4, 1e-3, 1e-2)
+#: Candidates of largest posterior weight that make up a sample's conditioning ensemble.
+ENSEMBLE = 256
 
 
 def _sq_distances(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -81,6 +100,7 @@ class CodeMixture:
         self.sources = np.concatenate(sources)  # (c, 2): the fitted codes each candidate is built from
         self.decoded = np.asarray(decode(self.candidates), dtype=np.float64)
         self.noise: float | None = None
+        self.condition: float | None = None
 
     def weights(self, scaled: np.ndarray, observed: np.ndarray, noise: float, exclude: np.ndarray | None = None):
         """(n, c) posterior weights of the candidates given the observed entries."""
@@ -91,19 +111,48 @@ class CodeMixture:
         w = np.exp(-energy)
         return w / w.sum(axis=1, keepdims=True)
 
-    def predict(self, scaled: np.ndarray, observed: np.ndarray, noise: float | None = None):
-        """Posterior-mean sequences (n, T, J, scaled) and posterior-mode codes (n, q)."""
+    def predict(self, scaled: np.ndarray, observed: np.ndarray, noise: float | None = None, condition="chosen"):
+        """Sequences (n, T, J, scaled) and posterior-mode codes (n, q): the posterior mean, or
+        with ``condition=r`` the ensemble conditioned on the observed entries
+        (:meth:`conditioned`). ``noise`` and ``condition`` default to the chosen ones."""
         noise = self.noise if noise is None else noise
+        condition = self.condition if condition == "chosen" else condition
         if noise is None:
             raise UserError("the mixture's noise is not chosen: call choose_noise() or give noise=")
         w = self.weights(scaled, observed, noise)
-        return np.einsum("nc,ctj->ntj", w, self.decoded), self.candidates[np.argmax(w, axis=1)]
+        sequences = self.posterior_mean(w) if condition is None else self.conditioned(w, scaled, observed, condition)
+        return sequences, self.candidates[np.argmax(w, axis=1)]
+
+    def posterior_mean(self, w: np.ndarray) -> np.ndarray:
+        """(n, T, J): the weighted mean of the decoded candidates, weights ``w`` (n, c)."""
+        return np.einsum("nc,ctj->ntj", w, self.decoded)
+
+    def conditioned(self, w: np.ndarray, scaled: np.ndarray, observed: np.ndarray, r: float) -> np.ndarray:
+        """(n, T, J): the ensemble of the :data:`ENSEMBLE` candidates of largest weight ``w``
+        (n, c), conditioned on the entries of ``scaled`` (n, T, J) where ``observed`` (n, T),
+        observation noise ``r`` per entry (module docstring)."""
+        n, t, j = scaled.shape
+        flat, x = self.decoded.reshape(len(self.decoded), -1), scaled.reshape(n, -1)
+        masks = np.repeat(np.asarray(observed, dtype=bool), j, axis=1)
+        k = min(ENSEMBLE, flat.shape[0])
+        top = np.argpartition(-w, k - 1, axis=1)[:, :k] if k < flat.shape[0] else np.tile(np.arange(k), (n, 1))
+        out = np.empty_like(x, dtype=np.float64)
+        for i in range(n):
+            wi = w[i, top[i]]
+            wi = wi / wi.sum()
+            mu = wi @ flat[top[i]]
+            a = np.sqrt(wi)[:, None] * (flat[top[i]] - mu)
+            ao = a[:, masks[i]]
+            gram = ao @ ao.T + r * np.eye(k)
+            out[i] = mu + a.T @ np.linalg.solve(gram, ao @ (x[i, masks[i]] - mu[masks[i]]))
+        return out.reshape(n, t, j)
 
     def choose_noise(self, fitted_scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray,
-                     grid=NOISE_GRID) -> dict:
-        """σ² of :data:`NOISE_GRID` whose leave-one-out prediction of the fitted demonstrations
-        is best (each predicted from the candidates not built from it, then
-        :func:`continuity_correction`); sets and returns ``{"noise": σ², "loo": {σ²: MSE}}``.
+                     grid=NOISE_GRID, conditions=CONDITION_GRID) -> dict:
+        """The σ² of ``grid`` and the conditioning ``r`` of ``conditions`` (None: the posterior
+        mean) whose leave-one-out prediction of the fitted demonstrations is best (each
+        predicted from the candidates not built from it, then :func:`continuity_correction`);
+        sets them and returns ``{"noise": σ², "condition": r, "loo": {"σ²/r": MSE}}``.
 
         ``fitted_scaled`` (m, T, J) are the demonstrations of the codes, ``observed`` (m, T)
         their observed steps under the rule being predicted, ``valid`` their valid steps.
@@ -111,15 +160,19 @@ class CodeMixture:
         m = len(fitted_scaled)
         own = np.arange(m)[:, None]
         exclude = (self.sources[None, :, 0] == own) | (self.sources[None, :, 1] == own)
-        scores = {}
+        left = (valid & ~observed)[..., None]
+        scores, settings = {}, {}
         for noise in grid:
             w = self.weights(fitted_scaled, observed, noise, exclude)
-            pred = continuity_correction(np.einsum("nc,ctj->ntj", w, self.decoded), fitted_scaled, observed, valid)
-            left = (valid & ~observed)[..., None]
-            err = ((pred - fitted_scaled) ** 2 * left).sum((1, 2)) / np.maximum(left.sum((1, 2)) * pred.shape[2], 1)
-            scores[float(noise)] = float(err[left.any((1, 2))].mean()) if left.any() else 0.0
-        self.noise = min(scores, key=scores.get)
-        return {"noise": self.noise, "loo": scores}
+            for r in conditions:
+                pred = self.posterior_mean(w) if r is None else self.conditioned(w, fitted_scaled, observed, r)
+                pred = continuity_correction(pred, fitted_scaled, observed, valid)
+                err = ((pred - fitted_scaled) ** 2 * left).sum((1, 2)) / np.maximum(left.sum((1, 2)) * pred.shape[2], 1)
+                key = f"{noise:g}/{'none' if r is None else f'{r:g}'}"
+                scores[key] = float(err[left.any((1, 2))].mean()) if left.any() else 0.0
+                settings[key] = (float(noise), None if r is None else float(r))
+        self.noise, self.condition = settings[min(scores, key=scores.get)]
+        return {"noise": self.noise, "condition": self.condition, "loo": scores}
 
 
 def continuity_correction(predicted: np.ndarray, scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray):

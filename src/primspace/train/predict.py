@@ -36,7 +36,7 @@ from primspace.peers import unobserved_mse
 from primspace.train.api import as_run, infer, reconstruct
 from primspace.train.checks import select
 from primspace.latent import INFER_STARTS
-from primspace.train.mixture import CodeMixture, continuity_correction
+from primspace.train.mixture import CONDITION_GRID, CodeMixture, continuity_correction
 from primspace.train.observe import NOTHING, Observation, fitted_samples, observation_masks
 from primspace.train.run import TrainedRun
 
@@ -145,18 +145,21 @@ def code_mixture(parent: TrainedRun) -> CodeMixture:
     return parent.mixture
 
 
-def _mixture(parent: TrainedRun, data: MotionDataset, observation: Observation, fitted_data, frames: bool):
-    """Codes (posterior modes), scaled motor (posterior means), frames and the noise choice
-    of the mixture start (:class:`~primspace.train.mixture.CodeMixture`)."""
+def _mixture(parent: TrainedRun, data: MotionDataset, observation: Observation, fitted_data, frames: bool,
+             condition: bool):
+    """Codes (posterior modes), scaled motor (posterior means, or the conditioned ensemble
+    when the leave-one-out choice prefers it and ``condition``), frames and the choice of
+    the mixture start (:class:`~primspace.train.mixture.CodeMixture`)."""
     if observation.motor == NOTHING:
         raise UserError("init 'mixture' weighs the fitted codes by the observed joints, and observe='none' observes "
                         "none: start by 'zero' or 'random'")
     scaler, mixture = parent.scaler, code_mixture(parent)
     fitted = fitted_samples(parent, fitted_data)
     fitted_observed = observation_masks(observation, fitted)[0]
-    choice = mixture.choose_noise(scaler.transform(fitted.motor), fitted_observed, observation_masks(None, fitted)[0])
+    choice = mixture.choose_noise(scaler.transform(fitted.motor), fitted_observed, observation_masks(None, fitted)[0],
+                                  conditions=CONDITION_GRID if condition else (None,))
     scaled, codes = mixture.predict(scaler.transform(data.motor), observation_masks(observation, data)[0],
-                                    noise=choice["noise"])
+                                    noise=choice["noise"], condition=choice["condition"])
     predicted_frames = reconstruct(parent, codes.astype(np.float32), images=True)[1] if frames else None
     details = {"mixture": {"candidates": int(len(mixture.candidates)), **choice}}
     return codes.astype(np.float32), scaled, predicted_frames, details
@@ -194,6 +197,7 @@ def predict(
     fitted_data: MotionDataset | None = None,
     frames: bool = True,
     continuity: bool = False,
+    condition: bool = True,
     online: int | None = None,
     progress: bool | None = None,
     **overrides,
@@ -215,8 +219,10 @@ def predict(
         The start (default: the run's): ``zero``, ``random``, ``projection``, ``pca``,
         ``calibrated`` (fitted for this rule), ``nearest``, each followed by ``epochs``
         of inference on the observed entries; or ``mixture``: no gradient steps, the
-        posterior mean over the fitted codes' mixture (:mod:`primspace.train.mixture`;
-        ``epochs`` is not used).
+        posterior mean over the fitted codes' mixture, or that mixture's ensemble
+        conditioned on the observed entries, whichever the leave-one-out prediction of
+        the fitted demonstrations prefers (:mod:`primspace.train.mixture`; ``epochs`` is
+        not used).
     epochs : int
         Inference epochs on the observed entries (0: the start decoded as it is).
     indices : array-like of int, optional
@@ -235,6 +241,10 @@ def predict(
     continuity : bool
         Apply :func:`~primspace.train.mixture.continuity_correction` to the motor (the
         residual at the last observed step, decaying to zero at the end).
+    condition : bool
+        ``mixture`` only: let the leave-one-out choice take the ensemble conditioning
+        (:meth:`~primspace.train.mixture.CodeMixture.conditioned`); False: the posterior
+        mean only.
     progress : bool, optional
     **overrides
         Train-config overrides of the inference (``latent_lr``, ``batch_size``, ``seed`` ...).
@@ -268,7 +278,7 @@ def predict(
                                                            want_frames, overrides)
         epochs, init = 0, init or parent.init
     elif init == MIXTURE:
-        codes, scaled, predicted_frames, details = _mixture(parent, data, observation, fitted_data, want_frames)
+        codes, scaled, predicted_frames, details = _mixture(parent, data, observation, fitted_data, want_frames, condition)
         epochs = 0
     else:
         inferred = infer(parent, data, None, epochs=epochs, init=init, observe=observe, observe_frames=observe_frames,
