@@ -277,3 +277,16 @@ def test_predict_overwrite_never_replaces_what_it_did_not_write(run_cli, eval_se
     res = run_cli("predict", run_dir, data, "--observe", "0.5", "--epochs", "1", "--out", foreign, "--overwrite")
     assert_user_error(res, "not a primspace predict output")
     assert (foreign / "result.json").read_text() == '{"mine": 1}' and len(list(foreign.iterdir())) == 1
+
+
+def test_the_predicted_subset_keeps_each_labels_share_and_follows_the_seed():
+    from primspace.experiments.prediction import predicted_subset
+
+    idx = np.arange(100, 200)
+    labels = np.repeat([0, 1, 2], [60, 30, 10])
+    assert predicted_subset(idx, labels, 100, 0) is idx and predicted_subset(idx, labels, None, 0) is idx
+    sub = predicted_subset(idx, labels, 21, seed=3)
+    assert len(sub) == 21 and (np.diff(sub) > 0).all() and set(sub) <= set(idx)
+    assert np.bincount(labels[sub - 100]).tolist() == [13, 6, 2]  # 12.6 / 6.3 / 2.1: the remainder to the largest
+    np.testing.assert_array_equal(sub, predicted_subset(idx, labels, 21, seed=3))
+    assert not np.array_equal(sub, predicted_subset(idx, labels, 21, seed=4))

@@ -29,7 +29,8 @@ from primspace.experiments.runs import focus_runs, phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["PREDICT_FRACTIONS", "PREDICT_STARTS_GRID", "PEERS", "run_predict", "run_predict_point", "predict_table"]
+__all__ = ["PREDICT_FRACTIONS", "PREDICT_STARTS_GRID", "PEERS", "PREDICT_MAX_SAMPLES", "run_predict", "run_predict_point",
+           "predict_table", "predicted_subset"]
 
 #: Observed fractions of the error table (1.0 is added for the judge on simulator data).
 PREDICT_FRACTIONS = (0.1, 0.25, 0.5)
@@ -45,6 +46,27 @@ MIXTURE_VARIANTS = (("mixture", True, True), (POSTERIOR_MEAN, True, False), ("mi
 PREDICT_VERSION = 3
 #: Inference epochs of the gradient starts.
 PREDICT_EPOCHS = 200
+#: Evaluation samples predicted per seed at most: a subset stratified by label, drawn with
+#: the seed (all of them on LASA, 130, and the demo, 98; 280 of the paper preset's 1372,
+#: whose gradient starts and simulator replays would otherwise take hours per seed).
+PREDICT_MAX_SAMPLES = 280
+
+
+def predicted_subset(indices: np.ndarray, labels: np.ndarray | None, max_samples: int | None, seed: int) -> np.ndarray:
+    """``indices`` when there are at most ``max_samples``; else a subset of that size, each
+    label's share kept (rounded down, the remainder from the largest labels), drawn with
+    ``seed`` and returned in the original order."""
+    indices = np.asarray(indices)
+    if max_samples is None or len(indices) <= max_samples:
+        return indices
+    rng = np.random.default_rng(seed)
+    labels = np.zeros(len(indices), int) if labels is None else np.asarray(labels)
+    names, counts = np.unique(labels, return_counts=True)
+    take = np.floor(counts * max_samples / len(indices)).astype(int)
+    for i in np.argsort(-counts, kind="stable")[: max_samples - take.sum()]:
+        take[i] += 1
+    chosen = np.concatenate([rng.permutation(np.flatnonzero(labels == n))[:k] for n, k in zip(names, take)])
+    return indices[np.sort(chosen)]
 
 
 def _judge(test: MotionDataset, motor: np.ndarray) -> dict:
@@ -95,8 +117,9 @@ def _peer_predictions(fitted_scaled, fitted, test_scaled, test, observed) -> dic
 
 
 def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str, fractions: tuple,
-                      starts: tuple, epochs: int, judge: bool) -> dict:
-    """One seed: every start and peer at every fraction; mean unobserved MSE (and success)."""
+                      starts: tuple, epochs: int, judge: bool, max_samples: int | None = None) -> dict:
+    """One seed: every start and peer at every fraction; mean unobserved MSE (and success)
+    over the run's evaluation samples (at most ``max_samples``: :func:`predicted_subset`)."""
     from primspace.peers import unobserved_mse
     from primspace.train import TrainConfig, configure_process, load_run
     from primspace.train.observe import Observation, observation_masks
@@ -105,6 +128,8 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
     configure_process(TrainConfig(device="cpu", threads=1))
     data = MotionDataset.load(data_path).without_images()
     fit, test_idx = load_run(fit_dir), load_run(test_dir).indices
+    test_idx = predicted_subset(test_idx, None if data.labels is None else data.labels[test_idx], max_samples,
+                                fit.train_config.seed)
     scaler, fitted, test = fit.scaler, data.subset(fit.indices), data.subset(test_idx)
     fitted_scaled, test_scaled = scaler.transform(fitted.motor), scaler.transform(test.motor)
     table: dict = {}
@@ -133,7 +158,8 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
             observed = observation_masks(Observation.build(float(key)), test)[0]
             table.setdefault("mixture (labels; diagnostic)", {})[key] = {
                 "mse": _mean(unobserved_mse(scaled, test_scaled, observed, test.lengths))}
-    return {"methods": table, "n_fitted": int(len(fit.indices)), "n_test": int(len(test_idx))}
+    return {"methods": table, "n_fitted": int(len(fit.indices)), "n_test": int(len(test_idx)),
+            "n_eval": int(len(load_run(test_dir).indices))}
 
 
 def _mean(values) -> float | None:
@@ -154,7 +180,7 @@ def run_predict(exp: ExperimentDir, fractions=PREDICT_FRACTIONS, starts=PREDICT_
         GridPoint(f"predict{PREDICT_VERSION}/projection-q{q}-s{s}",
                   (str(exp.data_path), str(phase_dir(exp.path, "projection", q, s, "fit")),
                    str(phase_dir(exp.path, "projection", q, s, "infer")), tuple(fractions), tuple(starts), int(epochs),
-                   judge))
+                   judge, PREDICT_MAX_SAMPLES))
         for s in seeds
     ]
     with exp.stage("predict"):
