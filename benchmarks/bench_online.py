@@ -17,7 +17,10 @@ On one CPU core (``torch.set_num_threads(1)``), in one process:
    along the stream (moments carried) instead of a fresh one per step;
 4. for each rate, the smallest k whose error is within 10 % of the offline one at both t,
    and its latency;
-5. ``--images``: the latency with 48x64 frames and an image head (the vision term on
+5. the mixture online (:func:`primspace.train.online_mixture.mixture_online`, no
+   gradient): latency per step, and its error as a ratio to its own offline prediction
+   from the same prefix (1.0 by construction) and to the gradient inference's;
+6. ``--images``: the latency with 48x64 frames and an image head (the vision term on
    the observed frames; a short fit, as only the time is measured), timed on single
    steps at the same t (a whole stream is minutes per k on one core).
 
@@ -92,11 +95,37 @@ def _fit(images: bool, args) -> tuple:
     last = run.history[-1]
     print(f"fit: {len(train)} samples, {tc.epochs} epochs, {time.perf_counter() - t0:.1f} s, "
           f"final motor MSE {last['motor']:.2e}" + (f", vision {last['vision']:.2e}" if images else ""))
-    return run, held
+    return run, held, train
+
+
+def mixture_bench(run, held, train, ts, off, figures: dict) -> None:
+    """The mixture online (no gradient): latency per step; its error against its own offline
+    prediction from the same prefix (equal by construction) and against gradient inference."""
+    from primspace.train.online_mixture import mixture_online, prepare_noises
+    from primspace.train.predict import predict
+
+    t0 = time.perf_counter()
+    noises = prepare_noises(run, range(1, T + 1), fitted_data=train)
+    prepared = time.perf_counter() - t0
+    cpu = time.process_time()
+    result = mixture_online(run, held, fitted_data=train, noises=noises)
+    cpu = (time.process_time() - cpu) / len(result.steps)
+    errors = [result.error_at(t) for t in ts]
+    own = [float(np.nanmean(predict(run, held, observe=t, init="mixture", fitted_data=train, frames=False,
+                                    condition=False, continuity=True).errors["motor_mse"])) for t in ts]
+    row = {"latency_mean_ms": 1e3 * result.latency_mean, "latency_p95_ms": 1e3 * result.latency_p95,
+           "cpu_ms_per_step": 1e3 * cpu, "prepare_s": prepared, "errors": errors, "offline_mixture": own,
+           "ratios_to_own_offline": [e / o for e, o in zip(errors, own)],
+           "ratios_to_gradient_offline": [e / o for e, o in zip(errors, off["mean_error"])]}
+    figures["mixture_online"] = row
+    print(f"\nmixture online (no gradient; sigma² per prefix prepared from the fitted data in {prepared:.1f} s): "
+          f"{row['latency_mean_ms']:.2f} ms mean, {row['latency_p95_ms']:.2f} ms p95, {row['cpu_ms_per_step']:.2f} ms CPU "
+          "per step; error " + ", ".join(f"{e:.4f} (x{a:.2f} its offline, x{b:.2f} gradient offline)" for e, a, b in
+                                        zip(errors, row["ratios_to_own_offline"], row["ratios_to_gradient_offline"])))
 
 
 def motor_bench(args, figures: dict) -> None:
-    run, held = _fit(False, args)
+    run, held, train = _fit(False, args)
     ts = [math.ceil(f * T) for f in (0.25, 0.5)]
     t0 = time.perf_counter()
     off = offline_errors(run, held, ts, epochs=args.offline_epochs, batch_size=len(held))
@@ -124,6 +153,7 @@ def motor_bench(args, figures: dict) -> None:
                   f"{r['latency_p95_ms']:>8.2f} {r['cpu_ms_per_step']:>7.2f}   "
                   + "   ".join(f"{e:.4f} ({q:5.2f})" for e, q in zip(errors, r["ratios"])))
     figures["online"] = rows
+    mixture_bench(run, held, train, ts, off, figures)
     figures["smallest_k"] = {}
     for lr in sorted({r["latent_lr"] for r in rows if r["moments"] == "fresh"}):
         mine = [r for r in rows if r["moments"] == "fresh" and r["latent_lr"] == lr]
@@ -143,7 +173,7 @@ def motor_bench(args, figures: dict) -> None:
 
 def image_bench(args, figures: dict) -> None:
     print("\n=== with images (48x64 frames, image head)")
-    run, held = _fit(True, args)
+    run, held, _ = _fit(True, args)
     ts = [math.ceil(f * T) for f in (0.25, 0.5)]
     print(f"single steps at t = {ts} ({len(held)} samples, {args.repeats} repeats each), "
           f"load average {os.getloadavg()[0]:.1f}")

@@ -235,8 +235,6 @@ def test_online_prediction_reports_latency_and_the_error_against_time(run_cli, t
     assert online["steps_observed"] == 15 and online["iterations"] == 2 and online["latency_ms_mean"] > 0
     assert len(online["remaining_error"]) == eval_set.length and online["remaining_error"][-1] is None  # nothing left
     assert np.isfinite(p.errors["motor_mse"]).all()
-    with pytest.raises(UserError, match="not 'mixture'"):
-        predict(trained, eval_set, observe=0.5, init=MIXTURE, online=2, fitted_data=train_set)
     with pytest.raises(UserError, match="iterations"):
         predict(trained, eval_set, observe=0.5, init="zero", online=-1)
 
@@ -290,3 +288,33 @@ def test_the_predicted_subset_keeps_each_labels_share_and_follows_the_seed():
     assert np.bincount(labels[sub - 100]).tolist() == [13, 6, 2]  # 12.6 / 6.3 / 2.1: the remainder to the largest
     np.testing.assert_array_equal(sub, predicted_subset(idx, labels, 21, seed=3))
     assert not np.array_equal(sub, predicted_subset(idx, labels, 21, seed=4))
+
+
+# ------------------------------------------------------------------ the mixture online
+
+
+def test_the_online_mixture_is_the_offline_mixture_after_every_step(trained, train_set, eval_set):
+    from primspace.train.online_mixture import mixture_online, prepare_noises
+
+    noises = prepare_noises(trained, range(4, 31), fitted_data=train_set)
+    result = mixture_online(trained, eval_set, start_step=4, fitted_data=train_set, noises=noises, prediction_after=9)
+    assert result.steps.tolist() == list(range(4, 31)) and result.iterations == 0 and (result.latency > 0).all()
+    for t in (4, 9, 20):
+        offline = predict(trained, eval_set, observe=t, init=MIXTURE, fitted_data=train_set, frames=False,
+                          condition=False, continuity=True)
+        np.testing.assert_allclose(result.errors[:, result.column(t)], offline.errors["motor_mse"], rtol=1e-6)
+        if t == 9:
+            np.testing.assert_allclose(result.prediction, offline.motor, rtol=1e-5, atol=1e-6)
+    assert result.error_at(20) < result.error_at(4)  # the posterior sharpens as steps arrive
+    with pytest.raises(UserError, match="prediction_after"):
+        mixture_online(trained, eval_set, start_step=4, fitted_data=train_set, noises=noises, prediction_after=2)
+
+
+def test_predict_online_with_the_mixture_keeps_the_prediction_after_the_observed_steps(trained, train_set, eval_set):
+    online = predict(trained, eval_set, observe=12, init=MIXTURE, online=0, fitted_data=train_set, frames=False,
+                     continuity=True)
+    offline = predict(trained, eval_set, observe=12, init=MIXTURE, fitted_data=train_set, frames=False,
+                      condition=False, continuity=True)
+    np.testing.assert_allclose(online.errors["motor_mse"], offline.errors["motor_mse"], rtol=1e-5)
+    curve = online.details["online"]["remaining_error"]
+    assert len(curve) == eval_set.length and online.details["online"]["latency_ms_mean"] > 0

@@ -166,19 +166,28 @@ def _mixture(parent: TrainedRun, data: MotionDataset, observation: Observation, 
 
 
 def _online(parent: TrainedRun, data: MotionDataset, observation: Observation, init, iterations: int, fitted_data,
-            frames: bool, overrides: dict):
+            frames: bool, continuity: bool, overrides: dict):
     """Codes after the observed steps arrived one at a time (:func:`~primspace.train.online.infer_online`,
-    ``iterations`` per step), their decoding, and the error of the remaining steps against time."""
+    ``iterations`` per step; or the mixture's posterior, :func:`~primspace.train.online_mixture.mixture_online`),
+    their prediction, and the error of the remaining steps against time."""
     from primspace.train.online import infer_online
 
     if observation.motor == NOTHING or observation.frames != observation.motor:
         raise UserError("online prediction observes joints and frames together, a step at a time: give --observe "
                         "only (not --observe-frames, not 'none')")
-    result = infer_online(parent, data, iterations=iterations, init=init, fitted_data=fitted_data,
-                          latent_lr=overrides.get("latent_lr"), seed=overrides.get("seed"))
     seen = int(observation_masks(observation, data)[0].sum(axis=1).max())
-    codes = result.codes[:, result.column(seen)]
-    motor, predicted_frames = reconstruct(parent, codes, images=frames)
+    if init == MIXTURE:  # no gradient: the prefix's posterior, updated a step at a time
+        from primspace.train.online_mixture import mixture_online, prepare_noises
+
+        result = mixture_online(parent, data, fitted_data=fitted_data, prediction_after=seen, continuity=continuity,
+                                noises=prepare_noises(parent, range(1, data.length + 1), fitted_data))
+        codes = result.codes[:, result.column(seen)]
+        motor, predicted_frames = result.prediction, reconstruct(parent, codes, images=frames)[1]
+    else:
+        result = infer_online(parent, data, iterations=iterations, init=init, fitted_data=fitted_data,
+                              latent_lr=overrides.get("latent_lr"), seed=overrides.get("seed"))
+        codes = result.codes[:, result.column(seen)]
+        motor, predicted_frames = reconstruct(parent, codes, images=frames)
     details = {"online": {"iterations": int(iterations), "steps_observed": seen,
                           "latency_ms_mean": 1e3 * result.latency_mean, "latency_ms_p95": 1e3 * result.latency_p95,
                           "remaining_error": [None if not np.isfinite(e) else float(e) for e in result.mean_error]}}
@@ -271,11 +280,8 @@ def predict(
     want_frames = frames and parent.model_config.has_images
     scaler, details = parent.scaler, {}
     if online is not None:
-        if init == MIXTURE:
-            raise UserError("online prediction runs gradient steps: start it by zero, random, projection, pca, "
-                            "calibrated or nearest, not 'mixture'")
         codes, scaled, predicted_frames, details = _online(parent, data, observation, init, online, fitted_data,
-                                                           want_frames, overrides)
+                                                           want_frames, continuity, overrides)
         epochs, init = 0, init or parent.init
     elif init == MIXTURE:
         codes, scaled, predicted_frames, details = _mixture(parent, data, observation, fitted_data, want_frames, condition)
@@ -288,7 +294,7 @@ def predict(
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     valid = valid_steps(lengths, data.length)
     truth = scaler.transform(data.motor)
-    if continuity:
+    if continuity and not (online is not None and init == MIXTURE):  # the online mixture corrected each step
         scaled = continuity_correction(scaled, truth, motor_observed, valid)
     errors = {"motor_mse": unobserved_mse(scaled, truth, motor_observed, lengths)}
     if predicted_frames is not None and data.has_images:
