@@ -37,6 +37,8 @@ FORBIDDEN = {
     "latent": ("model", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "train": ("sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "plots": ("train", "model", "latent", "experiments", "report", "demo", "cli"),
+    # the scene-only prediction: above train and cluster (it uses both), below the experiments
+    "scene": ("experiments", "report", "demo", "cli"),
     "experiments": ("report", "demo", "cli"),
     "report": ("demo", "cli"),
     "demo": ("cli",),

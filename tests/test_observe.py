@@ -215,3 +215,103 @@ def test_appendix_a_holds_for_the_observed_part():
     assert abs(dot_obs - float(np.sum(a * b))) > 5 * out["mean_stderr"]  # the observed part's product, not the whole's
     with pytest.raises(UserError):
         appendix_a_observed(a, b, observed[:4], latent_dim=8)
+
+
+# ------------------------------------------------------------- the frames-only start
+
+
+def _linear_scene(n: int, seed: int):
+    """Frames whose first frame is ``base + a1 pattern1 + a2 pattern2`` (a in [0, 1]²); the rest noise."""
+    fixed = np.random.default_rng(77)
+    base, patterns = fixed.uniform(40, 120, (8, 8, 3)), fixed.uniform(-1, 1, (2, 8, 8, 3)) * 60
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0, 1, (n, 2))
+    frames = rng.integers(0, 256, (n, 6, 8, 8, 3)).astype(np.uint8)
+    frames[:, 0] = np.clip(np.round(base + np.einsum("nk,khwc->nhwc", a, patterns)), 0, 255).astype(np.uint8)
+    motor = rng.normal(0, 1, (n, 6, 2)).cumsum(axis=1)
+    return MotionDataset(motor, images=frames), a
+
+
+@pytest.fixture(scope="module")
+def linear_scene():
+    """A tiny image run whose fitted codes are set to a linear function of the first frame's parameters."""
+    import dataclasses
+
+    train, a = _linear_scene(16, seed=0)
+    test, b = _linear_scene(6, seed=1)
+    run = fit(train, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), progress=False)
+    weights = np.random.default_rng(5).normal(0, 1, (2, SMALL.latent_dim))
+    codes = lambda x: (0.5 + x @ weights).astype(np.float32)  # noqa: E731
+    run = dataclasses.replace(run, latents=codes(a), observed_calibrations={})
+    return run, train, test, codes(b)
+
+
+def test_the_frames_start_recovers_codes_linear_in_the_first_frame(linear_scene):
+    from primspace.train.frames_start import frames_start_codes
+
+    run, train, test, truth = linear_scene
+    rule = Observation.build("none", "first")
+    start = frames_start_codes(run, test, rule, fitted_data=train)
+    err_frames = float(np.sqrt(np.mean((start - truth) ** 2)))
+    err_zero = float(np.sqrt(np.mean(truth**2)))
+    assert err_frames < 0.1 * err_zero, (err_frames, err_zero)
+    changed = test.images.copy()
+    changed[:, 1:] = 255 - changed[:, 1:]  # frames after the first are not observed
+    again = frames_start_codes(run, MotionDataset(test.motor, images=changed), rule, fitted_data=train)
+    np.testing.assert_array_equal(again, start)
+    inferred = infer(run, test, epochs=0, observe="none", observe_frames="first", init="calibrated",
+                     fitted_data=train, progress=False)  # infer's own start is this one
+    np.testing.assert_allclose(inferred.initial_latents, start, rtol=1e-5, atol=1e-6)
+    assert ("frames", "none", "first") in run.observed_calibrations
+
+
+def test_the_frames_start_is_deterministic_for_a_seed(linear_scene):
+    import dataclasses
+
+    from primspace.train.frames_start import frame_matrix, frames_start_codes
+
+    run, train, test, _ = linear_scene
+    rule = Observation.build("none", 0.5)
+    fresh = lambda r: dataclasses.replace(r, observed_calibrations={})  # noqa: E731
+    a = frames_start_codes(fresh(run), test, rule, fitted_data=train)
+    b = frames_start_codes(fresh(run), test, rule, fitted_data=train)
+    np.testing.assert_array_equal(a, b)
+    assert np.array_equal(frame_matrix(0, 3, 6, 10), frame_matrix(0, 3, 6, 10))
+    assert not np.array_equal(frame_matrix(0, 3, 6, 10), frame_matrix(1, 3, 6, 10))  # another run seed
+    assert not np.array_equal(frame_matrix(0, 3, 6, 10), frame_matrix(0, 4, 6, 10))  # another step
+    other = fresh(dataclasses.replace(run, train_config=dataclasses.replace(run.train_config, seed=9)))
+    assert not np.array_equal(frames_start_codes(other, test, rule, fitted_data=train), a)
+
+
+def test_the_frames_projection_in_chunks_is_the_whole_projection():
+    from primspace.train.frames_start import frame_matrix, frames_projection
+
+    rng = np.random.default_rng(0)
+    images = rng.integers(0, 256, (5, 4, 3, 2, 3)).astype(np.uint8)
+    observed = np.arange(4)[None, :] < np.array([1, 2, 3, 4, 0])[:, None]
+    mean = rng.uniform(0, 1, (3, 2, 3))
+    x = (images.astype(np.float64) / 255 - mean).reshape(5, 4, -1) * observed[..., None]
+    whole = sum(x[:, t] @ frame_matrix(3, t, 5, 18).T.astype(np.float64) for t in range(4))
+    chunked = frames_projection(images, observed, mean, 5, 3, budget=1)  # one step at a time
+    np.testing.assert_allclose(chunked, whole, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(frames_projection(images, observed, mean, 5, 3), whole, rtol=1e-4, atol=1e-5)
+    assert np.all(chunked[4] == 0)  # nothing observed: the mean frame, projected to zero
+
+
+def test_the_frames_start_refuses_in_one_line(linear_scene, image_set):
+    from primspace.train.frames_start import frames_start, frames_start_codes
+
+    run, train, test, _ = linear_scene
+    rule = Observation.build("none", "first")
+    with pytest.raises(UserError, match=r"^init 'calibrated' from frames alone .* the data set has no frames$"):
+        frames_start_codes(run, test.without_images(), rule, fitted_data=train)
+    with pytest.raises(UserError, match="the fitted data has no frames"):
+        import dataclasses
+        frames_start(dataclasses.replace(run, observed_calibrations={}), rule, fitted_data=train.without_images())
+    no_head = fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False)
+    with pytest.raises(UserError, match="needs a run with an image head"):
+        frames_start_codes(no_head, image_set, rule, fitted_data=image_set)
+    with pytest.raises(UserError, match="start by 'calibrated' \\(from the frames\\)"):
+        _infer(run, test, observe="none", observe_frames="first", init="pca", fitted_data=train)
+    with pytest.raises(UserError, match="has no frames"):  # infer's own check, before any start
+        _infer(run, test.without_images(), observe="none", observe_frames="first", init="calibrated", fitted_data=train)

@@ -1,4 +1,5 @@
-"""Prediction command: predict (the rest of each motion from its observed beginning; docs/predict.md)."""
+"""Prediction command: predict (the rest of each motion from its observed beginning, or with ``--scene`` a
+whole motion from the first frame and the primitive named; docs/predict.md)."""
 
 from __future__ import annotations
 
@@ -80,8 +81,8 @@ def predict_command(
     run: Path = typer.Argument(..., help="A fitted run directory (its weights are frozen)."),
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the motions to predict."),
     out: Path = typer.Option(..., "--out", "-o", help="The folder to write (predicted.h5, result.json, prediction.png)."),
-    observe: str = typer.Option("0.25", "--observe", help="Observed joints: a fraction of each motion's valid steps "
-                                "(0.25), a number of steps (10), or none (frames only)."),
+    observe: Optional[str] = typer.Option(None, "--observe", help="Observed joints: a fraction of each motion's valid "
+                                          "steps (0.25, the default), a number of steps (10), or none (frames only)."),
     observe_frames: Optional[str] = typer.Option(None, "--observe-frames", help="Observed frames: a fraction, a "
                                                  "number of steps, first (the first frame) or none. Default: as --observe."),
     init: Optional[str] = typer.Option(None, "--init", help="The start: zero, random, projection, pca, calibrated, "
@@ -97,41 +98,93 @@ def predict_command(
                                 "after each, warm-started (predictive coding); result.json gets the latency per step "
                                 "and the error of the rest after each step."),
     iterations: int = typer.Option(5, "--iterations", help="With --online: inference iterations per arriving step."),
+    scene: bool = typer.Option(False, "--scene", help="The scene only: the first frame and the first joints, and the "
+                               "primitive to perform (--primitive), searched in its cluster's affine subspace of the "
+                               "fitted codes. Not with --observe, --observe-frames, --init, --online."),
+    primitive: Optional[int] = typer.Option(None, "--primitive", help="With --scene: the cluster id of the primitive "
+                                            "(clusters numbered by their first fitted demonstration; result.json "
+                                            "lists their sizes and majority labels)."),
+    clusters: Optional[int] = typer.Option(None, "--clusters", help="With --scene: how many clusters of the fitted "
+                                           "codes (default: the number of distinct labels of the fitted data)."),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
 ) -> None:
-    """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded."""
+    """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded
+    (with --scene: from the first frame and joints, inside the named primitive's cluster of fitted codes)."""
     from primspace.cluster.outputs import OutputKind, atomic_directory
-    from primspace.data.dataset import MotionDataset
-    from primspace.data.indices import read_indices
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
-    from primspace.train.observe import FIRST, NOTHING
     from primspace.train.predict import predict
 
-    motor = parse_amount(observe, "--observe", (NOTHING,))
-    frames = None if observe_frames is None else parse_amount(observe_frames, "--observe-frames", (FIRST, NOTHING))
+    motor, frames = _amounts(scene, primitive, clusters, observe, observe_frames, init, online)
     check_outside_inputs(out, (file, indices, run, fitted))
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
-    dataset = MotionDataset.load(file)
-    idx = read_indices(indices, dataset) if indices is not None else None
-    fitted_data = MotionDataset.load(fitted) if fitted is not None else None
+    dataset, idx, fitted_data = _inputs(file, indices, fitted)
     overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
     configure_process(TrainConfig(threads=threads).validate())
+    common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
     with atomic_directory(out, overwrite, kind) as tmp:
-        prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, epochs=epochs, indices=idx,
-                             fitted_data=fitted_data, threads=threads, online=iterations if online else None,
-                             **overrides)
+        if scene:
+            from primspace.scene import predict_scene
+
+            prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
+            command = {"scene": True, "primitive": primitive, "clusters": clusters}
+        else:
+            prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init,
+                                 online=iterations if online else None, **common)
+            command = {"observe": motor, "observe_frames": frames, "init": init, "online": iterations if online else None}
+        command = {"run": str(run), "data": str(file), **command, "epochs": epochs}
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)
-        command = {"run": str(run), "data": str(file), "observe": motor, "observe_frames": frames, "init": init,
-                   "epochs": epochs, "online": iterations if online else None}
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
+    typer.echo(_summary_line(out, result, prediction, online, judged))
+
+
+def _inputs(file: Path, indices: Path | None, fitted: Path | None) -> tuple:
+    """The data set, the indices of the samples to predict (None: all) and the fitted data (None: the run's)."""
+    from primspace.data.dataset import MotionDataset
+    from primspace.data.indices import read_indices
+
+    dataset = MotionDataset.load(file)
+    idx = read_indices(indices, dataset) if indices is not None else None
+    return dataset, idx, MotionDataset.load(fitted) if fitted is not None else None
+
+
+def _amounts(scene: bool, primitive, clusters, observe, observe_frames, init, online: bool) -> tuple:
+    """``--observe`` and ``--observe-frames`` parsed (motor None under ``--scene``), after the ``--scene`` checks."""
+    from primspace.train.observe import FIRST, NOTHING
+
+    _check_scene_flags(scene, primitive, clusters, observe, observe_frames, init, online)
+    motor = None if scene else parse_amount(observe or "0.25", "--observe", (NOTHING,))
+    frames = None if observe_frames is None else parse_amount(observe_frames, "--observe-frames", (FIRST, NOTHING))
+    return motor, frames
+
+
+def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames, init, online: bool) -> None:
+    """One line for flags that do not go with (or without) ``--scene``."""
+    if not scene:
+        if primitive is not None or clusters is not None:
+            raise UserError("--primitive and --clusters go with --scene (the scene-only mode)")
+        return
+    given = [name for name, value in (("--observe", observe), ("--observe-frames", observe_frames), ("--init", init),
+                                      ("--online", online or None)) if value is not None]
+    if given:
+        raise UserError(f"--scene observes the first frame and the first joints only: do not give {', '.join(given)}")
+    if primitive is None:
+        raise UserError("--scene needs --primitive K: the cluster id of the primitive to perform")
+
+
+def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
+    """What ``primspace predict`` prints when it is done."""
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     line = f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
+    if "scene" in prediction.details:
+        s = prediction.details["scene"]
+        name = f" ({s['name']})" if s["name"] else ""
+        line += f"; primitive {s['primitive']}{name} of {s['n_clusters']} clusters, subspace rank {s['rank']}"
     if online:
         o = prediction.details["online"]
         line += f"; online, {o['iterations']} iterations per step: {o['latency_ms_mean']:.1f} ms per step"
     if judged is not None:
         line += "; success " + ", ".join(f"{p} {r:.2f}" for p, r in judged["rates"].items())
-    typer.echo(line)
+    return line

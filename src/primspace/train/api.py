@@ -228,8 +228,9 @@ def infer(
     observe : float, int or "none", optional
         Infer from a prefix of each motion (:mod:`primspace.train.observe`): a fraction in
         (0, 1] of each sample's valid steps (rounded up, at least one), a number of steps,
-        or ``"none"`` (no joints: frames only). The loss counts the observed entries only
-        and the starts read the observed part. None: every step.
+        or ``"none"`` (no joints: frames only; start by ``zero``, ``random`` or ``calibrated``,
+        the last from the observed frames, :mod:`primspace.train.frames_start`). The loss
+        counts the observed entries only and the starts read the observed part. None: every step.
     observe_frames : float, int, "first" or "none", optional
         The same for the frames (default: as ``observe``); ``"first"``: the first frame.
     fitted_data : MotionDataset, optional

@@ -18,7 +18,10 @@ observed entries (:class:`primspace.train.loop.DataTensors`), and the starts of
   projections (the same rule applied to them) to their fitted codes; fitted on demand and
   cached in memory on the :class:`~primspace.train.run.TrainedRun`, keyed by the rule;
 * ``nearest``: the fitted code of the fitted demonstration whose motor is nearest over the
-  new sample's observed steps (Euclidean, scaled units).
+  new sample's observed steps (Euclidean, scaled units);
+* ``calibrated`` with no joints observed (``observe="none"``) and frames observed: a random
+  projection of the observed frames minus the run's mean frame, mapped to the fitted codes
+  by a calibration fitted the same way (:mod:`primspace.train.frames_start`).
 
 The rule is recorded in an infer run's ``config.json`` (``observe``), so a resume checks it.
 """
@@ -173,26 +176,33 @@ def observing_args(init: str, observation: Observation | None, data: MotionDatas
     None when the start reads no mask (no observation and not ``nearest``: today's starts)."""
     if observation is None and init != NEAREST:
         return None
-    return {"observed": observation_masks(observation, data)[0], "observation": observation, "fitted_data": fitted_data}
+    return {"observed": observation_masks(observation, data)[0], "observation": observation, "fitted_data": fitted_data,
+            "data": data}
 
 
 def observed_start(init: str, parent, initializer: LatentInitializer, scaled: np.ndarray, observed: np.ndarray,
-                   seed: int, observation: Observation | None, fitted_data: MotionDataset | None) -> np.ndarray:
+                   seed: int, observation: Observation | None, fitted_data: MotionDataset | None,
+                   data: MotionDataset | None = None) -> np.ndarray:
     """Starting codes (float64, (n, K·q)) of ``scaled`` motor observed at ``observed`` (n, T).
 
     ``zero`` / ``random`` / ``projection`` / ``pca``: the initialiser's codes of the observed
     part (:meth:`~primspace.latent.LatentInitializer.transform`); ``calibrated``: those
-    mapped by the calibration for this rule (:func:`observed_calibration`); ``nearest``:
-    :func:`nearest_codes`. ``parent``: the trained run; ``fitted_data``: the data set it was
-    fitted on (default: its data file).
+    mapped by the calibration for this rule (:func:`observed_calibration`), or with no
+    joints observed the frames start of ``data`` (:func:`~primspace.train.frames_start.frames_start_codes`);
+    ``nearest``: :func:`nearest_codes`. ``parent``: the trained run; ``fitted_data``: the
+    data set it was fitted on (default: its data file); ``data``: the samples (their frames).
     """
     if init == NEAREST:
-        data = fitted_samples(parent, fitted_data)
-        fitted, valid = parent.scaler.transform(data.motor), observation_masks(None, data)[0]
+        fitted_set = fitted_samples(parent, fitted_data)
+        fitted, valid = parent.scaler.transform(fitted_set.motor), observation_masks(None, fitted_set)[0]
         return nearest_codes(scaled, observed, fitted, valid, parent.latents)
-    if observation is not None and observation.motor == NOTHING and init != "zero" and init != "random":
+    if observation is not None and observation.motor == NOTHING and init not in ("zero", "random"):
+        if init == CALIBRATED and data is not None:
+            from primspace.train.frames_start import frames_start_codes  # it reads this module's masks
+
+            return frames_start_codes(parent, data, observation, fitted_data)
         raise UserError(f"init {init!r} starts from the observed joints, and observe='none' observes none: "
-                        "start by 'zero' or 'random' (a start from frames alone is not implemented)")
+                        "start by 'calibrated' (from the frames), 'zero' or 'random'")
     codes = initializer.transform(scaled, random_state=seed, observed=observed)
     if init == CALIBRATED:
         codes = observed_calibration(parent, observation, fitted_data).transform(codes)

@@ -1,0 +1,345 @@
+"""The scene only: see the block, name the primitive, do it (issue 25, item 4; docs/predict.md).
+
+No step of the new motion is demonstrated. What is given: the first camera frame, the
+initial joints (the first step), and the primitive to perform, named as a cluster of the
+run's fitted codes. The paper finds primitives as affine subspaces of the codes (paper,
+*Affine Subspace Clustering*; :class:`~primspace.cluster.LowRankSubspaceClustering`); here
+the code of the new motion is searched inside the chosen cluster's affine subspace,
+
+    z = μ_k + U_kᵀ a,
+
+``μ_k`` the mean of cluster ``k``'s fitted codes and ``U_k`` (r x K·q) their top ``r``
+principal directions (``r``: the fewest that explain at least 90 % of the cluster's
+variance, or ``rank=``). θ is frozen and only ``a`` is optimised (start ``a = 0``: the
+cluster mean), by the masked loss of inference (:func:`primspace.train.loop.batch_loss`)
+on the observed entries: the first step's joints and the first frame. Row-wise Adam
+(:class:`~primspace.latent.LatentTable`), the whole set in order, on the CPU, seeded by the
+run's seed: the same call gives the same codes. The decoder's whole sequence is the
+prediction (:class:`~primspace.train.predict.Prediction`), scored on the steps after the
+first (:func:`primspace.peers.unobserved_mse`).
+
+**Which cluster is which primitive.** Cluster ids are numbered by the order of their
+first member among the run's fitted samples (the run's ``indices`` order): the cluster
+of the first fitted demonstration is 0, the next new one 1, and so on, so the numbering
+is stable for a run and seed. :func:`scene_clusters` lists, per cluster, its size, its
+first member and, when the fitted data has labels, the majority label's name: for
+display only, so a user can tell "cluster 2 is the pushes" before asking for it. The
+number of clusters, when not given, is the number of distinct labels of the fitted
+data: a count, the labels themselves are never used to cluster.
+
+This module sits above ``train`` and ``cluster`` (the training layer knows nothing of
+clustering, docs/architecture.md), beside the experiments, which use
+:func:`run_scene_point`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+from primspace.cluster.estimator import LowRankSubspaceClustering
+from primspace.data import MotionDataset
+from primspace.data.steps import valid_steps
+from primspace.errors import UserError
+from primspace.latent import LatentTable
+from primspace.peers import unobserved_mse
+from primspace.progress import progress_bar
+from primspace.train.api import as_run, reconstruct, uses_images
+from primspace.train.checks import select
+from primspace.train.config import lr_factor
+from primspace.train.loop import DataTensors, batch_loss
+from primspace.train.observe import FIRST, Observation, fitted_samples, observation_masks
+from primspace.train.predict import DEFAULT_PREDICT_EPOCHS, Prediction, frame_errors
+
+__all__ = ["SCENE", "SCENE_VARIANCE", "SceneClusters", "cluster_codes", "scene_clusters", "affine_subspace",
+           "infer_in_subspace", "predict_scene", "run_scene_point"]
+
+#: ``Prediction.init`` and ``result.json``'s ``mode`` of a scene-only prediction.
+SCENE = "scene"
+#: The share of a cluster's variance its subspace keeps when no rank is given.
+SCENE_VARIANCE = 0.9
+
+
+def _observation() -> Observation:
+    """What the scene mode observes: the first step's joints and the first frame."""
+    return Observation.build(1, FIRST)
+
+
+@dataclass
+class SceneClusters:
+    """The fitted codes clustered into primitives (:func:`cluster_codes`).
+
+    Attributes
+    ----------
+    labels : ndarray (N,) int
+        The cluster of each fitted code (the run's fitted order), numbered by first member.
+    codes : ndarray (N, K·q) float64
+        The fitted codes.
+    majority : list of int or None
+        Per cluster, the most frequent label of its members (None without labels).
+    names : list of str or None
+        The majority label's name (display only).
+    r2 : float
+        R² of the clustering's self-representation.
+    """
+
+    labels: np.ndarray
+    codes: np.ndarray
+    majority: list
+    names: list
+    r2: float
+
+    @property
+    def n_clusters(self) -> int:
+        return len(self.majority)
+
+    @property
+    def sizes(self) -> list[int]:
+        return np.bincount(self.labels, minlength=self.n_clusters).astype(int).tolist()
+
+    def check(self, primitive) -> int:
+        """``primitive`` as a cluster id, or one line naming the valid range."""
+        k = self.n_clusters
+        if isinstance(primitive, (bool, np.bool_)) or not isinstance(primitive, (int, np.integer)) \
+                or not 0 <= primitive < k:
+            raise UserError(f"primitive {primitive!r} is out of range: the run's fitted codes form {k} clusters, "
+                            f"choose 0..{k - 1}")
+        return int(primitive)
+
+    def subspace(self, primitive: int, rank: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Cluster ``primitive``'s affine subspace: mean (K·q,) and basis (r, K·q) (:func:`affine_subspace`)."""
+        k = self.check(primitive)
+        return affine_subspace(self.codes[self.labels == k], rank, where=f"cluster {k}")
+
+    def summary(self) -> dict:
+        """What ``result.json`` records of the clusters."""
+        return {"n_clusters": self.n_clusters, "cluster_sizes": self.sizes, "cluster_names": list(self.names),
+                "first_members": [int(np.flatnonzero(self.labels == k)[0]) for k in range(self.n_clusters)],
+                "r2": self.r2}
+
+
+def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, *, r2_target=None,
+                  random_state: int = 0) -> SceneClusters:
+    """Cluster ``codes`` (N, K·q) with :class:`~primspace.cluster.LowRankSubspaceClustering`
+    (affine); ``labels`` / ``label_names`` of the same samples only name the clusters."""
+    codes = np.asarray(codes, dtype=np.float64)
+    if isinstance(n_clusters, (bool, np.bool_)) or not isinstance(n_clusters, (int, np.integer)) \
+            or not 1 <= n_clusters <= len(codes):
+        raise UserError(f"the number of clusters must be a whole number in 1..{len(codes)} (the fitted codes), "
+                        f"got {n_clusters!r}")
+    model = LowRankSubspaceClustering(int(n_clusters), affine=True, r2_target=r2_target, random_state=random_state)
+    raw = model.fit(codes).labels_
+    order = list(dict.fromkeys(raw.tolist()))  # by first member
+    order += [c for c in range(int(n_clusters)) if c not in order]
+    ids = np.array([order.index(c) for c in raw], dtype=np.int64)
+    majority, names = [], []
+    for k in range(int(n_clusters)):
+        own = None if labels is None else np.asarray(labels)[ids == k]
+        own = None if own is None else own[own >= 0]
+        top = None if own is None or not own.size else int(np.bincount(own).argmax())
+        majority.append(top)
+        names.append(None if top is None else (label_names[top] if label_names is not None and top < len(label_names)
+                                               else str(top)))
+    return SceneClusters(ids, codes, majority, names, float(model.r2_))
+
+
+def scene_clusters(run, n_clusters: int | None = None, *, fitted_data: MotionDataset | None = None,
+                   r2_target=None) -> SceneClusters:
+    """The run's fitted codes clustered, ids numbered by first member (module docstring).
+
+    ``n_clusters`` defaults to the number of distinct labels of the fitted data (``fitted_data``
+    or the run's data file): a count, not the labels. The labels, when there are any, also
+    name each cluster by its majority (display only). Seeded by the run's seed.
+    """
+    parent = as_run(run)
+    fitted = None
+    if fitted_data is not None or parent.data_path is not None:
+        fitted = fitted_samples(parent, fitted_data)
+    labels = None if fitted is None else fitted.labels
+    if n_clusters is None:
+        if labels is None:
+            why = "has no data file" if fitted is None else "fitted data has no labels"
+            raise UserError(f"the scene mode clusters the fitted codes and the run {why} to count primitives by: "
+                            "give the number of clusters (n_clusters, --clusters N)")
+        n_clusters = int(np.unique(labels[labels >= 0]).size)
+    return cluster_codes(parent.latents, n_clusters, labels, None if fitted is None else fitted.label_names,
+                         r2_target=r2_target, random_state=int(parent.train_config.seed))
+
+
+def affine_subspace(codes, rank: int | None = None, variance: float = SCENE_VARIANCE, *,
+                    where: str = "the cluster") -> tuple[np.ndarray, np.ndarray]:
+    """The mean (d,) and the top ``r`` principal directions (r, d) of ``codes`` (m, d).
+
+    ``r``: ``rank`` (0 .. min(m − 1, d)), or the fewest directions that explain at least
+    ``variance`` of the variance (0 when the codes are one point).
+    """
+    codes = np.asarray(codes, dtype=np.float64)
+    mean = codes.mean(axis=0)
+    _, s, vt = np.linalg.svd(codes - mean, full_matrices=False)
+    most = min(len(codes) - 1, codes.shape[1])
+    if rank is None:
+        total = float(np.sum(s**2))
+        share = np.cumsum(s**2) / total if total > 0 else np.ones(0)
+        rank = 0 if total <= 0 else int(np.searchsorted(share, variance - 1e-12) + 1)
+    elif isinstance(rank, (bool, np.bool_)) or not isinstance(rank, (int, np.integer)) or not 0 <= rank <= most:
+        raise UserError(f"rank {rank!r}: {where} has {len(codes)} codes of size {codes.shape[1]}, "
+                        f"its subspace spans 0..{most} directions")
+    return mean, vt[: int(rank)]
+
+
+def infer_in_subspace(run, data: MotionDataset, mean: np.ndarray, basis: np.ndarray, *, epochs: int,
+                      progress: bool | None = None, **overrides) -> np.ndarray:
+    """Codes (n, K·q) float32 ``mean + a @ basis`` with ``a`` fitted (θ frozen, start ``a = 0``) to
+    the scene's observed entries (first joints, first frame) by the masked inference loss."""
+    parent = as_run(run)
+    try:
+        tc = replace(parent.train_config, epochs=epochs, device="cpu", amp=False, vision_frames=None,
+                     **overrides).validate()
+    except TypeError as exc:
+        raise UserError(f"unknown train config override ({exc})") from None
+    if not uses_images(parent.model_config, data, tc):
+        raise UserError("the scene mode reads the first camera frame, and this run does not use frames "
+                        "(vision_weight 0)")
+    tensors = DataTensors.build(data, parent.scaler, True, "cpu", _observation())
+    model = copy.deepcopy(parent.model).cpu().eval().requires_grad_(False)
+    mu = torch.from_numpy(np.asarray(mean, dtype=np.float32))
+    u = torch.from_numpy(np.ascontiguousarray(basis, dtype=np.float32))
+    n, r = len(data), u.shape[0]
+    table = LatentTable(torch.zeros(n, r), tc.latent_lr)
+    with torch.random.fork_rng(devices=[]), progress_bar(tc.epochs if r else 0, "scene", enabled=progress) as advance:
+        torch.manual_seed(tc.seed)
+        for epoch in range(tc.epochs if r else 0):
+            table.lr = tc.latent_lr * lr_factor(epoch, tc.epochs, tc.final_lr_fraction)
+            for start in range(0, n, tc.batch_size):
+                idx = torch.arange(start, min(n, start + tc.batch_size))
+                a = table.batch(idx)
+                loss, _ = batch_loss(model, mu + a @ u, idx, tensors, tc, contextlib.nullcontext())
+                loss.backward()
+                table.step(idx, a.grad.mul_(idx.numel()))  # each code on its own sample's gradient
+            advance()
+    return (np.asarray(mean, dtype=np.float64) + table.numpy().astype(np.float64) @ np.asarray(basis)).astype(np.float32)
+
+
+def _check_scene(parent, data: MotionDataset) -> None:
+    if not isinstance(data, MotionDataset):
+        raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
+    if not parent.model_config.has_images:
+        raise UserError("the scene mode reads the first camera frame and needs a run with an image head; "
+                        "this run was fitted on joints only")
+    if not data.has_images:
+        where = str(data.path) if data.path is not None else "the data set"
+        raise UserError(f"the scene mode reads the first camera frame, and {where} has no frames")
+
+
+def predict_scene(run, data: MotionDataset, primitive: int, *, clusters: SceneClusters | None = None,
+                  n_clusters: int | None = None, rank: int | None = None, epochs: int = DEFAULT_PREDICT_EPOCHS,
+                  indices=None, fitted_data: MotionDataset | None = None, frames: bool = True,
+                  progress: bool | None = None, **overrides) -> Prediction:
+    """Predict each sample's whole motion from its first frame and first joints, as primitive ``primitive``.
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+        A fitted run with an image head (θ frozen; the run is not changed).
+    data : MotionDataset
+        The scenes (with frames); every step after the first is the answer the errors are measured against.
+    primitive : int
+        The cluster id of the primitive to perform (:func:`scene_clusters`: ids by first member).
+    clusters : SceneClusters, optional
+        The run's clusters, computed once (:func:`scene_clusters`); default: computed here.
+    n_clusters : int, optional
+        How many clusters (default: the number of distinct labels of the fitted data).
+    rank : int, optional
+        The subspace's dimension (default: 90 % of the cluster's variance).
+    epochs : int
+        Optimisation epochs of the subspace coordinates (0: the cluster mean).
+    indices, fitted_data, frames, progress, **overrides
+        As in :func:`primspace.train.predict.predict` (``latent_lr``, ``batch_size``, ``seed`` ...).
+
+    Returns
+    -------
+    Prediction
+        ``init`` ``"scene"``; ``details``: ``mode``, and ``scene`` (primitive, its name,
+        rank, cluster sizes and names).
+    """
+    parent = as_run(run)
+    _check_scene(parent, data)
+    sub, idx = select(data, indices)
+    if clusters is None:
+        clusters = scene_clusters(parent, n_clusters, fitted_data=fitted_data)
+    elif clusters.codes.shape != parent.latents.shape or not np.allclose(clusters.codes, parent.latents):
+        raise UserError("clusters are not of this run's fitted codes: compute them with scene_clusters(run)")
+    k = clusters.check(primitive)
+    mean, basis = clusters.subspace(k, rank)
+    codes = infer_in_subspace(parent, sub, mean, basis, epochs=epochs, progress=progress, **overrides)
+    motor, predicted_frames = reconstruct(parent, codes, images=frames)
+    motor_observed, frames_observed = observation_masks(_observation(), sub)
+    lengths = sub.lengths if sub.lengths is not None else np.full(len(sub), sub.length)
+    scaled, truth = parent.scaler.transform(motor), parent.scaler.transform(sub.motor)
+    errors = {"motor_mse": unobserved_mse(scaled, truth, motor_observed, lengths)}
+    if predicted_frames is not None:
+        errors["vision_mse"], errors["psnr"] = frame_errors(predicted_frames, sub.load_images().images,
+                                                            frames_observed, valid_steps(lengths, sub.length))
+    details = {"mode": SCENE, "scene": {"primitive": k, "name": clusters.names[k], "rank": int(basis.shape[0]),
+                                        **clusters.summary()}}
+    return Prediction(codes=codes, motor=motor, frames=predicted_frames, motor_observed=motor_observed,
+                      frames_observed=frames_observed, indices=idx, errors=errors,
+                      observation=_observation().to_dict(), init=SCENE, epochs=int(epochs), details=details)
+
+
+def run_scene_point(fit, fitted: MotionDataset, test: MotionDataset, epochs: int) -> dict:
+    """The scene mode on an experiment's split, for the success-per-primitive table.
+
+    Parameters
+    ----------
+    fit : TrainedRun
+        The fitted run (image head).
+    fitted : MotionDataset
+        Its fitted samples, in its order (``data.subset(fit.indices)``), with labels.
+    test : MotionDataset
+        The scenes to act on, with frames and labels.
+    epochs : int
+
+    Returns
+    -------
+    dict
+        ``scaled`` (n, T, J) the predicted motor in scaled units (NaN rows: no cluster
+        holds the sample's label), ``motor`` the same in physical units, ``cluster`` (n,)
+        the cluster asked for (−1: none), ``mse`` (n,) the unobserved motor MSE, and
+        ``clusters`` (:meth:`SceneClusters.summary`) with ``ranks`` per cluster used.
+
+    Notes
+    -----
+    The labels only pick which primitive to ask for, as a user names the primitive:
+    each test sample asks for the cluster whose members' majority label is its label
+    (of several, the one holding most fitted samples of that label; of none, the
+    cluster holding most of them). The clustering itself sees codes only; its number of
+    clusters is the number of distinct fitted labels.
+    """
+    if fitted.labels is None or test.labels is None:
+        raise UserError("run_scene_point picks each sample's primitive by its label: both data sets need labels")
+    n_clusters = int(np.unique(fitted.labels[fitted.labels >= 0]).size)
+    clusters = cluster_codes(fit.latents, n_clusters, fitted.labels, fitted.label_names,
+                             random_state=int(fit.train_config.seed))
+    counts = np.array([[np.sum((clusters.labels == k) & (fitted.labels == lab)) for k in range(n_clusters)]
+                       for lab in range(int(max(fitted.labels.max(), test.labels.max())) + 1)])
+    chosen = np.full(len(test), -1, dtype=np.int64)
+    for i, lab in enumerate(test.labels):
+        if lab >= 0 and counts[lab].max() > 0:
+            score = [(clusters.majority[k] == lab, counts[lab, k]) for k in range(n_clusters)]
+            chosen[i] = max(range(n_clusters), key=lambda k: score[k])
+    scaled = np.full(test.motor.shape, np.nan)
+    mse, ranks = np.full(len(test), np.nan), {}
+    for k in np.unique(chosen[chosen >= 0]):
+        rows = np.flatnonzero(chosen == k)
+        p = predict_scene(fit, test, int(k), clusters=clusters, epochs=epochs, indices=rows, frames=False,
+                          progress=False)
+        scaled[rows], mse[rows] = fit.scaler.transform(p.motor), p.errors["motor_mse"]
+        ranks[int(k)] = p.details["scene"]["rank"]
+    motor = np.where(np.isnan(scaled), np.nan, fit.scaler.inverse_transform(np.nan_to_num(scaled)))
+    return {"scaled": scaled, "motor": motor.astype(np.float32), "cluster": chosen, "mse": mse,
+            "clusters": {**clusters.summary(), "ranks": ranks}}
