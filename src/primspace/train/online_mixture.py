@@ -102,16 +102,24 @@ def mixture_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, 
     truth = parent.scaler.transform(data.motor)
     lengths = data.lengths if data.lengths is not None else np.full(len(data), length)
     valid = valid_steps(lengths, length)
-    n, decoded, kept = len(data), mixture.decoded, None
-    d2 = np.zeros((n, len(decoded)))
+    n, kept = len(data), None
+    by_step = np.ascontiguousarray(mixture.decoded.transpose(1, 0, 2))  # (T, c, J): a step's candidates together
+    squares = (by_step**2).sum(axis=2)  # (T, c)
+
+    def arrive(t: int) -> np.ndarray:  # (n, c): the squared distances of step t (1-based), valid samples only
+        x = truth[:, t - 1]
+        step = (x**2).sum(axis=1)[:, None] + squares[t - 1][None] - 2.0 * x @ by_step[t - 1].T
+        return valid[:, t - 1, None] * np.maximum(step, 0.0)
+
+    d2 = np.zeros((n, by_step.shape[1]))
     for t in range(1, int(start_step)):  # the steps before the first arrival
-        d2 += valid[:, t - 1, None] * ((truth[:, None, t - 1] - decoded[None, :, t - 1]) ** 2).sum(-1)
+        d2 += arrive(t)
     codes = np.empty((n, len(steps), mixture.candidates.shape[1]), dtype=np.float32)
     errors, latency = np.empty((n, len(steps))), np.empty(len(steps))
     with progress_bar(len(steps), "online mixture", enabled=progress) as advance:
         for s, t in enumerate(steps):
             t0 = time.perf_counter()
-            d2 += valid[:, t - 1, None] * ((truth[:, None, t - 1] - decoded[None, :, t - 1]) ** 2).sum(-1)
+            d2 += arrive(int(t))
             energy = d2 / (2.0 * noises[int(t)])
             w = np.exp(-(energy - energy.min(axis=1, keepdims=True)))
             w /= w.sum(axis=1, keepdims=True)
