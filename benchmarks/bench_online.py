@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from threadpoolctl import threadpool_limits
 
 from primspace.data import MotionDataset
 from primspace.model import ModelConfig
@@ -215,6 +216,7 @@ def main() -> None:
     args.image_iterations = [int(k) for k in args.image_iterations.split(",")]
     args.online_lrs = [None if v == "run" else float(v) for v in args.online_lrs.split(",")]
     torch.set_num_threads(1)
+    threadpool_limits(1)  # numpy's BLAS too (the mixture): one core, and no spinning threads on a busy machine
     figures = {"threads": 1, "T": T, "J": J, "q": Q, "samples": args.samples}
     motor_bench(args, figures)
     if args.images:

@@ -186,6 +186,12 @@ _experiment_command(
     ("prediction:run_predict",), "predict_error_table",
 )
 _experiment_command(
+    "scene", "Act from the scene only (see the block, do a push): each evaluation sample's first frame and joints and "
+    "its primitive, named as a cluster of the fitted codes; success per primitive beside the primitive's mean motion "
+    "and the reproduction from the whole motion, over seeds (runs intra if needed; needs images; docs/predict.md).",
+    ("scene_only:run_scene",), "scene_table",
+)
+_experiment_command(
     "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
     ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"), None,
 )

@@ -54,6 +54,7 @@ __all__ = [
     "calibration_table",
     "calibration_verdict",
     "tuning_table",
+    "scene_table",
 ]
 
 META_FILE = "experiment.json"
@@ -435,6 +436,25 @@ def predict_error_table(results: dict) -> tuple[list[str], list[list]]:
         if results.get("judged"):
             row += [_cell_text(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])]
         rows.append(row)
+    return columns, rows
+
+
+def scene_table(results: dict) -> tuple[list[str], list[list]]:
+    """Scene: per primitive (then all), a row per method (the scene only, the mean motion given
+    the label, the reproduction from the whole motion): its samples per seed, the success
+    where judged and the MSE of the steps after the first, mean ± std over seeds."""
+    table = results["table"]
+    methods = [m for m in results.get("methods", list(table)) if m in table]
+    judged = bool(results.get("judged"))
+    names = [p for p in dict.fromkeys(p for m in methods for p in table[m]) if p != "all"] + ["all"]
+    columns = ["primitive", "method", "n"] + (["success"] if judged else []) + ["MSE after step 1"]
+    rows = []
+    for name in names:
+        for method in methods:
+            cell = table[method].get(name)
+            if cell:
+                rows.append([name, method, f"{cell['n'][0]:g}"] + ([_cell_text(cell.get("success"), digits=2)]
+                                                                   if judged else []) + [_cell_text(cell.get("mse"))])
     return columns, rows
 
 

@@ -29,6 +29,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.inter, "inter"),
     (sections.tuning, "tune"),
     (sections.prediction, "predict"),
+    (sections.scene_only, "scene"),
     (sections.composite, "composite"),
     (sections.latent_figures, "intra"),
     (sections.animations, "intra_animation"),

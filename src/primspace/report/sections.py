@@ -36,6 +36,7 @@ from primspace.experiments.results import (
     read_meta,
     read_results,
     results_file,
+    scene_table,
     success_table,
     tuning_table,
 )
@@ -294,6 +295,26 @@ def prediction(out_dir: Path, report: HtmlReport) -> None:
     report.figure(figure_file(out_dir, "predict_errors"), "Error of the unobserved steps against the observed fraction.")
     if results["failures"]:
         _failures(report, results["failures"], "prediction point(s)")
+
+
+def scene_only(out_dir: Path, report: HtmlReport) -> None:
+    """Acting from the scene only: success (and error) per primitive, beside the mean motion and the reproduction."""
+    results = read_results(out_dir, "scene")
+    if results is None:
+        return
+    report.section("Acting from the scene only")
+    report.paragraph(
+        f"See the block, do the primitive: each evaluation sample gives only its first camera frame and its first "
+        f"joints, and names the primitive as the cluster of the fitted codes whose majority label is its own; the "
+        f"code is searched inside that cluster's affine subspace ({results['epochs']} epochs, θ of the projection fit "
+        f"at q = {results['latent_dim']} frozen) and decoded whole (docs/predict.md). Beside it, on the same samples: "
+        "the mean motion of the primitive's fitted demonstrations (given the label) and the same run's codes inferred "
+        "from the whole motion (the reproduction). MSE of the steps after the first (scaled units), mean ± std over "
+        "seeds" + ("; success as judged by the simulator." if results.get("judged") else "."))
+    columns, rows = scene_table(results)
+    report.table(columns, rows)
+    if results["failures"]:
+        _failures(report, results["failures"], "scene point(s)")
 
 
 def composite(out_dir: Path, report: HtmlReport) -> None:
