@@ -329,6 +329,14 @@ def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, mo
     assert not (out / "report.html").exists()
     again = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero", "--epochs", "3,1")
     assert_user_error(again, "made with other settings", "fit_epochs=2")
+    # the command that made the runs is kept, and a summary names it without being told
+    command = (f"primspace experiment intra --preset tiny --data {tiny_data} --out {out} --inits zero --epochs 2,1 "
+               "--workers 1 --no-report")
+    assert [i["command"] for i in json.loads((out / "experiment.json").read_text())["invocations"]] == [command]
+    summary = tmp_path / "summary.json"
+    made = run_cli("summarize", out, "--name", "tiny", "--out", summary)
+    assert made.code == 0, made.err
+    assert json.loads(summary.read_text())["command"] == command
 
 
 def test_preset_json_roundtrip_and_unknown_field():
@@ -380,6 +388,8 @@ def test_a_summary_holds_what_the_claims_and_docs_read(finished):
     from primspace.experiments.summary import read_summary, summarize
 
     exp, intra, _, success = finished
+    with pytest.raises(UserError, match="recorded no commands"):  # made from Python: no command to name
+        summarize(exp.path, "tiny")
     summary = summarize(exp.path, "tiny", "primspace experiment success --out tiny")
     assert set(summary["results"]) >= {"intra", "success", "clustering", "probe"}
     assert check_claims(summary["results"]) == check_claims(exp.path)

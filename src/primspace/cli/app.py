@@ -104,6 +104,16 @@ def _run(args: list[str]) -> int:
     return 0
 
 
+#: The arguments of the command :func:`main` is running (None outside it): experiments
+#: record them in experiment.json, so a summary names the commands that made its runs.
+INVOCATION: list[str] | None = None
+
+
+def invocation() -> list[str] | None:
+    """The arguments of the running ``primspace`` command (:data:`INVOCATION`)."""
+    return INVOCATION
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``primspace`` command (and ``python -m primspace``).
 
@@ -112,7 +122,9 @@ def main(argv: list[str] | None = None) -> None:
     of the option parser. Ctrl-C is one line and exit 130. ``primspace`` alone prints the
     help (exit 2, as Click does).
     """
+    global INVOCATION
     args = list(sys.argv[1:] if argv is None else argv)
+    INVOCATION = args
     try:
         code = _run(args)
     except getattr(_click_errors, "NoArgsIsHelpError", ()) as exc:  # the help, printed already or here

@@ -35,12 +35,17 @@ def _experiment(preset: str | None, data, out, backend, address, workers, seed, 
     from primspace.experiments.workspace import ExperimentDir
     from primspace.parallel import default_workers
 
+    from primspace.cli.app import invocation
+
     check_workers(workers)
     chosen = resolve_preset(preset or DEFAULT_PRESET).with_overrides(**overrides)
-    return ExperimentDir(
+    exp = ExperimentDir(
         out, chosen, data=data, backend=backend.value, address=address, workers=workers or default_workers(),
         **({} if seed is None else {"seed": seed}),  # else ExperimentDir's default
     )
+    if invocation() is not None:
+        exp.record_invocation(invocation())
+    return exp
 
 
 def _finish(exp, report: bool) -> None:
@@ -201,7 +206,9 @@ _experiment_command(
 def summarize_command(
     directory: Path = typer.Argument(..., help="An experiment directory."),
     name: str = typer.Option(..., "--name", help="The summary's name (its heading in the docs)."),
-    command: str = typer.Option(..., "--command", help="The command(s) that made DIRECTORY, exactly as run."),
+    command: Optional[str] = typer.Option(
+        None, "--command", help="The command(s) that made DIRECTORY, exactly as run (default: the ones its "
+        "experiment.json recorded)."),
     out: Path = typer.Option(..., "--out", "-o", help="The summary file, e.g. docs/results/NAME.json."),
     note: str = typer.Option("", "--note", help="What a reader must know (e.g. other jobs shared the cores)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier summary at OUT (nothing else)."),

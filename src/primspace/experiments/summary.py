@@ -154,7 +154,16 @@ _REDUCERS = {
 }
 
 
-def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> dict:
+def recorded_commands(meta: dict) -> str:
+    """The ``primspace experiment`` commands experiment.json recorded, each once, in order, one per line."""
+    seen: list[str] = []
+    for entry in meta.get("invocations", []):
+        if isinstance(entry, dict) and isinstance(entry.get("command"), str) and entry["command"] not in seen:
+            seen.append(entry["command"])
+    return "\n".join(seen)
+
+
+def summarize(out_dir: str | Path, name: str, command: str | None = None, note: str = "") -> dict:
     """The summary of experiment directory ``out_dir``.
 
     Parameters
@@ -163,8 +172,10 @@ def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> d
         A directory ``primspace experiment`` wrote.
     name : str
         The summary's name (its file in docs/results/ and its heading in the docs).
-    command : str
-        The command(s) that made the directory, exactly as run (the docs print them).
+    command : str, optional
+        The command(s) that made the directory, exactly as run (the docs print them);
+        default: those experiment.json recorded (:func:`recorded_commands`; directories
+        made before 0.6.1 recorded none: then give them).
     note : str
         Anything a reader must know (e.g. "other jobs shared the cores").
 
@@ -177,6 +188,11 @@ def summarize(out_dir: str | Path, name: str, command: str, note: str = "") -> d
         ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict: those run).
     """
     meta = read_meta(out_dir)
+    if command is None:
+        command = recorded_commands(meta)
+        if not command:
+            raise UserError(f"{out_dir}: its experiment.json recorded no commands (made before 0.6.1): "
+                            "give --command, the command(s) that made it")
     results = {}
     for key, reduce in _REDUCERS.items():
         found = read_results(out_dir, key)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import json
+import shlex
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
@@ -118,6 +119,14 @@ class ExperimentDir:
             }
         self.data_path = data_path
         self._dataset: MotionDataset | None = None
+
+    def record_invocation(self, args: Sequence[str]) -> None:
+        """Keep ``primspace ARGS`` in experiment.json's ``invocations`` (with the version and
+        the time; written with the next save): :func:`~primspace.experiments.summary.summarize`
+        names them when no command is given."""
+        self.meta.setdefault("invocations", []).append({
+            "command": "primspace " + shlex.join(str(a) for a in args), "primspace": __version__,
+            "at": _dt.datetime.now().isoformat(timespec="seconds")})
 
     # ----------------------------------------------------------------------- files
     def save_meta(self) -> None:
