@@ -169,11 +169,13 @@ def _mean(values) -> float | None:
 
 
 def run_predict(exp: ExperimentDir, fractions=PREDICT_FRACTIONS, starts=PREDICT_STARTS_GRID,
-                epochs: int = PREDICT_EPOCHS) -> dict:
-    """The prediction grid over the intra runs' seeds (runs intra first if needed)."""
+                epochs: int = PREDICT_EPOCHS, seeds=None) -> dict:
+    """The prediction grid over the intra runs' seeds (runs intra first if needed); ``seeds``:
+    only those of them (the results then hold those seeds only)."""
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
-    seeds = sorted({r["seed"] for r in intra["runs"] if r["latent_dim"] == q and r["init"] == "projection"})
+    seeds_run = sorted({r["seed"] for r in intra["runs"] if r["latent_dim"] == q and r["init"] == "projection"})
+    seeds = seeds_run if seeds is None else [s for s in seeds_run if s in set(seeds)]
     data = exp.dataset()
     judge = _judgeable(data)
     points = [
