@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments.claims import check_claims, eighth_loss
-from primspace.experiments.results import LEARNED_CODES, predict_error_table, tuning_table
+from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
 
@@ -36,7 +36,7 @@ SUMMARY_DIR = Path("docs") / "results"
 
 #: Each generated block: the file it lives in.
 TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.md",
-           "predict": Path("docs") / "predict.md"}
+           "predict": Path("docs") / "predict.md", "scene": Path("docs") / "predict.md"}
 
 #: The order summaries are shown in (others follow, by name); README's headline shows these only.
 ORDER = ("paper", "paper-images", "demo", "lasa")
@@ -294,8 +294,23 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
               if a in summaries and b in summaries]
     results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
+    scene = "\n\n".join(render_scene(s) for s in summaries.values() if "scene" in s["results"])
     return {"headline": headline(summaries), "results": results,
-            "predict": predicted or "No stored prediction summaries yet (docs/results/)."}
+            "predict": predicted or "No stored prediction summaries yet (docs/results/).",
+            "scene": scene or "No stored scene-only summaries yet (docs/results/)."}
+
+
+def render_scene(summary: dict) -> str:
+    """The scene-only table of one summary (``primspace experiment scene``)."""
+    sc, seeds = summary["results"]["scene"], summary.get("preset", {}).get("seeds", [])
+    columns, rows = scene_table(sc)
+    return "\n".join([
+        f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
+        f"q = {sc['latent_dim']}, seeds {', '.join(map(str, seeds))}, {sc['epochs']} inference epochs in the "
+        "subspace; n: samples per seed; MSE of the steps after the first (joints scaled to [-1, 1] over the data "
+        "set), mean ± std over seeds" + ("; success: the share the simulator judges a success." if sc.get("judged")
+                                         else "."),
+        "", _table(columns, [[str(c) for c in row] for row in rows])])
 
 
 def render_predict(summary: dict) -> str:

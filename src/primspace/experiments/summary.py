@@ -142,6 +142,10 @@ def _predict(p: dict) -> dict:
     return {k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table", "failures")}
 
 
+def _scene(p: dict) -> dict:
+    return {k: p.get(k) for k in ("latent_dim", "epochs", "judged", "methods", "table", "failures")}
+
+
 _REDUCERS = {
     "intra": lambda r: {"runs": [_intra(x) for x in r.get("runs", [])], "failures": r.get("failures", {}),
                         "splits": r.get("splits", {}), "label_names": r.get("label_names")},
@@ -151,6 +155,7 @@ _REDUCERS = {
     "probe": _probe,
     "tune": _tune,
     "predict": _predict,
+    "scene": _scene,
 }
 
 
