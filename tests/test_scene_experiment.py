@@ -67,6 +67,18 @@ def test_a_second_call_reuses_the_points_and_the_report_has_the_section(scene):
     assert "Acting from the scene only" in text and "mean motion (labels)" in text
 
 
+def test_the_stored_summary_keeps_the_scene_table_and_the_docs_print_it(scene):
+    from primspace.docs import blocks
+    from primspace.experiments.summary import _round, summarize
+
+    exp, results = scene
+    summary = summarize(exp.path, "tiny", "primspace experiment scene --out tiny")
+    assert summary["results"]["scene"]["table"] == _round(results["table"])  # 5 significant digits
+    text = blocks({"tiny": summary})["scene"]
+    assert "#### tiny" in text and "| primitive | method | n | success | MSE after step 1 |" in text
+    assert text.count("| scene only |") == len(exp.dataset().label_names) + 1  # every primitive, then all
+
+
 def test_a_motor_only_experiment_is_refused_in_one_line(run_cli, scene_data, tmp_path):
     res = run_cli("experiment", "scene", "--data", scene_data, "--out", tmp_path / "cli", "--no-images", "-j", "1")
     assert_user_error(res, "image head")
