@@ -302,7 +302,8 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
 
 def render_scene(summary: dict) -> str:
     """The scene-only table of one summary (``primspace experiment scene``)."""
-    sc, seeds = summary["results"]["scene"], summary.get("preset", {}).get("seeds", [])
+    sc = summary["results"]["scene"]
+    seeds = sc.get("seeds") or summary.get("preset", {}).get("seeds", [])
     columns, rows = scene_table(sc)
     return "\n".join([
         f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
@@ -315,7 +316,8 @@ def render_scene(summary: dict) -> str:
 
 def render_predict(summary: dict) -> str:
     """The prediction table of one summary (``primspace experiment predict``)."""
-    pr, seeds = summary["results"]["predict"], summary.get("preset", {}).get("seeds", [])
+    pr = summary["results"]["predict"]
+    seeds = pr.get("seeds") or summary.get("preset", {}).get("seeds", [])  # summaries before 0.6.1: all of them
     columns, rows = predict_error_table(pr)
     cpu = summary.get("cpu", {})
     return "\n".join([

@@ -138,12 +138,19 @@ def _tune(t: dict) -> dict:
         "tuned": {"runs": [_intra(x) for x in t.get("tuned", {}).get("runs", [])]}}
 
 
+def _seeds_run(p: dict) -> list[int]:
+    """The seeds a grid over seeds holds (its ``by_seed``), in order."""
+    return sorted(int(s) for s in p.get("by_seed", {}))
+
+
 def _predict(p: dict) -> dict:
-    return {k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table", "failures")}
+    return {k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table",
+                                  "failures")} | {"seeds": _seeds_run(p)}
 
 
 def _scene(p: dict) -> dict:
-    return {k: p.get(k) for k in ("latent_dim", "epochs", "judged", "methods", "table", "failures")}
+    return {k: p.get(k) for k in ("latent_dim", "epochs", "judged", "methods", "table", "failures")} | {
+        "seeds": _seeds_run(p)}
 
 
 _REDUCERS = {
