@@ -96,23 +96,29 @@ def _given_labels(fit, fitted: MotionDataset, test: MotionDataset, noises: dict)
     return out
 
 
-def _peer_predictions(fitted_scaled, fitted, test_scaled, test, observed) -> dict:
-    """Scaled predictions of each peer (the ProMPs' noise chosen on the answer)."""
-    from primspace.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+def _fitted_peers(fitted_scaled, fitted) -> dict:
+    """The peers fitted on the fitted demonstrations once (ProMP's EM is the slow part), by name."""
+    from primspace.peers import MeanMotionPeer, NearestPeer, ProMPPeer
+
+    args = (fitted_scaled, fitted.labels, fitted.lengths)
+    return {"promp (labels)": ProMPPeer(per_label=True).fit(*args),
+            "promp (one for all)": ProMPPeer(per_label=False).fit(*args),
+            "nearest neighbour": NearestPeer().fit(*args), "mean motion (labels)": MeanMotionPeer().fit(*args)}
+
+
+def _peer_predictions(peers: dict, test_scaled, test, observed) -> dict:
+    """Scaled predictions of each fitted peer (:func:`_fitted_peers`; the ProMPs' noise chosen on the answer)."""
+    from primspace.peers import ProMPPeer, best_noise
     from primspace.train.observe import observation_masks
 
-    lf, lt = fitted.lengths, test.lengths
-    out = {}
+    lt = test.lengths
     left = (observation_masks(None, test)[0] & ~observed).any()
-    for name, per_label in (("promp (labels)", True), ("promp (one for all)", False)):
-        peer = ProMPPeer(per_label=per_label).fit(fitted_scaled, fitted.labels, lf)
-        if left:
+    out = {}
+    for name, peer in peers.items():
+        if isinstance(peer, ProMPPeer) and left:
             out[name] = best_noise(peer, test_scaled, observed, test.labels, lt).predicted
-        else:  # everything observed (the judge's 100 %): no answer to choose the noise on, the default
+        else:  # the others have no noise; at 100 % observed no answer to choose the ProMPs' on: their default
             out[name] = peer.predict(test_scaled, observed, test.labels, lt)
-    out["nearest neighbour"] = NearestPeer().fit(fitted_scaled, fitted.labels, lf).predict(test_scaled, observed, test.labels, lt)
-    out["mean motion (labels)"] = MeanMotionPeer().fit(fitted_scaled, fitted.labels, lf).predict(
-        test_scaled, observed, test.labels, lt)
     return out
 
 
@@ -133,6 +139,7 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
     scaler, fitted, test = fit.scaler, data.subset(fit.indices), data.subset(test_idx)
     fitted_scaled, test_scaled = scaler.transform(fitted.motor), scaler.transform(test.motor)
     table: dict = {}
+    peers = _fitted_peers(fitted_scaled, fitted)
     for f in tuple(fractions) + ((1.0,) if judge else ()):
         key = f"{f:g}"
         observed = observation_masks(Observation.build(f), test)[0]
@@ -147,7 +154,7 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
                 if judge:
                     entry["success"] = _judge(test, p.motor)
                 table.setdefault(name, {})[key] = entry
-        for name, scaled in _peer_predictions(fitted_scaled, fitted, test_scaled, test, observed).items():
+        for name, scaled in _peer_predictions(peers, test_scaled, test, observed).items():
             entry = {"mse": _mean(unobserved_mse(scaled, test_scaled, observed, test.lengths))}
             if judge:
                 entry["success"] = _judge(test, scaler.inverse_transform(scaled).astype(np.float32))
