@@ -569,7 +569,7 @@ def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_p
 
 def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     """`experiment predict`: every start and peer at every fraction, judged on simulator data, resumable."""
-    from primspace.experiments.prediction import PEERS, run_predict
+    from primspace.experiments.prediction import PEERS, PREDICT_VERSION, run_predict
 
     exp = finished[0]
     results = run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)
@@ -584,3 +584,5 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     assert_figure(exp.figure("predict_errors"))
     assert "Predicting the rest of a motion" in build_report(exp.path).read_text()
     assert run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)["table"] == table
+    points = list((exp.path / "runs" / f"predict{PREDICT_VERSION}").iterdir())
+    assert points and all(p.name.endswith("-e2") for p in points)  # other epochs than the grid's: other points

@@ -265,6 +265,25 @@ def test_the_mixture_is_decoded_once_per_run(trained, train_set, eval_set):
     assert first.details["mixture"]["candidates"] == second.details["mixture"]["candidates"] == len(built.candidates)
 
 
+def test_one_leave_one_out_search_per_rule(trained, train_set, eval_set, monkeypatch):
+    searches = []
+    original = CodeMixture.choose_noise
+
+    def counted(self, *args, **kwargs):
+        searches.append(kwargs.get("conditions"))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(CodeMixture, "choose_noise", counted)
+    trained.mixture = None  # a fresh mixture: nothing chosen yet
+    kw = dict(init=MIXTURE, fitted_data=train_set, frames=False)
+    plain = predict(trained, eval_set, observe=0.3, **kw)
+    joined = predict(trained, eval_set, observe=0.3, continuity=True, **kw)  # the same rule: the same search
+    predict(trained, eval_set, observe=0.3, condition=False, **kw)  # posterior mean only: its own search
+    predict(trained, eval_set, observe=0.5, **kw)  # another rule
+    assert len(searches) == 3 and searches[1] == (None,)
+    assert plain.details["mixture"] == joined.details["mixture"]
+
+
 def test_predict_overwrite_never_replaces_what_it_did_not_write(run_cli, eval_set, tmp_path):
     run_dir, data = tmp_path / "run", tmp_path / "data.h5"
     eval_set.save(data)

@@ -175,18 +175,31 @@ def _mean(values) -> float | None:
     return float(v.mean()) if v.size else None
 
 
+def projection_seeds(intra: dict, q: int) -> list[int]:
+    """The seeds of the intra experiment's projection runs at latent size ``q`` (whose fits the
+    prediction and scene grids freeze), in order."""
+    return sorted({r["seed"] for r in intra["runs"] if r["latent_dim"] == q and r["init"] == "projection"})
+
+
+def epochs_tail(epochs: int, default: int) -> str:
+    """The suffix of a grid point's key for a non-default epoch count (``-e{epochs}``; "" for the
+    default): the grid reuses points by key, so other epochs must be other points."""
+    return "" if int(epochs) == default else f"-e{int(epochs)}"
+
+
 def run_predict(exp: ExperimentDir, fractions=PREDICT_FRACTIONS, starts=PREDICT_STARTS_GRID,
                 epochs: int = PREDICT_EPOCHS, seeds=None) -> dict:
     """The prediction grid over the intra runs' seeds (runs intra first if needed); ``seeds``:
     only those of them (the results then hold those seeds only)."""
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
-    seeds_run = sorted({r["seed"] for r in intra["runs"] if r["latent_dim"] == q and r["init"] == "projection"})
+    seeds_run = projection_seeds(intra, q)
     seeds = seeds_run if seeds is None else [s for s in seeds_run if s in set(seeds)]
+    tail = epochs_tail(epochs, PREDICT_EPOCHS)
     data = exp.dataset()
     judge = _judgeable(data)
     points = [
-        GridPoint(f"predict{PREDICT_VERSION}/projection-q{q}-s{s}",
+        GridPoint(f"predict{PREDICT_VERSION}/projection-q{q}-s{s}{tail}",
                   (str(exp.data_path), str(phase_dir(exp.path, "projection", q, s, "fit")),
                    str(phase_dir(exp.path, "projection", q, s, "infer")), tuple(fractions), tuple(starts), int(epochs),
                    judge, PREDICT_MAX_SAMPLES))

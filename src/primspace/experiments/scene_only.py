@@ -31,7 +31,8 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments.intra import run_intra
-from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, _judgeable, _mean, _spread, predicted_subset
+from primspace.experiments.prediction import (PREDICT_MAX_SAMPLES, _judgeable, _mean, _spread, epochs_tail,
+                                              predicted_subset, projection_seeds)
 from primspace.experiments.runs import focus_runs, phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
@@ -150,14 +151,14 @@ def run_scene(exp: ExperimentDir, epochs: int = SCENE_EPOCHS) -> dict:
     _check_frames(exp)
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
-    seeds = sorted({r["seed"] for r in intra["runs"] if r["latent_dim"] == q and r["init"] == "projection"})
+    seeds = projection_seeds(intra, q)
     if not seeds:
         raise UserError(f"experiment scene uses the intra projection runs at q = {q}, and there are none "
                         "(an experiment whose --inits include projection)")
     if not load_run(phase_dir(exp.path, "projection", q, seeds[0], "fit")).model_config.has_images:
         raise UserError(_NO_FRAMES)
     judge = _judgeable(exp.dataset())
-    tail = "" if int(epochs) == SCENE_EPOCHS else f"-e{int(epochs)}"  # other epochs: other points
+    tail = epochs_tail(epochs, SCENE_EPOCHS)
     points = [
         GridPoint(f"scene{SCENE_VERSION}/projection-q{q}-s{s}{tail}",
                   (str(exp.data_path), str(phase_dir(exp.path, "projection", q, s, "fit")),

@@ -101,6 +101,9 @@ class CodeMixture:
         self.decoded = np.asarray(decode(self.candidates), dtype=np.float64)
         self.noise: float | None = None
         self.condition: float | None = None
+        #: Choices of :meth:`choose_noise` kept by whoever asks (e.g. per observation rule), so
+        #: that predictions of one rule share one leave-one-out search.
+        self.choices: dict = {}
 
     def weights(self, scaled: np.ndarray, observed: np.ndarray, noise: float, exclude: np.ndarray | None = None):
         """(n, c) posterior weights of the candidates given the observed entries."""

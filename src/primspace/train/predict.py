@@ -154,10 +154,14 @@ def _mixture(parent: TrainedRun, data: MotionDataset, observation: Observation, 
         raise UserError("init 'mixture' weighs the fitted codes by the observed joints, and observe='none' observes "
                         "none: start by 'zero' or 'random'")
     scaler, mixture = parent.scaler, code_mixture(parent)
-    fitted = fitted_samples(parent, fitted_data)
-    fitted_observed = observation_masks(observation, fitted)[0]
-    choice = mixture.choose_noise(scaler.transform(fitted.motor), fitted_observed, observation_masks(None, fitted)[0],
-                                  conditions=CONDITION_GRID if condition else (None,))
+    key = (observation.key, bool(condition))  # one leave-one-out search per rule, whatever the continuity
+    if key not in mixture.choices:
+        fitted = fitted_samples(parent, fitted_data)
+        mixture.choices[key] = mixture.choose_noise(scaler.transform(fitted.motor),
+                                                    observation_masks(observation, fitted)[0],
+                                                    observation_masks(None, fitted)[0],
+                                                    conditions=CONDITION_GRID if condition else (None,))
+    choice = mixture.choices[key]
     scaled, codes = mixture.predict(scaler.transform(data.motor), observation_masks(observation, data)[0],
                                     noise=choice["noise"], condition=choice["condition"])
     predicted_frames = reconstruct(parent, codes.astype(np.float32), images=True)[1] if frames else None
@@ -188,7 +192,7 @@ def _online(parent: TrainedRun, data: MotionDataset, observation: Observation, i
                               latent_lr=overrides.get("latent_lr"), seed=overrides.get("seed"))
         codes = result.codes[:, result.column(seen)]
         motor, predicted_frames = reconstruct(parent, codes, images=frames)
-    details = {"online": {"iterations": int(iterations), "steps_observed": seen,
+    details = {"online": {"iterations": 0 if init == MIXTURE else int(iterations), "steps_observed": seen,
                           "latency_ms_mean": 1e3 * result.latency_mean, "latency_ms_p95": 1e3 * result.latency_p95,
                           "remaining_error": [None if not np.isfinite(e) else float(e) for e in result.mean_error]}}
     return codes.astype(np.float32), parent.scaler.transform(motor), predicted_frames, details
