@@ -35,6 +35,7 @@ def test_a_saved_file_has_what_the_table_says(tmp_path):
         rng.normal(size=(n, t, j)), images=rng.integers(0, 255, (n, t, h, w, 3), dtype=np.uint8),
         labels=[0, 1, -1], params=np.ones((n, 2)), lengths=[4, 3, 2],
         step_labels=[[0, 0, 1, 1], [1, 1, 1, -1], [0, 0, -1, -1]], step_segments=[[0, 0, 1, 1], [0, 0, 0, -1], [0, 0, -1, -1]],
+        source_ids=["a.hdf5:data/demo_0", "a.hdf5:data/demo_1", "b.npz:0"],
     )
     dims = {"N": n, "T": t, "J": j, "H": h, "W": w, "P": 2}
     with h5py.File(ds.save(tmp_path / "d.h5", compression_level=6)) as f:
@@ -55,13 +56,14 @@ def test_field_lookup_shapes_and_buffers():
     with pytest.raises(KeyError):
         field("depth")
     assert list(empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3})) == [
-        "motor", "labels", "params", "lengths", "step_labels", "step_segments"]
+        "motor", "labels", "params", "lengths", "step_labels", "step_segments", "source_ids"]
     buf = empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3}, ["motor", "labels", "params"])
     assert list(buf) == ["motor", "labels", "params"]
     assert buf["motor"].dtype == np.float32 and buf["labels"].shape == (4,) and buf["params"].shape == (4, 3)
     assert dims_of(buf) == {"N": 4, "T": 3, "J": 9, "P": 3}
     shard = dict(buf, ik_error=np.zeros(4), start=0)
-    assert list(arrays_of(shard)) == ["motor", "images", "labels", "params", "lengths", "step_labels", "step_segments"]
+    assert list(arrays_of(shard)) == ["motor", "images", "labels", "params", "lengths", "step_labels", "step_segments",
+                                      "source_ids"]
     assert arrays_of(shard)["images"] is None
 
 

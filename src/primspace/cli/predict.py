@@ -39,7 +39,8 @@ def _shown_titles(dataset, indices) -> list[str]:
     for i in indices:
         label = None if dataset.labels is None else int(dataset.labels[i])
         name = names[label] if names is not None and label is not None and 0 <= label < len(names) else None
-        titles.append(f"sample {int(i)}" + (f" ({name})" if name else ""))
+        where = "" if dataset.source_ids is None else f" {dataset.source_ids[int(i)]}"
+        titles.append(f"sample {int(i)}{where}" + (f" ({name})" if name else ""))
     return titles
 
 
@@ -71,6 +72,7 @@ def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | Non
     per_sample = {name: [None if not float(v) == float(v) else float(v) for v in values]
                   for name, values in prediction.errors.items()}
     result = {**prediction.summary(), "command": command, "indices": [int(i) for i in prediction.indices],
+              "source_ids": None if data.source_ids is None else [str(v) for v in data.source_ids],
               "per_sample": per_sample, "success": judged, "writer": PREDICT_MARK}
     (tmp / "result.json").write_text(json.dumps(result, indent=2))
     return result

@@ -59,6 +59,10 @@ class MotionDataset:
         (N,) valid steps per sample (the motor after them is padding), ``step_labels``
         (N, T) the primitive of each step and ``step_segments`` (N, T) its segment
         index (0, 1, ...), both -1 exactly at the padding.
+    source_ids : sequence of str, shape (N,), optional
+        Where each sample was recorded, e.g. ``robomimic:lift.hdf5:data/demo_3`` or
+        ``lerobot:pusht:episode 12``: set by the importers, kept by :meth:`subset` and
+        carried into predictions and experiment results (one line of text each).
     joint_names, label_names, param_names : list of str, optional
         Names; defaults are ``j0..``, ``0..`` (one per label value), ``p0..``.
     dt : float, default 1.0
@@ -86,6 +90,7 @@ class MotionDataset:
     lengths: np.ndarray | None = None
     step_labels: np.ndarray | None = None
     step_segments: np.ndarray | None = None
+    source_ids: np.ndarray | None = None
     joint_names: list[str] | None = None
     label_names: list[str] | None = None
     param_names: list[str] | None = None
@@ -234,6 +239,10 @@ class MotionDataset:
             "steps_per_label": {name: counts.get(i, 0) for i, name in enumerate(self.label_names)},
         }
 
+    def source_id(self, index: int) -> str:
+        """Where sample ``index`` was recorded (its source id), else ``sample <index>``."""
+        return f"sample {index}" if self.source_ids is None else str(self.source_ids[index])
+
     def summary(self) -> dict:
         """What ``primspace info`` prints: sizes, names, label counts, per-joint ranges."""
         counts = Counter(int(v) for v in self.labels) if self.labels is not None else Counter()
@@ -252,6 +261,8 @@ class MotionDataset:
             "image_shape": None if self.images is None else list(self.images.shape[1:]),
             "steps": self._steps_summary(),
         }
+        if self.source_ids is not None:  # only then: files without them summarise as before
+            out["source_ids"] = _first_last(self.source_ids)
         for array in ARRAYS:  # [min, max] per name of each named numeric array
             value = getattr(self, array.name)
             if array.summary_key is not None and value is not None:
@@ -261,3 +272,9 @@ class MotionDataset:
                     for name, a, b in zip(getattr(self, names_of(array).name), value.min(axes), value.max(axes))
                 }
         return out
+
+
+def _first_last(ids: np.ndarray, shown: int = 3) -> list[str]:
+    """The first and last ``shown`` source ids (all of them when there are few), for ``info``."""
+    ids = [str(v) for v in ids]
+    return ids if len(ids) <= 2 * shown else ids[:shown] + ["..."] + ids[-shown:]

@@ -236,6 +236,8 @@ class DatasetWriter:
         Whether the file holds labels / params (default: names were given).
     with_steps : bool
         Whether the file holds ``lengths``, ``step_labels`` and ``step_segments``.
+    with_source_ids : bool
+        Whether the file holds ``source_ids`` (where each sample was recorded).
     dt : float
     source : str
     overwrite : bool
@@ -272,6 +274,7 @@ class DatasetWriter:
         with_labels: bool | None = None,
         with_params: bool | None = None,
         with_steps: bool = False,
+        with_source_ids: bool = False,
         dt: float = 1.0,
         source: str = "",
         overwrite: bool = False,
@@ -288,6 +291,7 @@ class DatasetWriter:
         self.with_labels = bool(self.label_names) if with_labels is None else with_labels
         self.with_params = bool(self.param_names) if with_params is None else with_params
         self.with_steps = bool(with_steps)
+        self.with_source_ids = bool(with_source_ids)
         self.dt, self.source = float(dt), str(source)
         self.overwrite = overwrite
         self.compression_level = compression_level
@@ -340,10 +344,11 @@ class DatasetWriter:
 
     # -- blocks
     def write(self, start: int, *, motor, images=None, labels=None, params=None, lengths=None, step_labels=None,
-              step_segments=None) -> None:
+              step_segments=None, source_ids=None) -> None:
         """Validate and store samples ``start .. start + len(motor) - 1``."""
         block, sl = self._check_block(start, dict(motor=motor, images=images, labels=labels, params=params, lengths=lengths,
-                                                  step_labels=step_labels, step_segments=step_segments))
+                                                  step_labels=step_labels, step_segments=step_segments,
+                                                  source_ids=source_ids))
         for array in _LAZY:
             value = getattr(block, array.name)
             if value is not None:

@@ -100,8 +100,9 @@ def _joint_curves(fig: Figure, sub, motor, generated_motor, names, n_cols: int, 
 def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
     """One sample of a data set (simulated or not): frame strip and joint curves.
 
-    The title names the sample, its primitive and, for simulated data, the block
-    (``block_x``, ``block_y``, ``block_size`` in cm). What ``primspace show`` draws.
+    The title names the sample, its source id (where it was recorded, for imported
+    data), its primitive and, for simulated data, the block (``block_x``, ``block_y``,
+    ``block_size`` in cm). What ``primspace show`` draws.
 
     Parameters
     ----------
@@ -113,6 +114,8 @@ def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
     """
     i = int(index)
     parts = [f"sample {i}"]
+    if dataset.source_ids is not None:
+        parts.append(str(dataset.source_ids[i]))
     if dataset.labels is not None and 0 <= int(dataset.labels[i]) < len(dataset.label_names):
         parts.append(dataset.label_names[int(dataset.labels[i])])
     if dataset.params is not None:

@@ -4,7 +4,8 @@ its checkpoint's keys.
 A run directory holds::
 
     config.json       kind (fit / infer), init, model and train configs, data (path,
-                      sample indices, SHA-1 of the samples' joints), parent run, scaler,
+                      sample indices, SHA-1 of the samples' joints, and the samples'
+                      source ids when the data set has them), parent run, scaler,
                       the observation rule of an inference from a prefix (``observe``)
     metrics.jsonl     one line per epoch
     checkpoint.pt     model, optimiser, codes and their optimiser, scaler, initialiser,
@@ -89,6 +90,7 @@ def run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
             "joint_names": list(data.joint_names),
             "dt": data.dt,
             "motor_sha1": fingerprint(data),
+            **({} if data.source_ids is None else {"source_ids": [str(data.source_ids[i]) for i in idx]}),
         },
         "parent": parent,
         "primspace_version": __version__,

@@ -175,7 +175,7 @@ def demonstrations(sequences: list, length: int, frames, *, source: str, images:
     try:
         motor = resample_located(sequences, length)
         if frames is not None:
-            source += f" images={images}; {frames.describe()}"
+            source += f" images={images}; {frames.collect().describe()}"
         return MotionDataset(
             motor=motor, images=None if frames is None else frames.stack(),
             dt=resampled_dt(dt_in, [len(seq) for seq in sequences], length), source=source, **fields,

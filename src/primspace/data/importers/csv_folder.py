@@ -74,6 +74,7 @@ def import_csv_folder(path: str | os.PathLike, length: int) -> MotionDataset:
             joint_names=joint_names,
             dt=dt,
             source=f"csv:{root.name}",
+            source_ids=[f"csv:{root.name}/{file.relative_to(root).as_posix()}" for file in files],
         )
     except DataError as exc:
         raise exc.located(path=root) from None

