@@ -107,7 +107,7 @@ def test_save_load_roundtrip_and_resume_of_an_in_memory_fit(fitted, data, new, t
 def test_get_params_set_params_clone(fitted):
     model, _ = fitted
     params = model.get_params()
-    assert set(params) == {"model_config", "train_config", "init", "images", "checkpoint_dir", "progress"}
+    assert set(params) == {"model_config", "train_config", "init", "images", "checkpoint_dir", "progress", "log_to"}
     copy = clone(model)
     assert not hasattr(copy, "run_") and copy.get_params()["train_config"] == TC
     assert copy.train_config is not model.train_config  # clone copies, it does not share

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Tuple
 
 import typer
 
@@ -33,6 +33,32 @@ class LossReduction(str, Enum):
 
     mean = "mean"
     sum = "sum"
+
+
+class LogTarget(str, Enum):
+    """What ``--log-to`` writes to (:mod:`primspace.train.logger`)."""
+
+    tensorboard = "tensorboard"
+
+
+_LOG_TO_HELP = ("Also write each epoch's metrics (those of metrics.jsonl) as TensorBoard event files into the "
+                "folder DIR (new files only: an existing folder is fine; give each run its own). Needs "
+                "pip install 'primspace\\[tensorboard]'.")
+
+
+def _log_to(value, inputs: tuple) -> tuple | None:
+    """``--log-to tensorboard DIR`` as the library's ``log_to`` pair, checked before any data is read."""
+    if value is None:
+        return None
+    from primspace.train.logger import check_log_to
+
+    log_to = (value[0].value, value[1])
+    check_log_to(log_to, inputs, option="--log-to")
+    return log_to
+
+
+def _log_to_option():
+    return typer.Option(None, "--log-to", metavar="tensorboard DIR", help=_LOG_TO_HELP)
 
 
 #: The mark ``reconstruct`` writes into its PNG (primspace.outputs).
@@ -146,21 +172,21 @@ def train_command(
     ),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
+    log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
 ) -> None:
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
     from primspace.train import configure_process, fit
 
     given = dict(locals()) | {"loss_reduction": loss_reduction.value}
+    log_to = _log_to(log_to, (file, indices, weights_from))
     mc = replace(_MC, **{k: given[k] for k in ("latent_dim", "code_window")}, layer_sizes=int_list(layers, "--layers"),
                  taus=float_list(taus, "--taus"), image_channels=int_list(image_channels, "--image-channels"))
     tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
     ds, idx = _train_inputs(out, file, indices, weights_from, tc, no_images)
     configure_process(tc)
-    run = fit(
-        ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
-        indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
-        images=False if no_images else None,
-    )
+    run = fit(ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
+              indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
+              images=False if no_images else None, log_to=log_to)
     typer.echo(_run_summary(run))
 
 
@@ -186,10 +212,12 @@ def infer_command(
     threads: Optional[int] = typer.Option(_TC.threads, "--threads"),
     resume: bool = typer.Option(False, "--resume"),
     overwrite: bool = typer.Option(False, "--overwrite"),
+    log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
 ) -> None:
     """Find latent codes for new samples with the trained weights frozen."""
     from primspace.train import configure_process, infer
 
+    log_to = _log_to(log_to, (file, indices, run))
     overrides = {"device": device, "amp": amp, "threads": threads}
     reduction = None if loss_reduction is None else loss_reduction.value
     for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed),
@@ -200,7 +228,7 @@ def infer_command(
     configure_process(replace(_TC, device=device, amp=amp, threads=threads).validate())
     result = infer(
         run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
-        resume=resume, overwrite=overwrite, **overrides,
+        resume=resume, overwrite=overwrite, log_to=log_to, **overrides,
     )
     typer.echo(_run_summary(result))
 

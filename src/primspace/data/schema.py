@@ -39,7 +39,7 @@ import numpy as np
 
 from primspace.data.images import LazyImages
 from primspace.data.steps import coerce_steps, validate_lengths, validate_step_labels, validate_step_segments
-from primspace.data.values import as_float32, check_finite, check_int32_labels
+from primspace.data.values import as_float32, check_finite, check_int32_labels, coerce_source_ids, validate_source_ids
 from primspace.errors import DataError
 
 __all__ = [
@@ -63,10 +63,6 @@ __all__ = [
 #: (``Field.checksum``). Files of version 1 (no checksum) still read. The optional
 #: ``source_ids`` array (0.7) kept the version: a reader that does not know it ignores it.
 SCHEMA_VERSION = 2
-
-#: The longest source id kept (characters): a file name, a demo key and an episode index
-#: fit many times over; a longer one is damage or a misuse of the field.
-MAX_SOURCE_ID = 1000
 
 #: The most bytes of a chunk of an array stored with a checksum (whole samples per chunk).
 CHECKSUM_CHUNK_BYTES = 1 << 18
@@ -346,30 +342,6 @@ def _strings(dtype: np.dtype) -> str | None:
     return None if h5py.check_string_dtype(dtype) is not None else f"must be strings, got {dtype}"
 
 
-def _coerce_source_ids(ids, path) -> np.ndarray:
-    """Source ids as an object array of ``str`` (bytes read from a file decoded as UTF-8)."""
-    values = np.asarray(ids, dtype=object).reshape(-1) if np.ndim(ids) else np.asarray([ids], dtype=object)
-    out = np.empty(values.shape, dtype=object)
-    for i, v in enumerate(values):
-        if isinstance(v, bytes):
-            v = v.decode("utf-8", "backslashreplace")
-        if not isinstance(v, str):
-            raise DataError(f"must be strings, got {type(v).__name__}", path=path, field="source_ids", index=i)
-        out[i] = v
-    return out
-
-
-def _validate_source_ids(ds) -> None:
-    p, n, ids = ds.path, ds.motor.shape[0], ds.source_ids
-    if ids.shape != (n,):
-        raise DataError(f"must have shape ({n},) to match motor, got {ids.shape}", path=p, field="source_ids")
-    for i, v in enumerate(ids):
-        if len(v) > MAX_SOURCE_ID or not v.isprintable():
-            why = f"is {len(v):,} characters long (at most {MAX_SOURCE_ID})" if len(v) > MAX_SOURCE_ID else \
-                "holds a control character (a source id is one line of text)"
-            raise DataError(why, path=p, field="source_ids", index=i)
-
-
 # ----------------------------------------------------------------------- table
 
 #: Every field, in the order they are converted, checked, read and written: arrays
@@ -418,7 +390,7 @@ FIELDS: tuple[Field, ...] = (
     Field(
         "source_ids", "dataset", "UTF-8 strings, where each sample was recorded (file, demo key, episode)",
         dtype=np.dtype(object, metadata={"vlen": str}), shape=("N",), writer_option="with_source_ids",
-        coerce=_coerce_source_ids, validate=_validate_source_ids, check_stored=_strings,
+        coerce=coerce_source_ids, validate=validate_source_ids, check_stored=_strings,
     ),
     Field("schema_version", "attribute", "layout version of the file", codec="version", default=None),
     Field(

@@ -234,10 +234,8 @@ class DatasetWriter:
     label_names, param_names : list of str
     with_labels, with_params : bool, optional
         Whether the file holds labels / params (default: names were given).
-    with_steps : bool
-        Whether the file holds ``lengths``, ``step_labels`` and ``step_segments``.
-    with_source_ids : bool
-        Whether the file holds ``source_ids`` (where each sample was recorded).
+    with_steps, with_source_ids : bool
+        Whether the file holds ``lengths``, ``step_labels`` and ``step_segments``; ``source_ids``.
     dt : float
     source : str
     overwrite : bool
@@ -290,8 +288,7 @@ class DatasetWriter:
         self.param_names = [str(s) for s in param_names]
         self.with_labels = bool(self.label_names) if with_labels is None else with_labels
         self.with_params = bool(self.param_names) if with_params is None else with_params
-        self.with_steps = bool(with_steps)
-        self.with_source_ids = bool(with_source_ids)
+        self.with_steps, self.with_source_ids = bool(with_steps), bool(with_source_ids)
         self.dt, self.source = float(dt), str(source)
         self.overwrite = overwrite
         self.compression_level = compression_level

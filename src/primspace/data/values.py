@@ -1,6 +1,7 @@
-"""Checks on the numbers of a data set, before they are stored: finite, within float32,
-labels within int32. Each failure is a :class:`~primspace.errors.DataError` naming the
-file, the field, the sample and the position inside it (step and joint, or column).
+"""Checks on the values of a data set, before they are stored: finite, within float32,
+labels within int32, source ids one line of text each. Each failure is a
+:class:`~primspace.errors.DataError` naming the file, the field, the sample and the
+position inside it (step and joint, or column).
 
 The float32 check runs *before* the cast: casting 1e39 to float32 gives inf, which the
 finiteness check would then call "NaN or inf" instead of naming the value as too large.
@@ -12,9 +13,13 @@ import numpy as np
 
 from primspace.errors import DataError
 
-__all__ = ["FLOAT32_MAX", "float32_overflow", "too_large", "as_float32", "check_finite", "check_int32_labels"]
+__all__ = ["FLOAT32_MAX", "MAX_SOURCE_ID", "float32_overflow", "too_large", "as_float32", "check_finite",
+           "check_int32_labels", "coerce_source_ids", "validate_source_ids"]
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
+#: The longest source id kept (characters): a file name, a demo key and an episode index
+#: fit many times over; a longer one is damage or a misuse of the field.
+MAX_SOURCE_ID = 1000
 
 
 def _position(pos: tuple[int, ...], ndim: int) -> str:
@@ -89,3 +94,28 @@ def check_int32_labels(labels: np.ndarray, path) -> None:
             f"label {int(labels[pos])} is not a primitive index (it does not fit in int32)",
             path=path, field="labels", index=pos[0] if labels.ndim == 1 else None,
         )
+
+
+def coerce_source_ids(ids, path) -> np.ndarray:
+    """Source ids as an object array of ``str`` (bytes read from a file decoded as UTF-8)."""
+    values = np.asarray(ids, dtype=object).reshape(-1) if np.ndim(ids) else np.asarray([ids], dtype=object)
+    out = np.empty(values.shape, dtype=object)
+    for i, v in enumerate(values):
+        if isinstance(v, bytes):
+            v = v.decode("utf-8", "backslashreplace")
+        if not isinstance(v, str):
+            raise DataError(f"must be strings, got {type(v).__name__}", path=path, field="source_ids", index=i)
+        out[i] = v
+    return out
+
+
+def validate_source_ids(ds) -> None:
+    """One source id per sample, each one line of at most :data:`MAX_SOURCE_ID` characters."""
+    p, n, ids = ds.path, ds.motor.shape[0], ds.source_ids
+    if ids.shape != (n,):
+        raise DataError(f"must have shape ({n},) to match motor, got {ids.shape}", path=p, field="source_ids")
+    for i, v in enumerate(ids):
+        if len(v) > MAX_SOURCE_ID or not v.isprintable():
+            why = f"is {len(v):,} characters long (at most {MAX_SOURCE_ID})" if len(v) > MAX_SOURCE_ID else \
+                "holds a control character (a source id is one line of text)"
+            raise DataError(why, path=p, field="source_ids", index=i)

@@ -26,6 +26,7 @@ from primspace.calibration import CodeCalibration
 from primspace.latent import CALIBRATABLE, CALIBRATED, INFER_STARTS, NEAREST, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
+from primspace.train.logger import check_log_to
 from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
 from primspace.train.checks import (
     check_calibrated,
@@ -67,6 +68,7 @@ def fit(
     images: bool | None = None,
     scaler: JointScaler | None = None,
     progress: bool | None = None,
+    log_to: tuple | None = None,
 ) -> TrainedRun:
     """Train the decoder's weights θ and one code per sample jointly (the paper's training).
 
@@ -120,6 +122,9 @@ def fit(
         scaler is used). Recorded in config.json.
     progress : bool, optional
         Progress bar (default: when stderr is a terminal); False is silent.
+    log_to : ("tensorboard", path-like), optional
+        Also write each epoch's metrics (``metrics.jsonl``'s) as TensorBoard event files
+        into that folder (:mod:`primspace.train.logger`; ``pip install 'primspace[tensorboard]'``).
 
     Returns
     -------
@@ -145,7 +150,7 @@ def fit(
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     config = run_config("fit", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config["scaler"] = None if scaler is None else scaler.to_dict()
-    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
+    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
     if ckpt is not None:
@@ -169,7 +174,7 @@ def fit(
     session = Session(
         store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"], calibrate=_calibrator(initializer, scaled, mc.latent_dim),
+        frames_seed=seeds["frames"], calibrate=_calibrator(initializer, scaled, mc.latent_dim), log_to=log_to,
     )
     session.run(ckpt, progress, label="fit")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -188,9 +193,9 @@ def infer(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool | None = None,
-    observe=None,
-    observe_frames=None,
+    observe=None, observe_frames=None,
     fitted_data: MotionDataset | None = None,
+    log_to: tuple | None = None,
     **overrides: Any,
 ) -> TrainedRun:
     """Find codes for new samples with the trained weights θ frozen (the paper's evaluation).
@@ -223,8 +228,8 @@ def infer(
     initial_latents : ndarray (N, q), optional
         Starting codes, one row per selected sample; rows containing NaN start by
         ``init`` (e.g. to try another start with the same weights).
-    resume, overwrite, progress
-        As in :func:`fit`.
+    resume, overwrite, progress, log_to
+        As in :func:`fit` (``log_to``: the inference's metrics).
     observe : float, int or "none", optional
         Infer from a prefix of each motion (:mod:`primspace.train.observe`): a fraction in
         (0, 1] of each sample's valid steps (rounded up, at least one), a number of steps,
@@ -258,7 +263,7 @@ def infer(
     check_something_to_train(tc, use_images)
     config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config.update(observation_record(observation, data, use_images, mc.has_images))
-    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs)
+    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to)
     device = resolve_device(tc.device, tc.amp)
     seeds = _seeds(tc.seed)
     model = copy.deepcopy(parent.model)  # θ frozen, but the caller's model is never moved or changed
@@ -279,7 +284,7 @@ def infer(
     session = Session(
         store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"], calibration=parent.calibration, observation=observation,
+        frames_seed=seeds["frames"], calibration=parent.calibration, observation=observation, log_to=log_to,
     )
     session.run(ckpt, progress, label="infer")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
@@ -406,8 +411,10 @@ def as_run(run: TrainedRun | str | os.PathLike) -> TrainedRun:
 # --------------------------------------------------------------------------- helpers
 
 
-def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, epochs: int):
-    """The run directory to write (None: in memory) and the checkpoint to resume from."""
+def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, epochs: int, log_to=None):
+    """The run directory to write (None: in memory) and the checkpoint to resume from;
+    ``log_to`` checked (:func:`~primspace.train.logger.check_log_to`)."""
+    check_log_to(log_to, inputs)
     if out_dir is None:
         if resume:
             raise UserError("resume=True needs the out_dir of the run to continue")

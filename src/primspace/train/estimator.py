@@ -48,6 +48,10 @@ class AutoDecoder(BaseEstimator):
         with ``fit(..., resume=True)``). Default: in memory only.
     progress : bool, optional
         Progress bars (default: when stderr is a terminal).
+    log_to : ("tensorboard", path-like), optional
+        Also write the fit's per-epoch metrics (``history_``, ``metrics.jsonl``) as
+        TensorBoard event files into that folder (:mod:`primspace.train.logger`; needs
+        ``pip install 'primspace[tensorboard]'``). ``transform`` takes its own ``log_to``.
 
     Attributes
     ----------
@@ -77,6 +81,7 @@ class AutoDecoder(BaseEstimator):
         images: bool | None = None,
         checkpoint_dir: str | os.PathLike | None = None,
         progress: bool | None = None,
+        log_to: tuple | None = None,
     ) -> None:
         self.model_config = model_config
         self.train_config = train_config
@@ -84,6 +89,7 @@ class AutoDecoder(BaseEstimator):
         self.images = images
         self.checkpoint_dir = checkpoint_dir
         self.progress = progress
+        self.log_to = log_to
 
     # ------------------------------------------------------------------ training
     def fit(self, X: MotionDataset, y=None, *, resume: bool = False, overwrite: bool = False) -> "AutoDecoder":
@@ -94,6 +100,7 @@ class AutoDecoder(BaseEstimator):
         self.run_ = fit(
             X, self.checkpoint_dir, model_config=self.model_config, train_config=self.train_config,
             init=self.init, images=self.images, resume=resume, overwrite=overwrite, progress=self.progress,
+            log_to=self.log_to,
         )
         self.codes_ = self.run_.latents
         self.history_ = self.run_.history
@@ -113,6 +120,7 @@ class AutoDecoder(BaseEstimator):
         checkpoint_dir: str | os.PathLike | None = None,
         observe=None,
         observe_frames=None,
+        log_to: tuple | None = None,
         **overrides,
     ) -> np.ndarray:
         """Codes for the samples of ``X`` with θ frozen (the paper's evaluation), in ``X``'s order.
@@ -133,6 +141,9 @@ class AutoDecoder(BaseEstimator):
             :meth:`load`: the run's data file).
         checkpoint_dir : path-like, optional
             Write the inference as a run directory (default: in memory).
+        log_to : ("tensorboard", path-like), optional
+            Also write the inference's per-epoch metrics as TensorBoard event files there
+            (give it a folder of its own: not the fit's ``log_to``).
         **overrides
             Train-config fields for the inference, e.g. ``latent_lr=``, ``batch_size=``.
         """
@@ -140,7 +151,7 @@ class AutoDecoder(BaseEstimator):
         self.inference_ = infer(
             run, X, checkpoint_dir, epochs=run.train_config.epochs if epochs is None else epochs,
             init=init, progress=self.progress, observe=observe, observe_frames=observe_frames,
-            fitted_data=getattr(self, "fit_data_", None), **overrides,
+            fitted_data=getattr(self, "fit_data_", None), log_to=log_to, **overrides,
         )
         return self.inference_.latents
 

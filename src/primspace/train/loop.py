@@ -27,6 +27,7 @@ from primspace.latent import LatentInitializer, LatentTable
 from primspace.model import MTRNNDecoder
 from primspace.progress import progress_bar
 from primspace.train.config import TrainConfig, TrainingDivergedError, lr_factor
+from primspace.train.logger import open_logger
 from primspace.train.observe import observation_masks
 from primspace.train.rundir import RunDirectory, checkpoint_state, restore_rng, unpack_checkpoint
 
@@ -203,14 +204,16 @@ class Session:
 
     ``store`` receives the config, metrics and checkpoints (written after epoch 0, every
     ``checkpoint_seconds`` or ``checkpoint_every`` epochs, and at the end); with None the
-    run is kept in memory: :attr:`history` and :meth:`state` are all there is.
+    run is kept in memory: :attr:`history` and :meth:`state` are all there is. ``log_to``
+    (``("tensorboard", DIR)``, :mod:`primspace.train.logger`) also receives every metrics
+    line, from the first epoch this session logs; it is flushed before each checkpoint.
     """
 
     def __init__(
         self, *, store: RunDirectory | None, config: dict, model: MTRNNDecoder, theta_opt, table: LatentTable,
         scaler: JointScaler, initializer: LatentInitializer, data: MotionDataset, use_images: bool,
         tc: TrainConfig, device: torch.device, shuffle_seed: int, frames_seed: int = 0,
-        calibrate=None, calibration=None, observation=None,
+        calibrate=None, calibration=None, observation=None, log_to=None,
     ) -> None:
         # calibrate: codes -> CodeCalibration, fitted when the last epoch is done (fit);
         # calibration: a map carried as is (infer: the trained run's)
@@ -226,6 +229,7 @@ class Session:
         self.frames = None if not use_images or k is None or k >= length else (k, length)
         self.frame_generator = torch.Generator().manual_seed(frames_seed) if self.frames else None
         self.initial_codes = table.codes.detach().cpu().clone()
+        self.log_to, self.sink = log_to, None
         self.history: list[dict] = []
         self.epoch = 0
         self.n = len(table)
@@ -247,12 +251,22 @@ class Session:
     # ------------------------------------------------------------------------ loop
     def run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
         """Train up to ``tc.epochs``, from ``ckpt`` (a checkpoint dict) or from the start."""
+        try:
+            self._run(ckpt, progress, label)
+        finally:
+            if self.sink is not None:
+                self.sink.close()
+                self.sink = None
+
+    def _run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
         tc = self.tc
         if ckpt is not None:
             self._restore(ckpt)
+            self.sink = open_logger(self.log_to, self.epoch + 1)  # the epochs after the checkpoint: logged anew
         else:
             if self.store is not None:
                 self.store.begin(self.config, self.initial_codes.numpy())
+            self.sink = open_logger(self.log_to, 0)
             if tc.log_initial:
                 t0 = time.perf_counter()
                 self.model.eval()
@@ -332,9 +346,13 @@ class Session:
         self.history.append(line)
         if self.store is not None:
             self.store.log(line)
+        if self.sink is not None:
+            self.sink.log(line)
 
     # ----------------------------------------------------------------- checkpoints
     def _checkpoint(self) -> None:
+        if self.sink is not None:  # the logged epochs reach the event files before the checkpoint that keeps them
+            self.sink.flush()
         if self.store is not None:
             self.store.save(self.state(), self.table.numpy())
         self._last_checkpoint = self.epoch
