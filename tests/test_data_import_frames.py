@@ -1,26 +1,26 @@
-"""Importing demonstrations with camera frames: robomimic HDF5, npz with images, LeRobot v2.
+"""Importing demonstrations with camera frames: robomimic HDF5, npz with images (LeRobot:
+tests/test_import_lerobot.py).
 
 Every source file is written here, in its format's layout. Frames are filled with one
 colour per recorded frame (frame ``i`` has the value ``_level(i)``), so a stored frame
 tells which recorded frame it came from, after resizing (a constant image stays
-constant under Lanczos) and after lossy video coding (within a tolerance).
+constant under Lanczos).
 """
 
 from __future__ import annotations
 
 import json
 import re
-import sys
 
 import h5py
 import numpy as np
 import pytest
 
 from conftest import assert_user_error
-from primspace.data import MotionDataset, import_lerobot, import_npz, import_robomimic, resample
+from primspace.data import MotionDataset, import_npz, import_robomimic, resample
 from primspace.data.importers import frame_steps
 from primspace.data.importers.frames import resize_frames
-from primspace.errors import DataError, UserError
+from primspace.errors import DataError
 
 SRC_H, SRC_W = 32, 40  # source frames (even sides: yuv420p video)
 
@@ -146,7 +146,7 @@ def test_robomimic_missing_keys_name_the_file_the_demo_and_the_keys_there(tmp_pa
     assert msg.startswith(f"{path}, field 'robot0_eef_pos', sample 0:") and "data/demo_0/obs/robot0_eef_pos is missing" in msg
     assert "keys there: agentview_image, robot0_gripper_qpos, robot0_joint_pos" in msg
     with pytest.raises(DataError, match=r"sample 2: data/demo_2/obs/agentview_image is missing; keys there: "
-                                        r"robot0_gripper_qpos, robot0_joint_pos$"):
+                                        r"robot0_gripper_qpos, robot0_joint_pos; at demo level \(data/demo_2\): actions$"):
         import_robomimic(path, 20, joints=["robot0_joint_pos"], images="agentview_image")
     with pytest.raises(DataError, match=r"no joint keys given .*data/demo_0/obs has: agentview_image, "):
         import_robomimic(path, 20, joints=[])
@@ -194,7 +194,7 @@ def test_npz_stacked_frames_and_joints_key(tmp_path):
     assert ds.images.shape == (2, 8, 16, 24, 3)
     np.testing.assert_allclose(ds.motor, resample(joints, 8), rtol=1e-5, atol=1e-5)
     assert [source_index(f, 15) for f in ds.images[1]] == frame_steps(15, 8).tolist() == [0, 2, 4, 6, 8, 10, 12, 14]
-    assert ds.source == "npz:s.npz; frames 32x40 -> 16x24"
+    assert ds.source == "npz:s.npz; frames 32x40 -> 16x24 (centre crop)"
 
 
 def test_npz_per_demo_frames_of_different_sizes_and_lengths(tmp_path):
@@ -206,7 +206,7 @@ def test_npz_per_demo_frames_of_different_sizes_and_lengths(tmp_path):
     for i, n in enumerate((12, 30, 7)):
         assert [source_index(f, n) for f in ds.images[i]] == frame_steps(n, 11).tolist()
         np.testing.assert_allclose(ds.motor[i], resample(arrays[f"joints_{i}"], 11), rtol=1e-5, atol=1e-5)
-    assert ds.source.endswith("frames 24x32, 60x80, 32x40 -> 48x64")
+    assert ds.source.endswith("frames 24x32, 60x80, 32x40 -> 48x64 (centre crop)")
 
 
 def test_npz_frames_with_lengths_and_without_frames_unchanged(tmp_path):
@@ -246,151 +246,6 @@ def test_npz_bad_frames_name_file_field_and_sample(tmp_path, arrays, match):
         import_npz(path, 10)
 
 
-# ---------------------------------------------------------------------------- LeRobot
-
-
-def write_video(path, frames: np.ndarray, fps: int = 10, codec: str = "mpeg4") -> None:
-    import av
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with av.open(str(path), "w") as container:
-        stream = container.add_stream(codec, rate=fps)
-        stream.width, stream.height, stream.pix_fmt = frames.shape[2], frames.shape[1], "yuv420p"
-        if codec == "mpeg4":
-            stream.bit_rate = 4_000_000  # at its default rate the grey levels drift beyond the tolerance
-        for frame in frames:
-            for packet in stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")):
-                container.mux(packet)
-        for packet in stream.encode():
-            container.mux(packet)
-
-
-def write_lerobot(root, lengths=(12, 20, 9), camera="observation.images.top", tasks=("push", "lift", "push"),
-                  video_lengths=None, names=("shoulder", "elbow", "wrist"), codec="mpeg4") -> list[np.ndarray]:
-    """A LeRobot v2.1 directory; returns the state of each episode."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    info = {
-        "codebase_version": "v2.1", "fps": 10, "chunks_size": 2, "total_episodes": len(lengths),
-        "data_path": "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet",
-        "video_path": "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4",
-        "features": {
-            "observation.state": {"dtype": "float32", "shape": [3], "names": list(names)},
-            "action": {"dtype": "float32", "shape": [3], "names": None},
-            camera: {"dtype": "video", "shape": [SRC_H, SRC_W, 3], "names": ["height", "width", "channel"]},
-            "timestamp": {"dtype": "float32", "shape": [1], "names": None},
-        },
-    }
-    (root / "meta").mkdir(parents=True)
-    (root / "meta" / "info.json").write_text(json.dumps(info))
-    lines = [json.dumps({"episode_index": e, "tasks": [tasks[e]], "length": t}) for e, t in enumerate(lengths)]
-    (root / "meta" / "episodes.jsonl").write_text("\n".join(lines) + "\n")
-    states = []
-    for e, t in enumerate(lengths):
-        state = joints_of(t, 3, offset=3.0 * e).astype(np.float32)
-        states.append(state)
-        table = pa.table({
-            "observation.state": pa.array(list(state), type=pa.list_(pa.float32())),
-            "action": pa.array(list(-state), type=pa.list_(pa.float32())),
-            "timestamp": pa.array(np.arange(t, dtype=np.float32) / 10),
-            "frame_index": pa.array(np.arange(t)),
-            "episode_index": pa.array(np.full(t, e)),
-        })
-        data = root / "data" / f"chunk-{e // 2:03d}" / f"episode_{e:06d}.parquet"
-        data.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(table, data)
-        n_frames = t if video_lengths is None else video_lengths[e]
-        video = root / "videos" / f"chunk-{e // 2:03d}" / camera / f"episode_{e:06d}.mp4"
-        write_video(video, frames_of(n_frames), codec=codec)
-    return states
-
-
-@pytest.mark.parametrize("codec", ["mpeg4", "libsvtav1"])  # libsvtav1: AV1, LeRobot's default codec
-def test_lerobot_state_video_frames_aligned_labels_and_dt(tmp_path, codec):
-    import av
-
-    try:
-        av.codec.Codec(codec, "w")
-    except Exception:  # an encoder this PyAV wheel lacks (not a decoder: the import only decodes)
-        pytest.skip(f"this PyAV build cannot encode {codec}")
-    states = write_lerobot(tmp_path / "ds", codec=codec)
-    ds = import_lerobot(tmp_path / "ds", 15, images="observation.images.top", image_size=(16, 24))
-    assert ds.motor.shape == (3, 15, 3) and ds.images.shape == (3, 15, 16, 24, 3)
-    assert ds.joint_names == ["shoulder", "elbow", "wrist"]
-    assert ds.label_names == ["lift", "push"] and ds.labels.tolist() == [1, 0, 1]
-    for i, state in enumerate(states):
-        np.testing.assert_allclose(ds.motor[i], resample(state.astype(np.float64), 15), rtol=1e-5, atol=1e-5)
-        # lossy video: each stored frame is within a few grey levels of the recorded frame the rule picks
-        assert [source_index(f, len(state), tol=6) for f in ds.images[i]] == frame_steps(len(state), 15).tolist()
-    np.testing.assert_allclose(ds.dt, 0.1 * np.mean([11, 19, 8]) / 14)
-    assert "32x40 -> 16x24" in ds.source
-
-
-def test_lerobot_image_feature_stored_in_the_table(tmp_path):
-    """An ``image`` feature: PNG bytes in the episode's table (lossless), decoded with Pillow."""
-    import io
-
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-    from PIL import Image
-
-    write_lerobot(tmp_path / "ds", lengths=(7, 11), tasks=("a", "b"))
-    info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())
-    info["features"]["observation.images.wrist"] = {"dtype": "image", "shape": [SRC_H, SRC_W, 3], "names": None}
-    (tmp_path / "ds" / "meta" / "info.json").write_text(json.dumps(info))
-    for e, t in enumerate((7, 11)):
-        file = tmp_path / "ds" / "data" / "chunk-000" / f"episode_{e:06d}.parquet"
-        pngs = []
-        for frame in frames_of(t):
-            buffer = io.BytesIO()
-            Image.fromarray(frame).save(buffer, format="PNG")
-            pngs.append({"bytes": buffer.getvalue(), "path": None})
-        pq.write_table(pq.read_table(file).append_column("observation.images.wrist", pa.array(pngs)), file)
-    ds = import_lerobot(tmp_path / "ds", 9, images="observation.images.wrist", image_size=(8, 16))
-    assert ds.images.shape == (2, 9, 8, 16, 3)
-    for i, t in enumerate((7, 11)):
-        assert [source_index(f, t) for f in ds.images[i]] == frame_steps(t, 9).tolist()  # exact: no tolerance
-
-
-def test_lerobot_joint_keys_concatenated_in_order_and_joints_only(tmp_path):
-    states = write_lerobot(tmp_path / "ds", names=("a", "b", "c"))
-    ds = import_lerobot(tmp_path / "ds", 6, joints=["action", "observation.state"])
-    assert ds.images is None and ds.motor.shape == (3, 6, 6)
-    assert ds.joint_names == ["action_0", "action_1", "action_2", "a", "b", "c"]
-    np.testing.assert_allclose(ds.motor[2, :, :3], resample(-states[2].astype(np.float64), 6), rtol=1e-5, atol=1e-5)
-
-
-def test_lerobot_errors_name_the_file_the_feature_and_the_episode(tmp_path):
-    write_lerobot(tmp_path / "ds", video_lengths=(12, 19, 9))
-    with pytest.raises(DataError) as err:
-        import_lerobot(tmp_path / "ds", 6, images="observation.images.top")
-    video = tmp_path / "ds" / "videos" / "chunk-000" / "observation.images.top" / "episode_000001.mp4"
-    assert str(err.value) == (f"{video}, field 'observation.images.top', sample 1: 19 frames for 20 rows of the "
-                              "episode's table (one frame per row is needed)")
-    with pytest.raises(DataError, match=r"no feature 'observation.images.wrist'; features: observation.state, action, "
-                                        r"observation.images.top, timestamp"):
-        import_lerobot(tmp_path / "ds", 6, images="observation.images.wrist")
-    with pytest.raises(DataError, match=r"field 'action': is a float32 feature, not camera frames; camera features: "
-                                        r"observation.images.top"):
-        import_lerobot(tmp_path / "ds", 6, images="action")
-    info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())
-    (tmp_path / "ds" / "meta" / "info.json").write_text(json.dumps(dict(info, codebase_version="v3.0")))
-    with pytest.raises(DataError, match=r"codebase_version v3.0: only LeRobot v2.x"):
-        import_lerobot(tmp_path / "ds", 6)
-
-
-def test_lerobot_without_the_video_extra_says_how_to_install_it(tmp_path, monkeypatch, run_cli):
-    write_lerobot(tmp_path / "ds", lengths=(5,), tasks=("t",))
-    monkeypatch.setitem(sys.modules, "av", None)  # import av now raises ImportError
-    with pytest.raises(UserError, match=r"needs PyAV \(av\), which is not installed: pip install 'primspace\[video\]'"):
-        import_lerobot(tmp_path / "ds", 6, images="observation.images.top")
-    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
-    res = run_cli("import", tmp_path / "ds", "--format", "lerobot", "-T", "6", "--out", tmp_path / "o.h5")
-    assert_user_error(res, "needs pyarrow", "pip install 'primspace[video]'")
-    assert not (tmp_path / "o.h5").exists()
-
-
 # -------------------------------------------------------------------- command line
 
 
@@ -409,13 +264,7 @@ def test_cli_robomimic_import_then_info_reports_frames(run_cli, tmp_path):
     assert info["image_shape"] == [61, 48, 64, 3] and "32x40" in info["source"]
 
 
-def test_cli_lerobot_and_npz_imports(run_cli, tmp_path):
-    write_lerobot(tmp_path / "ds", lengths=(8, 6), tasks=("a", "b"))
-    out = tmp_path / "le.h5"
-    res = run_cli("import", tmp_path / "ds", "--images", "observation.images.top", "--image-size", "16x24",
-                  "-T", "61", "--out", out)  # lerobot guessed from meta/info.json
-    assert res.code == 0, res.err
-    assert MotionDataset.load(out).images.shape == (2, 61, 16, 24, 3)
+def test_cli_npz_import_with_frames(run_cli, tmp_path):  # LeRobot's: tests/test_import_lerobot.py
     np.savez(tmp_path / "f.npz", motor=np.zeros((2, 5, 1)), images=np.stack([frames_of(5)] * 2))
     res = run_cli("import", tmp_path / "f.npz", "-T", "9", "--image-size", "8x8", "--out", tmp_path / "n.h5")
     assert res.code == 0, res.err

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from test_data_import_frames import frames_of, joints_of, robomimic_demos, write_lerobot, write_robomimic
+from test_data_import_frames import frames_of, joints_of, robomimic_demos, write_robomimic
+from test_import_lerobot import write_v2, write_v3
 
 SEED = 24
 N_MUTATIONS = int(os.environ.get("PRIMSPACE_FUZZ_N", 30))  # more to search longer: PRIMSPACE_FUZZ_N=1000
@@ -77,15 +78,31 @@ def _robomimic(root):
 
 
 def _lerobot(root, what):
+    """A LeRobot v3.0 data set (two episodes in one data file and video); v2.x for ``v2-meta``."""
     folder = root / "ds"
-    write_lerobot(folder, lengths=(6, 5), tasks=("a", "b"))
-    meta = [folder / "meta" / "info.json", folder / "meta" / "episodes.jsonl"]
+    if what == "v2-meta":
+        write_v2(folder, lengths=(6, 5), tasks=("a", "b"))
+        return folder, [folder / "meta" / "info.json", folder / "meta" / "episodes.jsonl"], ()
+    write_v3(folder, lengths=(6, 5), tasks=("a", "b"), data_files=((0, 0),) * 2, video_files=((0, 0),) * 2)
     if what == "meta":
-        return folder, meta, ()
+        meta = [folder / "meta" / "info.json", folder / "meta" / "tasks.parquet"]
+        return folder, meta + sorted((folder / "meta" / "episodes").rglob("*.parquet")), ()
     if what == "parquet":
         return folder, sorted((folder / "data").rglob("*.parquet")), ()
     return folder, sorted((folder / "videos").rglob("*.mp4")), ("--images", "observation.images.top",
                                                                  "--image-size", "8x8")
+
+
+def _npy(root):
+    """An EIPL-style folder: padded joints (N, Tmax, J), frames, lengths of two of three, labels."""
+    folder = root / "lab"
+    folder.mkdir()
+    joints = np.stack([np.pad(joints_of(t, 2, float(i)), ((0, 7 - t), (0, 0)), mode="edge")
+                       for i, t in enumerate((5, 7, 6))])
+    np.save(folder / "joints.npy", joints)
+    np.save(folder / "images.npy", np.stack([frames_of(7, 8, 8) for _ in range(3)]))
+    np.save(folder / "labels.npy", np.array(["a", "b", "a"]))
+    return folder, sorted(folder.glob("*.npy")), ("--format", "npy", "--image-size", "8x8")
 
 
 FORMATS = {
@@ -96,6 +113,8 @@ FORMATS = {
     "lerobot-meta": lambda root: _lerobot(root, "meta"),
     "lerobot-parquet": lambda root: _lerobot(root, "parquet"),
     "lerobot-video": lambda root: _lerobot(root, "video"),
+    "lerobot-v2-meta": lambda root: _lerobot(root, "v2-meta"),
+    "npy": _npy,
 }
 
 

@@ -17,9 +17,10 @@ import pytest
 
 from conftest import assert_user_error
 from primspace.data import MotionDataset
-from test_data_import_frames import joints_of, robomimic_demos, write_lerobot, write_robomimic
+from test_data_import_frames import joints_of, robomimic_demos, write_robomimic
+from test_import_lerobot import edit_episodes, write_v2, write_v3
 
-DATA_TEMPLATE = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
+DATA_TEMPLATE = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"  # LeRobot v3.0
 CAMERA = "observation.images.top"
 
 
@@ -55,8 +56,16 @@ def _episodes(root, *indices):
 
 @pytest.fixture
 def lerobot(tmp_path):
+    """A LeRobot v3.0 data set: two episodes in one data file and one video."""
     root = tmp_path / "sets" / "ds"
-    write_lerobot(root, lengths=(8, 6), tasks=("a", "b"))
+    write_v3(root, lengths=(8, 6), tasks=("a", "b"), data_files=((0, 0),) * 2, video_files=((0, 0),) * 2)
+    return root
+
+
+@pytest.fixture
+def lerobot_v2(tmp_path):
+    root = tmp_path / "sets" / "v2"
+    write_v2(root, lengths=(8, 6), tasks=("a", "b"))
     return root
 
 
@@ -81,7 +90,7 @@ def test_lerobot_symlinked_chunk_folder_pointing_outside_is_refused(run_cli, ler
 
 def test_lerobot_video_path_escaping_is_refused(run_cli, lerobot):
     shutil.copytree(lerobot / "videos", lerobot.parent / "v" / "videos")
-    _edit_info(lerobot, video_path="../v/videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4")
+    _edit_info(lerobot, video_path="../v/videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4")
     _refused(*_import(run_cli, lerobot, "--images", CAMERA), "meta/info.json", "field 'video_path'", "../v/videos")
 
 
@@ -92,20 +101,36 @@ def test_lerobot_templates_inside_the_folder_still_import(run_cli, lerobot):
 
 
 @pytest.mark.parametrize("template, fragment", [
-    ("data/{episode_index.__class__}.parquet", "{episode_index.__class__}"),  # used to expand
-    ("data/{episode_index.foo}.parquet", "{episode_index.foo}"),  # used to be a traceback
-    ("data/{episode_index[0]}.parquet", "{episode_index[0]}"),  # used to be a traceback
-    ("data/{episode_index!r}.parquet", "{episode_index!r}"),  # used to be accepted
-    ("data/{episode_index:>8}.parquet", "{episode_index:>8}"),
-    ("data/{episode_index:0999999999d}.parquet", "{episode_index:0999999999d}"),  # a 1 GB file name
+    ("data/{file_index.__class__}.parquet", "{file_index.__class__}"),  # used to expand
+    ("data/{file_index.foo}.parquet", "{file_index.foo}"),  # used to be a traceback
+    ("data/{file_index[0]}.parquet", "{file_index[0]}"),  # used to be a traceback
+    ("data/{file_index!r}.parquet", "{file_index!r}"),  # used to be accepted
+    ("data/{file_index:>8}.parquet", "{file_index:>8}"),
+    ("data/{file_index:0999999999d}.parquet", "{file_index:0999999999d}"),  # a 1 GB file name
     ("data/{0}.parquet", "{0}"),
     ("data/{}.parquet", "{}"),
     ("data/{video_key}/e.parquet", "{video_key}"),  # not a field of data_path
-    ("data/{episode_index:03d", "data/{episode_index:03d"),  # unbalanced
+    ("data/{episode_index:06d}.parquet", "{episode_index:06d}; a v3 template may use only {chunk_index}"),  # v2's
+    ("data/{file_index:03d", "data/{file_index:03d"),  # unbalanced
 ])
 def test_lerobot_template_fields_are_plain_integers(run_cli, lerobot, template, fragment):
     _edit_info(lerobot, data_path=template)
     _refused(*_import(run_cli, lerobot), "meta/info.json", "field 'data_path'", fragment)
+
+
+def test_lerobot_v2_template_fields_are_its_own(run_cli, lerobot_v2):
+    _edit_info(lerobot_v2, data_path=DATA_TEMPLATE)
+    _refused(*_import(run_cli, lerobot_v2), "meta/info.json", "field 'data_path'",
+             "{chunk_index:03d}; a v2 template may use only {episode_chunk}, {episode_index}")
+    _edit_info(lerobot_v2, data_path="../" + "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet")
+    _refused(*_import(run_cli, lerobot_v2), "meta/info.json", "field 'data_path'", "outside")
+
+
+def test_lerobot_episode_tables_linked_from_outside_are_refused(run_cli, lerobot, tmp_path):
+    folder = lerobot / "meta" / "episodes" / "chunk-000"
+    shutil.move(folder, tmp_path / "elsewhere")
+    folder.symlink_to(tmp_path / "elsewhere", target_is_directory=True)
+    _refused(*_import(run_cli, lerobot), "file-000.parquet", "field 'episodes'", "outside the data set folder")
 
 
 def test_lerobot_template_that_is_not_a_string_is_refused(run_cli, lerobot):
@@ -116,15 +141,32 @@ def test_lerobot_template_that_is_not_a_string_is_refused(run_cli, lerobot):
 # -------------------------------------------------------------- LeRobot: episodes, fps, chunks
 
 
-def test_lerobot_duplicate_episode_index_is_refused(run_cli, lerobot):
-    _episodes(lerobot, 0, 1, 0)
-    _refused(*_import(run_cli, lerobot), "episodes.jsonl", "line 3", "episode_index 0", "line 1")
+def test_lerobot_duplicate_episode_index_is_refused(run_cli, lerobot, lerobot_v2):
+    _episodes(lerobot_v2, 0, 1, 0)
+    _refused(*_import(run_cli, lerobot_v2), "episodes.jsonl", "line 3", "episode_index 0", "line 1")
+    edit_episodes(lerobot, "episode_index", {1: 0})
+    _refused(*_import(run_cli, lerobot), "meta/episodes/chunk-000/file-000.parquet", "field 'episode_index'",
+             "episode_index 0 is listed twice (also in this file)")
 
 
 @pytest.mark.parametrize("value", [1.7, "1", True, -1, None])
-def test_lerobot_episode_index_must_be_an_integer(run_cli, lerobot, value):
-    _episodes(lerobot, 0, value)
-    _refused(*_import(run_cli, lerobot), "episodes.jsonl", "line 2", "episode_index", json.dumps(value))
+def test_lerobot_episode_index_must_be_an_integer(run_cli, lerobot_v2, value):
+    _episodes(lerobot_v2, 0, value)
+    _refused(*_import(run_cli, lerobot_v2), "episodes.jsonl", "line 2", "episode_index", json.dumps(value))
+
+
+@pytest.mark.parametrize("column, value, fragment", [
+    ("episode_index", 1.5, "row 0: episode_index 0.0 is not a whole number >= 0"),  # the column becomes floats
+    ("episode_index", -1, "row 1: episode_index -1 is not a whole number >= 0"),
+    ("data/file_index", None, "row 1: data/file_index null is not a whole number >= 0"),
+    ("dataset_to_index", 8, "row 1: dataset_to_index 8 does not come after dataset_from_index 8"),
+    (f"videos/{CAMERA}/from_timestamp", float("nan"), "from_timestamp NaN is not a time in seconds >= 0"),
+    (f"videos/{CAMERA}/to_timestamp", 0.8, "to_timestamp 0.8 does not come after"),
+])
+def test_lerobot_v3_episode_rows_are_checked(run_cli, lerobot, column, value, fragment):
+    edit_episodes(lerobot, column, {1: value})
+    _refused(*_import(run_cli, lerobot, "--images", CAMERA), "meta/episodes/chunk-000/file-000.parquet",
+             f"field '{column}'", fragment)
 
 
 @pytest.mark.parametrize("fps", ["fast", 0, float("nan"), float("inf"), -10, True, [10], 1e-320, 1e12])
@@ -402,11 +444,11 @@ def test_names_with_a_newline_keep_the_message_on_one_line(run_cli, tmp_path):
 
 def test_lerobot_damaged_column_name_is_one_line(run_cli, lerobot):
     """A parquet column name that is not UTF-8 used to escape as a UnicodeDecodeError."""
-    file = lerobot / "data" / "chunk-000" / "episode_000000.parquet"
+    file = lerobot / "data" / "chunk-000" / "file-000.parquet"
     data = file.read_bytes()
     at = data.index(b"observation.state")  # the column chunk's path in the schema
     file.write_bytes(data[:at] + b"\xd5" + data[at + 1:])
-    _refused(*_import(run_cli, lerobot), "episode_000000.parquet", "sample 0")
+    _refused(*_import(run_cli, lerobot), "file-000.parquet", "sample 0")
 
 
 def test_robomimic_soft_link_through_an_external_link_is_refused(run_cli, lift, tmp_path):

@@ -5,7 +5,8 @@ module per group of commands registers them on :data:`primspace.cli.app.app`.
 """
 
 # imported for their side effect, in the order `primspace --help` lists the commands
-from primspace.cli import data  # noqa: F401, I001
+from primspace.cli import importing  # noqa: F401, I001
+from primspace.cli import data  # noqa: F401
 from primspace.cli import cluster  # noqa: F401
 from primspace.cli import train  # noqa: F401
 from primspace.cli import animate  # noqa: F401

@@ -1,9 +1,8 @@
-"""Data and simulator commands: import, info, generate, show."""
+"""Data and simulator commands: info, generate, show (import: :mod:`primspace.cli.importing`)."""
 
 from __future__ import annotations
 
 import json
-from enum import Enum
 from pathlib import Path
 from typing import Optional
 
@@ -12,166 +11,13 @@ import typer
 from primspace.errors import UserError
 
 from primspace.cli.app import app
-from primspace.cli.options import check_workers, echo_json, name_list
+from primspace.cli.options import check_workers, echo_json
 
+
+# the marks these commands write into their outputs (primspace.outputs): --overwrite replaces only their own
+_GENERATE_MARK, _SHOW_MARK = "primspace generate", "primspace show"
 
 # ============================================================================ data
-
-
-class ImportFormat(str, Enum):
-    npz = "npz"
-    csv = "csv"
-    lasa = "lasa"
-    robomimic = "robomimic"
-    lerobot = "lerobot"
-
-
-_FRAME_FORMATS = ("robomimic", "lerobot")  # formats that take --joints and --images
-#: The most steps ``import -T`` resamples to: 100 s at 1 kHz. The arrays grow with T (N x T x J
-#: float64 while resampling, N x T x H x W x 3 bytes of frames), so a larger T is a typo that
-#: would end in a memory error, not a data set.
-MAX_LENGTH = 100_000
-# the marks these commands write into their outputs (primspace.outputs): --overwrite replaces only their own
-_IMPORT_MARK, _GENERATE_MARK, _SHOW_MARK = "primspace import", "primspace generate", "primspace show"
-
-
-@app.command("import")
-def import_command(
-    src: Optional[Path] = typer.Argument(
-        None, help="A .npz file, a folder of CSV files, a robomimic .hdf5 file, a LeRobot data set folder, "
-        "or nothing / 'lasa' for --format lasa."
-    ),
-    format: Optional[ImportFormat] = typer.Option(
-        None, "--format", "-f", help="Input format; guessed from SRC when omitted."
-    ),
-    length: str = typer.Option(
-        ..., "--length", "-T", metavar="T", help=f"Resample every sequence to T steps, 2 to {MAX_LENGTH:,} (memory "
-        "grows with T: N x T x J x 8 bytes, and N x T x H x W x 3 with frames; 100,000 steps are 100 s at 1 kHz)."
-    ),
-    out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
-    joints: Optional[str] = typer.Option(
-        None, "--joints", help="robomimic: obs keys, comma-separated, concatenated in this order (required); "
-        "lerobot: state features (default observation.state)."
-    ),
-    images: Optional[str] = typer.Option(
-        None, "--images", help="robomimic: the obs key of the frames (e.g. agentview_image); "
-        "lerobot: the camera feature (e.g. observation.images.top). npz: frames are read from 'images'."
-    ),
-    image_size: Optional[str] = typer.Option(
-        None, "--image-size", help="HxW of the stored frames (default 48x64): resized with an anti-aliasing filter."
-    ),
-    shapes: Optional[str] = typer.Option(None, help="lasa: comma-separated shape names (default: 26 single-pattern shapes)."),
-    velocities: bool = typer.Option(False, help="lasa: add velocities vx, vy as joints."),
-    overwrite: bool = typer.Option(False, help="Replace OUT if it is an earlier import output (nothing else)."),
-) -> None:
-    """Import demonstrations (npz, CSV folder, LASA, robomimic HDF5, LeRobot) into a MotionDataset file.
-
-    Frames: each step takes the recorded frame nearest in time, resized to --image-size.
-    """
-    from primspace.files import output_file
-
-    length = _parse_length(length)
-    source = None if src is None or str(src).lower() == "lasa" else src
-    out = output_file(out, inputs=(source,), overwrite=overwrite, writer=_IMPORT_MARK)
-    fmt = format.value if format is not None else _guess_format(src)
-    _check_import_options(fmt, joints, images, image_size)
-    if fmt == "lasa":
-        from primspace.data.importers import import_lasa
-
-        names = [s.strip() for s in shapes.split(",") if s.strip()] if shapes else None
-        ds = import_lasa(length, shapes=names, velocities=velocities)
-    elif src is None:
-        raise UserError(f"--format {fmt} needs a source path")
-    else:
-        ds = _import_file(fmt, src, length, joints, images, _parse_image_size(image_size))
-    ds.save(out, overwrite=overwrite, writer=_IMPORT_MARK)
-    frames = f", frames {ds.image_size[0]}x{ds.image_size[1]}" if ds.has_images else ""
-    typer.echo(f"wrote {out}: {len(ds)} samples x {ds.length} steps x {ds.n_joints} joints{frames}")
-
-
-def _import_file(fmt: str, src: Path, length: int, joints: Optional[str], images: Optional[str], size):
-    """Run the importer of ``fmt`` on ``src``."""
-    from primspace.data import importers
-
-    if fmt == "npz":
-        return importers.import_npz(src, length, image_size=size)
-    if fmt == "csv":
-        return importers.import_csv_folder(src, length)
-    keys = name_list(joints, "--joints") if joints is not None else None
-    if fmt == "robomimic":
-        return importers.import_robomimic(src, length, joints=keys or (), images=images, image_size=size)
-    return importers.import_lerobot(
-        src, length, joints=keys or ("observation.state",), images=images, image_size=size
-    )
-
-
-def _check_import_options(fmt: str, joints, images, image_size) -> None:
-    """Refuse flags the format does not take (one line naming the flag)."""
-    if fmt not in _FRAME_FORMATS:
-        for flag, value in (("--joints", joints), ("--images", images)):
-            if value is not None:
-                raise UserError(f"{flag} applies to --format robomimic or lerobot, not {fmt}")
-    if image_size is not None and (fmt in ("csv", "lasa") or (fmt in _FRAME_FORMATS and not images)):
-        raise UserError(f"--image-size {image_size}: there are no frames to resize (--format {fmt}"
-                        f"{' without --images' if fmt in _FRAME_FORMATS else ''})")
-
-
-def _parse_length(text: str) -> int:
-    """``-T``: a whole number of steps from 2 to :data:`MAX_LENGTH` (one line otherwise)."""
-    value = text.strip()
-    if not (value.isascii() and value.isdigit()):  # "1e30", "2.5", "-3", "²": not a count of steps
-        raise UserError(f"--length {text}: must be a whole number of steps from 2 to {MAX_LENGTH:,}")
-    if len(value) > 9 or int(value) > MAX_LENGTH:
-        raise UserError(f"--length {text}: at most {MAX_LENGTH:,} steps (100 s at 1 kHz); the arrays grow with T "
-                        "(N x T x J x 8 bytes, N x T x H x W x 3 with frames), a longer T is a typo that would "
-                        "run out of memory")
-    if int(value) < 2:
-        raise UserError(f"--length {text}: must be at least 2 steps (a first and a last)")
-    return int(value)
-
-
-def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
-    """``"48x64"`` -> ``(48, 64)``, a size the decoder's image head can produce."""
-    from primspace.data.importers import DEFAULT_IMAGE_SIZE
-    from primspace.model_config import ModelConfig, check_image_size
-
-    if text is None:
-        return DEFAULT_IMAGE_SIZE
-    parts = text.lower().replace(" ", "").split("x")
-    if len(parts) != 2 or not all(p.isdigit() and int(p) > 0 for p in parts):
-        raise UserError(f"--image-size must be HxW in pixels, e.g. 48x64; got '{text}'")
-    size = (int(parts[0]), int(parts[1]))
-    try:
-        check_image_size(size, ModelConfig().image_channels)
-    except UserError as exc:
-        raise UserError(f"--image-size {text}: {exc}") from None
-    return size
-
-
-def _guess_format(src: Optional[Path]) -> str:
-    """The format of ``src``; an HDF5 file is robomimic only when it is a ``.hdf5`` file with
-    ``data/demo_N`` groups (a ``.h5`` file is usually a primspace data set already)."""
-    if src is None or str(src).lower() == "lasa":
-        return "lasa"
-    if src.is_dir():
-        from primspace.data.importers import is_lerobot_dir
-
-        return "lerobot" if is_lerobot_dir(src) else "csv"
-    suffix = src.suffix.lower()
-    if suffix == ".npz":
-        return "npz"
-    if suffix == ".hdf5":
-        from primspace.data.importers import looks_like_robomimic
-
-        if not src.exists() or looks_like_robomimic(src):
-            return "robomimic"
-        raise UserError(f"{src}: cannot tell the format (an HDF5 file without data/demo_N groups); pass --format")
-    if suffix == ".h5":
-        raise UserError(
-            f"{src}: cannot tell the format of a .h5 file (usually a primspace data set, which needs no import); "
-            "pass --format robomimic for a robomimic-style file"
-        )
-    raise UserError(f"{src}: cannot tell the format; pass --format npz|csv|lasa|robomimic|lerobot")
 
 
 @app.command("info")
@@ -179,7 +25,7 @@ def info_command(
     file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text."),
 ) -> None:
-    """Summarise a data set: N, T, J, joint names, label counts, images, joint ranges."""
+    """Summarise a data set: N, T, J, joint names, source and source ids, label counts, images, joint ranges."""
     from primspace.data.dataset import MotionDataset
 
     summary = MotionDataset.load(file).summary()
@@ -195,6 +41,8 @@ def _format_summary(s: dict) -> str:
         f"  samples  {s['n_samples']}    steps (T)  {s['length']}    joints (J)  {s['n_joints']}    dt  {s['dt']:.4g} s",
         f"  source   {s['source'] or '-'}",
     ]
+    if s.get("source_ids") is not None:
+        lines.append(f"  ids      {', '.join(s['source_ids'])}")
     img = s["image_shape"]
     lines.append(f"  images   {'x'.join(map(str, img)) + ' uint8 per sample' if img else 'none'}")
     if s["label_counts"] is None:
@@ -367,4 +215,4 @@ def show_command(
         raise UserError(f"{file}: sample {sample} out of range 0..{len(ds) - 1}")
     out = output_file(out, inputs=(file,), overwrite=overwrite, writer=_SHOW_MARK)
     save_figure(plot_sim_sample(ds, sample, n_frames=frames), out, writer=_SHOW_MARK, overwrite=overwrite)
-    typer.echo(f"wrote {out}")
+    typer.echo(f"wrote {out}" + ("" if ds.source_ids is None else f" (sample {sample}: {ds.source_id(sample)})"))

@@ -1,4 +1,4 @@
-"""Import a robomimic-style HDF5 file: ``data/demo_N/obs/<key>``, joints and camera frames.
+"""Import a robomimic-style HDF5 file: ``data/demo_N``, joints and camera frames.
 
 The layout (robomimic's, as its data set conversion scripts write it)::
 
@@ -6,21 +6,42 @@ The layout (robomimic's, as its data set conversion scripts write it)::
         demo_0/obs/robot0_joint_pos        (T_0, 7)  float
         demo_0/obs/robot0_gripper_qpos     (T_0, 2)  float
         demo_0/obs/agentview_image         (T_0, H, W, 3) uint8
+        demo_0/actions                     (T_0, 7)  float   (demo level: also states, rewards, dones)
         demo_1/...
+    mask/                       (optional) filter keys: the demos of each split
+        train                              (n,) byte strings, e.g. b"demo_0"
+        valid
 
-Demonstrations are read in natural numeric order (``demo_0, demo_1, ..., demo_10``).
+Demonstrations are read in natural numeric order (``demo_0, demo_1, ..., demo_10``);
+with ``filter_key`` only those that ``mask/<filter_key>`` names, still in natural numeric
+order whatever the mask's order (robomimic's ``--filter-key train``). A missing filter key
+is refused naming the filter keys there are; so is a mask that names a demo not in
+``data`` or one twice, or names none.
+
+Keys
+----
+A joint or image key is looked up in ``data/demo_N/obs/<key>`` first, then at demo level,
+``data/demo_N/<key>`` (``actions``, ``states``, ``rewards``, ``dones``): so ``--joints
+actions`` reads the actions and can be mixed with observation keys. Where both exist, the
+observation wins. A key with a ``/`` is a path inside ``data/demo_N`` and is read there
+only: ``obs/<key>``, ``next_obs/<key>``, ``./actions`` (the demo-level one, even where
+``obs`` holds an ``actions`` too); ``..``, an empty component or a leading ``/`` are
+refused.
+
 The joint keys are concatenated along the last axis in the order given; a key of shape
-``(T_i,)`` is one joint. Joint names are the key (one column) or ``<key>_<j>``. Frames
-(one image key, optional) are aligned with the resampled joints and resized as
-:mod:`primspace.data.importers.frames` says: output step ``k`` gets the recorded frame
-nearest to its normalised time; only those frames are read from the file. Other groups
-(``actions``, ``next_obs``, ``states``, ``mask``) are not read.
+``(T_i,)`` is one joint. Joint names are the key (one column) or ``<key>_<j>`` (a leading
+``./`` dropped). Frames (one image key, optional) are aligned with the resampled joints,
+fitted (``image_fit``) and resized as :mod:`primspace.data.importers.frames` says: output
+step ``k`` gets the recorded frame nearest to its normalised time; only those frames are
+read from the file. Each sample's ``source_ids`` entry is
+``robomimic:<file name>:data/demo_N``.
 
 Only this file is read: an external link (h5py follows them by default), a dataset whose
 data lie in other files (external storage, a virtual dataset) and a soft link that leaves
-its ``data/demo_N`` group are refused, naming the link. So are two demo names with the
-same number (``demo_1``, ``demo_01``), an empty demonstration, and a ``control_freq`` that
-is not a rate (:func:`~primspace.data.importers.common.rate_dt`).
+its ``data/demo_N`` group are refused, naming the link; the mask's datasets are held to
+the same rules (a soft link may point anywhere inside the file). So are two demo names with
+the same number (``demo_1``, ``demo_01``), an empty demonstration, and a ``control_freq``
+that is not a rate (:func:`~primspace.data.importers.common.rate_dt`).
 """
 
 from __future__ import annotations
@@ -37,7 +58,7 @@ import numpy as np
 
 from primspace.data.dataset import MotionDataset
 from primspace.data.importers.common import check_fits_memory, demonstrations, natural_key, printable, rate_dt
-from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, check_frames
+from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, as_image_fit, check_frames
 from primspace.errors import DataError, first_line
 
 __all__ = ["import_robomimic", "looks_like_robomimic"]
@@ -54,6 +75,8 @@ def import_robomimic(
     joints: Sequence[str],
     images: str | None = None,
     image_size=DEFAULT_IMAGE_SIZE,
+    image_fit: str = "crop",
+    filter_key: str | None = None,
 ) -> MotionDataset:
     """Read joints (and frames) of every ``data/demo_N`` of a robomimic-style HDF5 file.
 
@@ -64,40 +87,53 @@ def import_robomimic(
     length : int
         T, the steps to resample each demonstration to.
     joints : list of str
-        Keys under ``obs``, concatenated in this order (e.g. ``robot0_joint_pos``,
-        ``robot0_gripper_qpos``).
+        Keys, concatenated in this order (e.g. ``robot0_joint_pos``, ``robot0_gripper_qpos``,
+        ``actions``): under ``obs``, else at demo level; a key with ``/`` is a path inside
+        the demo (module docstring, *Keys*).
     images : str, optional
-        The key of the frames under ``obs`` (e.g. ``agentview_image``); None: joints only.
+        The key of the frames (e.g. ``agentview_image``), looked up as the joint keys are;
+        None: joints only.
     image_size : (H, W)
         Size of the stored frames.
+    image_fit : {"crop", "pad", "stretch"}
+        How a frame of another aspect ratio is fitted (:mod:`~primspace.data.importers.frames`).
+    filter_key : str, optional
+        Read only the demos that ``mask/<filter_key>`` names (e.g. ``train``, ``valid``).
 
     Raises
     ------
     DataError
-        A missing file, group or key (naming the file, the demo and the keys that exist),
-        or bad values or frames (naming the file, the key and the demonstration's index).
+        A missing file, group, key or filter key (naming the file, the demo and the keys that
+        exist), or bad values or frames (naming the file, the key and the demonstration's index).
     """
     path = Path(path)
+    image_fit = as_image_fit(image_fit)
+    joints = [_check_key(key, path) for key in joints]
+    if images:
+        _check_key(images, path)
     with _open(path) as f:
         demos = _demos(f, path)
-        joints = list(joints)
+        if filter_key is not None:
+            demos = _filtered(f, demos, filter_key, path)
         if not joints:
             raise DataError(
                 f"no joint keys given (--joints, joints=); data/{demos[0]}/obs has: {_keys(f, demos[0])}", path=path
             )
-        sequences = [_joint_values(f, demo, joints, path, i) for i, demo in enumerate(demos)]
-        names = _joint_names(f, demos[0], joints)
+        sequences, names = _all_joint_values(f, demos, joints, path)
         frames = None
         if images:
-            frames = AlignedFrames(length, image_size)
+            frames = AlignedFrames(length, image_size, image_fit)
             for i, demo in enumerate(demos):
-                dataset = _dataset(f, demo, images, path, i)
+                dataset, _ = _dataset(f, demo, images, path, i)
                 check_frames(dataset, len(sequences[i]), path=path, field=images, index=i)
                 frames.add(len(sequences[i]), lambda idx, d=dataset, i=i: _read_frames(d, idx, path, images, i))
+            frames.collect()  # while the file is open
         dt_in = _control_dt(f, path)
+    split = "" if filter_key is None else f" filter_key={printable(filter_key)}"
     return demonstrations(
-        sequences, length, frames, source=f"robomimic:{path.name} joints={','.join(joints)}", images=images,
+        sequences, length, frames, source=f"robomimic:{path.name} joints={','.join(joints)}{split}", images=images,
         dt_in=dt_in, where=path, joint_names=names,
+        source_ids=[f"robomimic:{printable(path.name)}:data/{demo}" for demo in demos],
     )
 
 
@@ -201,44 +237,155 @@ def _keys(f: h5py.File, demo: str) -> str:
     return ", ".join(names) or "no keys"
 
 
-def _dataset(f: h5py.File, demo: str, key: str, path: Path, index: int) -> h5py.Dataset:
-    """``data/<demo>/obs/<key>``; a missing one names the file, the demo and the keys there."""
-    group = _get(f["data"], demo, path, f"data/{demo}", demo, field=key, index=index)
+def _check_key(key: str, path: Path) -> str:
+    """``key`` if it names something inside a demo (module docstring, *Keys*); DataError otherwise."""
+    parts, _ = _key_parts(key)
+    if not parts or any(p in ("", ".", "..") for p in parts):
+        raise DataError("a key is a name, or a path inside data/demo_N (obs/<key>, ./actions) without '..', "
+                        "'.', an empty part or a leading '/'", path=path, field=printable(key))
+    return key
+
+
+def _key_parts(key: str) -> tuple[list[str], bool]:
+    """The components of ``key`` and whether it is a path (holds a ``/``) rather than a plain name."""
+    if "/" not in key:
+        return [key], False
+    return (key[2:] if key.startswith("./") else key).split("/"), True
+
+
+def _dataset(f: h5py.File, demo: str, key: str, path: Path, index: int) -> tuple[h5py.Dataset, str]:
+    """The dataset of ``key`` in ``data/<demo>``: ``obs/<key>``, else ``<key>`` at demo level, or
+    the path ``key`` (module docstring, *Keys*); and where it lies. A missing one names the
+    file, the demo and the keys there."""
+    located = dict(field=key, index=index)
+    group = _get(f["data"], demo, path, f"data/{demo}", demo, **located)
     if not isinstance(group, h5py.Group):
-        raise DataError(f"data/{demo} is not a group", path=path, field=key, index=index)
-    obs = _get(group, "obs", path, f"data/{demo}/obs", demo, field=key, index=index)
-    if not isinstance(obs, h5py.Group):
-        there = ", ".join(_names(group, path, f"data/{demo}", field=key, index=index)) or "nothing"
-        raise DataError(f"data/{demo} has no 'obs' group; it has: {there}", path=path, field=key, index=index)
-    node = _get(obs, key, path, f"data/{demo}/obs/{key}", demo, field=key, index=index)
+        raise DataError(f"data/{demo} is not a group", path=path, **located)
+    parts, is_path = _key_parts(key)
+    if is_path:
+        node, where = _walk(group, parts, demo, path, located)
+    else:
+        obs = _get(group, "obs", path, f"data/{demo}/obs", demo, **located)
+        where = f"data/{demo}/obs/{key}"
+        node = _get(obs, key, path, where, demo, **located) if isinstance(obs, h5py.Group) else None
+        if node is None:
+            node = _get(group, key, path, f"data/{demo}/{key}", demo, **located)
+            if node is None:
+                raise DataError(_missing(group, obs, demo, key, path, located), path=path, **located)
+            where = f"data/{demo}/{key}"
     if not isinstance(node, h5py.Dataset):
-        what = "is not an array" if node is not None else "is missing"
-        raise DataError(f"data/{demo}/obs/{key} {what}; keys there: {_keys(f, demo)}", path=path, field=key, index=index)
-    return node
+        raise DataError(f"{where} is not an array; keys there: {_keys(f, demo)}", path=path, **located)
+    return node, where
 
 
-def _joint_values(f: h5py.File, demo: str, keys: list[str], path: Path, index: int) -> np.ndarray:
-    """The joint keys of one demo, concatenated: ``(T_i, J)``."""
+def _missing(group: h5py.Group, obs, demo: str, key: str, path: Path, located: dict) -> str:
+    """Why a plain ``key`` is in neither ``data/<demo>/obs`` nor ``data/<demo>``: the keys of both."""
+    level = ", ".join(n for n in _names(group, path, f"data/{demo}", **located) if n != "obs") or "nothing else"
+    if not isinstance(obs, h5py.Group):
+        return f"data/{demo} has no 'obs' group and no {printable(key)}; it has: {level}"
+    there = ", ".join(_names(obs, path, f"data/{demo}/obs", **located)) or "no keys"
+    return f"data/{demo}/obs/{printable(key)} is missing; keys there: {there}; at demo level (data/{demo}): {level}"
+
+
+def _walk(group: h5py.Group, parts: list[str], demo: str, path: Path, located: dict):
+    """The node at ``parts`` inside ``group`` (``data/<demo>``), each component checked by
+    :func:`_get`, and its path; a missing one is refused naming what its group holds."""
+    where = f"data/{demo}"
+    for part in parts:
+        if not isinstance(group, h5py.Group):
+            raise DataError(f"{where} is not a group", path=path, **located)
+        node = _get(group, part, path, f"{where}/{part}", demo, **located)
+        if node is None:
+            there = ", ".join(_names(group, path, where, **located)) or "nothing"
+            raise DataError(f"{where}/{printable(part)} is missing; {where} has: {there}", path=path, **located)
+        group, where = node, f"{where}/{part}"
+    return group, where
+
+
+def _all_joint_values(f: h5py.File, demos: list[str], keys: list[str], path: Path) -> tuple[list, list[str]]:
+    """Each demo's joint keys concatenated, ``(T_i, J)``, and the joint names: ``<key>`` for a
+    one-column key, ``<key>_<j>`` otherwise (a key's columns must agree across demos)."""
+    sequences, widths = [], None
+    for i, demo in enumerate(demos):
+        values, own = _joint_values(f, demo, keys, path, i)
+        if widths is not None and own != widths:
+            k = next(j for j in range(len(keys)) if own[j] != widths[j])
+            raise DataError(f"{keys[k]} has {own[k]} columns in data/{demo}, {widths[k]} in data/{demos[0]}",
+                            path=path, field=keys[k], index=i)
+        widths = widths or own
+        sequences.append(values)
+    names = []
+    for key, width in zip(keys, widths):
+        name = key[2:] if key.startswith("./") else key
+        names.extend([name] if width == 1 else [f"{name}_{j}" for j in range(width)])
+    return sequences, names
+
+
+def _joint_values(f: h5py.File, demo: str, keys: list[str], path: Path, index: int) -> tuple[np.ndarray, list[int]]:
+    """The joint keys of one demo, concatenated: ``(T_i, J)``; and each key's columns."""
     columns, steps = [], None
     for key in keys:
-        node = _dataset(f, demo, key, path, index)
+        node, where = _dataset(f, demo, key, path, index)
         if node.ndim not in (1, 2) or node.dtype.kind not in "fiu":
             raise DataError(
-                f"data/{demo}/obs/{key} must be (T_i,) or (T_i, d) numbers, got {node.dtype} {node.shape}",
+                f"{where} must be (T_i,) or (T_i, d) numbers, got {node.dtype} {node.shape}",
                 path=path, field=key, index=index,
             )
         if node.shape[0] == 0:
-            raise DataError(f"data/{demo}/obs/{key} is empty (0 steps)", path=path, field=key, index=index)
+            raise DataError(f"{where} is empty (0 steps)", path=path, field=key, index=index)
         value = _read(node, path, key, index)
         value = value[:, None] if value.ndim == 1 else value
         if steps is not None and value.shape[0] != steps[1]:
             raise DataError(
-                f"data/{demo}/obs/{key} has {value.shape[0]} steps, {steps[0]} has {steps[1]}",
+                f"{where} has {value.shape[0]} steps, {steps[0]} has {steps[1]}",
                 path=path, field=key, index=index,
             )
         steps = steps or (key, value.shape[0])
         columns.append(value)
-    return np.concatenate(columns, axis=1)
+    return np.concatenate(columns, axis=1), [c.shape[1] for c in columns]
+
+
+def _filtered(f: h5py.File, demos: list[str], filter_key: str, path: Path) -> list[str]:
+    """The demos that ``mask/<filter_key>`` names, in natural numeric order (module docstring)."""
+    field = f"mask/{printable(filter_key)}"
+    if not filter_key or "/" in filter_key or filter_key in (".", ".."):
+        raise DataError("a filter key is one name under mask/ (e.g. train, valid)", path=path, field=field)
+    mask = _get(f, "mask", path, "mask", field=field)
+    if not isinstance(mask, h5py.Group):
+        raise DataError(f"no filter key {printable(filter_key)!r}: the file has no 'mask' group (robomimic's "
+                        "filter keys are mask/<name>, lists of demo names)", path=path, field=field)
+    node = _get(mask, filter_key, path, field, field=field)
+    if node is None:
+        there = ", ".join(_names(mask, path, "mask", field=field)) or "none"
+        raise DataError(f"no filter key {printable(filter_key)!r}; filter keys there: {there}", path=path, field=field)
+    named = _mask_names(node, path, field)
+    if not named:
+        raise DataError(f"{field} names no demonstrations", path=path, field=field)
+    known, seen = set(demos), set()
+    for name in named:
+        if name not in known:
+            raise DataError(f"{field} names {name}, which is not among data's {len(demos)} demo_N groups "
+                            f"({_span(demos)})", path=path, field=field)
+        if name in seen:
+            raise DataError(f"{field} names {name} twice", path=path, field=field)
+        seen.add(name)
+    return [demo for demo in demos if demo in seen]
+
+
+def _mask_names(node, path: Path, field: str) -> list[str]:
+    """The demo names of a mask dataset: 1-D strings (robomimic writes bytes, ``b"demo_0"``)."""
+    strings = isinstance(node, h5py.Dataset) and (node.dtype.kind == "S" or h5py.check_string_dtype(node.dtype))
+    if not strings or node.ndim != 1:
+        got = f"{node.dtype} {node.shape}" if isinstance(node, h5py.Dataset) else "a group"
+        raise DataError(f"{field} must be a 1-D array of demo names (strings such as b'demo_0'), got {got}",
+                        path=path, field=field)
+    values = _read(node, path, field, None).tolist()
+    return [printable(v.decode("utf-8", "backslashreplace") if isinstance(v, bytes) else str(v)) for v in values]
+
+
+def _span(demos: list[str]) -> str:
+    """``demo_0, demo_1, demo_2`` or ``demo_0 .. demo_9`` (for messages)."""
+    return ", ".join(demos) if len(demos) <= 4 else f"{demos[0]} .. {demos[-1]}"
 
 
 def _read(node: h5py.Dataset, path: Path, key: str, index: int, selection=()) -> np.ndarray:
@@ -259,16 +406,6 @@ def _read(node: h5py.Dataset, path: Path, key: str, index: int, selection=()) ->
 def _read_frames(node: h5py.Dataset, indices: np.ndarray, path: Path, key: str, index: int) -> np.ndarray:
     """The frames at ``indices`` (sorted, distinct): only those are read."""
     return _read(node, path, key, index, indices)
-
-
-def _joint_names(f: h5py.File, demo: str, keys: list[str]) -> list[str]:
-    """``<key>`` for a one-column key, ``<key>_<j>`` otherwise (the widths of ``demo``)."""
-    names = []
-    for key in keys:
-        node = f["data"][demo]["obs"][key]
-        width = 1 if node.ndim == 1 else int(node.shape[1])
-        names.extend([key] if width == 1 else [f"{key}_{j}" for j in range(width)])
-    return names
 
 
 def _control_dt(f: h5py.File, path: Path) -> float:
