@@ -20,7 +20,8 @@ import pytest
 from conftest import read_png
 
 README = Path(__file__).resolve().parents[1] / "README.md"
-ALTERNATIVES = ("--format csv", "demos.npz", "--format lerobot")  # other importers of the same file
+# other importers, or other options of the same one (tests/test_readme_imports.py runs those lines)
+ALTERNATIVES = ("--format csv", "demos.npz", "--format lerobot", "--format npy", "--filter-key")
 
 
 def _commands() -> list[list[str]]:
