@@ -255,6 +255,13 @@ def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
     result = json.loads((tmp_path / "pred" / "result.json").read_text())
     assert result["observe"] == {"motor": 5, "frames": 5} and result["mean"]["motor_mse"] > 0
     assert MotionDataset.load(tmp_path / "pred" / "predicted.h5").label_names == MotionDataset.load(tmp_path / "d.h5").label_names
+    # every number traces to a recording: the csv file of each predicted sample, and of each fitted one
+    ids = [str(v) for v in MotionDataset.load(tmp_path / "d.h5").source_ids]
+    assert ids[0] == "csv:csv/prim" + ids[0].split("/prim", 1)[1] and ids[0].endswith(".csv")
+    assert result["source_ids"] == [ids[i] for i in result["indices"]]
+    assert list(MotionDataset.load(tmp_path / "pred" / "predicted.h5").source_ids) == result["source_ids"]
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["data"]["source_ids"] == [ids[i] for i in config["data"]["indices"]]
 
 
 def test_the_mixture_is_decoded_once_per_run(trained, train_set, eval_set):
