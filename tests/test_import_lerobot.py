@@ -120,6 +120,22 @@ def _rows(episode: int, n: int, first: int, task: int, times=None) -> dict:
 # ---------------------------------------------------------------------- v3.0 writer
 
 
+def write_tasks(path, names) -> None:
+    """meta/tasks.parquet as LeRobot writes it (``pd.DataFrame({"task_index": ...}, index=tasks)``):
+    the task names are the pandas index, stored as ``__index_level_0__`` with pandas' metadata."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pandas = {"index_columns": ["__index_level_0__"], "column_indexes": [], "creator": {"library": "pyarrow"},
+              "pandas_version": "2.2.3", "columns": [
+                  {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64",
+                   "metadata": None},
+                  {"name": None, "field_name": "__index_level_0__", "pandas_type": "unicode", "numpy_type": "object",
+                   "metadata": None}]}
+    table = pa.table({"task_index": pa.array(range(len(names)), pa.int64()), "__index_level_0__": list(names)})
+    pq.write_table(table.replace_schema_metadata({b"pandas": json.dumps(pandas).encode()}), path)
+
+
 def write_v3(root, lengths=(6, 9, 5, 7), tasks=("push", "lift", "push", "lift"),
              data_files=((0, 0), (0, 0), (0, 1), (1, 0)), video_files=((0, 0), (0, 0), (0, 0), (0, 1)),
              codec="mpeg4", times=None, video_extra=0, gop=None, meta_split=2) -> list[np.ndarray]:
@@ -137,7 +153,7 @@ def write_v3(root, lengths=(6, 9, 5, 7), tasks=("push", "lift", "push", "lift"),
             "video_path": V3_VIDEO, "features": _features()}
     (root / "meta").mkdir(parents=True)
     (root / "meta" / "info.json").write_text(json.dumps(info))
-    pq.write_table(pa.table({"task_index": list(range(len(names))), "task": names}), root / "meta" / "tasks.parquet")
+    write_tasks(root / "meta" / "tasks.parquet", names)
     tables, videos, records, first = {}, {}, [], 0
     for e, n in enumerate(lengths):
         rows = _rows(e, n, first, names.index(tasks[e]), None if times is None else times.get(e))
