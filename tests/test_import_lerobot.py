@@ -206,21 +206,31 @@ def edit_episodes(root, column: str, values: dict) -> None:
 
 def write_v2(root, lengths=(12, 20, 9), tasks=("push", "lift", "push"), video_lengths=None, codec="mpeg4",
              names=("shoulder", "elbow", "wrist")) -> list[np.ndarray]:
-    """A LeRobot v2.1 directory (one table and one video per episode); returns each episode's state."""
+    """A LeRobot v2.1 directory (one table and one video per episode, with the meta files LeRobot's
+    v2.1 -> v3.0 converter reads: tasks.jsonl, episodes_stats.jsonl); returns each episode's state."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    task_names = sorted(set(tasks))
     info = {"codebase_version": "v2.1", "fps": FPS, "chunks_size": 2, "total_episodes": len(lengths),
-            "data_path": V2_DATA, "video_path": V2_VIDEO, "features": _features(names)}
+            "total_chunks": (len(lengths) + 1) // 2, "total_videos": len(lengths), "total_frames": int(sum(lengths)),
+            "total_tasks": len(task_names), "data_path": V2_DATA, "video_path": V2_VIDEO,
+            "features": _features(names)}
     (root / "meta").mkdir(parents=True)
     (root / "meta" / "info.json").write_text(json.dumps(info))
     lines = [json.dumps({"episode_index": e, "tasks": [tasks[e]], "length": t}) for e, t in enumerate(lengths)]
     (root / "meta" / "episodes.jsonl").write_text("\n".join(lines) + "\n")
+    (root / "meta" / "tasks.jsonl").write_text("".join(
+        json.dumps({"task_index": i, "task": t}) + "\n" for i, t in enumerate(task_names)))
+    stats = [{"episode_index": e, "stats": {"observation.state": {
+        "min": s.min(0).tolist(), "max": s.max(0).tolist(), "mean": s.mean(0).tolist(), "std": s.std(0).tolist(),
+        "count": [len(s)]}}} for e, s in enumerate(state_of(e, n) for e, n in enumerate(lengths))]
+    (root / "meta" / "episodes_stats.jsonl").write_text("".join(json.dumps(x) + "\n" for x in stats))
     first = 0
     for e, n in enumerate(lengths):
         data = root / V2_DATA.format(episode_chunk=e // 2, episode_index=e)
         data.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(pa.table(_rows(e, n, first, 0)), data)
+        pq.write_table(pa.table(_rows(e, n, first, task_names.index(tasks[e]))), data)
         first += n
         video = root / V2_VIDEO.format(episode_chunk=e // 2, video_key=CAMERA, episode_index=e)
         write_video(video, coded_frames(e, n if video_lengths is None else video_lengths[e]), codec=codec)

@@ -103,16 +103,6 @@ def test_v21_converted_by_lerobot_imports_the_same(tmp_path):
     convert = pytest.importorskip("lerobot.datasets.v30.convert_dataset_v21_to_v30").convert_dataset
     root, lengths = tmp_path / "local" / "v21", (12, 20, 9)
     write_v2(root, lengths=lengths)
-    # what the converter reads besides what primspace needs
-    info = json.loads((root / "meta" / "info.json").read_text())
-    info.update(total_chunks=2, total_videos=3, total_frames=sum(lengths), total_tasks=2)
-    (root / "meta" / "info.json").write_text(json.dumps(info))
-    (root / "meta" / "tasks.jsonl").write_text("".join(
-        json.dumps({"task_index": i, "task": t}) + "\n" for i, t in enumerate(["lift", "push"])))
-    stats = [{"episode_index": e, "stats": {"observation.state": {
-        "min": s.min(0).tolist(), "max": s.max(0).tolist(), "mean": s.mean(0).tolist(), "std": s.std(0).tolist(),
-        "count": [len(s)]}}} for e, s in enumerate(state_of(e, n) for e, n in enumerate(lengths))]
-    (root / "meta" / "episodes_stats.jsonl").write_text("".join(json.dumps(s) + "\n" for s in stats))
     before = import_lerobot(root, 11, images=CAMERA, image_size=(24, 32))
 
     convert("local/v21", root=tmp_path, push_to_hub=False)  # root becomes v3.0; the original moves to v21_old
