@@ -211,53 +211,99 @@ def _format_sweep(rows: list[dict]) -> str:
 SEGMENT_FILES = ("segments.csv", "step_labels.npy", "result.json", "timeline.png")
 
 
+class SegmentMethod(str, Enum):
+    windows = "windows"
+    synthesis = "synthesis"
+
+
+_SEGMENT_RUN = typer.Argument(..., help="windows: a run trained with --code-window on DATA (fit or infer); "
+                              "synthesis: a run of single primitives (one code per demonstration).")
+_SEGMENT_METHOD = typer.Option(
+    SegmentMethod.windows, "--method", help="windows: change points of the run's window codes; synthesis: the "
+    "partition into segments that the single-primitive run generates best (docs/sequences.md).")
+_STEPS = "synthesis: the {} steps of a primitive in DATA (default {} x the run's T)."
+
+
 @app.command("segment")
 def segment_command(
-    run: Path = typer.Argument(..., help="A run trained with --code-window (fit or infer)."),
-    data: Path = typer.Argument(..., help="The run's data file (long demonstrations with lengths)."),
+    run: Path = _SEGMENT_RUN,
+    data: Path = typer.Argument(..., help="Long demonstrations (with lengths; windows: the run's data file)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."),
+    method: SegmentMethod = _SEGMENT_METHOD,
     primitives: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives (default: the data's label names)."),
-    tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window)."),
+    tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window; synthesis: 8)."),
+    min_steps: Optional[int] = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
+    max_steps: Optional[int] = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
 ) -> None:
-    """Find the primitives in long demonstrations from a run's code sequences: boundaries
-    (change points of the codes) and labels (affine subspace clustering of segment codes);
-    scored against the data's step_segments / step_labels when it has them."""
+    """Find the primitives in long demonstrations: boundaries (change points of a run's window
+    codes, or the segments a single-primitive run generates best) and labels (affine subspace
+    clustering of segment codes); scored against the data's step_segments / step_labels when it has them."""
     import numpy as np
 
     from primspace.cluster.outputs import OutputKind, atomic_directory, check_output_directory, write_json
     from primspace.data import MotionDataset
-    from primspace.experiments.composite import segment_codes
     from primspace.files import check_outside_inputs
-    from primspace.train import check_run_data, load_run
+    from primspace.train import load_run
 
     kind = OutputKind("primspace segment", SEGMENT_FILES, frozenset({"window", "boundaries", "scores"}))
     check_outside_inputs(out, (run, data))
     check_output_directory(out, overwrite, kind)
-    trained = load_run(run)
-    window = trained.model_config.code_window
-    if window is None:
-        raise UserError(f"{run}: the run has one code per sequence; segment needs a run trained with --code-window")
-    ds = MotionDataset.load(data)
-    check_run_data(trained, ds)
-    held = ds.subset(trained.indices)
+    if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None):
+        raise UserError("--min-steps and --max-steps apply to --method synthesis")
+    if tolerance is not None and tolerance < 0:
+        raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tolerance}")
+    trained, ds = load_run(run), MotionDataset.load(data)
+    segment = _segment_windows if method is SegmentMethod.windows else _segment_synthesis
+    samples, held, result, scores, window, k = segment(trained, ds, run, data, primitives, tolerance,
+                                                       (min_steps, max_steps))
+    record = {"run": str(run), "data": str(data), "method": method.value, "window": window, "n_primitives": k,
+              "samples": samples.tolist(), "boundaries": [b.tolist() for b in result.boundaries],
+              "scores": scores, "note": result.note}
+    with atomic_directory(out, overwrite, kind) as tmp:
+        _write_segments(tmp / "segments.csv", samples, result)
+        np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
+        _timeline(tmp / "timeline.png", trained, held, result, window, method.value)
+        write_json(tmp / "result.json", record)
+    typer.echo(_segment_summary(scores, len(held)))
+    typer.echo(f"wrote {out}")
+
+
+def _primitives(held, primitives: Optional[int], data: Path) -> int:
     if primitives is None and not held.label_names:
         raise UserError(f"{data}: no label names to count the primitives; pass --primitives K")
     if primitives is not None and primitives < 1:
         raise UserError(f"--primitives {primitives}: must be at least 1")
-    k = primitives or len(held.label_names)
+    return primitives or len(held.label_names)
+
+
+def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, _steps):
+    """Change points of the run's window codes (the run's own samples of ``ds``)."""
+    from primspace.experiments.composite import segment_codes
+    from primspace.train import check_run_data
+
+    window = trained.model_config.code_window
+    if window is None:
+        raise UserError(f"{run}: the run has one code per sequence; --method windows needs a run trained with "
+                        "--code-window (or use --method synthesis)")
+    check_run_data(trained, ds)
+    held = ds.subset(trained.indices)
+    k = _primitives(held, primitives, data)
     result, scores = segment_codes(trained.latents, held, window, trained.model_config.latent_dim, tolerance=tolerance,
                                    n_primitives=k)
-    record = {"run": str(run), "data": str(data), "window": window, "n_primitives": k,
-              "samples": trained.indices.tolist(), "boundaries": [b.tolist() for b in result.boundaries],
-              "scores": scores, "note": result.note}
-    with atomic_directory(out, overwrite, kind) as tmp:
-        _write_segments(tmp / "segments.csv", trained.indices, result)
-        np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
-        _timeline(tmp / "timeline.png", trained, held, result, window)
-        write_json(tmp / "result.json", record)
-    typer.echo(_segment_summary(scores, len(held)))
-    typer.echo(f"wrote {out}")
+    return trained.indices, held, result, scores, window, k
+
+
+def _segment_synthesis(trained, ds, run: Path, data: Path, primitives, tolerance, steps):
+    """The segments the single-primitive run generates best (every sample of ``ds``)."""
+    import numpy as np
+
+    from primspace.segmentation_synthesis import segment_by_synthesis, segmentation_scores
+
+    k = _primitives(ds, primitives, data)
+    result = segment_by_synthesis(trained, ds, k, min_steps=steps[0], max_steps=steps[1])
+    scores = segmentation_scores(result, ds, 8 if tolerance is None else tolerance)
+    return np.arange(len(ds)), ds, result, scores, 1, k
 
 
 def _write_segments(path: Path, samples, result) -> None:
@@ -273,8 +319,8 @@ def _write_segments(path: Path, samples, result) -> None:
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def _timeline(path: Path, trained, held, result, window: int, shown: int = 4) -> None:
-    """The first ``shown`` demonstrations' code sequences with true and found boundaries."""
+def _timeline(path: Path, trained, held, result, window: int, method: str, shown: int = 4) -> None:
+    """The first ``shown`` demonstrations' code sequences (synthesis: scaled joints) with true and found boundaries."""
     import numpy as np
 
     from primspace.plots import save_figure
@@ -282,13 +328,18 @@ def _timeline(path: Path, trained, held, result, window: int, shown: int = 4) ->
     from primspace.segmentation import boundaries_from_segments
 
     n = min(shown, len(held))
-    codes = trained.latents[:n].reshape(n, -1, trained.model_config.latent_dim)
+    if method == "synthesis":
+        codes = trained.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64))
+        what = f"{trained.init}: joints (scaled), segments by synthesis"
+    else:
+        codes = trained.latents[:n].reshape(n, -1, trained.model_config.latent_dim)
+        what = f"{trained.init}: code sequences (q = {trained.model_config.latent_dim}, W = {window})"
     lengths = held.lengths[:n] if held.lengths is not None else np.full(n, held.length)
     truth = held.step_labels[:n] if held.step_labels is not None else np.full((n, held.length), -1)
     true_bounds = boundaries_from_segments(held.step_segments[:n], lengths) if held.step_segments is not None else [[]] * n
     fig = plot_code_timeline(codes, window, lengths, truth, result.padded_step_labels(held.length)[:n], true_bounds,
                              result.boundaries[:n], label_names=list(held.label_names),
-                             title=f"{trained.init}: code sequences (q = {trained.model_config.latent_dim}, W = {window})")
+                             title=what)
     save_figure(fig, path, writer="primspace segment")
 
 

@@ -1,0 +1,213 @@
+"""Boundaries by synthesis: the partition of a long demonstration into segments that a
+single-primitive model explains best (issue 27, item 2).
+
+The paper's future work names the difficulty: "primitives might have different number of
+timesteps and not clear borderline between primitives" (shared/paper.tex, Summary and
+Discussion). A change-point detector on window codes (:mod:`primspace.segmentation`) or on
+the joints looks for where the motion *changes*; inside a primitive it changes as much
+(approach, contact, hold). This module asks instead where a *primitive* is: a model trained
+on single primitives (one code per demonstration, ``T1`` steps) generates motions, and a
+stretch of a long demonstration that is one primitive is explained by one of them.
+
+1. **Templates.** The model's decoded fitted codes ``d(θ, z_j)`` (:func:`run_templates`),
+   scaled by the run's scaler: what the model can generate, each with its code.
+2. **Candidate segments.** Every ``[s, e)`` with ``s`` on a grid of ``grid`` steps and
+   ``min_steps <= e - s <= max_steps`` (the last ending exactly at the demonstration's
+   length), resampled to ``T1`` steps (:func:`primspace.data.resample`; a primitive's
+   duration may differ from the model's).
+3. **Cost of a candidate**: the mean squared distance to the nearest template, after the
+   candidate's start offset is faded out over the first ``fade * T1`` steps: a primitive
+   after the first starts where the one before ended, not where the model's primitives
+   start (``x_t - y_t - c_t (x_0 - y_0)``, ``c_t = max(0, 1 - t / (fade T1))``).
+4. **Partition**: dynamic programming over the candidates, minimising the sum of
+   ``cost x duration`` (each step counted once); the duration bounds are the prior.
+5. **Labels**: each segment's code is its nearest template's code; all segments' codes are
+   clustered by the affine :class:`~primspace.cluster.LowRankSubspaceClustering`, τ chosen
+   without labels (:func:`primspace.segmentation.label_segments`), where the paper's
+   clustering works (single-primitive codes).
+
+What it needs that the window-code method does not: a model of single primitives, trained
+on demonstrations of one primitive each (the simulator's ``demo`` or ``paper`` data). What
+it does not do yet: refine a segment's code by inference with θ frozen (the nearest
+fitted code stands for it), or learn the duration bounds (given, or 0.4 T1 .. 0.85 T1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from primspace.data import MotionDataset, resample
+from primspace.errors import UserError
+from primspace.segmentation import SegmentationResult, label_segments
+
+__all__ = ["FADE", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
+           "best_partition", "segment_by_templates", "segment_by_synthesis", "segmentation_scores"]
+
+#: Fraction of the model's steps over which a candidate's start offset is faded out.
+FADE = 0.35
+#: Steps between candidate segment starts.
+DEFAULT_GRID = 2
+_BLOCK = 1 << 24  # the most floats of one block of candidate-template differences
+
+
+@dataclass(frozen=True)
+class SynthesisSettings:
+    """Where candidates start and how long they may last (steps of the long demonstrations)."""
+
+    min_steps: int
+    max_steps: int
+    grid: int = DEFAULT_GRID
+    fade: float = FADE
+
+    @classmethod
+    def for_model(cls, model_steps: int, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID,
+                  fade: float = FADE) -> "SynthesisSettings":
+        """Defaults from the model's ``T1``: 0.4 T1 to 0.85 T1 steps per primitive."""
+        lo = int(round(0.4 * model_steps)) if min_steps is None else int(min_steps)
+        hi = int(round(0.85 * model_steps)) if max_steps is None else int(max_steps)
+        if not 2 <= lo <= hi:
+            raise UserError(f"segment durations must satisfy 2 <= min_steps <= max_steps, got {lo} and {hi}")
+        if int(grid) < 1 or not 0 < float(fade) <= 1:
+            raise UserError(f"grid must be >= 1 step and fade in (0, 1], got {grid} and {fade}")
+        return cls(lo, hi, int(grid), float(fade))
+
+
+def run_templates(run) -> tuple[np.ndarray, np.ndarray]:
+    """The decoded fitted codes of a single-primitive run, scaled: ``(M, T1, J)``, and the codes ``(M, q)``."""
+    from primspace.train import reconstruct
+
+    if run.model_config.code_window is not None:
+        raise UserError("synthesis needs a model of single primitives (one code per demonstration); this run "
+                        "was trained with --code-window")
+    motor, _ = reconstruct(run, images=False)
+    return run.scaler.transform(np.asarray(motor, dtype=np.float64)), np.asarray(run.latents, dtype=np.float64)
+
+
+def candidate_segments(length: int, settings: SynthesisSettings) -> np.ndarray:
+    """``(K, 2)`` candidates ``[s, e)`` of a demonstration of ``length`` steps (module docstring, 2)."""
+    keys = []
+    for s in range(0, length - settings.min_steps + 1, settings.grid):
+        ends = [s + d for d in range(settings.min_steps, settings.max_steps + 1, settings.grid)
+                if s + d <= length - settings.min_steps]
+        if settings.min_steps <= length - s <= settings.max_steps:
+            ends.append(length)
+        keys.extend((s, e) for e in ends)
+    return np.asarray(keys, dtype=np.int64).reshape(-1, 2)
+
+
+def candidate_costs(x: np.ndarray, keys: np.ndarray, templates: np.ndarray, fade: float = FADE):
+    """Each candidate's cost and nearest template (module docstring, 3).
+
+    Parameters
+    ----------
+    x : ndarray (L, J)
+        One demonstration's valid steps, scaled as the templates.
+    keys : ndarray (K, 2)
+        Candidates ``[s, e)``.
+    templates : ndarray (M, T1, J)
+
+    Returns
+    -------
+    (cost (K,), nearest (K,) int)
+    """
+    m, t1, _ = templates.shape
+    ramp = np.clip(1.0 - np.arange(t1) / (fade * t1), 0.0, 1.0)[:, None]
+    candidates = resample([x[s:e] for s, e in keys], t1)  # (K, T1, J)
+    cost, nearest = np.full(len(keys), np.inf), np.zeros(len(keys), dtype=np.int64)
+    step = max(1, _BLOCK // max(1, m * templates[0].size))
+    shaped = templates - ramp * templates[:, :1]  # y_t - c_t y_0
+    for a in range(0, len(candidates), step):
+        c = candidates[a: a + step]
+        diff = (c - ramp * c[:, :1])[:, None] - shaped[None]  # (k, M, T1, J)
+        err = np.mean(diff * diff, axis=(2, 3))
+        nearest[a: a + step] = err.argmin(axis=1)
+        cost[a: a + step] = err[np.arange(len(c)), nearest[a: a + step]]
+    return cost, nearest
+
+
+def best_partition(length: int, keys: np.ndarray, cost: np.ndarray) -> list[int]:
+    """The candidates (indices into ``keys``) that tile ``[0, length)`` at the least total
+    ``cost x duration`` (module docstring, 4); empty when no tiling exists."""
+    best = {0: (0.0, -1)}  # end step -> (least total, the candidate ending there)
+    order = np.lexsort((keys[:, 0], keys[:, 1]))
+    for k in order:
+        s, e = int(keys[k, 0]), int(keys[k, 1])
+        if s in best:
+            total = best[s][0] + float(cost[k]) * (e - s)
+            if e not in best or total < best[e][0]:
+                best[e] = (total, int(k))
+    if length not in best:
+        return []
+    chosen, end = [], length
+    while end > 0:
+        k = best[end][1]
+        chosen.append(k)
+        end = int(keys[k, 0])
+    return chosen[::-1]
+
+
+def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.ndarray, n_primitives: int,
+                         settings: SynthesisSettings, random_state: int = 0) -> SegmentationResult:
+    """Segment scaled demonstrations ``sequences`` ``(N, T, J)`` (valid steps ``lengths``) by
+    the ``templates`` and label the segments by clustering their templates' ``codes``."""
+    segments, costs = [], []
+    for i, length in enumerate(np.asarray(lengths, dtype=np.int64)):
+        length = int(length)
+        if length < settings.min_steps:
+            raise UserError(f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})")
+        keys = candidate_segments(length, settings)
+        cost, nearest = candidate_costs(np.asarray(sequences[i][:length], dtype=np.float64), keys, templates,
+                                        settings.fade)
+        chosen = best_partition(length, keys, cost)
+        if not chosen:  # no tiling within the bounds: the whole demonstration is one segment
+            keys, nearest, chosen = np.array([[0, length]]), np.array([int(np.argmin(cost))]), [0]
+        segments.append([(i, int(keys[k, 0]), int(keys[k, 1]), int(nearest[k])) for k in chosen])
+        costs.append(float(np.sum(cost[chosen] * (keys[chosen, 1] - keys[chosen, 0]))) / length if chosen else 0.0)
+    rows = np.array([row for seq in segments for row in seq], dtype=np.int64)
+    seg_codes = codes[rows[:, 3]]
+    labels, note = label_segments(seg_codes, n_primitives, random_state=random_state)
+    sample, start, stop = rows[:, 0], rows[:, 1], rows[:, 2]
+    return SegmentationResult(
+        boundaries=[start[sample == i][1:] for i in range(len(segments))],
+        step_labels=[np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(segments))],
+        segment_codes=seg_codes, segment_sample=sample, segment_start=start, segment_stop=stop,
+        segment_labels=labels, penalties=np.asarray(costs), window=1, note=note,
+    )
+
+
+def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_steps=None, max_steps=None,
+                         grid: int = DEFAULT_GRID, fade: float = FADE, random_state: int = 0) -> SegmentationResult:
+    """Segment the long demonstrations ``data`` with a single-primitive ``run`` (module docstring).
+
+    ``penalties`` of the result holds each demonstration's mean cost per step (how well the
+    model explains it). The data's joints must be the run's (names and order).
+    """
+    names = run.config.get("data", {}).get("joint_names") if run.config else None
+    if data.n_joints != run.model_config.n_joints or (names is not None and list(data.joint_names) != list(names)):
+        raise UserError(f"the data's joints {list(data.joint_names)} are not the run's "
+                        f"{names if names is not None else f'{run.model_config.n_joints} joints'}")
+    templates, codes = run_templates(run)
+    settings = SynthesisSettings.for_model(templates.shape[1], min_steps, max_steps, grid, fade)
+    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    sequences = run.scaler.transform(np.asarray(data.motor, dtype=np.float64))
+    return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
+
+
+def segmentation_scores(result: SegmentationResult, data: MotionDataset, tolerance: int) -> dict:
+    """What ``primspace segment`` reports for any method: segments found, and, when ``data``
+    has the step fields, boundary precision / recall / F1 within ``tolerance`` steps and the
+    per-step labelling accuracy (:mod:`primspace.segmentation`'s metrics)."""
+    from primspace.segmentation import boundaries_from_segments, boundary_f1, step_labelling_accuracy
+
+    scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
+    if data.step_segments is None:
+        return scores
+    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    truth = boundaries_from_segments(data.step_segments, lengths)
+    return scores | {
+        "boundary": boundary_f1(truth, result.boundaries, tolerance),
+        "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)),
+        "tolerance": int(tolerance), "segments_true": int(sum(len(b) + 1 for b in truth)),
+    }
