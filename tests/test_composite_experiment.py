@@ -1,5 +1,6 @@
 """The composite experiment (issue 15) on tiny long demonstrations: code sequences fitted
-and inferred, segmented and scored, resumable, reported; and ``primspace segment``."""
+and inferred, segmented and scored beside the peers and bounds (issue 27), resumable,
+reported; and ``primspace segment``."""
 
 import json
 from dataclasses import replace
@@ -58,14 +59,47 @@ def test_runs_are_segmented_and_scored(finished):
         assert (exp.path / "figures" / f"{name}.png").stat().st_size > 1000
 
 
+def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
+    from primspace.experiments.composite_results import bounds_table, composite_table, recall_table
+    from primspace.segmentation_peers import PEERS
+
+    _, results = finished
+    block = results["peers"]["0"]
+    assert (block["n_eval"], block["tolerance"], block["segments_true"]) == (4, 8, 8)
+    assert block["inits"] == ["projection-q4", "zero-q4"]
+    assert {"raw", "relative", "codes projection-q4", "codes trajectory projection-q4", "codes zero-q4",
+            "untrained codes projection-q4"} <= set(block["bounds"])
+    assert "untrained codes zero-q4" not in block["bounds"]  # all zero: nothing to read
+    assert set(block["methods"]) | set(block["missing"]) == set(PEERS)
+    for scores in block["methods"].values():
+        assert 0 <= scores["boundary"]["f1"] <= 1 and 0 < scores["accuracy"] <= 1 and scores["segments_found"] >= 4
+    rows = composite_table(results)[1]
+    assert [r[0] for r in rows] == ["projection", "zero"] + [f"peer: {n}" for n in block["methods"]]
+    assert len(bounds_table(results)[1]) == len(block["bounds"])
+    assert recall_table(results) is not None or all(b["supervised"] is None for b in block["bounds"].values())
+
+
+def test_the_summary_keeps_the_peers_and_the_docs_render_them(finished):
+    from primspace.docs import render_composite
+    from primspace.experiments.summary import summarize
+
+    exp, results = finished
+    summary = summarize(exp.path, "tiny", "primspace experiment composite --out tiny")
+    assert summary["results"]["composite"]["peers"].keys() == results["peers"].keys()
+    text = render_composite(summary)
+    assert text.startswith("#### tiny") and "| projection | 4 | 1 |" in text and "raw joints (resampled)" in text
+    assert all(f"peer: {name}" in text for name in results["peers"]["0"]["methods"])
+
+
 def test_rerun_skips_finished_runs_and_the_report_shows_them(finished):
     from primspace.report import build_report
 
     exp, results = finished
     again = run_composite(ExperimentDir(exp.path, TINY, data=exp.data_path, progress=False))
-    assert again["runs"] == results["runs"]
+    assert again["runs"] == results["runs"] and again["peers"] == results["peers"]
     html = build_report(exp.path).read_text()
     assert "Long demonstrations: sequences of codes" in html and "composite_timeline_projection" in html
+    assert "Upper bounds, on the true segments" in html and "raw joints minus the start pose" in html
 
 
 def test_segment_codes_scores_planted_sequences(long_data):

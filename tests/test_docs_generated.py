@@ -16,7 +16,7 @@ def test_committed_docs_equal_what_the_summaries_give(capsys):
 
 
 def test_a_stale_block_is_found_and_rewritten(tmp_path):
-    for target in ("README.md", "docs/reproduce.md", "docs/predict.md"):
+    for target in ("README.md", "docs/reproduce.md", "docs/predict.md", "docs/sequences.md"):
         (tmp_path / target).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / target).write_text((ROOT / target).read_text(encoding="utf-8"), encoding="utf-8")
     readme = tmp_path / "README.md"

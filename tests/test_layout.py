@@ -30,6 +30,11 @@ FORBIDDEN = {
     "cluster": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "probe": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
     "segmentation": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    # its peers (ruptures, hmmlearn) and upper bounds (classifiers given the labels): motion arrays and codes only
+    "segmentation_peers": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    "segmentation_bounds": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    # boundaries by synthesis: decodes a trained single-primitive run (train), clusters (cluster)
+    "segmentation_synthesis": ("sim", "experiments", "report", "demo", "cli"),
     # the peers of prediction (ProMP, nearest neighbour, mean motion): they see motion arrays only
     "peers": ("sim", "latent", "model", "train", "cluster", "experiments", "report", "demo", "cli"),
     "model_config": ("model", "latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
@@ -43,8 +48,8 @@ FORBIDDEN = {
     "report": ("demo", "cli"),
     "demo": ("cli",),
     # small statistics helpers: the standard library only
-    "stats": ("data", "sim", "cluster", "probe", "segmentation", "model_config", "model", "latent", "train", "plots",
-              "experiments", "report", "demo", "cli", "docs"),
+    "stats": ("data", "sim", "cluster", "probe", "segmentation", "segmentation_peers", "segmentation_bounds",
+              "model_config", "model", "latent", "train", "plots", "experiments", "report", "demo", "cli", "docs"),
     # the docs' generated numbers: read from stored summaries, above the experiments and the report
     "docs": ("cli",),
 }

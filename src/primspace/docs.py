@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments.claims import check_claims, eighth_loss
+from primspace.experiments.composite_results import PEER_RULES, bounds_table, composite_table, recall_table
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
@@ -36,7 +37,8 @@ SUMMARY_DIR = Path("docs") / "results"
 
 #: Each generated block: the file it lives in.
 TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.md",
-           "predict": Path("docs") / "predict.md", "scene": Path("docs") / "predict.md"}
+           "predict": Path("docs") / "predict.md", "scene": Path("docs") / "predict.md",
+           "composite": Path("docs") / "sequences.md"}
 
 #: The order summaries are shown in (others follow, by name); README's headline shows these only.
 ORDER = ("paper", "paper-images", "demo", "lasa")
@@ -289,15 +291,49 @@ def load_summaries(root: Path) -> dict[str, dict]:
 
 def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block."""
-    parts = [render_summary(s) for s in summaries.values()]
+    parts = [render_summary(s) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
     parts += [render_comparison(summaries[a], summaries[b], what) for a, b, what in COMPARISONS
               if a in summaries and b in summaries]
     results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
     scene = "\n\n".join(render_scene(s) for s in summaries.values() if "scene" in s["results"])
+    composite = "\n\n".join(render_composite(s) for s in summaries.values() if "composite" in s["results"])
     return {"headline": headline(summaries), "results": results,
             "predict": predicted or "No stored prediction summaries yet (docs/results/).",
-            "scene": scene or "No stored scene-only summaries yet (docs/results/)."}
+            "scene": scene or "No stored scene-only summaries yet (docs/results/).",
+            "composite": composite or "No stored composite summaries yet (docs/results/)."}
+
+
+#: The experiments docs/reproduce.md shows (a summary holding none of them is shown elsewhere only).
+_REPRODUCED = {"intra", "success", "clustering", "inter", "tune"}
+
+
+def _md_table(table) -> str:
+    columns, rows = table
+    return _table(columns, [[str(c) for c in row] for row in rows])
+
+
+def render_composite(summary: dict) -> str:
+    """The composite tables of one summary (``primspace experiment composite``): primspace per
+    init beside its peers, the upper bounds, and each primitive's recall."""
+    co = summary["results"]["composite"]
+    preset, cpu = summary.get("preset", {}), summary.get("cpu", {})
+    seeds = sorted({r["seed"] for r in co["runs"]})
+    out = [f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
+           f"primspace {summary.get('primspace')}; preset {preset.get('name')}, seeds {', '.join(map(str, seeds))}, "
+           f"W = {co.get('window')}, epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}; measured on "
+           f"{cpu.get('model', '?')}." + (f" {summary['note']}" if summary.get("note") else ""), "",
+           "Mean ± std over seeds; losses are mean squared errors of the scaled joints of the held-out "
+           "demonstrations; boundaries match one-to-one within the tolerance; accuracies are per step (Hungarian). "
+           "Peers: " + "; ".join(f"`{k}` {v}" for k, v in PEER_RULES.items()) + ".", "",
+           _md_table(composite_table(co))]
+    bounds, recall = bounds_table(co), recall_table(co)
+    if bounds is not None:
+        out += ["", "Upper bounds on the true segments of the same held-out demonstrations (per-step accuracy; "
+                    "classifiers given the labels, 5-fold stratified cross-validation):", "", _md_table(bounds)]
+    if recall is not None:
+        out += ["", "Recall of each primitive by the logistic regression (mean over seeds):", "", _md_table(recall)]
+    return "\n".join(out)
 
 
 def render_scene(summary: dict) -> str:

@@ -147,10 +147,10 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         for step in _judgeable_steps(exp, name, steps):
             module, function = step.split(":")
             results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
-        if table is not None:
-            from primspace.experiments import results as tables
-
-            echo_table(*getattr(tables, table)(results[0]))
+        if table is not None:  # "function" of experiments.results, or "module:function" of another reader
+            module, _, function = table.rpartition(":")
+            tables = importlib.import_module(f"primspace.experiments.{module or 'results'}")
+            echo_table(*getattr(tables, function)(results[0]))
         _finish(exp, report or name == "all")
 
     command.__doc__ = doc
@@ -176,7 +176,7 @@ _experiment_command(
 _experiment_command(
     "composite", "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
     "segmented and labelled without labels (--preset demo or paper; docs/sequences.md).",
-    ("composite:run_composite",), "composite_table", preset_names="COMPOSITE_PRESET_OF",
+    ("composite:run_composite",), "composite_results:composite_table", preset_names="COMPOSITE_PRESET_OF",
 )
 _experiment_command(
     "tune", "Fair baselines: tune each init's layer time constants and latent learning rate on a validation split "

@@ -13,9 +13,13 @@ boundary F1 within one window, per-step labelling accuracy (Hungarian) and the h
 loss. The untrained codes of each init are segmented and scored too (the projection's
 ``P m`` windows need no training at all).
 
-Results: ``results/composite.json`` (one row per run) and ``results/composite.npz``
-(the code sequences and boundaries of a few held-out demonstrations of the first seed's
-runs, for the timeline figure).
+Beside them, per seed on the same held-out demonstrations, the peers (ruptures change
+points, a Gaussian HMM, on the scaled joints) and the upper bounds (classifiers given the
+labels, and clustering given the true boundaries; :mod:`primspace.experiments.composite_peers`).
+
+Results: ``results/composite.json`` (one row per run, and ``peers``: a block per seed) and
+``results/composite.npz`` (the code sequences and boundaries of a few held-out
+demonstrations of the first seed's runs, for the timeline figure).
 """
 
 from __future__ import annotations
@@ -170,13 +174,44 @@ def run_composite(exp: ExperimentDir) -> dict:
     with exp.stage("composite"):
         grid = exp.grid(run_composite_point, shared_fits_last(points), "composite runs")
     runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
+    previous = exp.read_results("composite") or {}
+    with exp.stage("composite peers"):
+        peers = _peers_by_seed(exp, data, runs, previous.get("peers", {}))
     results = {"runs": runs, "failures": grid.failures, "splits": splits, "window": preset.model.code_window,
-               "label_names": list(data.label_names)}
+               "label_names": list(data.label_names), "peers": peers}
     exp.write_results("composite", results)
     if runs:
         _write_timelines(exp, runs)
     figures.draw_composite(exp.path)
     return results
+
+
+def _peers_by_seed(exp: ExperimentDir, data: MotionDataset, runs: list[dict], previous: dict) -> dict:
+    """Per seed with finished runs, :func:`~primspace.experiments.composite_peers.peers_block`
+    on its held-out demonstrations, with every run's codes; a stored block is reused while
+    the seed's runs and the peers' version are the same and no peer was missing."""
+    from primspace.experiments.composite_peers import peers_block
+    from primspace.segmentation_peers import PEERS, PEERS_VERSION
+    from primspace.train import load_run
+
+    out = {}
+    for seed in exp.preset.seeds:
+        mine = [r for r in runs if r["seed"] == seed]
+        if not mine:
+            continue
+        names = sorted(f"{r['init']}-q{r['latent_dim']}" for r in mine)
+        old = previous.get(str(seed))
+        same = old and old.get("inits") == names and old.get("version") == PEERS_VERSION
+        if same and set(old["methods"]) == set(PEERS):
+            out[str(seed)] = old
+            continue
+        codes, held = {}, None
+        for r in mine:
+            run = load_run(run_dir_of(exp.path, r["key"]) / "infer")
+            held = run.indices if held is None else held
+            codes[f"{r['init']}-q{r['latent_dim']}"] = (run.latents, run.initial_latents, r["latent_dim"])
+        out[str(seed)] = peers_block(data, held, mine[0]["window"], seed, codes)
+    return out
 
 
 def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:

@@ -309,34 +309,6 @@ def inter_table(results: dict) -> tuple[list[str], list[list]]:
     return ["init", "folds", "phase-2 loss at start", "phase-2 final loss"], rows
 
 
-def composite_table(results: dict) -> tuple[list[str], list[list]]:
-    """Composite: per (q, init), mean ± std over seeds of the held-out loss before and
-    after inference, the boundary precision, recall and F1 (within the tolerance), the
-    per-step labelling accuracy, the same two for the untrained codes, and segments
-    found against true."""
-    groups: dict = {}
-    for r in results["runs"]:
-        groups.setdefault((r["latent_dim"], r["init"]), []).append(r)
-    rows = []
-    for (q, init), runs in sorted(groups.items()):
-        seg = [r["segmentation"] for r in runs]
-        raw = [r["segmentation_untrained"] for r in runs]
-        rows.append([
-            init, q, len(runs), _mean_std([r["infer"][0]["loss"] for r in runs]),
-            _mean_std([final([h["loss"] for h in r["infer"]]) for r in runs]),
-            *[_mean_std([s["boundary"][k] for s in seg]) for k in ("precision", "recall", "f1")],
-            _mean_std([s["accuracy"] for s in seg]), _mean_std([s.get("accuracy_true_boundaries") for s in seg]),
-            _mean_std([s["boundary"]["f1"] for s in raw]), _mean_std([s["accuracy"] for s in raw]),
-            f"{np.mean([s['segments_found'] for s in seg]):.0f} / {seg[0]['segments_true']}",
-        ])
-    tol = runs[0]["segmentation"]["tolerance"] if groups else None
-    return ["init", "q", "seeds", "held-out loss before inference", "after inference",
-            f"boundary precision (±{tol} steps)", "recall", "F1", "step labelling accuracy",
-            "accuracy given the true boundaries",
-            "F1, untrained codes", "accuracy, untrained codes", "segments found / true"], rows
-
-
-
 #: The starts the calibration table compares, in its column order.
 CALIBRATION_COMPARED = ("projection", "calibrated", "zero", "pca")
 

@@ -153,6 +153,15 @@ def _scene(p: dict) -> dict:
         "seeds": _seeds_run(p)}
 
 
+def _composite(c: dict) -> dict:
+    keep = ("init", "latent_dim", "seed", "window", "n_train", "n_eval", "seconds", "segmentation",
+            "segmentation_untrained")
+    return {k: c.get(k) for k in ("failures", "splits", "window", "label_names")} | {
+        "runs": [{k: r.get(k) for k in keep} | {"fit": _curve(r["fit"]), "infer": _curve(r["infer"])}
+                 for r in c.get("runs", [])],
+        "peers": c.get("peers", {})}
+
+
 _REDUCERS = {
     "intra": lambda r: {"runs": [_intra(x) for x in r.get("runs", [])], "failures": r.get("failures", {}),
                         "splits": r.get("splits", {}), "label_names": r.get("label_names")},
@@ -163,6 +172,7 @@ _REDUCERS = {
     "tune": _tune,
     "predict": _predict,
     "scene": _scene,
+    "composite": _composite,
 }
 
 
@@ -197,7 +207,8 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
         ``summary_version``, ``name``, ``command``, ``note``, ``primspace`` (the version
         that made the runs), ``cpu`` (:func:`cpu_class` of this machine: run it where the
         runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
-        ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict: those run).
+        ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict, scene,
+        composite: those run).
     """
     meta = read_meta(out_dir)
     if command is None:
