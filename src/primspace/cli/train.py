@@ -120,7 +120,49 @@ def _train_inputs(out: Path, file: Path, indices: Optional[Path], other: Optiona
 #: The train command's arguments that are TrainConfig fields of the same name.
 _TRAIN_FLAGS = ("epochs", "batch_size", "lr", "latent_lr", "final_lr_fraction", "motor_weight", "vision_weight",
                 "vision_frames", "loss_reduction", "code_smoothness", "seed", "device", "amp", "threads",
-                "checkpoint_every", "checkpoint_seconds")
+                "checkpoint_every", "checkpoint_seconds") + ("stream_frames", "frames_memory_gb", "loader_workers",
+                                                             "micro_batches")
+
+#: The options of streaming and data-parallel training, shared by train and infer (docs/scale.md).
+_SCALE_HELP = {
+    "stream_frames": "Read each batch's frames from the data file while training instead of loading them all "
+                     "first (the same numbers). Default: stream when they would not fit --frames-memory-gb.",
+    "frames_memory_gb": "Memory the loaded frames may take, all processes of a machine together (default: half "
+                        "of the device's memory).",
+    "loader_workers": "Processes that read and decode streamed frames (0: the training process).",
+    "micro_batches": "Split each batch into this many parts computed one after another (less memory; the numbers "
+                     "of as many torchrun processes).",
+}
+
+
+def _scale_options(defaults: TrainConfig | None):
+    """The typer options of :data:`_SCALE_HELP` (``defaults`` None: each defaults to the run's, for infer)."""
+    d = defaults
+    return {
+        "stream_frames": typer.Option(None, "--stream-frames/--load-frames", help=_SCALE_HELP["stream_frames"]),
+        "frames_memory_gb": typer.Option(None, "--frames-memory-gb", help=_SCALE_HELP["frames_memory_gb"]),
+        "loader_workers": typer.Option(None if d is None else d.loader_workers, "--loader-workers",
+                                       help=_SCALE_HELP["loader_workers"]),
+        "micro_batches": typer.Option(None if d is None else d.micro_batches, "--micro-batches",
+                                      help=_SCALE_HELP["micro_batches"]),
+    }
+
+
+_TRAIN_SCALE, _INFER_SCALE = _scale_options(_TC), _scale_options(None)
+
+
+def _launch(tc: TrainConfig, call) -> None:
+    """Apply ``tc``'s process-wide settings, run ``call()`` (fit or infer) in the process
+    group a launcher asked for (torchrun: docs/scale.md) and print the run's summary once
+    (every process of a torchrun launch runs the command)."""
+    from primspace.train import configure_process
+    from primspace.train.distributed import launched
+
+    configure_process(tc)
+    with launched(tc.device) as rank:
+        run = call()
+    if rank == 0:
+        typer.echo(_run_summary(run))
 
 
 _TRAIN_INIT_HELP = "How the latent codes start (calibrated: only with --weights-from a projection or pca run)."
@@ -173,9 +215,15 @@ def train_command(
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
     log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
+    stream_frames: Optional[bool] = _TRAIN_SCALE["stream_frames"], loader_workers: int = _TRAIN_SCALE["loader_workers"],
+    frames_memory_gb: Optional[float] = _TRAIN_SCALE["frames_memory_gb"], micro_batches: int = _TRAIN_SCALE["micro_batches"],
 ) -> None:
-    """Train the MTRNN decoder and one latent code per sample (theta and Z jointly)."""
-    from primspace.train import configure_process, fit
+    """Train the MTRNN decoder and one latent code per sample (theta and Z jointly).
+
+    Under torchrun (torchrun --nproc-per-node G -m primspace train ...) the processes
+    train one model together (docs/scale.md).
+    """
+    from primspace.train import fit
 
     given = dict(locals()) | {"loss_reduction": loss_reduction.value}
     log_to = _log_to(log_to, (file, indices, weights_from))
@@ -183,11 +231,9 @@ def train_command(
                  taus=float_list(taus, "--taus"), image_channels=int_list(image_channels, "--image-channels"))
     tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
     ds, idx = _train_inputs(out, file, indices, weights_from, tc, no_images)
-    configure_process(tc)
-    run = fit(ds, out, model_config=None if weights_from is not None else mc, train_config=tc, init=init.value,
-              indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
-              images=False if no_images else None, log_to=log_to)
-    typer.echo(_run_summary(run))
+    _launch(tc, lambda: fit(ds, out, model_config=None if weights_from is not None else mc, train_config=tc,
+                            init=init.value, indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
+                            images=False if no_images else None, log_to=log_to))
 
 
 @app.command("infer")
@@ -213,24 +259,29 @@ def infer_command(
     resume: bool = typer.Option(False, "--resume"),
     overwrite: bool = typer.Option(False, "--overwrite"),
     log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
+    stream_frames: Optional[bool] = _INFER_SCALE["stream_frames"],
+    frames_memory_gb: Optional[float] = _INFER_SCALE["frames_memory_gb"],
+    loader_workers: Optional[int] = _INFER_SCALE["loader_workers"],
+    micro_batches: Optional[int] = _INFER_SCALE["micro_batches"],
 ) -> None:
-    """Find latent codes for new samples with the trained weights frozen."""
-    from primspace.train import configure_process, infer
+    """Find latent codes for new samples with the trained weights frozen (under torchrun:
+    each batch's samples split across the processes)."""
+    from primspace.train import infer
 
     log_to = _log_to(log_to, (file, indices, run))
     overrides = {"device": device, "amp": amp, "threads": threads}
     reduction = None if loss_reduction is None else loss_reduction.value
     for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed),
-                        ("loss_reduction", reduction)):
+                        ("loss_reduction", reduction), ("stream_frames", stream_frames),
+                        ("frames_memory_gb", frames_memory_gb), ("loader_workers", loader_workers),
+                        ("micro_batches", micro_batches)):
         if value is not None:
             overrides[name] = value
     ds, idx = _inputs(out, file, indices, run)
-    configure_process(replace(_TC, device=device, amp=amp, threads=threads).validate())
-    result = infer(
+    _launch(replace(_TC, device=device, amp=amp, threads=threads).validate(), lambda: infer(
         run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
         resume=resume, overwrite=overwrite, log_to=log_to, **overrides,
-    )
-    typer.echo(_run_summary(result))
+    ))
 
 
 @app.command("reconstruct")

@@ -32,6 +32,8 @@ The package, one concept per module:
 - :mod:`~primspace.train.rundir`: the run directory and the checkpoint format (the only
   code that names checkpoint keys), :func:`load_run`, :func:`write_run`;
 - :mod:`~primspace.train.loop`: the training loop (one ``Session`` per call);
+- :mod:`~primspace.train.streaming`: frames read from the data file batch by batch;
+- :mod:`~primspace.train.distributed`: one model trained by several processes (torchrun);
 - :mod:`~primspace.train.api`: :func:`fit`, :func:`infer`, :func:`reconstruct`,
   :func:`evaluate`, which accept each other's runs and work in memory unless given a
   directory;

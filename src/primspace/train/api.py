@@ -27,7 +27,8 @@ from primspace.latent import CALIBRATABLE, CALIBRATED, INFER_STARTS, NEAREST, La
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.logger import check_log_to
-from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop
+from primspace.train.distributed import current_world
+from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop, opened_stream
 from primspace.train.checks import (
     check_calibrated,
     check_data_fits,
@@ -83,6 +84,8 @@ def fit(
         Sizes; J, T and the image size are filled in from ``dataset``. Default:
         ``ModelConfig()`` with an image head when the data has images (see ``images``).
     train_config : TrainConfig, optional
+        Its ``stream_frames`` reads the frames from the file batch by batch; under a
+        started ``torch.distributed`` group the processes train one model (docs/scale.md).
     init : {"zero", "random", "projection", "pca", "calibrated"}
         How the codes start (:class:`primspace.latent.LatentInitializer`); ``calibrated``
         (with ``weights_from`` only): the parent's initialiser, its codes mapped by the
@@ -150,8 +153,9 @@ def fit(
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     config = run_config("fit", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config["scaler"] = None if scaler is None else scaler.to_dict()
-    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to)
-    device = resolve_device(tc.device, tc.amp)
+    world = current_world(tc.micro_batches)
+    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to, world)
+    device = world.device(resolve_device(tc.device, tc.amp))
     seeds = _seeds(tc.seed)
     if ckpt is not None:
         parts = unpack_checkpoint(ckpt, out_dir)
@@ -263,8 +267,9 @@ def infer(
     check_something_to_train(tc, use_images)
     config = run_config("infer", init, mc, tc, data, idx, use_images, parent=_run_path(parent))
     config.update(observation_record(observation, data, use_images, mc.has_images))
-    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to)
-    device = resolve_device(tc.device, tc.amp)
+    world = current_world(tc.micro_batches)
+    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to, world)
+    device = world.device(resolve_device(tc.device, tc.amp))
     seeds = _seeds(tc.seed)
     model = copy.deepcopy(parent.model)  # θ frozen, but the caller's model is never moved or changed
     if ckpt is not None:
@@ -277,9 +282,8 @@ def infer(
         observing = observing_args(init, observation, data, fitted_data)
         seen = scaled if observing is None else scaled * observing["observed"][..., None]  # what a new pca fits
         initializer = _initializer(init, parent, mc, seen, seeds)
-        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents,
-                             observing).astype(np.float32)
-        table = LatentTable(torch.from_numpy(codes).to(device), tc.latent_lr)
+        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents, observing)
+        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
     session = Session(
         store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
@@ -375,10 +379,10 @@ def evaluate(
     tc = replace(run.train_config, batch_size=batch_size, device=device, amp=False)
     use_images = uses_images(run.model_config, data, tc)
     dev = resolve_device(device)
-    tensors = DataTensors.build(data, run.scaler, use_images, dev)
     table = LatentTable(torch.from_numpy(np.ascontiguousarray(z)).to(dev), 0.0)
-    with _eval_model(run.model, dev) as model:
-        sums = evaluate_loop(model, table, tensors, tc, dev)
+    with opened_stream(tc, data, use_images, dev) as stream, _eval_model(run.model, dev) as model:
+        tensors = DataTensors.build(data, run.scaler, use_images, dev, stream=stream is not None)
+        sums = evaluate_loop(model, table, tensors, tc, dev, stream=stream)
     return epoch_values(sums, len(data), use_images)
 
 
@@ -411,9 +415,12 @@ def as_run(run: TrainedRun | str | os.PathLike) -> TrainedRun:
 # --------------------------------------------------------------------------- helpers
 
 
-def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, epochs: int, log_to=None):
+def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, epochs: int, log_to=None, world=None):
     """The run directory to write (None: in memory) and the checkpoint to resume from;
-    ``log_to`` checked (:func:`~primspace.train.logger.check_log_to`)."""
+    ``log_to`` checked (:func:`~primspace.train.logger.check_log_to`). With several
+    processes, process 0 checks and reads, and hands both to the others."""
+    if world is not None and world.distributed:
+        return world.from_main(lambda: _open(out_dir, config, resume, overwrite, inputs, epochs, log_to))
     check_log_to(log_to, inputs)
     if out_dir is None:
         if resume:

@@ -103,6 +103,24 @@ class TrainConfig:
         activation buffers are reused instead of page-faulted in every batch (the image
         head ran 1.6x faster in a measurement; see docs/model.md). Process-wide: applied by
         :func:`configure_process`.
+    stream_frames : bool, optional
+        Read each batch's camera frames from the data file while training (a
+        ``torch.utils.data.DataLoader`` whose worker processes open the file themselves)
+        instead of loading every frame into memory first; motor, masks and codes stay in
+        memory. The numbers are the same bit for bit either way (:mod:`primspace.train.streaming`).
+        None (default): stream when the frames would not fit in ``frames_memory_gb``.
+        Frames already in memory (a data set not read from a file) are used as they are.
+    frames_memory_gb : float, optional
+        The memory the frames may take when loaded (GB; all the processes of a machine
+        together when several train one model). None: half of the device's memory (the
+        host's RAM on the CPU, the GPU's on CUDA).
+    loader_workers : int
+        Worker processes that read and decode the streamed frames (0: the training
+        process reads them itself, between steps).
+    micro_batches : int
+        Split each batch into this many parts, processed one after another with their
+        gradients summed: the numbers of as many data-parallel processes, bit for bit on
+        the CPU (:mod:`primspace.train.distributed`), at a part's peak memory.
     """
 
     epochs: int = 100
@@ -123,6 +141,10 @@ class TrainConfig:
     log_initial: bool = True
     threads: int | None = None
     tune_malloc: bool = True
+    stream_frames: bool | None = None
+    frames_memory_gb: float | None = None
+    loader_workers: int = 2
+    micro_batches: int = 1
 
     def validate(self) -> "TrainConfig":
         if not isinstance(self.epochs, int) or self.epochs < 0:
@@ -154,8 +176,21 @@ class TrainConfig:
             raise UserError(f"checkpoint_seconds must be a number >= 0, got {self.checkpoint_seconds}")
         if self.threads is not None and (not isinstance(self.threads, int) or self.threads < 1):
             raise UserError(f"threads must be at least 1, got {self.threads}")
+        self._validate_scale()
         resolve_device(self.device, self.amp)
         return self
+
+    def _validate_scale(self) -> None:
+        """The fields of streaming and data-parallel training."""
+        if self.stream_frames is not None and not isinstance(self.stream_frames, bool):
+            raise UserError(f"stream_frames must be True, False or None (automatic), got {self.stream_frames!r}")
+        budget = self.frames_memory_gb
+        if budget is not None and not (isinstance(budget, (int, float)) and math.isfinite(budget) and budget > 0):
+            raise UserError(f"frames_memory_gb must be a number > 0 (or None: half of the memory), got {budget}")
+        if not isinstance(self.loader_workers, int) or isinstance(self.loader_workers, bool) or self.loader_workers < 0:
+            raise UserError(f"loader_workers must be a whole number >= 0, got {self.loader_workers}")
+        if not isinstance(self.micro_batches, int) or isinstance(self.micro_batches, bool) or self.micro_batches < 1:
+            raise UserError(f"micro_batches must be a whole number >= 1, got {self.micro_batches}")
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -66,8 +66,10 @@ LATENTS_NAME, LATENTS_INIT_NAME = "latents.npy", "latents_init.npy"
 CALIBRATION_NAME = "calibration.json"
 RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_INIT_NAME, CALIBRATION_NAME)
 
-# Train-config fields that may change when a run is resumed (they do not change the numbers).
-RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc"}
+# Train-config fields that may change when a run is resumed: they do not change the numbers
+# (micro_batches, like the number of processes, changes only the rounding: docs/scale.md).
+RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc", "stream_frames",
+                     "frames_memory_gb", "loader_workers", "micro_batches"}
 
 
 def fingerprint(data: MotionDataset) -> str:
