@@ -165,7 +165,11 @@ class LazyImages:
         if hi - lo + 1 == base.size and np.all(np.diff(base) == 1):
             return read_samples(dset, slice(lo, hi + 1), self._path)  # one contiguous run
         uniq, inverse = np.unique(base, return_inverse=True)
-        return read_samples(dset, uniq, self._path)[inverse]  # h5py needs increasing indices
+        # each contiguous run as a slice: h5py's point selection of a list is ~20-50x slower
+        # per sample on per-sample chunks (150 ms against 3-8 ms per 61-frame motion)
+        runs = np.split(uniq, np.flatnonzero(np.diff(uniq) != 1) + 1)
+        parts = [read_samples(dset, slice(int(r[0]), int(r[-1]) + 1), self._path) for r in runs]
+        return np.concatenate(parts)[inverse.reshape(-1)]
 
     def __getitem__(self, key):
         rest = ()
