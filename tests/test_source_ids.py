@@ -101,3 +101,15 @@ def test_lasa_and_its_chains_name_their_demonstrations():
         segments = range(int(chains.step_segments[i].max()) + 1)
         shapes = [chains.label_names[chains.step_labels[i][chains.step_segments[i] == s][0]] for s in segments]
         assert [p.split(" demo ")[0] for p in pieces] == shapes
+
+
+def test_a_run_on_some_samples_records_their_ids(tmp_path):
+    from primspace.model import ModelConfig
+    from primspace.train import TrainConfig, fit
+
+    data = _data(8)
+    run = fit(data, tmp_path / "run", model_config=ModelConfig(latent_dim=2, layer_sizes=(4, 2)),
+              train_config=TrainConfig(epochs=1, batch_size=4), init="zero", indices=[6, 1, 3], progress=False)
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["data"]["indices"] == run.indices.tolist()
+    assert config["data"]["source_ids"] == [f"robomimic:lift.hdf5:data/demo_{i}" for i in run.indices]

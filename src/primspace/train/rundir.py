@@ -92,7 +92,7 @@ def run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
             "joint_names": list(data.joint_names),
             "dt": data.dt,
             "motor_sha1": fingerprint(data),
-            **({} if data.source_ids is None else {"source_ids": [str(data.source_ids[i]) for i in idx]}),
+            **({} if data.source_ids is None else {"source_ids": [str(v) for v in data.source_ids]}),  # data: the selected samples
         },
         "parent": parent,
         "primspace_version": __version__,
