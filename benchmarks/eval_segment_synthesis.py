@@ -24,7 +24,8 @@ from threadpoolctl import threadpool_limits
 
 from primspace.data import MotionDataset
 from primspace.experiments.composite import split_sequences
-from primspace.segmentation_synthesis import segment_by_synthesis, segmentation_scores
+from primspace.segmentation import segmentation_scores
+from primspace.segmentation_synthesis import segment_by_synthesis
 from primspace.train import load_run
 
 

@@ -48,7 +48,7 @@ from primspace.errors import UserError
 __all__ = [
     "AUTO_PENALTY_FACTOR", "DEFAULT_MIN_SIZE", "SEGMENT_R2_TARGET", "SegmentationResult", "auto_penalty",
     "boundaries_from_segments", "boundary_f1", "change_points", "noise_variances", "segment_sequences",
-    "step_labelling_accuracy", "label_segments",
+    "step_labelling_accuracy", "label_segments", "segmentation_scores",
 ]
 
 #: ``c`` of the automatic penalty (module docstring: why 2).
@@ -408,6 +408,22 @@ def step_labelling_accuracy(true_step_labels, found_step_labels) -> float:
         raise UserError("no valid steps to score (every true step label is -1)")
     known = f != -1
     return clustering_accuracy(t[known], f[known]) * float(known.mean()) if known.any() else 0.0
+
+
+def segmentation_scores(result: SegmentationResult, data, tolerance: int, **more) -> dict:
+    """What ``primspace segment`` reports for any method: segments found and, when ``data`` (a
+    :class:`~primspace.data.MotionDataset`) has the step fields, boundary F1 within ``tolerance``
+    steps, per-step accuracy (then ``more``, e.g. the accuracy given the true boundaries)."""
+    scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
+    if data.step_segments is None:
+        return scores
+    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    truth = boundaries_from_segments(data.step_segments, lengths)
+    return scores | {
+        "boundary": boundary_f1(truth, result.boundaries, tolerance),
+        "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)), **more,
+        "tolerance": int(tolerance), "segments_true": int(sum(len(b) + 1 for b in truth)),
+    }
 
 
 def _rows(x, what: str) -> list[np.ndarray]:

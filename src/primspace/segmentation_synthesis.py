@@ -43,7 +43,7 @@ from primspace.errors import UserError
 from primspace.segmentation import SegmentationResult, label_segments
 
 __all__ = ["FADE", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
-           "best_partition", "segment_by_templates", "segment_by_synthesis", "segmentation_scores"]
+           "best_partition", "segment_by_templates", "segment_by_synthesis"]
 
 #: Fraction of the model's steps over which a candidate's start offset is faded out.
 FADE = 0.35
@@ -194,20 +194,3 @@ def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_ste
     sequences = run.scaler.transform(np.asarray(data.motor, dtype=np.float64))
     return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
 
-
-def segmentation_scores(result: SegmentationResult, data: MotionDataset, tolerance: int) -> dict:
-    """What ``primspace segment`` reports for any method: segments found, and, when ``data``
-    has the step fields, boundary precision / recall / F1 within ``tolerance`` steps and the
-    per-step labelling accuracy (:mod:`primspace.segmentation`'s metrics)."""
-    from primspace.segmentation import boundaries_from_segments, boundary_f1, step_labelling_accuracy
-
-    scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
-    if data.step_segments is None:
-        return scores
-    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
-    truth = boundaries_from_segments(data.step_segments, lengths)
-    return scores | {
-        "boundary": boundary_f1(truth, result.boundaries, tolerance),
-        "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)),
-        "tolerance": int(tolerance), "segments_true": int(sum(len(b) + 1 for b in truth)),
-    }

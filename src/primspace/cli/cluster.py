@@ -298,7 +298,8 @@ def _segment_synthesis(trained, ds, run: Path, data: Path, primitives, tolerance
     """The segments the single-primitive run generates best (every sample of ``ds``)."""
     import numpy as np
 
-    from primspace.segmentation_synthesis import segment_by_synthesis, segmentation_scores
+    from primspace.segmentation import segmentation_scores
+    from primspace.segmentation_synthesis import segment_by_synthesis
 
     k = _primitives(ds, primitives, data)
     result = segment_by_synthesis(trained, ds, k, min_steps=steps[0], max_steps=steps[1])

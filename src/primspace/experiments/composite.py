@@ -82,31 +82,18 @@ def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_di
         The segmentation and its scores: ``boundary`` (precision, recall, f1, tp, fp, fn),
         ``accuracy`` (per step), ``tolerance``, ``segments_true``, ``segments_found``.
     """
-    from primspace.segmentation import (
-        boundaries_from_segments,
-        boundary_f1,
-        segment_sequences,
-        step_labelling_accuracy,
-    )
+    from primspace.segmentation import segment_sequences, segmentation_scores
 
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     sequences = np.asarray(codes, dtype=np.float64).reshape(len(data), -1, latent_dim)
     n_primitives = n_primitives or max(len(data.label_names), 1)
     result = segment_sequences(sequences, window, lengths, n_primitives)
-    scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
-    if data.step_segments is not None:
-        tol = window if tolerance is None else int(tolerance)
-        if tol < 0:
-            raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tol}")
-        truth = boundaries_from_segments(data.step_segments, lengths)
-        scores |= {
-            "boundary": boundary_f1(truth, result.boundaries, tol),
-            "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)),
-            "accuracy_true_boundaries": _accuracy_given_boundaries(sequences, data, window, n_primitives),
-            "tolerance": tol,
-            "segments_true": int(sum(len(b) + 1 for b in truth)),
-        }
-    return result, scores
+    tol = window if tolerance is None else int(tolerance)
+    if tol < 0:
+        raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tol}")
+    given = {} if data.step_segments is None else {
+        "accuracy_true_boundaries": _accuracy_given_boundaries(sequences, data, window, n_primitives)}
+    return result, segmentation_scores(result, data, tol, **given)
 
 
 def _accuracy_given_boundaries(sequences: np.ndarray, data: MotionDataset, window: int, n_primitives: int) -> float | None:
