@@ -1,9 +1,9 @@
 """Boundaries by synthesis: the partition of a long demonstration into segments that a
 single-primitive model explains best (issue 27, item 2).
 
-The paper's future work names the difficulty: "primitives might have different number of
-timesteps and not clear borderline between primitives" (shared/paper.tex, Summary and
-Discussion). A change-point detector on window codes (:mod:`primspace.segmentation`) or on
+The paper's future work names the difficulty (shared/paper.tex, Summary and Discussion,
+verbatim): "There are some challenges such as primitives might have different number of
+timesteps and not clear borderline between primitives." A change-point detector on window codes (:mod:`primspace.segmentation`) or on
 the joints looks for where the motion *changes*; inside a primitive it changes as much
 (approach, contact, hold). This module asks instead where a *primitive* is: a model trained
 on single primitives (one code per demonstration, ``T1`` steps) generates motions, and a
