@@ -144,3 +144,12 @@ def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
                               tmp_path / "s2"), "--min-steps and --max-steps apply to --method synthesis")
     assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--out", tmp_path / "s3"),
                       "--method windows needs a run trained with --code-window")
+
+
+def test_a_demonstration_that_no_tiling_fits_is_one_segment_of_its_nearest_template():
+    templates, codes, labels = _templates()
+    x = resample([templates[7]], 45)[0]  # segments of 25..36 steps cannot tile 45 (one is too short, two too long)
+    result = segment_by_templates(x[None], [45], templates, codes, 3, SynthesisSettings(25, 36, grid=1))
+    assert result.boundaries[0].size == 0
+    assert result.segment_start.tolist() == [0] and result.segment_stop.tolist() == [45]
+    assert np.allclose(result.segment_codes[0], codes[7]) and result.penalties[0] < 1e-3

@@ -157,14 +157,16 @@ def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.nd
         length = int(length)
         if length < settings.min_steps:
             raise UserError(f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})")
+        x = np.asarray(sequences[i][:length], dtype=np.float64)
         keys = candidate_segments(length, settings)
-        cost, nearest = candidate_costs(np.asarray(sequences[i][:length], dtype=np.float64), keys, templates,
-                                        settings.fade)
+        cost, nearest = candidate_costs(x, keys, templates, settings.fade)
         chosen = best_partition(length, keys, cost)
-        if not chosen:  # no tiling within the bounds: the whole demonstration is one segment
-            keys, nearest, chosen = np.array([[0, length]]), np.array([int(np.argmin(cost))]), [0]
+        if not chosen:  # no tiling within the bounds: the whole demonstration is one segment, scored as one
+            keys = np.array([[0, length]])
+            cost, nearest = candidate_costs(x, keys, templates, settings.fade)
+            chosen = [0]
         segments.append([(i, int(keys[k, 0]), int(keys[k, 1]), int(nearest[k])) for k in chosen])
-        costs.append(float(np.sum(cost[chosen] * (keys[chosen, 1] - keys[chosen, 0]))) / length if chosen else 0.0)
+        costs.append(float(np.sum(cost[chosen] * (keys[chosen, 1] - keys[chosen, 0]))) / length)
     rows = np.array([row for seq in segments for row in seq], dtype=np.int64)
     seg_codes = codes[rows[:, 3]]
     labels, note = label_segments(seg_codes, n_primitives, random_state=random_state)
