@@ -23,7 +23,7 @@ from primspace.data import MotionDataset
 from primspace.experiments.composite import segment_codes
 from primspace.experiments.composite_peers import held_out_sequences
 from primspace.segmentation import boundaries_from_segments, boundary_f1
-from primspace.segmentation_peers import PEERS
+from primspace.segmentation.peers import PEERS
 from primspace.train import load_run
 
 INITS = ("projection", "pca", "zero")

@@ -3,7 +3,7 @@
 For each seed s: the held-out demonstrations of ``experiment composite``'s split s
 (``split_sequences(N, train_fraction, s)``) are segmented by a single-primitive run (one
 code per demonstration, trained on single primitives: e.g. the paper or demo preset's
-``intra`` fit of seed s) with :func:`primspace.segmentation_synthesis.segment_by_synthesis`,
+``intra`` fit of seed s) with :func:`primspace.segmentation.synthesis.segment_by_synthesis`,
 and scored as the composite experiment scores its methods: boundary precision / recall / F1
 within ``--tolerance`` steps and the per-step labelling accuracy (Hungarian), as many
 clusters as primitives. Prints a Markdown table (mean ± std over seeds, per-seed values) and
@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits
 from primspace.data import MotionDataset
 from primspace.experiments.composite import split_sequences
 from primspace.segmentation import segmentation_scores
-from primspace.segmentation_synthesis import segment_by_synthesis
+from primspace.segmentation.synthesis import segment_by_synthesis
 from primspace.train import load_run
 
 

@@ -61,7 +61,7 @@ def test_runs_are_segmented_and_scored(finished):
 
 def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
     from primspace.experiments.composite_results import bounds_table, composite_table, recall_table
-    from primspace.segmentation_peers import PEERS
+    from primspace.segmentation.peers import PEERS
 
     _, results = finished
     block = results["peers"]["0"]
@@ -175,3 +175,69 @@ def test_lasa_chains_are_continuous_real_shapes_with_their_steps_labelled():
     again = chain_lasa(6, n_shapes=(2, 3), duration=(30, 40), seed=1)
     np.testing.assert_array_equal(again.motor, data.motor)
     assert not np.array_equal(chain_lasa(6, n_shapes=(2, 3), duration=(30, 40), seed=2).step_labels, data.step_labels)
+
+
+SINGLE_TINY = ExperimentPreset(
+    name="single-tiny", data_preset="demo", latent_dims=(4,), fit_epochs=3, images=False, cluster_latent_dim=4,
+    model=replace(default_model(), layer_sizes=(12, 6)), train=replace(default_train(), batch_size=4),
+)
+
+
+@pytest.fixture(scope="module")
+def by_primitives(long_data, tmp_path_factory):
+    """The composite experiment with a model of single primitives (one seed): the simulator's
+    seven primitives at two block placements, made beside the experiment's data."""
+    from primspace.experiments.composite_primitives import PRIMITIVES_FILE
+    from primspace.sim.config import GenerationConfig
+    from primspace.sim.generate import generate_dataset
+
+    preset = replace(TINY, seeds=(0,), primitives="single-tiny", segment_steps=(20, 40))
+    exp = ExperimentDir(tmp_path_factory.mktemp("prim") / "out", preset, data=long_data, workers=1, progress=False)
+    generate_dataset(GenerationConfig(block_x=(0.5, 0.55), block_y=(0.0,), block_size=(0.05,), images=False), seed=0,
+                     out=exp.path / PRIMITIVES_FILE, progress=False)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setitem(experiment_presets.PRESETS, "single-tiny", SINGLE_TINY)
+        yield exp, run_composite(exp)
+
+
+def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_primitives):
+    from primspace.experiments.composite_results import composite_table
+    from primspace.docs import render_composite
+    from primspace.experiments.summary import summarize
+
+    exp, results = by_primitives
+    [row] = results["primitives"]
+    assert (row["seed"], row["preset"], row["latent_dim"], row["n_templates"]) == (0, "single-tiny", 4, 14)
+    for name in ("synthesis", "surprise"):
+        scores = row[name]
+        assert scores["tolerance"] == 8 and scores["segments_true"] == 8
+        assert 0 <= scores["boundary"]["f1"] <= 1 and 0 < scores["accuracy"] <= 1
+        assert 0 < scores["accuracy_template_labels"] <= 1
+        found = scores["segments_found"]
+        assert 4 <= found <= 4 * 80 // 20  # at least one per demonstration, none shorter than the least duration
+    assert row["surprise"]["threshold"] > 0
+    assert (exp.path / "runs" / "composite" / "primitives-s0" / "fit" / "checkpoint.pt").exists()
+    names = [r[0] for r in composite_table(results)[1]]
+    assert names[2:4] == ["synthesis (single-tiny single primitives)", "surprise (single-tiny single primitives)"]
+    text = render_composite(summarize(exp.path, "tiny", "primspace experiment composite --out tiny"))
+    assert "| synthesis (single-tiny single primitives) | 4 | 1 |" in text
+    again = run_composite(ExperimentDir(exp.path, exp.preset, data=exp.data_path, progress=False))
+    assert again["primitives"] == results["primitives"]  # finished: read back, not re-run
+
+
+def test_lasa_chains_leave_out_the_demonstrations_of_the_single_strokes():
+    from primspace.data.importers import chain_lasa
+    from primspace.data.importers.lasa import CHAIN_DEMOS
+    from primspace.errors import UserError
+
+    data = chain_lasa(12, seed=0, demos=CHAIN_DEMOS)
+    used = {int(p.rsplit(" ", 1)[1]) for s in data.source_ids for p in s.split(": ", 1)[1].split(" + ")}
+    assert used <= set(CHAIN_DEMOS) and len(used) > 1
+    np.testing.assert_array_equal(chain_lasa(12, seed=0).motor, chain_lasa(12, seed=0, demos=range(7)).motor)
+    with pytest.raises(UserError, match="demos"):
+        chain_lasa(2, demos=(7,))
+    from primspace.experiments.composite_primitives import _check_unseen
+
+    _check_unseen(data)  # chains of the held-out demonstrations pass
+    with pytest.raises(UserError, match="fitted on"):
+        _check_unseen(chain_lasa(12, seed=0))  # chains made before 0.8 drew from all seven

@@ -8,14 +8,14 @@ import pytest
 
 from primspace.errors import UserError
 from primspace.segmentation import boundary_f1, step_labelling_accuracy
-from primspace.segmentation_bounds import (
+from primspace.segmentation.bounds import (
     clustered_bound,
     segment_features,
     supervised_bound,
     true_segments,
     window_code_features,
 )
-from primspace.segmentation_peers import (
+from primspace.segmentation.peers import (
     PEERS,
     ChangePointPeer,
     elbow,

@@ -12,7 +12,7 @@ import pytest
 from conftest import assert_user_error
 from primspace.data import MotionDataset, resample
 from primspace.segmentation import boundary_f1
-from primspace.segmentation_synthesis import (
+from primspace.segmentation.synthesis import (
     SynthesisSettings, best_partition, candidate_costs, candidate_segments, segment_by_templates,
 )
 from test_train import primitives
@@ -141,7 +141,7 @@ def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
     assert 0 <= result["scores"]["boundary"]["f1"] <= 1 and result["scores"]["segments_true"] == 12
     assert np.load(tmp_path / "seg" / "step_labels.npy").shape == (4, 90)
     assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--min-steps", "5", "--out",
-                              tmp_path / "s2"), "--min-steps and --max-steps apply to --method synthesis")
+                              tmp_path / "s2"), "--min-steps and --max-steps apply to --method surprise and synthesis")
     assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--out", tmp_path / "s3"),
                       "--method windows needs a run trained with --code-window")
 

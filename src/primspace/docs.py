@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments.claims import check_claims, eighth_loss
-from primspace.experiments.composite_results import PEER_RULES, bounds_table, composite_table, recall_table
+from primspace.experiments.composite_results import (
+    PEER_RULES, bounds_table, composite_table, primitives_table, recall_table)
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
@@ -327,6 +328,11 @@ def render_composite(summary: dict) -> str:
            "demonstrations; boundaries match one-to-one within the tolerance; accuracies are per step (Hungarian). "
            "Peers: " + "; ".join(f"`{k}` {v}" for k, v in PEER_RULES.items()) + ".", "",
            _md_table(composite_table(co))]
+    single = primitives_table(co)
+    if single is not None:
+        out += ["", "The model of single primitives (synthesis, surprise; same held-out demonstrations, same scores) "
+                    "and its labeller's bound: each found segment given its nearest template's true primitive:", "",
+                _md_table(single)]
     bounds, recall = bounds_table(co), recall_table(co)
     if bounds is not None:
         out += ["", "Upper bounds on the true segments of the same held-out demonstrations (per-step accuracy; "

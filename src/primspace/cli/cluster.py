@@ -213,15 +213,17 @@ SEGMENT_FILES = ("segments.csv", "step_labels.npy", "result.json", "timeline.png
 
 class SegmentMethod(str, Enum):
     windows = "windows"
+    surprise = "surprise"
     synthesis = "synthesis"
 
 
 _SEGMENT_RUN = typer.Argument(..., help="windows: a run trained with --code-window on DATA (fit or infer); "
-                              "synthesis: a run of single primitives (one code per demonstration).")
+                              "surprise, synthesis: a run of single primitives (one code per demonstration).")
 _SEGMENT_METHOD = typer.Option(
-    SegmentMethod.windows, "--method", help="windows: change points of the run's window codes; synthesis: the "
-    "partition into segments that the single-primitive run generates best (docs/sequences.md).")
-_STEPS = "synthesis: the {} steps of a primitive in DATA (default {} x the run's T)."
+    SegmentMethod.windows, "--method", help="windows: change points of the run's window codes; surprise: where "
+    "the single-primitive run's prediction of the next steps fails; synthesis: the partition into segments that "
+    "the single-primitive run generates best (docs/sequences.md).")
+_STEPS = "surprise, synthesis: the {} steps of a primitive in DATA (default {} x the run's T)."
 
 
 @app.command("segment")
@@ -231,7 +233,7 @@ def segment_command(
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."),
     method: SegmentMethod = _SEGMENT_METHOD,
     primitives: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives (default: the data's label names)."),
-    tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window; synthesis: 8)."),
+    tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window; surprise, synthesis: 8)."),
     min_steps: Optional[int] = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
     max_steps: Optional[int] = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
@@ -250,16 +252,18 @@ def segment_command(
     check_outside_inputs(out, (run, data))
     check_output_directory(out, overwrite, kind)
     if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None):
-        raise UserError("--min-steps and --max-steps apply to --method synthesis")
+        raise UserError("--min-steps and --max-steps apply to --method surprise and synthesis")
     if tolerance is not None and tolerance < 0:
         raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tolerance}")
     trained, ds = load_run(run), MotionDataset.load(data)
-    segment = _segment_windows if method is SegmentMethod.windows else _segment_synthesis
+    segment = _segment_windows if method is SegmentMethod.windows else _segment_by_primitives
     samples, held, result, scores, window, k = segment(trained, ds, run, data, primitives, tolerance,
-                                                       (min_steps, max_steps))
+                                                       (min_steps, max_steps), method.value)
     record = {"run": str(run), "data": str(data), "method": method.value, "window": window, "n_primitives": k,
               "samples": samples.tolist(), "boundaries": [b.tolist() for b in result.boundaries],
               "scores": scores, "note": result.note}
+    if method is SegmentMethod.surprise:
+        record["threshold"] = float(result.penalties[0])
     with atomic_directory(out, overwrite, kind) as tmp:
         _write_segments(tmp / "segments.csv", samples, result)
         np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
@@ -277,7 +281,7 @@ def _primitives(held, primitives: Optional[int], data: Path) -> int:
     return primitives or len(held.label_names)
 
 
-def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, _steps):
+def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, _steps, _method):
     """Change points of the run's window codes (the run's own samples of ``ds``)."""
     from primspace.experiments.composite import segment_codes
     from primspace.train import check_run_data
@@ -285,7 +289,7 @@ def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, 
     window = trained.model_config.code_window
     if window is None:
         raise UserError(f"{run}: the run has one code per sequence; --method windows needs a run trained with "
-                        "--code-window (or use --method synthesis)")
+                        "--code-window (or use --method surprise or synthesis)")
     check_run_data(trained, ds)
     held = ds.subset(trained.indices)
     k = _primitives(held, primitives, data)
@@ -294,15 +298,18 @@ def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, 
     return trained.indices, held, result, scores, window, k
 
 
-def _segment_synthesis(trained, ds, run: Path, data: Path, primitives, tolerance, steps):
-    """The segments the single-primitive run generates best (every sample of ``ds``)."""
+def _segment_by_primitives(trained, ds, run: Path, data: Path, primitives, tolerance, steps, method: str):
+    """The segments the single-primitive run generates best, or where its prediction fails
+    (every sample of ``ds``)."""
     import numpy as np
 
     from primspace.segmentation import segmentation_scores
-    from primspace.segmentation_synthesis import segment_by_synthesis
+    from primspace.segmentation.surprise import segment_by_surprise
+    from primspace.segmentation.synthesis import segment_by_synthesis
 
     k = _primitives(ds, primitives, data)
-    result = segment_by_synthesis(trained, ds, k, min_steps=steps[0], max_steps=steps[1])
+    segment = segment_by_surprise if method == "surprise" else segment_by_synthesis
+    result = segment(trained, ds, k, min_steps=steps[0], max_steps=steps[1])
     scores = segmentation_scores(result, ds, 8 if tolerance is None else tolerance)
     return np.arange(len(ds)), ds, result, scores, 1, k
 
@@ -329,9 +336,9 @@ def _timeline(path: Path, trained, held, result, window: int, method: str, shown
     from primspace.segmentation import boundaries_from_segments
 
     n = min(shown, len(held))
-    if method == "synthesis":
+    if method != "windows":
         codes = trained.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64))
-        what = f"{trained.init}: joints (scaled), segments by synthesis"
+        what = f"{trained.init}: joints (scaled), segments by {method}"
     else:
         codes = trained.latents[:n].reshape(n, -1, trained.model_config.latent_dim)
         what = f"{trained.init}: code sequences (q = {trained.model_config.latent_dim}, W = {window})"

@@ -17,7 +17,11 @@ Beside them, per seed on the same held-out demonstrations, the peers (ruptures c
 points, a Gaussian HMM, on the scaled joints) and the upper bounds (classifiers given the
 labels, and clustering given the true boundaries; :mod:`primspace.experiments.composite_peers`).
 
-Results: ``results/composite.json`` (one row per run, and ``peers``: a block per seed) and
+Per seed too, a model of single primitives segments the same held-out demonstrations by
+synthesis and by surprise (:mod:`primspace.experiments.composite_primitives`).
+
+Results: ``results/composite.json`` (one row per run, ``peers``: a block per seed, and
+``primitives``: a row per seed) and
 ``results/composite.npz`` (the code sequences and boundaries of a few held-out
 demonstrations of the first seed's runs, for the timeline figure).
 """
@@ -150,10 +154,11 @@ def run_composite(exp: ExperimentDir) -> dict:
     if data.step_segments is None:
         raise UserError(f"{exp.data_path}: the composite experiment needs long demonstrations with step_segments "
                         "(primspace generate --preset composite-demo)")
-    points, splits = [], {}
+    points, splits, held_out = [], {}, {}
     for seed in preset.seeds:
         train, evaluation = split_sequences(len(data), preset.train_fraction, seed)
         splits[str(seed)] = {"n_train": len(train), "n_eval": len(evaluation)}
+        held_out[seed] = evaluation.tolist()
         for q in preset.latent_dims:
             for init in preset.inits:
                 args = (str(exp.data_path), train.tolist(), evaluation.tolist(), init, q, seed, preset.to_dict())
@@ -164,8 +169,11 @@ def run_composite(exp: ExperimentDir) -> dict:
     previous = exp.read_results("composite") or {}
     with exp.stage("composite peers"):
         peers = _peers_by_seed(exp, data, runs, previous.get("peers", {}))
+    from primspace.experiments.composite_primitives import run_primitives
+
     results = {"runs": runs, "failures": grid.failures, "splits": splits, "window": preset.model.code_window,
-               "label_names": list(data.label_names), "peers": peers}
+               "label_names": list(data.label_names), "peers": peers,
+               "primitives": run_primitives(exp, held_out)}
     exp.write_results("composite", results)
     if runs:
         _write_timelines(exp, runs)
@@ -178,7 +186,7 @@ def _peers_by_seed(exp: ExperimentDir, data: MotionDataset, runs: list[dict], pr
     on its held-out demonstrations, with every run's codes; a stored block is reused while
     the seed's runs and the peers' version are the same and no peer was missing."""
     from primspace.experiments.composite_peers import peers_block
-    from primspace.segmentation_peers import PEERS, PEERS_VERSION
+    from primspace.segmentation.peers import PEERS, PEERS_VERSION
     from primspace.train import load_run
 
     out = {}

@@ -5,10 +5,10 @@ For each seed, on the same held-out demonstrations as that seed's runs (the spli
 scales them (:func:`~primspace.experiments.runs.experiment_scaler`) and cut to their valid
 steps:
 
-* ``methods``: every :data:`~primspace.segmentation_peers.PEERS` (ruptures change points,
+* ``methods``: every :data:`~primspace.segmentation.peers.PEERS` (ruptures change points,
   a Gaussian HMM), scored like primspace's segmentation (boundary F1 within one window,
   per-step labelling accuracy); peers whose package is missing are listed in ``missing``.
-* ``bounds`` (:mod:`primspace.segmentation_bounds`): on the true segments, classifiers
+* ``bounds`` (:mod:`primspace.segmentation.bounds`): on the true segments, classifiers
   given the labels (cross-validated) and the clustering without labels, from the raw
   joints, the joints minus each segment's start pose, and each run's window codes
   (inferred, and untrained; their mean over the segment, and their trajectory through it).
@@ -50,7 +50,7 @@ def score_found(held: MotionDataset, boundaries, step_labels, tolerance: int) ->
 
 def _methods(held: MotionDataset, seqs: list, n_primitives: int, window: int, seed: int) -> tuple[dict, dict]:
     from primspace.segmentation import boundaries_from_segments
-    from primspace.segmentation_peers import run_peers
+    from primspace.segmentation.peers import run_peers
 
     counts = [len(b) for b in boundaries_from_segments(held.step_segments, held.lengths)]
     found, missing = run_peers(seqs, n_primitives, window, true_counts=counts, random_state=seed)
@@ -60,7 +60,7 @@ def _methods(held: MotionDataset, seqs: list, n_primitives: int, window: int, se
 
 
 def _bound(features, segments, held: MotionDataset, n_primitives: int, seed: int) -> dict:
-    from primspace.segmentation_bounds import clustered_bound, supervised_bound
+    from primspace.segmentation.bounds import clustered_bound, supervised_bound
 
     return {"supervised": supervised_bound(features, segments, n_primitives, random_state=seed),
             "clustered": clustered_bound(features, segments, held.step_labels, n_primitives, random_state=seed)}
@@ -86,12 +86,12 @@ def peers_block(data: MotionDataset, eval_idx, window: int, seed: int, codes: di
     Returns
     -------
     dict
-        ``version`` (:data:`~primspace.segmentation_peers.PEERS_VERSION`), ``n_eval``,
+        ``version`` (:data:`~primspace.segmentation.peers.PEERS_VERSION`), ``n_eval``,
         ``tolerance``, ``segments_true``, ``inits``, ``methods`` (name -> scores
         and seconds), ``missing`` (name -> why it did not run) and ``bounds`` (features ->
         ``supervised``, ``clustered``).
     """
-    from primspace.segmentation_bounds import CODE_WINDOWS, segment_features, true_segments, window_code_features
+    from primspace.segmentation.bounds import CODE_WINDOWS, segment_features, true_segments, window_code_features
 
     held, seqs = held_out_sequences(data, eval_idx)
     n_primitives = max(len(data.label_names), 1)
@@ -107,7 +107,7 @@ def peers_block(data: MotionDataset, eval_idx, window: int, seed: int, codes: di
             for how, n in (("", None), (" trajectory", CODE_WINDOWS)):
                 feats = window_code_features(seq, segments, window, n)
                 bounds[f"{which}{how} {init}"] = _bound(feats, segments, held, n_primitives, seed)
-    from primspace.segmentation_peers import PEERS_VERSION
+    from primspace.segmentation.peers import PEERS_VERSION
 
     return {"version": PEERS_VERSION, "n_eval": len(held), "tolerance": int(window), "segments_true": len(segments),
             "inits": sorted(codes),

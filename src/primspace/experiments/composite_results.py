@@ -12,9 +12,9 @@ import numpy as np
 
 from primspace.experiments.results import _mean_std, final
 
-__all__ = ["composite_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
+__all__ = ["composite_table", "primitives_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
 
-#: What each peer is, for the tables' readers (primspace.segmentation_peers has the rules).
+#: What each peer is, for the tables' readers (primspace.segmentation.peers has the rules).
 PEER_RULES = {
     "pelt-l2-noise": "ruptures PELT, l2 cost, primspace's noise penalty",
     "pelt-normal-bic": "ruptures PELT, Gaussian cost, BIC penalty",
@@ -57,12 +57,55 @@ def composite_table(results: dict) -> tuple[list[str], list[list]]:
             _mean_std([s["boundary"]["f1"] for s in raw]), _mean_std([s["accuracy"] for s in raw]),
             f"{np.mean([s['segments_found'] for s in seg]):.0f} / {np.mean([s['segments_true'] for s in seg]):.0f}",
         ])
+    rows += _primitive_rows(results)
     rows += _peer_rows(results)
     tol = next(iter(groups.values()))[0]["segmentation"]["tolerance"] if groups else None
     return ["method", "q", "seeds", "held-out loss before inference", "after inference",
             f"boundary precision (±{tol} steps)", "recall", "F1", "step labelling accuracy",
             "accuracy given the true boundaries",
             "F1, untrained codes", "accuracy, untrained codes", "segments found / true"], rows
+
+
+def _primitive_rows(results: dict) -> list[list]:
+    """A row per method of the model of single primitives (synthesis, surprise): mean ± std
+    over the seeds that ran it; q is the single-primitive model's."""
+    from primspace.experiments.composite_primitives import METHODS
+
+    seeds = results.get("primitives") or []
+    rows = []
+    for name in METHODS:
+        got = [r[name] for r in seeds if name in r]
+        if not got:
+            continue
+        rows.append([f"{name} ({seeds[0]['preset']} single primitives)", seeds[0]["latent_dim"], len(got), "—", "—",
+                     *[_mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
+                     _mean_std([m["accuracy"] for m in got]), "—", "—", "—",
+                     f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean([m['segments_true'] for m in got]):.0f}"])
+    return rows
+
+
+def primitives_table(results: dict) -> tuple[list[str], list[list]] | None:
+    """The model of single primitives per method (synthesis, surprise): boundary F1, per-step
+    labelling accuracy, the same with each segment given its nearest template's true
+    primitive (the labeller's bound), the surprise threshold, and the seeds' values; mean ±
+    std over seeds. None when the experiment had no such model."""
+    from primspace.experiments.composite_primitives import METHODS
+
+    seeds = results.get("primitives") or []
+    if not seeds:
+        return None
+    rows = []
+    for name in METHODS:
+        got = [(r["seed"], r[name]) for r in seeds if name in r]
+        per = ", ".join(f"{s}: {m['boundary']['f1']:.2f} / {m['accuracy']:.2f}" for s, m in got)
+        rows.append([name, len(got), _mean_std([m["boundary"]["f1"] for _, m in got]),
+                     _mean_std([m["accuracy"] for _, m in got]),
+                     _mean_std([m.get("accuracy_template_labels") for _, m in got]),
+                     _mean_std([m.get("threshold") for _, m in got]) if name == "surprise" else "—", per])
+    first = seeds[0]
+    return [f"method ({first['preset']} preset, q = {first['latent_dim']}, {first['n_templates']} single primitives "
+            "fitted)", "seeds", "boundary F1", "step labelling accuracy",
+            "accuracy, nearest template's true primitive", "surprise threshold", "per seed (F1 / accuracy)"], rows
 
 
 def _peer_rows(results: dict) -> list[list]:

@@ -115,6 +115,14 @@ class ExperimentPreset:
         Epochs of phase 1 (six primitives) and phase 2 (the seventh + replay).
     inter_replay : float
         Share of phase-1 samples replayed in phase 2 (the paper: 10%).
+    primitives : str or None
+        Composite presets: the experiment preset whose single primitives (its data, its
+        optimiser, q = its ``cluster_latent_dim``) make the model that segments the long
+        demonstrations by synthesis and by surprise
+        (:mod:`primspace.experiments.composite_primitives`); None: those methods do not run.
+    segment_steps : (int, int) or None
+        Their duration prior: the fewest and most steps of one primitive in the long
+        demonstrations; None: 0.4 to 0.85 of the primitives' T.
 
     Notes
     -----
@@ -141,6 +149,8 @@ class ExperimentPreset:
     inter_inits: tuple[str, ...] = ("zero", "projection", "calibrated")
     inter_epochs: tuple[int, int] = (400, 400)
     inter_replay: float = 0.1
+    primitives: str | None = None
+    segment_steps: tuple[int, int] | None = None
     extra: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -150,6 +160,8 @@ class ExperimentPreset:
             object.__setattr__(self, "train", TrainConfig.from_dict(self.train))
         for key in _TUPLE_FIELDS:
             object.__setattr__(self, key, tuple(getattr(self, key)))
+        if self.segment_steps is not None:
+            object.__setattr__(self, "segment_steps", tuple(int(v) for v in self.segment_steps))
 
     def to_dict(self) -> dict:
         """JSON-ready: ``model`` and ``train`` nested as their own ``to_dict``."""
@@ -265,18 +277,18 @@ _DEMO_TRAIN = dict(batch_size=16, lr=3e-3, latent_lr=3e-2)
 # runs "composite-demo", `--preset paper` runs "composite" (COMPOSITE_PRESET_OF).
 PRESETS["composite-demo"] = ExperimentPreset(
     name="composite-demo", data_preset="composite-demo", train_fraction=0.3, latent_dims=(8,), images=False,
-    fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
+    primitives="demo", fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 PRESETS["composite"] = ExperimentPreset(
     name="composite", data_preset="composite", train_fraction=0.2, inits=("zero", "random", "projection"),
-    latent_dims=(8,), images=False, model=replace(default_model(), code_window=10),
+    primitives="paper", latent_dims=(8,), images=False, model=replace(default_model(), code_window=10),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 
 PRESETS["composite-lasa"] = ExperimentPreset(
     name="composite-lasa", data_preset=LASA_CHAINS, train_fraction=0.3, latent_dims=(8,), images=False,
-    fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
+    primitives="lasa", segment_steps=(30, 66), fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 

@@ -159,7 +159,7 @@ def _composite(c: dict) -> dict:
     return {k: c.get(k) for k in ("failures", "splits", "window", "label_names")} | {
         "runs": [{k: r.get(k) for k in keep} | {"fit": _curve(r["fit"]), "infer": _curve(r["infer"])}
                  for r in c.get("runs", [])],
-        "peers": c.get("peers", {})}
+        "peers": c.get("peers", {}), "primitives": c.get("primitives", [])}
 
 
 _REDUCERS = {

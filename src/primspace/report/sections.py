@@ -14,7 +14,7 @@ import platform
 from pathlib import Path
 
 from primspace.experiments.claims import check_claims, claims_table
-from primspace.experiments.composite_results import bounds_table, composite_table, recall_table
+from primspace.experiments.composite_results import bounds_table, composite_table, primitives_table, recall_table
 from primspace.experiments.results import (
     predict_error_table,
     ANIMATION_RESULTS,
@@ -335,6 +335,11 @@ def composite(out_dir: Path, report: HtmlReport) -> None:
     columns, rows = composite_table(results)
     report.table(columns, rows, "primspace per init, then its peers on the raw scaled joints (peer: rows; "
                  "ruptures, hmmlearn), the same held-out demonstrations and scores; mean ± std over seeds.")
+    single = primitives_table(results)
+    if single is not None:
+        report.table(*single, "A model of single primitives segments the same held-out demonstrations: by synthesis "
+                     "(the partition it generates best) and by surprise (where its prediction of the next steps "
+                     "fails); the bound gives each found segment its nearest template's true primitive.")
     _composite_bounds(results, report)
     for phase in ("fit", "infer"):
         report.figure(figure_file(out_dir, f"composite_loss_{phase}"), f"Loss per epoch ({phase}), per init.")

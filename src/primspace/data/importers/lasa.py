@@ -17,11 +17,17 @@ from primspace.data.dataset import MotionDataset
 from primspace.data.resample import resample
 from primspace.errors import UserError
 
-__all__ = ["import_lasa", "lasa_shape_names", "chain_lasa", "CHAIN_SHAPES"]
+__all__ = ["import_lasa", "lasa_shape_names", "chain_lasa", "CHAIN_SHAPES", "CHAIN_DEMOS", "PRIMITIVE_DEMOS"]
 
 #: The shapes :func:`chain_lasa` chains by default: seven distinct strokes (as the
 #: simulator has seven primitives).
 CHAIN_SHAPES = ("Angle", "CShape", "GShape", "Leaf_1", "Sine", "Sshape", "Worm")
+#: The composite experiment's split of each shape's 7 demonstrations: the chains are made
+#: of these ...
+CHAIN_DEMOS = (2, 3, 4, 5, 6)
+#: ... and the model of single shapes that segments them by synthesis and surprise is
+#: fitted on these, so no chained stroke is one the model has seen.
+PRIMITIVE_DEMOS = (0, 1)
 
 
 def _lasa_module():
@@ -84,7 +90,7 @@ def import_lasa(length: int, shapes: Sequence[str] | None = None, velocities: bo
 
 
 def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shapes: tuple[int, int] = (2, 3),
-               duration: tuple[int, int] = (40, 60), seed: int = 0) -> MotionDataset:
+               duration: tuple[int, int] = (40, 60), seed: int = 0, demos: Sequence[int] | None = None) -> MotionDataset:
     """Long demonstrations made by chaining real LASA demonstrations of different shapes.
 
     Each sequence chains ``n_shapes`` (drawn in the range) demonstrations of shapes drawn
@@ -107,12 +113,20 @@ def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shap
         Fewest and most steps per shape.
     seed : int
         Same seed, same sequences.
+    demos : sequence of int, optional
+        Which of each shape's 7 demonstrations the chains draw from (default all; the
+        composite experiment keeps some out, for the model of single shapes that segments
+        them: :data:`CHAIN_DEMOS`).
     """
     if n_sequences < 1 or len(set(shapes)) < 2 or not 1 <= n_shapes[0] <= n_shapes[1] or not 2 <= duration[0] <= duration[1]:
         raise UserError("chain_lasa needs n_sequences >= 1, 2 or more distinct shapes, 1 <= n_shapes[0] <= n_shapes[1] "
                         "and 2 <= duration[0] <= duration[1]")
     pkg, _ = _lasa_module()
-    demos = [[np.asarray(d.pos, dtype=np.float64).T for d in getattr(pkg.DataSet, name).demos] for name in shapes]
+    recorded = [[np.asarray(d.pos, dtype=np.float64).T for d in getattr(pkg.DataSet, name).demos] for name in shapes]
+    least = min(len(r) for r in recorded)
+    drawn = list(range(least)) if demos is None else sorted({int(d) for d in demos})
+    if not drawn or drawn[0] < 0 or drawn[-1] >= least:
+        raise UserError(f"chain_lasa: demos {drawn} are not among each shape's {least}")
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 1515]))
     t_max = n_shapes[1] * duration[1]
     motor = np.zeros((n_sequences, t_max, 2))
@@ -123,9 +137,9 @@ def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shap
         pieces, chain, used = [], [], []
         for j in range(int(rng.integers(n_shapes[0], n_shapes[1] + 1))):
             k = int(rng.choice([s for s in range(len(shapes)) if not chain or s != chain[-1]]))
-            d = int(rng.integers(len(demos[k])))
+            d = drawn[int(rng.integers(len(drawn)))]
             used.append(f"{shapes[k]} demo {d}")
-            piece = resample(demos[k][d], int(rng.integers(duration[0], duration[1] + 1)))
+            piece = resample(recorded[k][d], int(rng.integers(duration[0], duration[1] + 1)))
             start = pieces[-1][-1] if pieces else piece[0]
             pieces.append(piece - piece[0] + start)
             chain.append(k)

@@ -49,7 +49,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from primspace.errors import UserError
-from primspace.segmentation import auto_penalty, label_segments, noise_variances
+from primspace.segmentation.result import label_segments
+from primspace.segmentation.windows import auto_penalty, noise_variances
 
 __all__ = ["ChangePointPeer", "HMMPeer", "MissingPackage", "PeerResult", "PEERS", "PEERS_VERSION", "RULES",
            "LABEL_STEPS", "ELBOW_MAX",

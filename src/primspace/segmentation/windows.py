@@ -1,4 +1,4 @@
-"""Segmenting demonstrations into primitives from their sequences of window codes, and labelling them.
+"""Segmenting demonstrations into primitives from their sequences of window codes (``--method windows``).
 
 The paper closes (Summary and Discussion): "To model more complex behaviours composed of many
 consecutive primitives ... a sequence of such vectors is used", the challenges being that
@@ -36,104 +36,24 @@ the primitives with the paper's tool: codes of one primitive lie near an affine 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from numbers import Integral, Real
 
 import numpy as np
 
-from primspace.cluster import LowRankSubspaceClustering
-from primspace.cluster.metrics import clustering_accuracy
 from primspace.errors import UserError
+from primspace.segmentation.result import SEGMENT_R2_TARGET, SegmentationResult, label_segments
+from primspace.segmentation.scores import valid_lengths
 
-__all__ = [
-    "AUTO_PENALTY_FACTOR", "DEFAULT_MIN_SIZE", "SEGMENT_R2_TARGET", "SegmentationResult", "auto_penalty",
-    "boundaries_from_segments", "boundary_f1", "change_points", "noise_variances", "segment_sequences",
-    "step_labelling_accuracy", "label_segments", "segmentation_scores",
-]
+__all__ = ["AUTO_PENALTY_FACTOR", "DEFAULT_MIN_SIZE", "auto_penalty", "change_points", "noise_variances",
+           "segment_sequences"]
 
 #: ``c`` of the automatic penalty (module docstring: why 2).
 AUTO_PENALTY_FACTOR = 2.0
 #: Fewest windows in a segment, a transition window included.
 DEFAULT_MIN_SIZE = 2
-#: R^2 target of the affine subspace clustering of segment codes.
-SEGMENT_R2_TARGET = "auto"
 
 # 1 / Phi^-1(3/4): the median absolute value of N(0, s^2) is s / 1.4826
 _MAD_TO_SIGMA = 1.482602218505602
-
-
-@dataclass
-class SegmentationResult:
-    """Segments of every sequence, their codes and labels. ``S`` segments in all, ordered by
-    sequence then time.
-
-    Attributes
-    ----------
-    boundaries : list of ndarray of int64
-        Per sequence, the ascending steps where a segment starts (``k * window`` for a change
-        point at window ``k``, inside window ``k`` after a transition window).
-    step_labels : list of ndarray of int64
-        Per sequence, the label of each of its ``lengths[i]`` valid steps.
-    segment_codes : ndarray (S, q)
-        Mean of each segment's fitted window codes.
-    segment_sample, segment_start, segment_stop, segment_labels : ndarray (S,) of int64
-        Sequence, steps ``[start, stop)`` and label (``0..n_primitives-1``) of each segment.
-    change_points, transitions : list of ndarray
-        Per sequence, the windows ``k >= 1`` where a segment starts, and whether window ``k``
-        is a transition (left out of the segment's fit).
-    penalties : ndarray (N,)
-        Penalty used per sequence.
-    window : int
-    note : str or None
-        Set when there were too few segments to cluster: each segment is then its own label.
-    """
-
-    boundaries: list[np.ndarray]
-    step_labels: list[np.ndarray]
-    segment_codes: np.ndarray
-    segment_sample: np.ndarray
-    segment_start: np.ndarray
-    segment_stop: np.ndarray
-    segment_labels: np.ndarray
-    change_points: list[np.ndarray] = field(default_factory=list)
-    transitions: list[np.ndarray] = field(default_factory=list)
-    penalties: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    window: int = 1
-    note: str | None = None
-
-    def padded_step_labels(self, n_steps: int) -> np.ndarray:
-        """Step labels as one (N, n_steps) int32 array with -1 at padding, like a data set's."""
-        longest = max((len(s) for s in self.step_labels), default=0)
-        if n_steps < longest:
-            raise UserError(f"n_steps={n_steps} is shorter than the longest sequence ({longest} steps)")
-        out = np.full((len(self.step_labels), n_steps), -1, dtype=np.int32)
-        for i, labels in enumerate(self.step_labels):
-            out[i, : len(labels)] = labels
-        return out
-
-
-def boundaries_from_segments(step_segments, lengths=None) -> list[np.ndarray]:
-    """True boundary steps per sequence: ``t > 0`` where the segment index changes, both valid.
-
-    Parameters
-    ----------
-    step_segments : array-like (N, T) of int, or list of 1-D arrays
-        Segment index of each step, -1 at padding.
-    lengths : array-like (N,) of int, optional
-        Valid steps per sequence; later steps are ignored.
-
-    Returns
-    -------
-    list of ndarray of int64
-    """
-    rows = _rows(step_segments, "step_segments")
-    L = None if lengths is None else _lengths(lengths, len(rows))
-    out = []
-    for i, seg in enumerate(rows):
-        valid = (seg != -1) & (np.arange(len(seg)) < (len(seg) if L is None else L[i]))
-        change = (seg[1:] != seg[:-1]) & valid[1:] & valid[:-1]
-        out.append(np.flatnonzero(change).astype(np.int64) + 1)
-    return out
 
 
 def noise_variances(codes) -> np.ndarray:
@@ -321,122 +241,6 @@ def _sequence_segments(z, points, flags, window: int, length: int):
     return codes, np.asarray(steps[:-1], dtype=np.int64), np.asarray(steps[1:], dtype=np.int64)
 
 
-def label_segments(codes, n_primitives: int, r2_target=SEGMENT_R2_TARGET, random_state=0):
-    """Cluster labels of segment codes (affine LRSC), and a note when there is nothing to
-    cluster (too few segments, or all codes identical; the note says which)."""
-    n = len(codes)
-    if n <= n_primitives:
-        note = f"only {n} segment(s) for {n_primitives} primitive(s): not clustered, each segment is its own label"
-        return np.arange(n, dtype=np.int64), note
-    distinct = len(np.unique(np.round(codes, 12), axis=0))
-    if distinct < 2:  # e.g. untrained zero codes: there is nothing to tell apart
-        return np.zeros(n, dtype=np.int64), f"all {n} segment codes are identical: one label"
-    model = LowRankSubspaceClustering(n_primitives, affine=True, r2_target=r2_target, random_state=random_state)
-    return model.fit(codes).labels_.astype(np.int64), None
-
-
-def boundary_f1(true_boundaries, found_boundaries, tolerance) -> dict:
-    """Precision, recall and F1 of found boundaries matched one-to-one within ``tolerance`` steps.
-
-    A found ``f`` and a true ``t`` may match if ``|f - t| <= tolerance``, each at most once,
-    and the matches are as many as possible. Per sequence, both sorted, the earliest
-    unmatched found boundary is matched to the earliest true one within reach: optimal, as
-    the reaches ``[t - tol, t + tol]`` end in the order they start (earliest-deadline-first
-    matching of points to intervals; an exchange argument).
-
-    Parameters
-    ----------
-    true_boundaries, found_boundaries : list of array-like of int
-        Per sequence, boundary steps; as many sequences in both.
-    tolerance : float
-        >= 0, in steps.
-
-    Returns
-    -------
-    dict
-        ``precision``, ``recall``, ``f1``, ``tp``, ``fp``, ``fn`` pooled over the sequences.
-        Precision is 1 with nothing found, recall 1 with nothing to find (F1 1 if both).
-    """
-    if isinstance(tolerance, bool) or not isinstance(tolerance, Real) or not tolerance >= 0 or tolerance == np.inf:
-        raise UserError(f"tolerance must be a finite number >= 0 (steps), got {tolerance!r}")
-    if len(true_boundaries) != len(found_boundaries):
-        raise UserError(f"{len(true_boundaries)} sequences of true boundaries but {len(found_boundaries)} found")
-    tp = fp = fn = 0
-    for t, f in zip(true_boundaries, found_boundaries):
-        t, f = np.sort(np.asarray(t, dtype=float).ravel()), np.sort(np.asarray(f, dtype=float).ravel())
-        m = _matches(t, f, float(tolerance))
-        tp, fp, fn = tp + m, fp + len(f) - m, fn + len(t) - m
-    precision = tp / (tp + fp) if tp + fp else 1.0
-    recall = tp / (tp + fn) if tp + fn else 1.0
-    f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
-    return {"precision": float(precision), "recall": float(recall), "f1": float(f1), "tp": tp, "fp": fp, "fn": fn}
-
-
-def _matches(t: np.ndarray, f: np.ndarray, tol: float) -> int:
-    """Most one-to-one pairs ``|f - t| <= tol`` of two sorted arrays (greedy, optimal)."""
-    i = j = m = 0
-    while i < len(t) and j < len(f):
-        if f[j] < t[i] - tol:
-            j += 1  # f[j] is too early for t[i] and every later true boundary
-        elif f[j] > t[i] + tol:
-            i += 1  # t[i] is too early for f[j] and every later found boundary
-        else:
-            i, j, m = i + 1, j + 1, m + 1
-    return m
-
-
-def step_labelling_accuracy(true_step_labels, found_step_labels) -> float:
-    """Per-step accuracy over all valid steps pooled, after the best one-to-one matching of ids.
-
-    ``true_step_labels``, ``found_step_labels``: (N, T) arrays or lists of 1-D arrays, a row
-    per sequence; -1 is padding. Steps whose true label is -1 are ignored; a row may be
-    longer than its partner by padding only; a found -1 at a valid step counts as wrong.
-    Scored with :func:`~primspace.cluster.metrics.clustering_accuracy` (Hungarian).
-    """
-    t_rows, f_rows = _rows(true_step_labels, "true step labels"), _rows(found_step_labels, "found step labels")
-    if len(t_rows) != len(f_rows):
-        raise UserError(f"{len(t_rows)} sequences of true step labels but {len(f_rows)} found")
-    ts, fs = [], []
-    for i, (t, f) in enumerate(zip(t_rows, f_rows)):
-        k = min(len(t), len(f))
-        if np.any(t[k:] != -1) or np.any(f[k:] != -1):
-            raise UserError(f"sequence {i}: {len(t)} true step labels but {len(f)} found (beyond padding)")
-        ts.append(t[:k][t[:k] != -1])
-        fs.append(f[:k][t[:k] != -1])
-    t, f = np.concatenate(ts), np.concatenate(fs)
-    if t.size == 0:
-        raise UserError("no valid steps to score (every true step label is -1)")
-    known = f != -1
-    return clustering_accuracy(t[known], f[known]) * float(known.mean()) if known.any() else 0.0
-
-
-def segmentation_scores(result: SegmentationResult, data, tolerance: int, **more) -> dict:
-    """What ``primspace segment`` reports for any method: segments found and, when ``data`` (a
-    :class:`~primspace.data.MotionDataset`) has the step fields, boundary F1 within ``tolerance``
-    steps, per-step accuracy (then ``more``, e.g. the accuracy given the true boundaries)."""
-    scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
-    if data.step_segments is None:
-        return scores
-    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
-    truth = boundaries_from_segments(data.step_segments, lengths)
-    return scores | {
-        "boundary": boundary_f1(truth, result.boundaries, tolerance),
-        "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)), **more,
-        "tolerance": int(tolerance), "segments_true": int(sum(len(b) + 1 for b in truth)),
-    }
-
-
-def _rows(x, what: str) -> list[np.ndarray]:
-    """A 2-D array or a list of 1-D arrays as a list of 1-D integer arrays."""
-    if not isinstance(x, (list, tuple)) and np.ndim(x) != 2:
-        raise UserError(f"{what} must be an (N, T) array or a list of 1-D arrays, got shape {np.shape(x)}")
-    out = [np.asarray(r) for r in x]
-    for i, r in enumerate(out):
-        if r.ndim != 1 or (r.size and not np.issubdtype(r.dtype, np.integer)):
-            raise UserError(f"{what}: sequence {i} must be a 1-D array of integers, got {r.dtype} {r.shape}")
-    return out
-
-
 def _codes(codes, what: str) -> np.ndarray:
     Z = np.asarray(codes, dtype=np.float64)
     if Z.ndim != 2:
@@ -467,13 +271,6 @@ def _auto(variances, Z: np.ndarray) -> float:
     return max(auto_penalty(variances, len(Z)), 1e-9 * spread)
 
 
-def _lengths(lengths, n: int) -> np.ndarray:
-    L = np.asarray(lengths)
-    if L.shape != (n,) or (L.size and not np.issubdtype(L.dtype, np.integer)):
-        raise UserError(f"lengths must be {n} integers (one per sequence), got {L.dtype} {L.shape}")
-    return L.astype(np.int64)
-
-
 def _checked_sequences(code_sequences, window, lengths):
     """The valid windows of each sequence (finite, one code size), lengths (>= 1) and window."""
     window = _count("window", window, 1)
@@ -482,7 +279,7 @@ def _checked_sequences(code_sequences, window, lengths):
     seqs = [np.asarray(z, dtype=np.float64) for z in code_sequences]
     if not seqs or any(z.ndim != 2 for z in seqs) or len({z.shape[1] for z in seqs}) > 1:
         raise UserError(f"code sequences must be one or more (K, q) arrays of one q, got {[z.shape for z in seqs]}")
-    L = _lengths(lengths, len(seqs))
+    L = valid_lengths(lengths, len(seqs))
     if np.any(L < 1):
         raise UserError(f"every length must be >= 1; sequence {int(np.argmin(L))} has {int(L.min())}")
     n_valid = -(-L // window)

@@ -17,7 +17,7 @@ demonstrations (from their ``step_segments`` and ``step_labels``):
   (:func:`~primspace.segmentation.label_segments`), scored per step (Hungarian).
 
 Features of a segment (:func:`segment_features`): ``raw``, its scaled joints resampled to
-:data:`~primspace.segmentation_peers.LABEL_STEPS` steps and flattened; ``relative``, the
+:data:`~primspace.segmentation.peers.LABEL_STEPS` steps and flattened; ``relative``, the
 same minus its first step (the pose it started from removed: if primitives were ambiguous
 because a primitive starts where the one before ended, this would read them better);
 :func:`window_code_features`, the mean of the window codes a segment touches (what
@@ -37,8 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from primspace.errors import UserError
-from primspace.segmentation import label_segments, step_labelling_accuracy
-from primspace.segmentation_peers import LABEL_STEPS, resample_segment
+from primspace.segmentation.result import label_segments
+from primspace.segmentation.scores import step_labelling_accuracy
+from primspace.segmentation.peers import LABEL_STEPS, resample_segment
 
 __all__ = ["FOLDS", "CODE_WINDOWS", "TrueSegments", "true_segments", "segment_features", "window_code_features",
            "supervised_bound",

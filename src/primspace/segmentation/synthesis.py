@@ -40,10 +40,10 @@ import numpy as np
 
 from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
-from primspace.segmentation import SegmentationResult, label_segments
+from primspace.segmentation.result import SegmentationResult, label_segments
 
 __all__ = ["FADE", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
-           "best_partition", "segment_by_templates", "segment_by_synthesis"]
+           "best_partition", "labelled_segments", "segment_by_templates", "segment_by_synthesis", "model_inputs"]
 
 #: Fraction of the model's steps over which a candidate's start offset is faded out.
 FADE = 0.35
@@ -167,6 +167,15 @@ def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.nd
             chosen = [0]
         segments.append([(i, int(keys[k, 0]), int(keys[k, 1]), int(nearest[k])) for k in chosen])
         costs.append(float(np.sum(cost[chosen] * (keys[chosen, 1] - keys[chosen, 0]))) / length)
+    return labelled_segments(segments, codes, n_primitives, np.asarray(costs), random_state)
+
+
+def labelled_segments(segments: list, codes: np.ndarray, n_primitives: int, penalties: np.ndarray,
+                      random_state: int = 0) -> SegmentationResult:
+    """The result of a partition: ``segments`` holds per demonstration its ``(sample, start,
+    stop, template)`` rows in time order; each segment's code is its template's row of
+    ``codes``, and all are clustered by :func:`~primspace.segmentation.label_segments`
+    (module docstring, 5). Shared by synthesis and :mod:`primspace.segmentation.surprise`."""
     rows = np.array([row for seq in segments for row in seq], dtype=np.int64)
     seg_codes = codes[rows[:, 3]]
     labels, note = label_segments(seg_codes, n_primitives, random_state=random_state)
@@ -175,7 +184,7 @@ def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.nd
         boundaries=[start[sample == i][1:] for i in range(len(segments))],
         step_labels=[np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(segments))],
         segment_codes=seg_codes, segment_sample=sample, segment_start=start, segment_stop=stop,
-        segment_labels=labels, penalties=np.asarray(costs), window=1, note=note,
+        segment_labels=labels, penalties=np.asarray(penalties), window=1, note=note,
     )
 
 
@@ -186,6 +195,16 @@ def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_ste
     ``penalties`` of the result holds each demonstration's mean cost per step (how well the
     model explains it). The data's joints must be the run's (names and order).
     """
+    sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
+    return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
+
+
+def model_inputs(run, data: MotionDataset, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID,
+                 fade: float = FADE):
+    """What a segmentation by a single-primitive ``run`` reads: the data's joints scaled as
+    the run's ``(N, T, J)``, the valid lengths, the templates and codes of
+    :func:`run_templates`, and the :class:`SynthesisSettings`. Refuses data whose joints
+    are not the run's (names and order)."""
     names = run.config.get("data", {}).get("joint_names") if run.config else None
     if data.n_joints != run.model_config.n_joints or (names is not None and list(data.joint_names) != list(names)):
         raise UserError(f"the data's joints {list(data.joint_names)} are not the run's "
@@ -194,5 +213,4 @@ def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_ste
     settings = SynthesisSettings.for_model(templates.shape[1], min_steps, max_steps, grid, fade)
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     sequences = run.scaler.transform(np.asarray(data.motor, dtype=np.float64))
-    return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
-
+    return sequences, np.asarray(lengths, dtype=np.int64), templates, codes, settings
