@@ -57,7 +57,7 @@ def test_planted_chains_are_cut_where_the_prediction_fails_and_labelled():
         padded[i, : len(s)] = s
     result = segment_by_surprise_templates(padded, lengths, templates, codes, 3, SETTINGS)
     assert boundary_f1(bounds, result.boundaries, 3)["f1"] >= 0.85  # causal: a few found a step or two late
-    assert np.all(result.penalties == result.penalties[0]) and result.penalties[0] > 0  # the threshold, recorded
+    assert result.chosen["threshold"] > 0 and len(result.penalties) == len(seqs) and (result.penalties >= 0).all()
     for b, n in zip(result.boundaries, lengths):  # every segment within the duration bounds
         edges = np.r_[0, b, n]
         assert (np.diff(edges) >= SETTINGS.min_steps).all()
@@ -81,8 +81,43 @@ def test_segment_by_surprise_on_the_command_line(run_cli, tmp_path):
     MotionDataset(motor, lengths=[60] * 3, step_labels=np.repeat(segments, 1, axis=0), step_segments=segments,
                   label_names=["a", "b"]).save(tmp_path / "long.h5")
     res = run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--method", "surprise", "--min-steps", "18",
-                  "--max-steps", "32", "--out", tmp_path / "seg")
+                  "--max-steps", "32", "--infer-epochs", "3", "--out", tmp_path / "seg")
     assert res.code == 0, res.err
     result = json.loads((tmp_path / "seg" / "result.json").read_text())
     assert result["method"] == "surprise" and len(result["boundaries"]) == 3 and result["scores"]["segments_true"] == 6
-    assert result["threshold"] > 0
+    assert result["threshold"] > 0 and result["offset"] in ("fade", "translate")
+    assert result["codes"] == "inferred, 3 epochs"
+
+
+def test_segment_codes_inferred_with_the_weights_frozen(tmp_path):
+    """Each found segment gets a code of its own, inferred from its nearest template's code."""
+    from primspace.data import MotionDataset
+    from primspace.segmentation.inferred import in_model_frame
+    from primspace.segmentation.synthesis import segment_by_synthesis
+    from primspace.train import fit
+    from primspace.model_config import ModelConfig
+    from primspace.train import TrainConfig
+    from test_train import primitives
+
+    single = primitives(6, seed=0, T=30, J=3)
+    run = fit(single, model_config=ModelConfig(n_joints=3, length=30, latent_dim=4, layer_sizes=(16, 6)),
+              train_config=TrainConfig(epochs=10, seed=0), progress=False)
+    motor = np.concatenate([single.motor[:3], single.motor[-3:]], axis=1)  # 3 demonstrations of 2 primitives
+    segments = np.repeat([[0, 1]], 3, axis=0).repeat(30, axis=1)
+    data = MotionDataset(motor, lengths=[60] * 3, step_segments=segments, step_labels=segments, label_names=["a", "b"])
+    plain = segment_by_synthesis(run, data, 2, min_steps=20, max_steps=40, offset="fade")
+    inferred = segment_by_synthesis(run, data, 2, min_steps=20, max_steps=40, offset="fade", infer_epochs=5)
+    assert [b.tolist() for b in inferred.boundaries] == [b.tolist() for b in plain.boundaries]
+    assert inferred.chosen["codes"] == "inferred, 5 epochs" and inferred.segment_codes.shape == plain.segment_codes.shape
+    assert len(np.unique(inferred.segment_codes.round(9), axis=0)) == len(inferred.segment_codes)  # one code each
+    assert not np.allclose(inferred.segment_codes, plain.segment_codes)
+    # a template itself, started elsewhere, is moved back onto the template's start
+    from primspace.segmentation.synthesis import run_templates
+
+    templates, _ = run_templates(run)
+    x = templates[2] + 0.5
+    from primspace.segmentation.result import SegmentationResult
+
+    one = SegmentationResult([np.array([])], [np.zeros(30, int)], np.zeros((1, 4)), np.array([0]), np.array([0]),
+                             np.array([30]), np.array([0]))
+    np.testing.assert_allclose(in_model_frame([x], one, templates, np.array([2]), float("inf")), templates[2:3], atol=1e-9)

@@ -141,7 +141,7 @@ def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
     assert 0 <= result["scores"]["boundary"]["f1"] <= 1 and result["scores"]["segments_true"] == 12
     assert np.load(tmp_path / "seg" / "step_labels.npy").shape == (4, 90)
     assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--min-steps", "5", "--out",
-                              tmp_path / "s2"), "--min-steps and --max-steps apply to --method surprise and synthesis")
+                              tmp_path / "s2"), "--min-steps, --max-steps, --offset and --infer-epochs apply")
     assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--out", tmp_path / "s3"),
                       "--method windows needs a run trained with --code-window")
 
@@ -153,3 +153,35 @@ def test_a_demonstration_that_no_tiling_fits_is_one_segment_of_its_nearest_templ
     assert result.boundaries[0].size == 0
     assert result.segment_start.tolist() == [0] and result.segment_stop.tolist() == [45]
     assert np.allclose(result.segment_codes[0], codes[7]) and result.penalties[0] < 1e-3
+
+
+def test_the_offset_model_is_chosen_by_how_well_it_explains_the_data():
+    from primspace.segmentation.synthesis import OFFSETS, by_offset
+
+    templates, codes, labels = _templates()
+    seqs, bounds, _ = _chains(templates, labels)  # each piece's start offset faded out
+    rng = np.random.default_rng(4)
+    shifted = []  # the same pieces translated whole to start where the last ended (chained LASA strokes)
+    for s, b in zip(seqs, bounds):
+        pieces = np.split(s, b)
+        out, start = [], np.zeros(2)
+        for p in pieces:
+            raw = templates[rng.integers(len(templates))]
+            piece = resample([raw], len(p))[0]
+            out.append(piece - piece[0] + start)
+            start = out[-1][-1]
+        shifted.append(np.concatenate(out))
+
+    def run(chains, offset):
+        lengths = np.array([len(c) for c in chains])
+        padded = np.zeros((len(chains), lengths.max(), 2))
+        for i, c in enumerate(chains):
+            padded[i, : len(c)] = c
+        settings = lambda fade: SynthesisSettings(18, 36, grid=1, fade=fade)  # noqa: E731
+        return by_offset(lambda fade: segment_by_templates(padded, lengths, templates, codes, 3, settings(fade)), offset)
+
+    faded, translated = run(seqs, "auto"), run(shifted, "auto")
+    assert faded.chosen["offset"] == "fade" and translated.chosen["offset"] == "translate"
+    assert translated.chosen["costs"]["translate"] < translated.chosen["costs"]["fade"]
+    assert boundary_f1(bounds, translated.boundaries, 2)["f1"] == 1.0
+    assert run(shifted, "fade").chosen == {"offset": "fade"} and set(OFFSETS) == {"fade", "translate"}

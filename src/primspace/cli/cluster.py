@@ -211,6 +211,12 @@ def _format_sweep(rows: list[dict]) -> str:
 SEGMENT_FILES = ("segments.csv", "step_labels.npy", "result.json", "timeline.png")
 
 
+class SegmentOffset(str, Enum):
+    auto = "auto"
+    fade = "fade"
+    translate = "translate"
+
+
 class SegmentMethod(str, Enum):
     windows = "windows"
     surprise = "surprise"
@@ -236,6 +242,12 @@ def segment_command(
     tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window; surprise, synthesis: 8)."),
     min_steps: Optional[int] = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
     max_steps: Optional[int] = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
+    infer_epochs: int = typer.Option(0, "--infer-epochs", help="surprise, synthesis: infer each segment's code with "
+                                     "θ frozen for this many epochs and label by those codes (0: its nearest "
+                                     "template's code; docs/sequences.md measures both)."),
+    offset: SegmentOffset = typer.Option(SegmentOffset.auto, "--offset", help="surprise, synthesis: how a primitive "
+                                         "begun where the last ended meets the model's: fade (the start offset fades "
+                                         "out), translate (kept throughout), auto (the one that explains DATA better)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
 ) -> None:
     """Find the primitives in long demonstrations: boundaries (change points of a run's window
@@ -251,19 +263,21 @@ def segment_command(
     kind = OutputKind("primspace segment", SEGMENT_FILES, frozenset({"window", "boundaries", "scores"}))
     check_outside_inputs(out, (run, data))
     check_output_directory(out, overwrite, kind)
-    if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None):
-        raise UserError("--min-steps and --max-steps apply to --method surprise and synthesis")
+    if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None
+                                            or offset is not SegmentOffset.auto or infer_epochs):
+        raise UserError("--min-steps, --max-steps, --offset and --infer-epochs apply to --method surprise and synthesis")
+    if infer_epochs < 0:
+        raise UserError(f"--infer-epochs {infer_epochs}: must be at least 0")
     if tolerance is not None and tolerance < 0:
         raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tolerance}")
     trained, ds = load_run(run), MotionDataset.load(data)
     segment = _segment_windows if method is SegmentMethod.windows else _segment_by_primitives
     samples, held, result, scores, window, k = segment(trained, ds, run, data, primitives, tolerance,
-                                                       (min_steps, max_steps), method.value)
+                                                       (min_steps, max_steps, offset.value, infer_epochs), method.value)
     record = {"run": str(run), "data": str(data), "method": method.value, "window": window, "n_primitives": k,
               "samples": samples.tolist(), "boundaries": [b.tolist() for b in result.boundaries],
               "scores": scores, "note": result.note}
-    if method is SegmentMethod.surprise:
-        record["threshold"] = float(result.penalties[0])
+    record |= {k: result.chosen[k] for k in ("offset", "threshold", "codes") if k in result.chosen}
     with atomic_directory(out, overwrite, kind) as tmp:
         _write_segments(tmp / "segments.csv", samples, result)
         np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
@@ -309,7 +323,7 @@ def _segment_by_primitives(trained, ds, run: Path, data: Path, primitives, toler
 
     k = _primitives(ds, primitives, data)
     segment = segment_by_surprise if method == "surprise" else segment_by_synthesis
-    result = segment(trained, ds, k, min_steps=steps[0], max_steps=steps[1])
+    result = segment(trained, ds, k, min_steps=steps[0], max_steps=steps[1], offset=steps[2], infer_epochs=steps[3])
     scores = segmentation_scores(result, ds, 8 if tolerance is None else tolerance)
     return np.arange(len(ds)), ds, result, scores, 1, k
 

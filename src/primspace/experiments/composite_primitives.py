@@ -75,7 +75,9 @@ def template_label_bound(fitted, primitives: MotionDataset, held: MotionDataset,
 
     if primitives.labels is None or (primitives.labels < 0).any():
         return None
-    seqs, _, templates, _, settings = model_inputs(fitted, held)
+    from primspace.segmentation.synthesis import OFFSETS
+
+    seqs, _, templates, _, settings = model_inputs(fitted, held, fade=OFFSETS[result.chosen.get("offset", "fade")])
     names = list(held.label_names)
     labels = np.array([names.index(primitives.label_names[int(v)]) if primitives.label_names[int(v)] in names else -1
                        for v in primitives.labels[np.asarray(fitted.indices)]])
@@ -121,8 +123,7 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
         scores = segmentation_scores(result, held, window)
         out[name] = scores | {"seconds": round(time.perf_counter() - start, 2), "note": result.note,
                               "accuracy_template_labels": template_label_bound(fitted, primitives, held, result)}
-        if name == "surprise":
-            out[name]["threshold"] = float(result.penalties[0])
+        out[name] |= {k: result.chosen[k] for k in ("offset", "costs", "threshold") if k in result.chosen}
     return out
 
 

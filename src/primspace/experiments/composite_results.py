@@ -85,7 +85,8 @@ def _primitive_rows(results: dict) -> list[list]:
 
 
 def primitives_table(results: dict) -> tuple[list[str], list[list]] | None:
-    """The model of single primitives per method (synthesis, surprise): boundary F1, per-step
+    """The model of single primitives per method (synthesis, surprise): the offset model
+    chosen without labels (seeds per model), boundary F1, per-step
     labelling accuracy, the same with each segment given its nearest template's true
     primitive (the labeller's bound), the surprise threshold, and the seeds' values; mean ±
     std over seeds. None when the experiment had no such model."""
@@ -98,13 +99,15 @@ def primitives_table(results: dict) -> tuple[list[str], list[list]] | None:
     for name in METHODS:
         got = [(r["seed"], r[name]) for r in seeds if name in r]
         per = ", ".join(f"{s}: {m['boundary']['f1']:.2f} / {m['accuracy']:.2f}" for s, m in got)
-        rows.append([name, len(got), _mean_std([m["boundary"]["f1"] for _, m in got]),
+        offsets = [m.get("offset") for _, m in got if m.get("offset")]
+        chosen = ", ".join(f"{o} ({offsets.count(o)} of {len(got)})" for o in dict.fromkeys(offsets)) or "—"
+        rows.append([name, len(got), chosen, _mean_std([m["boundary"]["f1"] for _, m in got]),
                      _mean_std([m["accuracy"] for _, m in got]),
                      _mean_std([m.get("accuracy_template_labels") for _, m in got]),
                      _mean_std([m.get("threshold") for _, m in got]) if name == "surprise" else "—", per])
     first = seeds[0]
     return [f"method ({first['preset']} preset, q = {first['latent_dim']}, {first['n_templates']} single primitives "
-            "fitted)", "seeds", "boundary F1", "step labelling accuracy",
+            "fitted)", "seeds", "offset model chosen", "boundary F1", "step labelling accuracy",
             "accuracy, nearest template's true primitive", "surprise threshold", "per seed (F1 / accuracy)"], rows
 
 

@@ -42,6 +42,9 @@ class SegmentationResult:
     window : int
     note : str or None
         Set when there were too few segments to cluster: each segment is then its own label.
+    chosen : dict
+        What the method chose without labels (synthesis and surprise: the ``offset`` model;
+        surprise: its ``threshold``).
     """
 
     boundaries: list[np.ndarray]
@@ -56,6 +59,7 @@ class SegmentationResult:
     penalties: np.ndarray = field(default_factory=lambda: np.zeros(0))
     window: int = 1
     note: str | None = None
+    chosen: dict = field(default_factory=dict)
 
     def padded_step_labels(self, n_steps: int) -> np.ndarray:
         """Step labels as one (N, n_steps) int32 array with -1 at padding, like a data set's."""

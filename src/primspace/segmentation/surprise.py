@@ -14,7 +14,8 @@ continuation the model can generate and the error jumps: the model is *surprised
    the model's ``T1``), held at its last pose after its end.
 2. **Following a segment** (:func:`follow`): from the current segment's start ``s``, at
    each step ``s + k`` the hypothesis whose first ``k`` steps are nearest the observed ones
-   (mean squared distance, the start offset faded out as synthesis fades it) predicts the
+   (mean squared distance, the start offset faded out or kept as synthesis's offset model
+   says) predicts the
    next ``horizon`` steps; the **surprise** at ``k`` is the mean squared error of that
    prediction once those steps have arrived (a delay of ``horizon`` steps). This is the
    fast form of the online inference of :mod:`primspace.train.online_mixture`: the
@@ -52,7 +53,7 @@ from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
 from primspace.segmentation.result import SegmentationResult
 from primspace.segmentation.synthesis import (
-    DEFAULT_GRID, FADE, SynthesisSettings, candidate_costs, labelled_segments, model_inputs)
+    DEFAULT_GRID, FADE, SynthesisSettings, by_offset, candidate_costs, labelled_segments, model_inputs, with_codes)
 
 __all__ = ["HORIZON", "QUANTILE", "MARGIN", "Hypotheses", "hypotheses", "follow", "surprise_threshold",
            "segment_by_surprise_templates", "segment_by_surprise"]
@@ -159,10 +160,11 @@ def segment_by_surprise_templates(sequences, lengths, templates: np.ndarray, cod
                                   random_state: int = 0) -> SegmentationResult:
     """Segment scaled demonstrations ``(N, T, J)`` (valid ``lengths``) where the templates'
     prediction fails; label the segments by their nearest templates' codes. ``penalties``
-    of the result holds the threshold (one value per demonstration)."""
+    of the result holds each demonstration's mean cost per step (as synthesis's: how well
+    the segments found are explained), ``chosen["threshold"]`` the threshold."""
     threshold = surprise_threshold(templates, settings) if threshold is None else float(threshold)
     hyp = hypotheses(templates, settings)
-    segments = []
+    segments, costs = [], []
     for i, length in enumerate(np.asarray(lengths, dtype=np.int64)):
         length = int(length)
         if length < settings.min_steps:
@@ -174,16 +176,24 @@ def segment_by_surprise_templates(sequences, lengths, templates: np.ndarray, cod
             keys.append((s, e))
             s = e
         keys = np.asarray(keys, dtype=np.int64)
-        _, nearest = candidate_costs(x, keys, templates, settings.fade)
+        cost, nearest = candidate_costs(x, keys, templates, settings.fade)
         segments.append([(i, int(a), int(b), int(t)) for (a, b), t in zip(keys, nearest)])
-    return labelled_segments(segments, codes, n_primitives, np.full(len(segments), threshold), random_state)
+        costs.append(float(np.sum(cost * (keys[:, 1] - keys[:, 0]))) / length)
+    result = labelled_segments(segments, codes, n_primitives, np.asarray(costs), random_state)
+    result.chosen = {"threshold": threshold}
+    return result
 
 
 def segment_by_surprise(run, data: MotionDataset, n_primitives: int, *, min_steps=None, max_steps=None,
-                        grid: int = DEFAULT_GRID, fade: float = FADE, threshold: float | None = None,
-                        random_state: int = 0) -> SegmentationResult:
+                        grid: int = DEFAULT_GRID, offset: str = "auto", threshold: float | None = None,
+                        infer_epochs: int = 0, random_state: int = 0) -> SegmentationResult:
     """Segment the long demonstrations ``data`` where a single-primitive ``run``'s prediction
-    fails (module docstring). The data's joints must be the run's (names and order)."""
-    sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
-    return segment_by_surprise_templates(sequences, lengths, templates, codes, n_primitives, settings, threshold,
-                                         random_state)
+    fails (module docstring). ``offset`` as :func:`~primspace.segmentation.synthesis.segment_by_synthesis`
+    (``auto``: the offset model whose segments are explained better), and ``infer_epochs``
+    (segment codes inferred with θ frozen). The data's joints must be the run's (names and order)."""
+    def segment(fade: float) -> SegmentationResult:
+        sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
+        return segment_by_surprise_templates(sequences, lengths, templates, codes, n_primitives, settings, threshold,
+                                             random_state)
+
+    return with_codes(run, data, by_offset(segment, offset), n_primitives, infer_epochs, random_state)

@@ -18,7 +18,13 @@ stretch of a long demonstration that is one primitive is explained by one of the
 3. **Cost of a candidate**: the mean squared distance to the nearest template, after the
    candidate's start offset is faded out over the first ``fade * T1`` steps: a primitive
    after the first starts where the one before ended, not where the model's primitives
-   start (``x_t - y_t - c_t (x_0 - y_0)``, ``c_t = max(0, 1 - t / (fade T1))``).
+   start (``x_t - y_t - c_t (x_0 - y_0)``, ``c_t = max(0, 1 - t / (fade T1))``). Two offset
+   models (:data:`OFFSETS`): ``fade`` (:data:`FADE` = 0.35: the arm leaves the last pose for
+   its own path, as the simulator's primitives go to the block) and ``translate`` (``c_t = 1``:
+   the whole primitive is shifted to start where the last ended, as the chained LASA strokes
+   are); ``auto`` (default) segments with both and keeps the one whose partition explains
+   the demonstrations better (the lower mean cost per step): one offset parameter each, so
+   the costs compare fairly, and no label is read.
 4. **Partition**: dynamic programming over the candidates, minimising the sum of
    ``cost x duration`` (each step counted once); the duration bounds are the prior.
 5. **Labels**: each segment's code is its nearest template's code; all segments' codes are
@@ -42,11 +48,15 @@ from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
 from primspace.segmentation.result import SegmentationResult, label_segments
 
-__all__ = ["FADE", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
+__all__ = ["FADE", "TRANSLATE", "OFFSETS", "offset_name", "by_offset", "with_codes", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
            "best_partition", "labelled_segments", "segment_by_templates", "segment_by_synthesis", "model_inputs"]
 
 #: Fraction of the model's steps over which a candidate's start offset is faded out.
 FADE = 0.35
+#: The start offset kept over the whole segment: a translated copy of a template.
+TRANSLATE = float("inf")
+#: The offset models by name (module docstring, 3); ``auto`` chooses between them.
+OFFSETS = {"fade": FADE, "translate": TRANSLATE}
 #: Steps between candidate segment starts.
 DEFAULT_GRID = 2
 _BLOCK = 1 << 24  # the most floats of one block of candidate-template differences
@@ -69,8 +79,8 @@ class SynthesisSettings:
         hi = int(round(0.85 * model_steps)) if max_steps is None else int(max_steps)
         if not 2 <= lo <= hi:
             raise UserError(f"segment durations must satisfy 2 <= min_steps <= max_steps, got {lo} and {hi}")
-        if int(grid) < 1 or not 0 < float(fade) <= 1:
-            raise UserError(f"grid must be >= 1 step and fade in (0, 1], got {grid} and {fade}")
+        if int(grid) < 1 or not (0 < float(fade) <= 1 or float(fade) == TRANSLATE):
+            raise UserError(f"grid must be >= 1 step and fade in (0, 1] or inf (translate), got {grid} and {fade}")
         return cls(lo, hi, int(grid), float(fade))
 
 
@@ -189,14 +199,53 @@ def labelled_segments(segments: list, codes: np.ndarray, n_primitives: int, pena
 
 
 def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_steps=None, max_steps=None,
-                         grid: int = DEFAULT_GRID, fade: float = FADE, random_state: int = 0) -> SegmentationResult:
+                         grid: int = DEFAULT_GRID, offset: str = "auto", infer_epochs: int = 0,
+                         random_state: int = 0) -> SegmentationResult:
     """Segment the long demonstrations ``data`` with a single-primitive ``run`` (module docstring).
 
-    ``penalties`` of the result holds each demonstration's mean cost per step (how well the
-    model explains it). The data's joints must be the run's (names and order).
+    ``offset``: ``fade``, ``translate`` or ``auto`` (module docstring, 3; ``chosen["offset"]``
+    of the result names the one used). ``penalties`` of the result holds each
+    demonstration's mean cost per step (how well the model explains it). The data's joints
+    must be the run's (names and order). ``infer_epochs > 0``: the segments' codes are
+    inferred with θ frozen and clustered (:mod:`primspace.segmentation.inferred`) instead of
+    their nearest templates' codes.
     """
-    sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
-    return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
+    def segment(fade: float) -> SegmentationResult:
+        sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
+        return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
+
+    return with_codes(run, data, by_offset(segment, offset), n_primitives, infer_epochs, random_state)
+
+
+def with_codes(run, data: MotionDataset, result: SegmentationResult, n_primitives: int, infer_epochs: int,
+               random_state: int = 0) -> SegmentationResult:
+    """``result`` as it is (segment codes: the nearest templates'), or with the codes
+    inferred for ``infer_epochs > 0`` epochs and the segments labelled by them."""
+    if int(infer_epochs) <= 0:
+        return result
+    from primspace.segmentation.inferred import relabel_by_inference
+
+    return relabel_by_inference(run, data, result, n_primitives, int(infer_epochs), random_state)
+
+
+def offset_name(fade: float) -> str:
+    """``fade`` or ``translate``: the :data:`OFFSETS` entry of a fade value."""
+    return "translate" if fade == TRANSLATE else "fade"
+
+
+def by_offset(segment, offset: str) -> SegmentationResult:
+    """``segment(fade)`` with the offset model ``offset``, or with each and the one whose
+    demonstrations' mean cost per step (``penalties``) is lower (``auto``); the result's
+    ``chosen["offset"]`` names it (and ``chosen["costs"]`` both costs under ``auto``)."""
+    if offset not in (*OFFSETS, "auto"):
+        raise UserError(f"offset must be one of {', '.join([*OFFSETS, 'auto'])}, got {offset!r}")
+    names = list(OFFSETS) if offset == "auto" else [offset]
+    results = {name: segment(OFFSETS[name]) for name in names}
+    costs = {name: float(np.mean(r.penalties)) for name, r in results.items()}
+    best = min(costs, key=costs.get)
+    chosen = results[best]
+    chosen.chosen = dict(chosen.chosen) | {"offset": best} | ({"costs": costs} if len(costs) > 1 else {})
+    return chosen
 
 
 def model_inputs(run, data: MotionDataset, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID,
