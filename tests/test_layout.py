@@ -35,6 +35,7 @@ FORBIDDEN = {
     # ... the methods of a single-primitive model decode a trained run (train)
     "segmentation.synthesis": ("sim", "experiments", "report", "demo", "cli"),
     "segmentation.surprise": ("sim", "experiments", "report", "demo", "cli"),
+    "segmentation.inferred": ("sim", "experiments", "report", "demo", "cli"),
     # the peers of prediction (ProMP, nearest neighbour, mean motion): they see motion arrays only
     "peers": ("sim", "latent", "model", "train", "cluster", "experiments", "report", "demo", "cli"),
     "model_config": ("model", "latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
