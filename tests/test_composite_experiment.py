@@ -217,6 +217,8 @@ def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_prim
         assert 4 <= found <= 4 * 80 // 20  # at least one per demonstration, none shorter than the least duration
     assert row["surprise"]["threshold"] > 0
     assert (exp.path / "runs" / "composite" / "primitives-s0" / "fit" / "checkpoint.pt").exists()
+    for name in ("synthesis", "surprise"):  # the report's timeline of each method
+        assert (exp.path / "figures" / f"composite_timeline_{name}.png").stat().st_size > 1000
     names = [r[0] for r in composite_table(results)[1]]
     assert names[2:4] == ["synthesis (single-tiny single primitives)", "surprise (single-tiny single primitives)"]
     text = render_composite(summarize(exp.path, "tiny", "primspace experiment composite --out tiny"))

@@ -37,13 +37,15 @@ from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_p
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["PRIMITIVES_FILE", "METHODS", "primitives_key", "primitive_indices", "run_primitives_point",
+__all__ = ["PRIMITIVES_FILE", "METHODS", "TIMELINE_FILE", "draw_timelines", "primitives_key", "primitive_indices", "run_primitives_point",
            "run_primitives"]
 
 #: The single primitives' data file inside the experiment folder.
 PRIMITIVES_FILE = "primitives.h5"
 #: The segmentations by the model of single primitives, in table order.
 METHODS = ("synthesis", "surprise")
+#: A point's arrays for the report's timeline figures (inside ``OUT/runs/<key>/``).
+TIMELINE_FILE = "timeline.npz"
 
 
 def primitives_key(seed: int) -> str:
@@ -117,14 +119,28 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
     k = max(len(held.label_names), 1)
     lo, hi = composite.segment_steps or (None, None)
     window = composite.model.code_window
+    timeline = {}
     for name, method in zip(METHODS, (segment_by_synthesis, segment_by_surprise)):
         start = time.perf_counter()
         result = method(fitted, held, k, min_steps=lo, max_steps=hi, random_state=seed)
+        timeline |= _timeline_arrays(name, fitted, held, result)
         scores = segmentation_scores(result, held, window)
         out[name] = scores | {"seconds": round(time.perf_counter() - start, 2), "note": result.note,
                               "accuracy_template_labels": template_label_bound(fitted, primitives, held, result)}
         out[name] |= {k: result.chosen[k] for k in ("offset", "costs", "threshold") if k in result.chosen}
+    np.savez_compressed(run_dir / TIMELINE_FILE, **timeline)
     return out
+
+
+def _timeline_arrays(name: str, fitted, held: MotionDataset, result) -> dict:
+    """The first :data:`~primspace.experiments.composite.TIMELINE_SAMPLES` held-out
+    demonstrations' scaled joints, true steps and ``name``'s found labels and boundaries."""
+    from primspace.experiments.composite import TIMELINE_SAMPLES, _padded
+
+    n = min(TIMELINE_SAMPLES, len(held))
+    return {"joints": fitted.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64)),
+            "lengths": held.lengths[:n], "step_labels": held.step_labels[:n], "step_segments": held.step_segments[:n],
+            f"found_{name}": result.padded_step_labels(held.length)[:n], f"bounds_{name}": _padded(result.boundaries[:n])}
 
 
 def _check_unseen(chains: MotionDataset) -> None:
@@ -159,3 +175,31 @@ def run_primitives(exp: ExperimentDir, splits: dict) -> list[dict]:
     with exp.stage("composite primitives"):
         grid = exp.grid(run_primitives_point, points, "single-primitive segmentation")
     return [grid.results[p.key] for p in points if p.key in grid.results]
+
+
+def draw_timelines(out_dir: Path, results: dict) -> list[Path]:
+    """Per method, the timeline figure of the first seed's held-out demonstrations: scaled
+    joints, true and found labels and boundaries (``composite_timeline_<method>.png``)."""
+    from primspace import plots
+    from primspace.experiments.sweep import run_dir_of
+    from primspace.experiments.results import figure_file
+    from primspace.plots.sequences import plot_code_timeline
+    from primspace.segmentation import boundaries_from_segments
+
+    rows = results.get("primitives") or []
+    path = run_dir_of(out_dir, primitives_key(rows[0]["seed"])) / TIMELINE_FILE if rows else None
+    if path is None or not path.exists():
+        return []
+    arrays = dict(np.load(path))
+    true_bounds = boundaries_from_segments(arrays["step_segments"], arrays["lengths"])
+    drawn = []
+    for name in METHODS:
+        if f"found_{name}" not in arrays:
+            continue
+        found = [b[b >= 0] for b in arrays[f"bounds_{name}"]]
+        fig = plot_code_timeline(arrays["joints"], 1, arrays["lengths"], arrays["step_labels"], arrays[f"found_{name}"],
+                                 true_bounds, found, label_names=results.get("label_names") or (),
+                                 title=f"{name} ({rows[0]['preset']} single primitives, seed {rows[0]['seed']}): "
+                                       "scaled joints of held-out demonstrations")
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{name}")))
+    return drawn

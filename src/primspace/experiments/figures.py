@@ -155,5 +155,7 @@ def draw_composite(out_dir: str | Path) -> list[Path]:
             title=f"{init}: inferred code sequences (q = {meta['latent_dim']}, W = {meta['window']}), held-out demonstrations",
         )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{init}")))
-    return drawn
+    from primspace.experiments.composite_primitives import draw_timelines
+
+    return drawn + draw_timelines(Path(out_dir), results)
 

@@ -49,6 +49,7 @@ def plot_code_timeline(
     grid = fig.add_gridspec(3 * n, 1, height_ratios=[6, 1, 1] * n, hspace=0.15)
     n_colors = int(max(np.max(true_labels), np.max(found_labels), 0)) + 1
     cmap = ListedColormap(label_colors(max(n_colors, 2)))
+    longest = max(int(v) for v in lengths[:n])  # one time axis for every row (a shorter demonstration ends early)
     for i in range(n):
         length = int(lengths[i])
         ax = fig.add_subplot(grid[3 * i])
@@ -57,6 +58,7 @@ def plot_code_timeline(
         ax.imshow(steps, aspect="auto", cmap="RdBu_r", vmin=-limit, vmax=limit, interpolation="nearest",
                   extent=(0, length, q, 0))
         ax.set_ylabel(f"#{i}\ncode", fontsize=8)
+        ax.set_xlim(0, longest)
         ax.set_xticks([])
         for b in true_boundaries[i]:
             ax.axvline(b, color="k", lw=1.5)
@@ -67,6 +69,7 @@ def plot_code_timeline(
             shown = np.ma.masked_less(np.asarray(labels[i][:length], float)[None], 0)
             strip.imshow(shown, aspect="auto", cmap=cmap, vmin=0, vmax=cmap.N - 1, interpolation="nearest",
                          extent=(0, length, 1, 0))
+            strip.set_xlim(0, longest)
             strip.set_yticks([])
             strip.set_ylabel(name, fontsize=7, rotation=0, ha="right", va="center")
             if not (i == n - 1 and row == 2):

@@ -344,8 +344,9 @@ def composite(out_dir: Path, report: HtmlReport) -> None:
     for phase in ("fit", "infer"):
         report.figure(figure_file(out_dir, f"composite_loss_{phase}"), f"Loss per epoch ({phase}), per init.")
     for path in sorted((out_dir / "figures").glob("composite_timeline_*.png")):
-        report.figure(path, "Code sequences of held-out demonstrations (heat map: code values per window), true "
-                      "(solid) and found (dashed) boundaries, true and found labels (found colours are cluster ids).")
+        report.figure(path, "Held-out demonstrations: the heat map shows code values per window (window codes) or "
+                      "the scaled joints per step (synthesis, surprise); true (solid) and found (dashed) boundaries, "
+                      "true and found labels (found colours are cluster ids).")
     if results["failures"]:
         _failures(report, results["failures"], "run(s)")
 
