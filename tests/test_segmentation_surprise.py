@@ -12,7 +12,7 @@ from primspace.data import resample
 from primspace.segmentation import boundary_f1
 from primspace.segmentation.surprise import HORIZON, follow, hypotheses, segment_by_surprise_templates, surprise_threshold
 from primspace.segmentation.synthesis import SynthesisSettings
-from test_segmentation_synthesis import _chains, _faded, _templates
+from test_segmentation_synthesis import _chains, _faded, _templates, padded_chains
 
 SETTINGS = SynthesisSettings(18, 36, grid=1)
 
@@ -51,10 +51,7 @@ def test_the_threshold_lies_between_the_surprise_inside_and_at_a_boundary():
 def test_planted_chains_are_cut_where_the_prediction_fails_and_labelled():
     templates, codes, labels = _templates()
     seqs, bounds, steps = _chains(templates, labels)
-    lengths = np.array([len(s) for s in seqs])
-    padded = np.zeros((len(seqs), lengths.max(), 2))
-    for i, s in enumerate(seqs):
-        padded[i, : len(s)] = s
+    padded, lengths = padded_chains(seqs)
     result = segment_by_surprise_templates(padded, lengths, templates, codes, 3, SETTINGS)
     assert boundary_f1(bounds, result.boundaries, 3)["f1"] >= 0.85  # causal: a few found a step or two late
     assert result.chosen["threshold"] > 0 and len(result.penalties) == len(seqs) and (result.penalties >= 0).all()
@@ -67,13 +64,9 @@ def test_planted_chains_are_cut_where_the_prediction_fails_and_labelled():
 
 def test_segment_by_surprise_on_the_command_line(run_cli, tmp_path):
     from primspace.data import MotionDataset
-    from test_train import primitives
+    from test_segmentation_synthesis import single_primitive_run
 
-    single = primitives(6, seed=0, T=30, J=3)
-    single.save(tmp_path / "single.h5")
-    assert run_cli("train", tmp_path / "single.h5", "--epochs", "10", "--latent-dim", "4", "--layers", "16,6", "--out",
-                   tmp_path / "run").code == 0
-    pieces = primitives(4, seed=1, T=30, J=3)
+    pieces = single_primitive_run(run_cli, tmp_path)
     motor, segments = np.zeros((3, 60, 3)), np.full((3, 60), -1)
     for i in range(3):
         motor[i, :30], motor[i, 30:] = pieces.motor[i], pieces.motor[i + 1]

@@ -63,6 +63,15 @@ def _chains(templates, labels, n=8, seed=1):
     return seqs, bounds, steps
 
 
+def padded_chains(chains):
+    """Ragged ``(L_i, 2)`` chains as one zero-padded ``(N, T, 2)`` array, and their lengths."""
+    lengths = np.array([len(c) for c in chains])
+    padded = np.zeros((len(chains), lengths.max(), 2))
+    for i, c in enumerate(chains):
+        padded[i, : len(c)] = c
+    return padded, lengths
+
+
 def test_candidates_tile_and_the_last_ends_at_the_length():
     keys = candidate_segments(61, SynthesisSettings(20, 30, grid=3))
     assert (keys[:, 0] % 3 == 0).all() and ((keys[:, 1] - keys[:, 0]) >= 20).all()
@@ -104,10 +113,7 @@ def test_a_start_offset_is_faded_out():
 def test_planted_chains_are_segmented_and_labelled():
     templates, codes, labels = _templates()
     seqs, bounds, steps = _chains(templates, labels)
-    lengths = np.array([len(s) for s in seqs])
-    padded = np.zeros((len(seqs), lengths.max(), 2))
-    for i, s in enumerate(seqs):
-        padded[i, : len(s)] = s
+    padded, lengths = padded_chains(seqs)
     result = segment_by_templates(padded, lengths, templates, codes, 3, SynthesisSettings(18, 36, grid=1))
     assert boundary_f1(bounds, result.boundaries, 2)["f1"] == 1.0
     found = np.concatenate(result.step_labels)
@@ -115,12 +121,16 @@ def test_planted_chains_are_segmented_and_labelled():
     assert max((found == perm[truth]).mean() for perm in map(np.array, itertools.permutations(range(3)))) > 0.97
 
 
-def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
-    single = primitives(6, seed=0, T=30, J=3)
-    single.save(tmp_path / "single.h5")
+def single_primitive_run(run_cli, tmp_path):
+    """A run of single primitives trained by the command line (``tmp_path/run``), and 4 other primitives."""
+    primitives(6, seed=0, T=30, J=3).save(tmp_path / "single.h5")
     assert run_cli("train", tmp_path / "single.h5", "--epochs", "10", "--latent-dim", "4", "--layers", "16,6", "--out",
                    tmp_path / "run").code == 0
-    pieces = primitives(4, seed=1, T=30, J=3)
+    return primitives(4, seed=1, T=30, J=3)
+
+
+def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
+    pieces = single_primitive_run(run_cli, tmp_path)
     rng = np.random.default_rng(0)
     motor, segments, step_labels, lengths = np.zeros((4, 90, 3)), np.full((4, 90), -1), np.full((4, 90), -1), []
     for i in range(4):
@@ -173,10 +183,7 @@ def test_the_offset_model_is_chosen_by_how_well_it_explains_the_data():
         shifted.append(np.concatenate(out))
 
     def run(chains, offset):
-        lengths = np.array([len(c) for c in chains])
-        padded = np.zeros((len(chains), lengths.max(), 2))
-        for i, c in enumerate(chains):
-            padded[i, : len(c)] = c
+        padded, lengths = padded_chains(chains)
         settings = lambda fade: SynthesisSettings(18, 36, grid=1, fade=fade)  # noqa: E731
         return by_offset(lambda fade: segment_by_templates(padded, lengths, templates, codes, 3, settings(fade)), offset)
 

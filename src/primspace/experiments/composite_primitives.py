@@ -33,18 +33,18 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
+from primspace.experiments.composite_results import METHODS
 from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_preset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["PRIMITIVES_FILE", "METHODS", "TIMELINE_FILE", "draw_timelines", "primitives_key", "primitive_indices", "run_primitives_point",
+__all__ = ["PRIMITIVES_FILE", "METHODS", "TIMELINE_FILE", "primitives_key", "primitive_indices", "run_primitives_point",
            "run_primitives"]
 
 #: The single primitives' data file inside the experiment folder.
 PRIMITIVES_FILE = "primitives.h5"
-#: The segmentations by the model of single primitives, in table order.
-METHODS = ("synthesis", "surprise")
-#: A point's arrays for the report's timeline figures (inside ``OUT/runs/<key>/``).
+#: A point's arrays for the report's timeline figures (inside ``OUT/runs/<key>/``; the first
+#: seed's are copied to ``OUT/results/composite_primitives.npz``, which the figures read).
 TIMELINE_FILE = "timeline.npz"
 
 
@@ -128,7 +128,10 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
         out[name] = scores | {"seconds": round(time.perf_counter() - start, 2), "note": result.note,
                               "accuracy_template_labels": template_label_bound(fitted, primitives, held, result)}
         out[name] |= {k: result.chosen[k] for k in ("offset", "costs", "threshold") if k in result.chosen}
-    np.savez_compressed(run_dir / TIMELINE_FILE, **timeline)
+    from primspace.files import atomic_path
+
+    with atomic_path(run_dir / TIMELINE_FILE) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **timeline)
     return out
 
 
@@ -174,32 +177,11 @@ def run_primitives(exp: ExperimentDir, splits: dict) -> list[dict]:
               for seed in exp.preset.seeds]
     with exp.stage("composite primitives"):
         grid = exp.grid(run_primitives_point, points, "single-primitive segmentation")
-    return [grid.results[p.key] for p in points if p.key in grid.results]
+    done = [grid.results[p.key] for p in points if p.key in grid.results]
+    if done:  # the first finished seed's timeline, where the figures read it
+        from primspace.experiments.sweep import run_dir_of
 
+        with np.load(run_dir_of(exp.path, primitives_key(done[0]["seed"])) / TIMELINE_FILE) as npz:
+            exp.write_arrays("composite_primitives", {k: npz[k] for k in npz.files})
+    return done
 
-def draw_timelines(out_dir: Path, results: dict) -> list[Path]:
-    """Per method, the timeline figure of the first seed's held-out demonstrations: scaled
-    joints, true and found labels and boundaries (``composite_timeline_<method>.png``)."""
-    from primspace import plots
-    from primspace.experiments.sweep import run_dir_of
-    from primspace.experiments.results import figure_file
-    from primspace.plots.sequences import plot_code_timeline
-    from primspace.segmentation import boundaries_from_segments
-
-    rows = results.get("primitives") or []
-    path = run_dir_of(out_dir, primitives_key(rows[0]["seed"])) / TIMELINE_FILE if rows else None
-    if path is None or not path.exists():
-        return []
-    arrays = dict(np.load(path))
-    true_bounds = boundaries_from_segments(arrays["step_segments"], arrays["lengths"])
-    drawn = []
-    for name in METHODS:
-        if f"found_{name}" not in arrays:
-            continue
-        found = [b[b >= 0] for b in arrays[f"bounds_{name}"]]
-        fig = plot_code_timeline(arrays["joints"], 1, arrays["lengths"], arrays["step_labels"], arrays[f"found_{name}"],
-                                 true_bounds, found, label_names=results.get("label_names") or (),
-                                 title=f"{name} ({rows[0]['preset']} single primitives, seed {rows[0]['seed']}): "
-                                       "scaled joints of held-out demonstrations")
-        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{name}")))
-    return drawn

@@ -12,7 +12,11 @@ import numpy as np
 
 from primspace.experiments.results import _mean_std, final
 
-__all__ = ["composite_table", "primitives_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
+__all__ = ["METHODS", "composite_table", "primitives_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
+
+#: The segmentations by a model of single primitives
+#: (:mod:`primspace.experiments.composite_primitives`), in table order.
+METHODS = ("synthesis", "surprise")
 
 #: What each peer is, for the tables' readers (primspace.segmentation.peers has the rules).
 PEER_RULES = {
@@ -69,8 +73,6 @@ def composite_table(results: dict) -> tuple[list[str], list[list]]:
 def _primitive_rows(results: dict) -> list[list]:
     """A row per method of the model of single primitives (synthesis, surprise): mean ± std
     over the seeds that ran it; q is the single-primitive model's."""
-    from primspace.experiments.composite_primitives import METHODS
-
     seeds = results.get("primitives") or []
     rows = []
     for name in METHODS:
@@ -90,8 +92,6 @@ def primitives_table(results: dict) -> tuple[list[str], list[list]] | None:
     labelling accuracy, the same with each segment given its nearest template's true
     primitive (the labeller's bound), the surprise threshold, and the seeds' values; mean ±
     std over seeds. None when the experiment had no such model."""
-    from primspace.experiments.composite_primitives import METHODS
-
     seeds = results.get("primitives") or []
     if not seeds:
         return None

@@ -155,7 +155,28 @@ def draw_composite(out_dir: str | Path) -> list[Path]:
             title=f"{init}: inferred code sequences (q = {meta['latent_dim']}, W = {meta['window']}), held-out demonstrations",
         )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{init}")))
-    from primspace.experiments.composite_primitives import draw_timelines
+    return drawn + _draw_primitive_timelines(out_dir, results)
 
-    return drawn + draw_timelines(Path(out_dir), results)
+
+def _draw_primitive_timelines(out_dir: str | Path, results: dict) -> list[Path]:
+    """Per method of the model of single primitives, the timeline of the first seed's
+    held-out demonstrations: scaled joints, true and found labels and boundaries."""
+    from primspace import plots
+    from primspace.experiments.composite_results import METHODS
+    from primspace.plots.sequences import plot_code_timeline
+    from primspace.segmentation import boundaries_from_segments
+
+    arrays, rows = read_arrays(out_dir, "composite_primitives"), results.get("primitives") or []
+    if arrays is None or not rows:
+        return []
+    true_bounds = boundaries_from_segments(arrays["step_segments"], arrays["lengths"])
+    drawn = []
+    for name in (m for m in METHODS if f"found_{m}" in arrays):
+        fig = plot_code_timeline(arrays["joints"], 1, arrays["lengths"], arrays["step_labels"], arrays[f"found_{name}"],
+                                 true_bounds, [b[b >= 0] for b in arrays[f"bounds_{name}"]],
+                                 label_names=results.get("label_names") or (),
+                                 title=f"{name} ({rows[0]['preset']} single primitives, seed {rows[0]['seed']}): "
+                                       "scaled joints of held-out demonstrations")
+        drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{name}")))
+    return drawn
 

@@ -53,7 +53,8 @@ from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
 from primspace.segmentation.result import SegmentationResult
 from primspace.segmentation.synthesis import (
-    DEFAULT_GRID, FADE, SynthesisSettings, by_offset, candidate_costs, labelled_segments, model_inputs, with_codes)
+    DEFAULT_GRID, FADE, SynthesisSettings, by_offset, candidate_costs, demonstrations, labelled_segments, model_inputs,
+    with_codes)
 
 __all__ = ["HORIZON", "QUANTILE", "MARGIN", "Hypotheses", "hypotheses", "follow", "surprise_threshold",
            "segment_by_surprise_templates", "segment_by_surprise"]
@@ -165,11 +166,7 @@ def segment_by_surprise_templates(sequences, lengths, templates: np.ndarray, cod
     threshold = surprise_threshold(templates, settings) if threshold is None else float(threshold)
     hyp = hypotheses(templates, settings)
     segments, costs = [], []
-    for i, length in enumerate(np.asarray(lengths, dtype=np.int64)):
-        length = int(length)
-        if length < settings.min_steps:
-            raise UserError(f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})")
-        x = np.asarray(sequences[i][:length], dtype=np.float64)
+    for i, length, x in demonstrations(sequences, lengths, settings):
         keys, s = [], 0
         while s < length:
             e = s + _cut(follow(x[s:], hyp, settings.fade), threshold, settings, length - s)

@@ -49,7 +49,7 @@ from primspace.errors import UserError
 from primspace.segmentation.result import SegmentationResult, label_segments
 
 __all__ = ["FADE", "TRANSLATE", "OFFSETS", "offset_name", "by_offset", "with_codes", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
-           "best_partition", "labelled_segments", "segment_by_templates", "segment_by_synthesis", "model_inputs"]
+           "best_partition", "demonstrations", "labelled_segments", "segment_by_templates", "segment_by_synthesis", "model_inputs"]
 
 #: Fraction of the model's steps over which a candidate's start offset is faded out.
 FADE = 0.35
@@ -158,16 +158,22 @@ def best_partition(length: int, keys: np.ndarray, cost: np.ndarray) -> list[int]
     return chosen[::-1]
 
 
+def demonstrations(sequences, lengths, settings: SynthesisSettings):
+    """``(i, length, x)`` per demonstration: its valid steps ``x`` ``(length, J)`` as float64;
+    refuses one shorter than a segment's fewest steps."""
+    for i, length in enumerate(np.asarray(lengths, dtype=np.int64)):
+        length = int(length)
+        if length < settings.min_steps:
+            raise UserError(f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})")
+        yield i, length, np.asarray(sequences[i][:length], dtype=np.float64)
+
+
 def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.ndarray, n_primitives: int,
                          settings: SynthesisSettings, random_state: int = 0) -> SegmentationResult:
     """Segment scaled demonstrations ``sequences`` ``(N, T, J)`` (valid steps ``lengths``) by
     the ``templates`` and label the segments by clustering their templates' ``codes``."""
     segments, costs = [], []
-    for i, length in enumerate(np.asarray(lengths, dtype=np.int64)):
-        length = int(length)
-        if length < settings.min_steps:
-            raise UserError(f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})")
-        x = np.asarray(sequences[i][:length], dtype=np.float64)
+    for i, length, x in demonstrations(sequences, lengths, settings):
         keys = candidate_segments(length, settings)
         cost, nearest = candidate_costs(x, keys, templates, settings.fade)
         chosen = best_partition(length, keys, cost)
