@@ -33,9 +33,10 @@ stretch of a long demonstration that is one primitive is explained by one of the
    clustering works (single-primitive codes).
 
 What it needs that the window-code method does not: a model of single primitives, trained
-on demonstrations of one primitive each (the simulator's ``demo`` or ``paper`` data). What
-it does not do yet: refine a segment's code by inference with θ frozen (the nearest
-fitted code stands for it), or learn the duration bounds (given, or 0.4 T1 .. 0.85 T1).
+on demonstrations of one primitive each (the simulator's ``demo`` or ``paper`` data, LASA's
+single strokes). A segment's code may instead be inferred with θ frozen
+(``infer_epochs``, :mod:`primspace.segmentation.inferred`; measured not to help, so off by
+default). What it does not do: learn the duration bounds (given, or 0.4 T1 .. 0.85 T1).
 """
 
 from __future__ import annotations
