@@ -51,6 +51,7 @@ def test_runs_are_segmented_and_scored(finished):
         assert (r["window"], r["n_train"], r["n_eval"]) == (8, 4, 4)
         seg = r["segmentation"]
         assert seg["tolerance"] == 8 and seg["segments_true"] == 8  # two primitives in each of 4 held-out demonstrations
+        assert seg["boundary_transition"]["f1"] >= seg["boundary"]["f1"]  # a 4-step transition widens the reach
         assert 0 <= seg["boundary"]["f1"] <= 1 and 0 < seg["accuracy"] <= 1
         assert len(r["infer"]) == 3  # epoch 0 and two inference epochs
     zero = results["runs"][0]["segmentation_untrained"]

@@ -250,3 +250,26 @@ def test_identical_codes_get_one_label_and_a_note():
     assert all(len(b) == 0 for b in result.boundaries)
     assert all((labels == 0).all() for labels in result.step_labels)
     assert result.note is not None and "identical" in result.note
+
+
+def test_a_boundary_anywhere_in_the_transition_matches_within_the_tolerance():
+    from primspace.segmentation import boundary_f1
+
+    truth = [np.array([20, 60])]
+    found = [np.array([33, 55])]  # 13 steps into a 10-step transition (3 past its end); 5 before the next
+    assert boundary_f1(truth, found, 4)["tp"] == 0 and boundary_f1(truth, found, 5)["tp"] == 1  # strict
+    within = boundary_f1(truth, found, 4, extent=10)  # reaches [16, 34] and [56, 74]: 55 misses by one
+    assert within["tp"] == 1 and boundary_f1(truth, found, 5, extent=10)["tp"] == 2
+    assert boundary_f1(truth, [np.array([15])], 4, extent=10)["tp"] == 0  # before the transition's reach
+    with pytest.raises(UserError, match="extent"):
+        boundary_f1(truth, found, 4, extent=-1)
+
+
+def test_the_composite_data_records_its_transition_steps(tmp_path):
+    from primspace.data import MotionDataset
+    from primspace.sim.composite import CompositeConfig, generate_composite, transition_steps
+
+    data = generate_composite(CompositeConfig(n_sequences=2, max_primitives=2, duration=(31, 32), transition_steps=5),
+                              seed=0, out=tmp_path / "long.h5", progress=False)
+    assert transition_steps(MotionDataset.load(data)) == 5 and transition_steps(MotionDataset.load(data).subset([1])) == 5
+    assert transition_steps(MotionDataset(np.zeros((1, 4, 2)))) == 0  # not made by the generator

@@ -320,11 +320,12 @@ def _segment_by_primitives(trained, ds, run: Path, data: Path, primitives, toler
     from primspace.segmentation import segmentation_scores
     from primspace.segmentation.surprise import segment_by_surprise
     from primspace.segmentation.synthesis import segment_by_synthesis
+    from primspace.sim.composite import transition_steps
 
     k = _primitives(ds, primitives, data)
     segment = segment_by_surprise if method == "surprise" else segment_by_synthesis
     result = segment(trained, ds, k, min_steps=steps[0], max_steps=steps[1], offset=steps[2], infer_epochs=steps[3])
-    scores = segmentation_scores(result, ds, 8 if tolerance is None else tolerance)
+    scores = segmentation_scores(result, ds, 8 if tolerance is None else tolerance, transition_steps(ds))
     return np.arange(len(ds)), ds, result, scores, 1, k
 
 
@@ -371,4 +372,7 @@ def _segment_summary(scores: dict, n: int) -> str:
     b = scores["boundary"]
     return (f"{n} demonstrations: {scores['segments_found']} segments found, {scores['segments_true']} true; "
             f"boundary F1 {b['f1']:.3f} (precision {b['precision']:.3f}, recall {b['recall']:.3f}, "
-            f"within {scores['tolerance']} steps); step labelling accuracy {scores['accuracy']:.3f}")
+            f"within {scores['tolerance']} steps"
+            + (f"; {scores['boundary_transition']['f1']:.3f} within them of the transition"
+               if "boundary_transition" in scores else "")
+            + f"); step labelling accuracy {scores['accuracy']:.3f}")

@@ -87,6 +87,7 @@ def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_di
         ``accuracy`` (per step), ``tolerance``, ``segments_true``, ``segments_found``.
     """
     from primspace.segmentation import segment_sequences, segmentation_scores
+    from primspace.sim.composite import transition_steps
 
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     sequences = np.asarray(codes, dtype=np.float64).reshape(len(data), -1, latent_dim)
@@ -97,7 +98,7 @@ def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_di
         raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tol}")
     given = {} if data.step_segments is None else {
         "accuracy_true_boundaries": _accuracy_given_boundaries(sequences, data, window, n_primitives)}
-    return result, segmentation_scores(result, data, tol, **given)
+    return result, segmentation_scores(result, data, tol, transition_steps(data), **given)
 
 
 def _accuracy_given_boundaries(sequences: np.ndarray, data: MotionDataset, window: int, n_primitives: int) -> float | None:
@@ -165,7 +166,7 @@ def run_composite(exp: ExperimentDir) -> dict:
                 points.append(GridPoint(composite_key(init, q, seed), args))
     with exp.stage("composite"):
         grid = exp.grid(run_composite_point, shared_fits_last(points), "composite runs")
-    runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
+    runs = _rescored(exp, [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results])
     previous = exp.read_results("composite") or {}
     with exp.stage("composite peers"):
         peers = _peers_by_seed(exp, data, runs, previous.get("peers", {}))
@@ -179,6 +180,28 @@ def run_composite(exp: ExperimentDir) -> dict:
         _write_timelines(exp, runs)
     figures.draw_composite(exp.path)
     return results
+
+
+def _rescored(exp: ExperimentDir, runs: list[dict]) -> list[dict]:
+    """Runs scored before 0.8 lack the F1 within the transition: segment their stored codes
+    again (the same segmentation, scored anew) and complete their stored results."""
+    from primspace.experiments.sweep import complete_result
+    from primspace.sim.composite import transition_steps
+    from primspace.train import load_run
+
+    data = exp.dataset()
+    if not transition_steps(data):
+        return runs
+    out = []
+    for r in runs:
+        if "boundary_transition" not in r["segmentation"]:
+            run = load_run(run_dir_of(exp.path, r["key"]) / "infer")
+            held = data.subset(run.indices)
+            extra = {"segmentation": segment_codes(run.latents, held, r["window"], r["latent_dim"])[1],
+                     "segmentation_untrained": segment_codes(run.initial_latents, held, r["window"], r["latent_dim"])[1]}
+            r = complete_result(exp.path, r["key"], extra) | {"key": r["key"]}
+        out.append(r)
+    return out
 
 
 def _peers_by_seed(exp: ExperimentDir, data: MotionDataset, runs: list[dict], previous: dict) -> dict:

@@ -35,15 +35,19 @@ def held_out_sequences(data: MotionDataset, eval_idx) -> tuple[MotionDataset, li
 
 
 def score_found(held: MotionDataset, boundaries, step_labels, tolerance: int) -> dict:
-    """Boundary precision / recall / F1 within ``tolerance`` steps, per-step labelling
-    accuracy, and the number of segments found (``step_labels``: one array per demonstration)."""
+    """Boundary precision / recall / F1 within ``tolerance`` steps (and within it of the
+    transition, for data with transitions), per-step labelling accuracy, and the number of
+    segments found (``step_labels``: one array per demonstration)."""
     from primspace.segmentation import boundaries_from_segments, boundary_f1, step_labelling_accuracy
+    from primspace.sim.composite import transition_steps
 
     truth = boundaries_from_segments(held.step_segments, held.lengths)
     found = np.full(held.step_labels.shape, -1)
     for i, labels in enumerate(step_labels):
         found[i, : len(labels)] = labels
-    return {"boundary": boundary_f1(truth, boundaries, tolerance),
+    transition = transition_steps(held)
+    within = {"boundary_transition": boundary_f1(truth, boundaries, tolerance, extent=transition)} if transition else {}
+    return within | {"boundary": boundary_f1(truth, boundaries, tolerance),
             "accuracy": step_labelling_accuracy(held.step_labels, found),
             "segments_found": int(sum(len(b) + 1 for b in boundaries))}
 

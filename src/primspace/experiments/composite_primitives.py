@@ -101,6 +101,7 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
     from primspace.segmentation import segmentation_scores
     from primspace.segmentation.surprise import segment_by_surprise
     from primspace.segmentation.synthesis import segment_by_synthesis
+    from primspace.sim.composite import transition_steps
     from primspace.train import configure_process
 
     composite = ExperimentPreset.from_dict(preset)
@@ -124,7 +125,7 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
         start = time.perf_counter()
         result = method(fitted, held, k, min_steps=lo, max_steps=hi, random_state=seed)
         timeline |= _timeline_arrays(name, fitted, held, result)
-        scores = segmentation_scores(result, held, window)
+        scores = segmentation_scores(result, held, window, transition_steps(held))
         out[name] = scores | {"seconds": round(time.perf_counter() - start, 2), "note": result.note,
                               "accuracy_template_labels": template_label_bound(fitted, primitives, held, result)}
         out[name] |= {k: result.chosen[k] for k in ("offset", "costs", "threshold") if k in result.chosen}

@@ -57,7 +57,7 @@ __all__ = ["ChangePointPeer", "HMMPeer", "MissingPackage", "PeerResult", "PEERS"
            "resample_segment", "label_by_clustering", "merge_short_runs", "elbow", "run_peers", "peer_sequences"]
 
 #: Bumped when a peer's rule or setting changes (a stored result of another version is recomputed).
-PEERS_VERSION = 1
+PEERS_VERSION = 2  # 2: scored within the transition too (0.8)
 #: Steps a segment is resampled to before its segments are clustered.
 LABEL_STEPS = 20
 #: Most change points per demonstration the ``elbow`` rule considers.

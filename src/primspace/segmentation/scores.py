@@ -39,14 +39,18 @@ def boundaries_from_segments(step_segments, lengths=None) -> list[np.ndarray]:
     return out
 
 
-def boundary_f1(true_boundaries, found_boundaries, tolerance) -> dict:
+def boundary_f1(true_boundaries, found_boundaries, tolerance, extent=0) -> dict:
     """Precision, recall and F1 of found boundaries matched one-to-one within ``tolerance`` steps.
 
     A found ``f`` and a true ``t`` may match if ``|f - t| <= tolerance``, each at most once,
     and the matches are as many as possible. Per sequence, both sorted, the earliest
     unmatched found boundary is matched to the earliest true one within reach: optimal, as
-    the reaches ``[t - tol, t + tol]`` end in the order they start (earliest-deadline-first
-    matching of points to intervals; an exchange argument).
+    the reaches ``[t - tol, t + extent + tol]`` end in the order they start (all are equally
+    long: earliest-deadline-first matching of points to intervals; an exchange argument).
+
+    ``extent > 0``: each true boundary is the first step of a transition of ``extent``
+    steps that belongs to neither primitive (the composite simulator's), and a found one
+    matches anywhere from ``tol`` before it to ``tol`` after the transition's end.
 
     Parameters
     ----------
@@ -54,6 +58,8 @@ def boundary_f1(true_boundaries, found_boundaries, tolerance) -> dict:
         Per sequence, boundary steps; as many sequences in both.
     tolerance : float
         >= 0, in steps.
+    extent : float, default 0
+        >= 0: the steps of the transition that starts at each true boundary.
 
     Returns
     -------
@@ -63,12 +69,14 @@ def boundary_f1(true_boundaries, found_boundaries, tolerance) -> dict:
     """
     if isinstance(tolerance, bool) or not isinstance(tolerance, Real) or not tolerance >= 0 or tolerance == np.inf:
         raise UserError(f"tolerance must be a finite number >= 0 (steps), got {tolerance!r}")
+    if isinstance(extent, bool) or not isinstance(extent, Real) or not extent >= 0 or extent == np.inf:
+        raise UserError(f"transition extent must be a finite number >= 0 (steps), got {extent!r}")
     if len(true_boundaries) != len(found_boundaries):
         raise UserError(f"{len(true_boundaries)} sequences of true boundaries but {len(found_boundaries)} found")
     tp = fp = fn = 0
     for t, f in zip(true_boundaries, found_boundaries):
         t, f = np.sort(np.asarray(t, dtype=float).ravel()), np.sort(np.asarray(f, dtype=float).ravel())
-        m = _matches(t, f, float(tolerance))
+        m = _matches(t, f, float(tolerance), float(tolerance) + float(extent))
         tp, fp, fn = tp + m, fp + len(f) - m, fn + len(t) - m
     precision = tp / (tp + fp) if tp + fp else 1.0
     recall = tp / (tp + fn) if tp + fn else 1.0
@@ -76,13 +84,13 @@ def boundary_f1(true_boundaries, found_boundaries, tolerance) -> dict:
     return {"precision": float(precision), "recall": float(recall), "f1": float(f1), "tp": tp, "fp": fp, "fn": fn}
 
 
-def _matches(t: np.ndarray, f: np.ndarray, tol: float) -> int:
-    """Most one-to-one pairs ``|f - t| <= tol`` of two sorted arrays (greedy, optimal)."""
+def _matches(t: np.ndarray, f: np.ndarray, before: float, after: float) -> int:
+    """Most one-to-one pairs ``t - before <= f <= t + after`` of two sorted arrays (greedy, optimal)."""
     i = j = m = 0
     while i < len(t) and j < len(f):
-        if f[j] < t[i] - tol:
+        if f[j] < t[i] - before:
             j += 1  # f[j] is too early for t[i] and every later true boundary
-        elif f[j] > t[i] + tol:
+        elif f[j] > t[i] + after:
             i += 1  # t[i] is too early for f[j] and every later found boundary
         else:
             i, j, m = i + 1, j + 1, m + 1
@@ -114,15 +122,19 @@ def step_labelling_accuracy(true_step_labels, found_step_labels) -> float:
     return clustering_accuracy(t[known], f[known]) * float(known.mean()) if known.any() else 0.0
 
 
-def segmentation_scores(result: SegmentationResult, data, tolerance: int, **more) -> dict:
+def segmentation_scores(result: SegmentationResult, data, tolerance: int, transition: int = 0, **more) -> dict:
     """What ``primspace segment`` reports for any method: segments found and, when ``data`` (a
     :class:`~primspace.data.MotionDataset`) has the step fields, boundary F1 within ``tolerance``
-    steps, per-step accuracy (then ``more``, e.g. the accuracy given the true boundaries)."""
+    steps, per-step accuracy (then ``more``, e.g. the accuracy given the true boundaries);
+    with ``transition > 0`` steps also ``boundary_transition``, the F1 that counts a found
+    boundary anywhere within ``tolerance`` of the transition (:func:`boundary_f1`'s ``extent``)."""
     scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
     if data.step_segments is None:
         return scores
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     truth = boundaries_from_segments(data.step_segments, lengths)
+    if transition:
+        scores["boundary_transition"] = boundary_f1(truth, result.boundaries, tolerance, extent=transition)
     return scores | {
         "boundary": boundary_f1(truth, result.boundaries, tolerance),
         "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)), **more,

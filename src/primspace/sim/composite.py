@@ -34,7 +34,7 @@ from primspace.sim.scene import FINGER_MAX, FINGERTIP_RADIUS, TABLE
 
 __all__ = [
     "CompositeConfig", "COMPOSITE_PRESETS", "ALLOWED", "MOVES_TO", "resolve_composite", "valid_chains",
-    "SequencePlan", "draw_plan", "transition_path", "simulate_sequence", "generate_chunk", "generate_composite",
+    "SequencePlan", "draw_plan", "transition_path", "transition_steps", "simulate_sequence", "generate_chunk", "generate_composite",
 ]
 
 #: Where push and pull leave the block: the zone it is in afterwards (others leave it in place).
@@ -447,3 +447,17 @@ def generate_composite(config_or_preset="composite-demo", seed: int = 0, out: st
             if values is not None:
                 arrays[name][sl] = values
     return MotionDataset(**arrays, **settings)
+
+
+def transition_steps(data) -> int:
+    """The steps of the transition that begins each primitive after the first in ``data``, as
+    the generator recorded them in its ``source`` (:func:`generate_composite`); 0 for data it
+    did not make (LASA chains, imports: a boundary is one step)."""
+    source = str(getattr(data, "source", "") or "")
+    prefix = "primspace.sim.composite "
+    if not source.startswith(prefix):
+        return 0
+    try:
+        return int(json.loads(source[len(prefix):])["config"]["transition_steps"])
+    except (ValueError, KeyError, TypeError):
+        return 0
