@@ -7,8 +7,10 @@ a few dozen distinct codes (one per fitted primitive) stand for hundreds of segm
 segment is labelled by which template it is nearest. Issue 27 asks instead for "inferred
 code, segment resampled to the model's length ... warm-started": the paper's evaluation
 (``infer``, θ frozen) run on the segments themselves, so that each segment's code places it
-in the single-primitive latent space, where the paper's clustering works ("which enables us
-to use subspace clustering algorithm for labeling a collection of motion").
+in the single-primitive latent space, where the paper's clustering works (Summary and
+Discussion, verbatim: "Moreover, these manifolds are close enough to affine subspaces, which
+enables us to use subspace clustering algorithm for labeling a collection of motion in
+unsupervised manner.").
 
 1. Each segment is resampled to the model's ``T1`` steps and moved into the model's frame:
    its start offset from its nearest template removed as the offset model says (faded out,

@@ -1,7 +1,10 @@
 """What a segmentation of long demonstrations finds, whatever the method: its segments,
 boundaries and labels (:class:`SegmentationResult`), and the labels given to segment codes by
-the paper's tool, affine subspace clustering (:func:`label_segments`): "which enables us to use
-subspace clustering algorithm for labeling a collection of motion" (shared/paper.tex)."""
+the paper's tool, affine subspace clustering (:func:`label_segments`). The paper
+(shared/paper.tex, Summary and Discussion, verbatim): "Moreover, these manifolds are close
+enough to affine subspaces, which enables us to use subspace clustering algorithm for
+labeling a collection of motion in unsupervised manner." (the manifolds: those of one
+primitive's motions in trajectory space)."""
 
 from __future__ import annotations
 

@@ -5,8 +5,10 @@ consecutive primitives ... a sequence of such vectors is used", the challenges b
 "primitives might have different number of timesteps and not clear borderline between
 primitives". A demonstration of ``L`` valid steps has window codes ``z_k``, window ``k``
 covering steps ``[kW, (k+1)W)``. This module finds the borderlines from the codes and names
-the primitives with the paper's tool: codes of one primitive lie near an affine subspace,
-"which enables us to use subspace clustering algorithm for labeling a collection of motion".
+the primitives with the paper's tool: codes of one primitive lie near an affine subspace
+(verbatim: "Moreover, these manifolds are close enough to affine subspaces, which enables us
+to use subspace clustering algorithm for labeling a collection of motion in unsupervised
+manner.").
 
 * **Change points: exact penalised optimal partitioning** (Jackson et al. 2005) of a
   piecewise-constant model: within-segment sums of squares plus ``penalty`` per segment,
