@@ -42,7 +42,7 @@ from primspace.experiments.sweep import GridPoint, run_dir_of
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = ["composite_key", "split_sequences", "segment_codes", "run_composite_point", "run_composite",
-           "TIMELINE_SAMPLES"]
+           "TIMELINE_SAMPLES", "padded_boundaries"]
 
 #: Held-out demonstrations shown in the timeline figure.
 TIMELINE_SAMPLES = 4
@@ -250,7 +250,7 @@ def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
         result, _ = segment_codes(run.latents, held_out, r["window"], r["latent_dim"])
         arrays[f"codes_{r['init']}"] = run.latents[:n].reshape(n, -1, r["latent_dim"])
         arrays[f"found_{r['init']}"] = result.padded_step_labels(data.length)[:n]
-        arrays[f"bounds_{r['init']}"] = _padded(result.boundaries[:n])
+        arrays[f"bounds_{r['init']}"] = padded_boundaries(result.boundaries[:n])
     arrays |= {"samples": run.indices[:n], "lengths": held_out.lengths[:n], "step_labels": held_out.step_labels[:n],
                "step_segments": held_out.step_segments[:n]}
     exp.write_arrays("composite", arrays)
@@ -259,7 +259,7 @@ def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
                                              "label_names": list(data.label_names)})
 
 
-def _padded(boundaries: list[np.ndarray]) -> np.ndarray:
+def padded_boundaries(boundaries: list[np.ndarray]) -> np.ndarray:
     """Ragged boundary lists as one (n, m) int array, -1 padded."""
     width = max((len(b) for b in boundaries), default=0)
     out = np.full((len(boundaries), max(width, 1)), -1, dtype=np.int64)

@@ -73,23 +73,15 @@ def template_label_bound(fitted, primitives: MotionDataset, held: MotionDataset,
     nearest template (the single primitives' labels): the most that any clustering of the
     segments' template codes can reach with these segments. None without labels."""
     from primspace.segmentation import step_labelling_accuracy
-    from primspace.segmentation.synthesis import candidate_costs, model_inputs
 
     if primitives.labels is None or (primitives.labels < 0).any():
         return None
-    from primspace.segmentation.synthesis import OFFSETS
-
-    seqs, _, templates, _, settings = model_inputs(fitted, held, fade=OFFSETS[result.chosen.get("offset", "fade")])
     names = list(held.label_names)
     labels = np.array([names.index(primitives.label_names[int(v)]) if primitives.label_names[int(v)] in names else -1
                        for v in primitives.labels[np.asarray(fitted.indices)]])
     found = np.full(held.step_labels.shape, -1)
-    for i in np.unique(result.segment_sample):
-        mine = result.segment_sample == i
-        keys = np.c_[result.segment_start[mine], result.segment_stop[mine]]
-        _, nearest = candidate_costs(np.asarray(seqs[i], dtype=np.float64), keys, templates, settings.fade)
-        for (a, b), t in zip(keys, nearest):
-            found[i, a:b] = labels[t]
+    for i, a, b, t in zip(result.segment_sample, result.segment_start, result.segment_stop, result.segment_templates):
+        found[i, a:b] = labels[t]
     return step_labelling_accuracy(held.step_labels, found)
 
 
@@ -139,12 +131,12 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
 def _timeline_arrays(name: str, fitted, held: MotionDataset, result) -> dict:
     """The first :data:`~primspace.experiments.composite.TIMELINE_SAMPLES` held-out
     demonstrations' scaled joints, true steps and ``name``'s found labels and boundaries."""
-    from primspace.experiments.composite import TIMELINE_SAMPLES, _padded
+    from primspace.experiments.composite import TIMELINE_SAMPLES, padded_boundaries
 
     n = min(TIMELINE_SAMPLES, len(held))
     return {"joints": fitted.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64)),
             "lengths": held.lengths[:n], "step_labels": held.step_labels[:n], "step_segments": held.step_segments[:n],
-            f"found_{name}": result.padded_step_labels(held.length)[:n], f"bounds_{name}": _padded(result.boundaries[:n])}
+            f"found_{name}": result.padded_step_labels(held.length)[:n], f"bounds_{name}": padded_boundaries(result.boundaries[:n])}
 
 
 def _check_unseen(chains: MotionDataset) -> None:

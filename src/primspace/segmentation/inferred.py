@@ -60,25 +60,25 @@ def infer_segment_codes(run, pieces: np.ndarray, start_codes: np.ndarray, epochs
     return np.asarray(inferred.latents, dtype=np.float64)
 
 
-def relabel_by_inference(run, data: MotionDataset, result: SegmentationResult, n_primitives: int, epochs: int,
+def relabel_by_inference(run, inputs: tuple, result: SegmentationResult, n_primitives: int, epochs: int,
                          random_state: int = 0) -> SegmentationResult:
     """``result`` with each segment's code inferred (module docstring) and the segments
-    labelled by clustering those codes; its nearest-template codes are the warm start."""
-    from primspace.segmentation.synthesis import OFFSETS, candidate_costs, model_inputs
+    labelled by clustering those codes; its nearest templates (``segment_templates``) and
+    their codes are the warm start. ``inputs``: what
+    :func:`~primspace.segmentation.synthesis.model_inputs` read for ``result``."""
+    from primspace.segmentation.synthesis import OFFSETS
 
+    sequences, _, templates, codes, _ = inputs
+    nearest = result.segment_templates
+    if nearest is None:
+        raise UserError("the segments have no nearest templates (segment codes are inferred for synthesis and surprise)")
     fade = OFFSETS[result.chosen.get("offset", "fade")]
-    sequences, _, templates, codes, _ = model_inputs(run, data, fade=fade)
-    nearest = np.empty(len(result.segment_sample), dtype=np.int64)
-    for i in np.unique(result.segment_sample):
-        mine = np.flatnonzero(result.segment_sample == i)
-        keys = np.c_[result.segment_start[mine], result.segment_stop[mine]]
-        nearest[mine] = candidate_costs(np.asarray(sequences[i], dtype=np.float64), keys, templates, fade)[1]
     pieces = in_model_frame(sequences, result, templates, nearest, fade)
-    inferred = infer_segment_codes(run, pieces, codes[nearest], epochs, data.joint_names)
+    names = (run.config or {}).get("data", {}).get("joint_names")
+    inferred = infer_segment_codes(run, pieces, codes[nearest], epochs, names)
     labels, note = label_segments(inferred, n_primitives, random_state=random_state)
     sample, start, stop = result.segment_sample, result.segment_start, result.segment_stop
     result.segment_codes, result.segment_labels, result.note = inferred, labels, note
     result.step_labels = [np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(result.step_labels))]
     result.chosen = dict(result.chosen) | {"codes": f"inferred, {int(epochs)} epochs"}
     return result
-

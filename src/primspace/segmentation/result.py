@@ -45,6 +45,9 @@ class SegmentationResult:
     window : int
     note : str or None
         Set when there were too few segments to cluster: each segment is then its own label.
+    segment_templates : ndarray (S,) of int64 or None
+        Synthesis and surprise: the template (decoded fitted code) nearest each segment,
+        whose code ``segment_codes`` holds unless the codes were inferred.
     chosen : dict
         What the method chose without labels (synthesis and surprise: the ``offset`` model;
         surprise: its ``threshold``).
@@ -62,6 +65,7 @@ class SegmentationResult:
     penalties: np.ndarray = field(default_factory=lambda: np.zeros(0))
     window: int = 1
     note: str | None = None
+    segment_templates: np.ndarray | None = None
     chosen: dict = field(default_factory=dict)
 
     def padded_step_labels(self, n_steps: int) -> np.ndarray:

@@ -45,7 +45,7 @@ it, so it can run as the motion arrives.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -188,9 +188,11 @@ def segment_by_surprise(run, data: MotionDataset, n_primitives: int, *, min_step
     fails (module docstring). ``offset`` as :func:`~primspace.segmentation.synthesis.segment_by_synthesis`
     (``auto``: the offset model whose segments are explained better), and ``infer_epochs``
     (segment codes inferred with θ frozen). The data's joints must be the run's (names and order)."""
-    def segment(fade: float) -> SegmentationResult:
-        sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
-        return segment_by_surprise_templates(sequences, lengths, templates, codes, n_primitives, settings, threshold,
-                                             random_state)
+    inputs = model_inputs(run, data, min_steps, max_steps, grid)
+    sequences, lengths, templates, codes, settings = inputs
 
-    return with_codes(run, data, by_offset(segment, offset), n_primitives, infer_epochs, random_state)
+    def segment(fade: float) -> SegmentationResult:
+        return segment_by_surprise_templates(sequences, lengths, templates, codes, n_primitives,
+                                             replace(settings, fade=fade), threshold, random_state)
+
+    return with_codes(run, inputs, by_offset(segment, offset), n_primitives, infer_epochs, random_state)

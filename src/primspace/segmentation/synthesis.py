@@ -41,7 +41,7 @@ default). What it does not do: learn the duration bounds (given, or 0.4 T1 .. 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -49,7 +49,7 @@ from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
 from primspace.segmentation.result import SegmentationResult, label_segments
 
-__all__ = ["FADE", "TRANSLATE", "OFFSETS", "offset_name", "by_offset", "with_codes", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
+__all__ = ["FADE", "TRANSLATE", "OFFSETS", "by_offset", "with_codes", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
            "best_partition", "demonstrations", "labelled_segments", "segment_by_templates", "segment_by_synthesis", "model_inputs"]
 
 #: Fraction of the model's steps over which a candidate's start offset is faded out.
@@ -201,7 +201,7 @@ def labelled_segments(segments: list, codes: np.ndarray, n_primitives: int, pena
         boundaries=[start[sample == i][1:] for i in range(len(segments))],
         step_labels=[np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(segments))],
         segment_codes=seg_codes, segment_sample=sample, segment_start=start, segment_stop=stop,
-        segment_labels=labels, penalties=np.asarray(penalties), window=1, note=note,
+        segment_labels=labels, penalties=np.asarray(penalties), window=1, note=note, segment_templates=rows[:, 3],
     )
 
 
@@ -217,27 +217,26 @@ def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_ste
     inferred with θ frozen and clustered (:mod:`primspace.segmentation.inferred`) instead of
     their nearest templates' codes.
     """
+    inputs = model_inputs(run, data, min_steps, max_steps, grid)
+    sequences, lengths, templates, codes, settings = inputs
+
     def segment(fade: float) -> SegmentationResult:
-        sequences, lengths, templates, codes, settings = model_inputs(run, data, min_steps, max_steps, grid, fade)
-        return segment_by_templates(sequences, lengths, templates, codes, n_primitives, settings, random_state)
+        return segment_by_templates(sequences, lengths, templates, codes, n_primitives, replace(settings, fade=fade),
+                                    random_state)
 
-    return with_codes(run, data, by_offset(segment, offset), n_primitives, infer_epochs, random_state)
+    return with_codes(run, inputs, by_offset(segment, offset), n_primitives, infer_epochs, random_state)
 
 
-def with_codes(run, data: MotionDataset, result: SegmentationResult, n_primitives: int, infer_epochs: int,
+def with_codes(run, inputs: tuple, result: SegmentationResult, n_primitives: int, infer_epochs: int,
                random_state: int = 0) -> SegmentationResult:
     """``result`` as it is (segment codes: the nearest templates'), or with the codes
-    inferred for ``infer_epochs > 0`` epochs and the segments labelled by them."""
+    inferred for ``infer_epochs > 0`` epochs and the segments labelled by them
+    (``inputs``: :func:`model_inputs`'s, read once)."""
     if int(infer_epochs) <= 0:
         return result
     from primspace.segmentation.inferred import relabel_by_inference
 
-    return relabel_by_inference(run, data, result, n_primitives, int(infer_epochs), random_state)
-
-
-def offset_name(fade: float) -> str:
-    """``fade`` or ``translate``: the :data:`OFFSETS` entry of a fade value."""
-    return "translate" if fade == TRANSLATE else "fade"
+    return relabel_by_inference(run, inputs, result, n_primitives, int(infer_epochs), random_state)
 
 
 def by_offset(segment, offset: str) -> SegmentationResult:
