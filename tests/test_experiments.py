@@ -444,6 +444,19 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
     assert again["chosen"] == tune["chosen"]
 
 
+def test_tuning_table_names_the_tuned_q_on_rows_of_another_q():
+    """The setting is chosen at one q and applied at every q: a row of another q says whose
+    choice it is and shows no validation loss (it had none)."""
+    from primspace.experiments.results import tuning_table
+
+    run = lambda q, loss: {"init": "zero", "latent_dim": q, "seed": 0, "infer": [{"loss": 1.0}, {"loss": loss}]}
+    tune = {"latent_dim": 40, "chosen": {"zero": {"taus": [4.0, 16.0], "latent_lr": 0.01, "validation_loss": 0.5}},
+            "tuned": {"runs": [run(8, 0.2), run(40, 0.1)]}, "shared": {"runs": [run(8, 0.4), run(40, 0.3)]}}
+    _, rows = tuning_table(tune)
+    assert rows[0][:4] == [8, "zero", "q = 40's choice", "—"]
+    assert rows[1][:4] == [40, "zero", "τ 4, 16; latent lr 0.01", "0.5"]
+
+
 def test_tiny_experiment_numbers_are_pinned(finished):
     """Same seed, same numbers: the tiny grid's losses, clustering accuracies and success
     rates as of 0.2 (CPU). A refactor that changes any of them changes results, and must

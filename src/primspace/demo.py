@@ -1,12 +1,13 @@
 """The one-command demo (``make demo``): simulate, learn, cluster, judge, report.
 
 At demo scale (:data:`primspace.experiments.presets.PRESETS` ``["demo"]``) on a 2-core
-CPU, in about five minutes: generate the demo data set with the MuJoCo arm, run the
-intra-primitive experiment (four latent initialisations and the calibrated start, two latent sizes), cluster the
-learned codes and the raw trajectories, judge the generated motions in the simulator,
-and write the HTML report. Whether the paper's qualitative result (projection-initialised
-codes infer to a lower loss than zero and random ones) holds at this scale is stated
-plainly in the summary and the report, whichever way it comes out.
+CPU, in about two minutes (the target is five): generate the demo data set with the
+MuJoCo arm, run the intra-primitive experiment (four latent initialisations and the
+calibrated start, two latent sizes), cluster the learned codes and the raw trajectories,
+judge the generated motions in the simulator, and write the HTML report. Whether the
+paper's qualitative result (projection-initialised codes infer to a lower loss than zero
+and random ones) holds at this scale is stated plainly in the summary and the report,
+whichever way it comes out.
 
 This module sits above both the experiments (which compute and write results) and the
 report (which reads them): neither imports it, and the report imports no experiment.

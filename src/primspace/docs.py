@@ -1,8 +1,10 @@
-"""The numbers of README and docs/reproduce.md, written from the stored summaries.
+"""The numbers of README, docs/reproduce.md, docs/predict.md and docs/sequences.md, written
+from the stored summaries.
 
 ``python -m primspace.docs`` reads every ``docs/results/*.json`` (experiment summaries,
-:mod:`primspace.experiments.summary`) and rewrites the generated blocks of README.md and
-docs/reproduce.md, the text between ``<!-- generated: NAME -->`` and
+:mod:`primspace.experiments.summary`) and rewrites the generated blocks of README.md,
+docs/reproduce.md, docs/predict.md (prediction, scene) and docs/sequences.md (composite
+segmentation), the text between ``<!-- generated: NAME -->`` and
 ``<!-- end generated: NAME -->``; ``--check`` writes nothing and exits 1 when a block
 differs from what it would write (tests/test_docs_generated.py runs it). Everything else
 in those files is prose, written by hand around the blocks.
@@ -196,8 +198,10 @@ def render_summary(summary: dict) -> str:
         out += ["", f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
                     f"the fitted part, over the same grid (layer time constants {res['tune']['grid']['taus']}, latent "
                     f"learning rate x {', '.join(f'{f:.3g}' for f in res['tune']['grid']['latent_lr_factor'])}) at "
-                    f"q = {res['tune']['latent_dim']}; the final eval loss with the shared and the tuned setting "
-                    "(mean ± std over seeds):", "",
+                    f"q = {res['tune']['latent_dim']} and applied at every q, epochs the preset's for all; the "
+                    "final eval loss with the shared and the tuned setting (mean ± std over seeds). The headline and "
+                    "the claims use the shared setting (the paper's protocol); this table says whether a gap "
+                    "survives tuning:", "",
                 _table(columns, [[str(c) for c in row] for row in rows])]
     claims = _claim_rows(res)
     if claims:

@@ -378,17 +378,22 @@ def calibration_verdict(results: dict) -> tuple[bool | None, str]:
 def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], list[list]]:
     """Tune: per q and init, the chosen setting (layer time constants, latent learning
     rate, its validation loss) and the final eval loss under the shared setting and under
-    the tuned one, mean ± std over seeds. The shared runs are ``intra``'s (default: the
-    copy the tune results keep)."""
+    the tuned one, mean ± std over seeds. The setting is chosen at one q (``latent_dim``)
+    and applied at every q: rows of another q name that choice instead of repeating it.
+    The shared runs are ``intra``'s (default: the copy the tune results keep)."""
     shared = (intra or results.get("shared") or {"runs": []})["runs"]
     tuned = results["tuned"]["runs"]
+    tuned_at = results.get("latent_dim")
     rows = []
     for q in sorted({r["latent_dim"] for r in tuned}):
         for init, setting in results["chosen"].items():
             s = [final([h["loss"] for h in r["infer"]]) for r in shared if r["init"] == init and r["latent_dim"] == q]
             t = [final([h["loss"] for h in r["infer"]]) for r in tuned if r["init"] == init and r["latent_dim"] == q]
-            rows.append([q, init, f"τ {setting['taus'][0]:g}, {setting['taus'][1]:g}; latent lr {setting['latent_lr']:.3g}",
-                         f"{setting['validation_loss']:.3g}", _mean_std(s), _mean_std(t)])
+            choice = f"τ {setting['taus'][0]:g}, {setting['taus'][1]:g}; latent lr {setting['latent_lr']:.3g}"
+            if q == tuned_at:
+                rows.append([q, init, choice, f"{setting['validation_loss']:.3g}", _mean_std(s), _mean_std(t)])
+            else:  # tuned at one q, applied at every q: the choice is q = tuned_at's
+                rows.append([q, init, f"q = {tuned_at}'s choice", "—", _mean_std(s), _mean_std(t)])
     return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
             "final eval loss, tuned"], rows
 

@@ -60,7 +60,7 @@ class GenerationConfig:
         Largest allowed distance between the TCP and its scripted path (m).
     verify : bool
         Replay every generated motion through the success judge and refuse one that
-        fails (a guard against silently writing a bad sample; costs ~10 ms a sample).
+        fails (a guard against silently writing a bad sample; costs ~6 ms a sample).
     """
 
     block_x: tuple[float, ...] = _grid(0.42, 0.60, 7)
