@@ -444,6 +444,17 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
     assert again["chosen"] == tune["chosen"]
 
 
+def test_a_summary_names_every_version_that_ran_into_the_directory():
+    """A stage added to an older directory by a newer version shows beside the version
+    that made it (0.8's summaries named only the first)."""
+    from primspace.experiments.summary import recorded_versions
+
+    meta = {"primspace": "0.5.0", "invocations": [{"command": "a", "primspace": "0.6.1"}, {"command": "b", "primspace": "0.5.0"},
+                                                   {"command": "c", "primspace": "0.8.0"}, {"command": "d", "primspace": "0.8.0"}]}
+    assert recorded_versions(meta) == "0.5.0, 0.6.1, 0.8.0"
+    assert recorded_versions({"primspace": "0.4.0"}) == "0.4.0" and recorded_versions({}) is None
+
+
 def test_tuning_table_names_the_tuned_q_on_rows_of_another_q():
     """The setting is chosen at one q and applied at every q: a row of another q says whose
     choice it is and shows no validation loss (it had none)."""

@@ -23,7 +23,7 @@ from primspace.errors import UserError
 from primspace.experiments.results import read_meta, read_results
 
 __all__ = ["SUMMARY_VERSION", "CURVE_EPOCHS", "DIGITS", "summarize", "read_summary", "write_summary", "cpu_class",
-           "kept_epochs"]
+           "kept_epochs", "recorded_commands", "recorded_versions"]
 
 #: Bumped when the summary's form changes.
 SUMMARY_VERSION = 1
@@ -185,6 +185,18 @@ def recorded_commands(meta: dict) -> str:
     return "\n".join(seen)
 
 
+def recorded_versions(meta: dict) -> str | None:
+    """The primspace versions that ran into an experiment directory, in order, each once:
+    the one that made it, then those of its recorded invocations (a later stage added by
+    a newer version shows, e.g. ``"0.6.1, 0.8.0"``)."""
+    seen: list[str] = [meta["primspace"]] if isinstance(meta.get("primspace"), str) else []
+    for entry in meta.get("invocations", []):
+        version = entry.get("primspace") if isinstance(entry, dict) else None
+        if isinstance(version, str) and version not in seen:
+            seen.append(version)
+    return ", ".join(seen) or None
+
+
 def summarize(out_dir: str | Path, name: str, command: str | None = None, note: str = "") -> dict:
     """The summary of experiment directory ``out_dir``.
 
@@ -204,8 +216,8 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
     Returns
     -------
     dict
-        ``summary_version``, ``name``, ``command``, ``note``, ``primspace`` (the version
-        that made the runs), ``cpu`` (:func:`cpu_class` of this machine: run it where the
+        ``summary_version``, ``name``, ``command``, ``note``, ``primspace`` (the versions
+        that ran into the directory, :func:`recorded_versions`), ``cpu`` (:func:`cpu_class` of this machine: run it where the
         runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
         ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict, scene,
         composite: those run).
@@ -229,7 +241,7 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
         "name": name,
         "command": command,
         "note": note,
-        "primspace": meta.get("primspace"),
+        "primspace": recorded_versions(meta),
         "cpu": cpu_class(),
         "preset": meta.get("preset_config", {}),
         "timings": meta.get("timings", {}),
