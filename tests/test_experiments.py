@@ -457,15 +457,24 @@ def test_a_summary_names_every_version_that_ran_into_the_directory():
 
 def test_tuning_table_names_the_tuned_q_on_rows_of_another_q():
     """The setting is chosen at one q and applied at every q: a row of another q says whose
-    choice it is and shows no validation loss (it had none)."""
+    choice it is and shows no validation loss (it had none); the last column counts, seed by
+    seed, where projection ends below the init, shared and tuned."""
     from primspace.experiments.results import tuning_table
 
-    run = lambda q, loss: {"init": "zero", "latent_dim": q, "seed": 0, "infer": [{"loss": 1.0}, {"loss": loss}]}
-    tune = {"latent_dim": 40, "chosen": {"zero": {"taus": [4.0, 16.0], "latent_lr": 0.01, "validation_loss": 0.5}},
-            "tuned": {"runs": [run(8, 0.2), run(40, 0.1)]}, "shared": {"runs": [run(8, 0.4), run(40, 0.3)]}}
+    def run(init, q, seed, loss):
+        return {"init": init, "latent_dim": q, "seed": seed, "infer": [{"loss": 1.0}, {"loss": loss}]}
+
+    chosen = {"taus": [4.0, 16.0], "latent_lr": 0.01, "validation_loss": 0.5}
+    shared = [run("zero", 8, 0, 0.4), run("zero", 40, 0, 0.3), run("zero", 40, 1, 0.3),
+              run("projection", 40, 0, 0.1), run("projection", 40, 1, 0.1)]
+    tuned = [run("zero", 8, 0, 0.2), run("zero", 40, 0, 0.05), run("zero", 40, 1, 0.2),
+             run("projection", 40, 0, 0.1), run("projection", 40, 1, 0.1)]
+    tune = {"latent_dim": 40, "chosen": {"zero": chosen, "projection": chosen}, "tuned": {"runs": tuned}, "shared": {"runs": shared}}
     _, rows = tuning_table(tune)
-    assert rows[0][:4] == [8, "zero", "q = 40's choice", "—"]
-    assert rows[1][:4] == [40, "zero", "τ 4, 16; latent lr 0.01", "0.5"]
+    assert rows[0][:4] == [8, "zero", "q = 40's choice", "—"] and rows[0][-1] == "0 of 0 → 0 of 0"
+    assert rows[2][:4] == [40, "zero", "τ 4, 16; latent lr 0.01", "0.5"]
+    assert rows[2][-1] == "2 of 2 → 1 of 2"  # tuning closed the gap in seed 0
+    assert rows[3][-1] == "—"
 
 
 def test_tiny_experiment_numbers_are_pinned(finished):

@@ -377,25 +377,36 @@ def calibration_verdict(results: dict) -> tuple[bool | None, str]:
 
 def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], list[list]]:
     """Tune: per q and init, the chosen setting (layer time constants, latent learning
-    rate, its validation loss) and the final eval loss under the shared setting and under
-    the tuned one, mean ± std over seeds. The setting is chosen at one q (``latent_dim``)
-    and applied at every q: rows of another q name that choice instead of repeating it.
-    The shared runs are ``intra``'s (default: the copy the tune results keep)."""
-    shared = (intra or results.get("shared") or {"runs": []})["runs"]
-    tuned = results["tuned"]["runs"]
+    rate, its validation loss), the final eval loss under the shared setting and under
+    the tuned one (mean ± std over seeds), and in how many seeds projection's final eval
+    loss is below the init's, seed by seed, under each (does a gap survive tuning?). The
+    setting is chosen at one q (``latent_dim``) and applied at every q: rows of another q
+    name that choice instead of repeating it. The shared runs are ``intra``'s (default:
+    the copy the tune results keep)."""
+    finals = {}
+    for kind, runs in (("shared", (intra or results.get("shared") or {"runs": []})["runs"]),
+                       ("tuned", results["tuned"]["runs"])):
+        for r in runs:
+            finals[(kind, r["init"], r["latent_dim"], r["seed"])] = final([h["loss"] for h in r["infer"]])
     tuned_at = results.get("latent_dim")
     rows = []
-    for q in sorted({r["latent_dim"] for r in tuned}):
+    for q in sorted({r["latent_dim"] for r in results["tuned"]["runs"]}):
         for init, setting in results["chosen"].items():
-            s = [final([h["loss"] for h in r["infer"]]) for r in shared if r["init"] == init and r["latent_dim"] == q]
-            t = [final([h["loss"] for h in r["infer"]]) for r in tuned if r["init"] == init and r["latent_dim"] == q]
+            s, t = ([v for (k, i, d, _), v in finals.items() if (k, i, d) == (kind, init, q)] for kind in ("shared", "tuned"))
             choice = f"τ {setting['taus'][0]:g}, {setting['taus'][1]:g}; latent lr {setting['latent_lr']:.3g}"
-            if q == tuned_at:
-                rows.append([q, init, choice, f"{setting['validation_loss']:.3g}", _mean_std(s), _mean_std(t)])
-            else:  # tuned at one q, applied at every q: the choice is q = tuned_at's
-                rows.append([q, init, f"q = {tuned_at}'s choice", "—", _mean_std(s), _mean_std(t)])
+            if q != tuned_at:  # tuned at one q, applied at every q: the choice is q = tuned_at's
+                choice, setting = f"q = {tuned_at}'s choice", {"validation_loss": None}
+            wins = " → ".join(_projection_below(finals, kind, init, q) for kind in ("shared", "tuned"))
+            rows.append([q, init, choice, "—" if setting["validation_loss"] is None else f"{setting['validation_loss']:.3g}",
+                         _mean_std(s), _mean_std(t), "—" if init == "projection" else wins])
     return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
-            "final eval loss, tuned"], rows
+            "final eval loss, tuned", "projection lower, seeds (shared → tuned)"], rows
+
+
+def _projection_below(finals: dict, kind: str, init: str, q: int) -> str:
+    """"k of n": the seeds where projection's final eval loss is below ``init``'s (paired by seed)."""
+    seeds = [sd for (k, i, d, sd) in finals if (k, i, d) == (kind, init, q) and (kind, "projection", q, sd) in finals]
+    return f"{sum(finals[(kind, 'projection', q, sd)] < finals[(kind, init, q, sd)] for sd in seeds)} of {len(seeds)}"
 
 
 def predict_error_table(results: dict) -> tuple[list[str], list[list]]:
