@@ -370,7 +370,7 @@ def render_predict(summary: dict) -> str:
     cpu = summary.get("cpu", {})
     return "\n".join([
         f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
-        f"Fitted runs by primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
+        f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
         f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
         "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
         + ("; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."),
