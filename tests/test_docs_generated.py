@@ -64,3 +64,27 @@ def test_two_summaries_are_compared_side_by_side_on_per_element_errors():
     assert text.startswith("#### mean against sum: two losses")
     assert "| projection | 2.0e-4 ± 1e-4 | 0.002 ± 0 | 29 ± 1 | 29 ± 0 |" in text
     assert "| zero | 0.001 ± 0 | 0.005 ± 0.001 |" in text
+
+
+def test_the_headline_says_whether_projection_leads_zero_after_tuning():
+    """Where a summary holds the tuned baselines, the headline counts the seeds where
+    projection's final eval loss is below zero's at the tuned q, tuned and shared, seed by
+    seed (counted here again from the summary's runs)."""
+    import json
+
+    from primspace.docs import headline
+
+    summary = json.loads((ROOT / "docs" / "results" / "demo.json").read_text())
+    tune, intra = summary["results"]["tune"], summary["results"]["intra"]
+    q = tune["latent_dim"]
+
+    def below(runs):
+        last = {(r["init"], r["seed"]): r["infer"][-1]["loss"] for r in runs if r["latent_dim"] == q}
+        seeds = sorted(s for i, s in last if i == "zero" and ("projection", s) in last)
+        return f"{sum(last[('projection', s)] < last[('zero', s)] for s in seeds)} of {len(seeds)}"
+
+    text = headline({"demo": summary})
+    assert (f"projection ends below zero in {below(tune['tuned']['runs'])} seeds at q = {q} "
+            f"({below(intra['runs'])} with the shared setting)") in text
+    del summary["results"]["tune"]
+    assert "tuned on a validation split" not in headline({"demo": summary})

@@ -222,7 +222,9 @@ def _final_by(intra: dict, q: int | None = None) -> dict[str, list[float]]:
 
 def headline(summaries: dict[str, dict]) -> str:
     """README's results paragraph: for each summary, projection's final eval loss against
-    zero's and random's at the largest q, mean ± std over seeds, and the claims' verdicts counted."""
+    zero's and random's at the largest q, mean ± std over seeds, success and clustering
+    where run, whether projection's lead over zero survives tuning (where tuned), and the
+    claims' verdicts counted."""
     if not summaries:
         return "No stored summaries yet (docs/results/)."
     parts = []
@@ -244,6 +246,12 @@ def headline(summaries: dict[str, dict]) -> str:
         if s["results"].get("clustering"):
             extra += "; clustering accuracy of the codes " + ", ".join(
                 f"{i} {outcomes[i][4].split(' [')[0]}" for i in ("projection", "zero", "untrained P m") if i in outcomes)
+        if s["results"].get("tune"):
+            tune = s["results"]["tune"]
+            gap = [row[-1] for row in tuning_table(tune, intra)[1] if row[0] == tune["latent_dim"] and row[1] == "zero"]
+            extra += (f"; with every init tuned on a validation split, projection ends below zero in "
+                      f"{gap[0].split(' → ')[1]} seeds at q = {tune['latent_dim']} ({gap[0].split(' → ')[0]} "
+                      "with the shared setting)") if gap else ""
         verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
         held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
         parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}{extra}; of the {len(verdicts)} "
