@@ -439,7 +439,8 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
         assert tune["chosen"][init]["validation_loss"] == best["validation_loss"]
     assert {(r["init"], r["seed"]) for r in tune["tuned"]["runs"]} == {("zero", 0), ("projection", 0)}
     columns, rows = tuning_table(tune)
-    assert columns[-1] == "final eval loss, tuned" and len(rows) == 2
+    assert columns[-2:] == ["final eval loss, tuned", "projection lower, seeds (shared → tuned)"] and len(rows) == 2
+    assert rows[1][1] == "projection" and rows[1][-1] == "—" and rows[0][-1].endswith("of 1")
     again = run_tune(exp)  # resumable: every point is found finished
     assert again["chosen"] == tune["chosen"]
 
