@@ -29,7 +29,7 @@ import numpy as np
 from primspace.experiments.claims import check_claims, eighth_loss
 from primspace.experiments.composite_results import (
     PEER_RULES, bounds_table, composite_table, primitives_table, recall_table)
-from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
+from primspace.experiments.results import LEARNED_CODES, predict_error_table, projection_lead, scene_table, tuning_table
 from primspace.experiments.summary import read_summary
 from primspace.stats import wilson_interval
 
@@ -247,11 +247,9 @@ def headline(summaries: dict[str, dict]) -> str:
             extra += "; clustering accuracy of the codes " + ", ".join(
                 f"{i} {outcomes[i][4].split(' [')[0]}" for i in ("projection", "zero", "untrained P m") if i in outcomes)
         if s["results"].get("tune"):
-            tune = s["results"]["tune"]
-            gap = [row[-1] for row in tuning_table(tune, intra)[1] if row[0] == tune["latent_dim"] and row[1] == "zero"]
-            extra += (f"; with every init tuned on a validation split, projection ends below zero in "
-                      f"{gap[0].split(' → ')[1]} seeds at q = {tune['latent_dim']} ({gap[0].split(' → ')[0]} "
-                      "with the shared setting)") if gap else ""
+            lead = projection_lead(s["results"]["tune"], intra)
+            extra += (f"; with every init tuned on a validation split, projection ends below zero in {lead['tuned']} "
+                      f"seeds at q = {s['results']['tune']['latent_dim']} ({lead['shared']} with the shared setting)")
         verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
         held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
         parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}{extra}; of the {len(verdicts)} "

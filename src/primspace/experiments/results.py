@@ -54,6 +54,7 @@ __all__ = [
     "calibration_table",
     "calibration_verdict",
     "tuning_table",
+    "projection_lead",
     "scene_table",
 ]
 
@@ -383,11 +384,7 @@ def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], l
     setting is chosen at one q (``latent_dim``) and applied at every q: rows of another q
     name that choice instead of repeating it. The shared runs are ``intra``'s (default:
     the copy the tune results keep)."""
-    finals = {}
-    for kind, runs in (("shared", (intra or results.get("shared") or {"runs": []})["runs"]),
-                       ("tuned", results["tuned"]["runs"])):
-        for r in runs:
-            finals[(kind, r["init"], r["latent_dim"], r["seed"])] = final([h["loss"] for h in r["infer"]])
+    finals = _tuning_finals(results, intra)
     tuned_at = results.get("latent_dim")
     rows = []
     for q in sorted({r["latent_dim"] for r in results["tuned"]["runs"]}):
@@ -401,6 +398,23 @@ def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], l
                          _mean_std(s), _mean_std(t), "—" if init == "projection" else wins])
     return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
             "final eval loss, tuned", "projection lower, seeds (shared → tuned)"], rows
+
+
+def projection_lead(results: dict, intra: dict | None = None, init: str = "zero") -> dict[str, str]:
+    """Tune: at the tuned q, the seeds where projection's final eval loss is below
+    ``init``'s, ``{"shared": "k of n", "tuned": "k of n"}`` (README's headline)."""
+    finals = _tuning_finals(results, intra)
+    return {kind: _projection_below(finals, kind, init, results["latent_dim"]) for kind in ("shared", "tuned")}
+
+
+def _tuning_finals(results: dict, intra: dict | None) -> dict[tuple, float]:
+    """``(shared|tuned, init, q, seed) -> final eval loss`` of the tune results' runs."""
+    finals = {}
+    for kind, runs in (("shared", (intra or results.get("shared") or {"runs": []})["runs"]),
+                       ("tuned", results["tuned"]["runs"])):
+        for r in runs:
+            finals[(kind, r["init"], r["latent_dim"], r["seed"])] = final([h["loss"] for h in r["infer"]])
+    return finals
 
 
 def _projection_below(finals: dict, kind: str, init: str, q: int) -> str:
