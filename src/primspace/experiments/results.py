@@ -391,11 +391,11 @@ def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], l
         for init, setting in results["chosen"].items():
             s, t = ([v for (k, i, d, _), v in finals.items() if (k, i, d) == (kind, init, q)] for kind in ("shared", "tuned"))
             choice = f"τ {setting['taus'][0]:g}, {setting['taus'][1]:g}; latent lr {setting['latent_lr']:.3g}"
+            validation = f"{setting['validation_loss']:.3g}"
             if q != tuned_at:  # tuned at one q, applied at every q: the choice is q = tuned_at's
-                choice, setting = f"q = {tuned_at}'s choice", {"validation_loss": None}
+                choice, validation = f"q = {tuned_at}'s choice", "—"
             wins = " → ".join(_projection_below(finals, kind, init, q) for kind in ("shared", "tuned"))
-            rows.append([q, init, choice, "—" if setting["validation_loss"] is None else f"{setting['validation_loss']:.3g}",
-                         _mean_std(s), _mean_std(t), "—" if init == "projection" else wins])
+            rows.append([q, init, choice, validation, _mean_std(s), _mean_std(t), "—" if init == "projection" else wins])
     return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
             "final eval loss, tuned", "projection lower, seeds (shared → tuned)"], rows
 
