@@ -46,6 +46,10 @@ TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.m
 #: The order summaries are shown in (others follow, by name); README's headline shows these only.
 ORDER = ("paper", "paper-q10-20", "paper-images", "demo", "lasa")
 
+#: Summaries whose baselines were tuned in another experiment directory (the tune's
+#: shared-setting runs are copies of this summary's): the headline reads the tune from there.
+TUNED_IN = {"paper-q10-20": "paper-tune20"}
+
 
 def g(x: float | None, digits: int = 2) -> str:
     """A number as the docs print it: ``digits`` significant digits, in scientific notation
@@ -223,8 +227,8 @@ def _final_by(intra: dict, q: int | None = None) -> dict[str, list[float]]:
 def headline(summaries: dict[str, dict]) -> str:
     """README's results paragraph: for each summary, projection's final eval loss against
     zero's and random's at the largest q, mean ± std over seeds, success and clustering
-    where run, whether projection's lead over zero survives tuning (where tuned), and the
-    claims' verdicts counted."""
+    where run, whether projection's lead over zero and pca survives tuning (where tuned,
+    here or in the summary :data:`TUNED_IN` names), and the claims' verdicts counted."""
     if not summaries:
         return "No stored summaries yet (docs/results/)."
     parts = []
@@ -246,16 +250,28 @@ def headline(summaries: dict[str, dict]) -> str:
         if s["results"].get("clustering"):
             extra += "; clustering accuracy of the codes " + ", ".join(
                 f"{i} {outcomes[i][4].split(' [')[0]}" for i in ("projection", "zero", "untrained P m") if i in outcomes)
-        if s["results"].get("tune"):
-            lead = projection_lead(s["results"]["tune"], intra)
-            extra += (f"; with every init tuned on a validation split, projection ends below zero in {lead['tuned']} "
-                      f"seeds at q = {s['results']['tune']['latent_dim']} ({lead['shared']} with the shared setting)")
+        extra += _tune_clause(summaries.get(TUNED_IN.get(name, name), {}))
         verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
         held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
         parts.append(f"*{name}* ({n} seeds, q = {q}): final eval loss {losses}{extra}; of the {len(verdicts)} "
                      f"sentences of the paper checked, {held} {'holds' if held == 1 else 'hold'} in every seed")
     return ("Results, mean ± std over seeds, generated from the stored summaries (docs/reproduce.md has the tables, "
             "the commands and every claim seed by seed): " + "; ".join(parts) + ".")
+
+
+def _tune_clause(summary: dict) -> str:
+    """The headline's words on the tuned baselines of ``summary`` (empty where it holds no
+    tune): the seeds where projection ends below zero and below pca at the tuned q, tuned
+    and with the shared setting."""
+    tune = summary.get("results", {}).get("tune")
+    if not tune:
+        return ""
+    leads = {init: projection_lead(tune, summary["results"].get("intra"), init) for init in ("zero", "pca")}
+    leads = {init: lead for init, lead in leads.items() if not lead["tuned"].endswith(" of 0")}
+    tuned = " and ".join(f"below {init} in {lead['tuned']}" for init, lead in leads.items())
+    shared = " and ".join(lead["shared"] for lead in leads.values())
+    return (f"; with every init tuned on a validation split, projection ends {tuned} seeds at q = "
+            f"{tune['latent_dim']} ({shared} with the shared setting)")
 
 
 #: Pairs of summaries shown side by side: (a, b, what differs). Both must be stored.
