@@ -107,3 +107,25 @@ def test_the_headline_reads_a_tune_run_in_another_directory():
     assert text.count("tuned on a validation split") == 1
     assert f"*{name}*" in text and f"*{TUNED_IN[name]}*" not in text
     assert "tuned on a validation split" not in headline({name: plain})
+
+
+def test_a_tune_run_on_copied_runs_shows_only_its_tuning_table():
+    """docs/reproduce.md shows the summary a docs.TUNED_IN entry names by its tuning table
+    alone (its shared-setting runs are the other summary's, shown there); without the
+    other summary stored, it is shown whole."""
+    import json
+
+    from primspace.docs import TUNED_IN, blocks
+
+    name = next(iter(TUNED_IN))
+    lasa = json.loads((ROOT / "docs" / "results" / "lasa.json").read_text())
+    tuned = dict(lasa, name=TUNED_IN[name])
+    plain = json.loads(json.dumps(lasa))
+    del plain["results"]["tune"]
+    plain["name"] = name
+    text = blocks({name: plain, TUNED_IN[name]: tuned})["results"]
+    section = text[text.index(f"#### {TUNED_IN[name]}"):]
+    assert "Fair baselines" in section
+    assert "Losses (mean" not in section and "The paper's sentences" not in section
+    alone = blocks({TUNED_IN[name]: tuned})["results"]
+    assert "Losses (mean" in alone and "Fair baselines" in alone

@@ -47,7 +47,8 @@ TARGETS = {"headline": Path("README.md"), "results": Path("docs") / "reproduce.m
 ORDER = ("paper", "paper-q10-20", "paper-q10", "paper-images", "demo", "lasa")
 
 #: Summaries whose baselines were tuned in another experiment directory (the tune's
-#: shared-setting runs are copies of this summary's): the headline reads the tune from there.
+#: shared-setting runs are copies of this summary's): the headline reads the tune from
+#: there, and docs/reproduce.md shows only that summary's tuning table (not the copies again).
 TUNED_IN = {"paper-q10-20": "paper-tune20"}
 
 
@@ -167,9 +168,13 @@ def _claim_rows(results: dict) -> list[list[str]]:
     return rows
 
 
-def render_summary(summary: dict) -> str:
-    """The markdown section of one summary."""
+def render_summary(summary: dict, tune_only: bool = False) -> str:
+    """The markdown section of one summary; ``tune_only``: its tuning table alone (a tune
+    run whose shared-setting runs are another summary's, :data:`TUNED_IN`, whose tables
+    show them)."""
     res, preset = summary["results"], summary.get("preset", {})
+    if tune_only:
+        res = {"tune": res["tune"], "intra": res["intra"]}
     cpu = summary.get("cpu", {})
     seeds = preset.get("seeds", [])
     out = [f"#### {summary['name']}", "",
@@ -179,7 +184,7 @@ def render_summary(summary: dict) -> str:
            f"epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}, loss "
            f"{preset.get('train', {}).get('loss_reduction', 'mean')}; measured on {cpu.get('model', '?')} ({cpu.get('isa', '?')})."
            + (f" {summary['note']}" if summary.get("note") else "")]
-    if "intra" in res:
+    if "intra" in res and not tune_only:
         out += ["", "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
                     "(θ frozen) before the first and after the last inference epoch.", "",
                 _table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"]))]
@@ -207,7 +212,7 @@ def render_summary(summary: dict) -> str:
                     "the claims use the shared setting (the paper's protocol); this table says whether a gap "
                     "survives tuning:", "",
                 _table(columns, [[str(c) for c in row] for row in rows])]
-    claims = _claim_rows(res)
+    claims = [] if tune_only else _claim_rows(res)
     if claims:
         out += ["", "The paper's sentences, checked (`primspace.experiments.claims`):", "",
                 _table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims)]
@@ -320,7 +325,8 @@ def load_summaries(root: Path) -> dict[str, dict]:
 
 def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block."""
-    parts = [render_summary(s) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
+    tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
+    parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
     parts += [render_comparison(summaries[a], summaries[b], what) for a, b, what in COMPARISONS
               if a in summaries and b in summaries]
     results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
