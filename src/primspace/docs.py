@@ -173,8 +173,6 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
     run whose shared-setting runs are another summary's, :data:`TUNED_IN`, whose tables
     show them)."""
     res, preset = summary["results"], summary.get("preset", {})
-    if tune_only:
-        res = {"tune": res["tune"], "intra": res["intra"]}
     cpu = summary.get("cpu", {})
     seeds = preset.get("seeds", [])
     out = [f"#### {summary['name']}", "",
@@ -184,7 +182,9 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
            f"epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}, loss "
            f"{preset.get('train', {}).get('loss_reduction', 'mean')}; measured on {cpu.get('model', '?')} ({cpu.get('isa', '?')})."
            + (f" {summary['note']}" if summary.get("note") else "")]
-    if "intra" in res and not tune_only:
+    if tune_only:
+        return "\n".join(out + _tune_section(res))
+    if "intra" in res:
         out += ["", "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
                     "(θ frozen) before the first and after the last inference epoch.", "",
                 _table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"]))]
@@ -202,21 +202,28 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
     if "inter" in res:
         out += ["", f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):", "",
                 _table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"]))]
-    if "tune" in res and res.get("intra"):
-        columns, rows = tuning_table(res["tune"], res["intra"])
-        out += ["", f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
-                    f"the fitted part, over the same grid (layer time constants {res['tune']['grid']['taus']}, latent "
-                    f"learning rate x {', '.join(f'{f:.3g}' for f in res['tune']['grid']['latent_lr_factor'])}) at "
-                    f"q = {res['tune']['latent_dim']} and applied at every q, epochs the preset's for all; the "
-                    "final eval loss with the shared and the tuned setting (mean ± std over seeds). The headline and "
-                    "the claims use the shared setting (the paper's protocol); this table says whether a gap "
-                    "survives tuning:", "",
-                _table(columns, [[str(c) for c in row] for row in rows])]
-    claims = [] if tune_only else _claim_rows(res)
+    out += _tune_section(res)
+    claims = _claim_rows(res)
     if claims:
         out += ["", "The paper's sentences, checked (`primspace.experiments.claims`):", "",
                 _table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims)]
     return "\n".join(out)
+
+
+def _tune_section(res: dict) -> list[str]:
+    """The lines of a summary's tuning table (none where it holds no tune)."""
+    if not ("tune" in res and res.get("intra")):
+        return []
+    tune = res["tune"]
+    columns, rows = tuning_table(tune, res["intra"])
+    factors = ", ".join(f"{f:.3g}" for f in tune["grid"]["latent_lr_factor"])
+    return ["", f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
+                f"the fitted part, over the same grid (layer time constants {tune['grid']['taus']}, latent "
+                f"learning rate x {factors}) at q = {tune['latent_dim']} and applied at every q, epochs the "
+                "preset's for all; the final eval loss with the shared and the tuned setting (mean ± std over "
+                "seeds). The headline and the claims use the shared setting (the paper's protocol); this table "
+                "says whether a gap survives tuning:", "",
+            _table(columns, [[str(c) for c in row] for row in rows])]
 
 
 def _final_by(intra: dict, q: int | None = None) -> dict[str, list[float]]:
