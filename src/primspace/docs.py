@@ -278,8 +278,8 @@ def _tune_clause(summary: dict) -> str:
     tune = summary.get("results", {}).get("tune")
     if not tune:
         return ""
-    leads = {init: projection_lead(tune, summary["results"].get("intra"), init) for init in ("zero", "pca")}
-    leads = {init: lead for init, lead in leads.items() if not lead["tuned"].endswith(" of 0")}
+    leads = {init: projection_lead(tune, summary["results"].get("intra"), init)
+             for init in ("zero", "pca") if init in tune["chosen"]}
     tuned = " and ".join(f"below {init} in {lead['tuned']}" for init, lead in leads.items())
     shared = " and ".join(lead["shared"] for lead in leads.values())
     return (f"; with every init tuned on a validation split, projection ends {tuned} seeds at q = "
