@@ -1,0 +1,47 @@
+"""The prediction numbers pinned before prediction moved into ``primspace.predict`` (issue 37).
+
+A small run (the observation tests' data, 30 epochs, no learning-rate decay given
+explicitly so a change of defaults cannot move it) and every row of the prediction grid
+on its evaluation samples: the gradient starts, the mixture's variants, the peers, the
+label-given diagnostic and the online predictors, at 10, 25 and 50 % observed. The
+numbers were recorded with the code as it stood before the move (0.8.0) and are kept:
+the refactor must reproduce them.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import pinned_for_this_cpu
+from test_train import SMALL, primitives
+
+PINNED = Path(__file__).with_suffix(".json")
+FRACTIONS = (0.1, 0.25, 0.5)
+
+
+@pytest.fixture(scope="module")
+def case():
+    from primspace.train import TrainConfig, fit
+
+    train, test = primitives(8, seed=0), primitives(4, seed=100)
+    run = fit(train, model_config=SMALL, init="projection", progress=False,
+              train_config=TrainConfig(epochs=30, batch_size=12, threads=1, final_lr_fraction=1.0))
+    return run, train, test
+
+
+def grid_numbers(run, train, test) -> dict:
+    """{row: {fraction: mean unobserved MSE}} of every predictor on ``test``."""
+    from primspace.predict import grid_predictions
+
+    return grid_predictions(run, train, test, FRACTIONS, epochs=5, online_iterations=2)
+
+
+def test_the_prediction_grid_keeps_its_numbers(case):
+    pinned = pinned_for_this_cpu(json.loads(PINNED.read_text()), "prediction numbers", vendor=True)
+    numbers = grid_numbers(*case)
+    assert set(numbers) == set(pinned)
+    for row, cells in pinned.items():
+        for key, value in cells.items():
+            assert numbers[row][key] == pytest.approx(value, rel=1e-6, abs=1e-12), (row, key)
