@@ -61,18 +61,17 @@ def infer_segment_codes(run, pieces: np.ndarray, start_codes: np.ndarray, epochs
 
 
 def relabel_by_inference(run, inputs: tuple, result: SegmentationResult, n_primitives: int, epochs: int,
-                         random_state: int = 0) -> SegmentationResult:
+                         fade: float, random_state: int = 0) -> SegmentationResult:
     """``result`` with each segment's code inferred (module docstring) and the segments
     labelled by clustering those codes; its nearest templates (``segment_templates``) and
     their codes are the warm start. ``inputs``: what
-    :func:`~primspace.segmentation.synthesis.model_inputs` read for ``result``."""
-    from primspace.segmentation.synthesis import OFFSETS
-
+    :func:`~primspace.segmentation.synthesis.model_inputs` read for ``result``; ``fade``: the
+    fade of the offset model ``result`` was found with
+    (:data:`primspace.segmentation.synthesis.OFFSETS`)."""
     sequences, _, templates, codes, _ = inputs
     nearest = result.segment_templates
     if nearest is None:
         raise UserError("the segments have no nearest templates (segment codes are inferred for synthesis and surprise)")
-    fade = OFFSETS[result.chosen.get("offset", "fade")]
     pieces = in_model_frame(sequences, result, templates, nearest, fade)
     names = (run.config or {}).get("data", {}).get("joint_names")
     inferred = infer_segment_codes(run, pieces, codes[nearest], epochs, names)

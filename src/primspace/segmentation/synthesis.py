@@ -47,6 +47,7 @@ import numpy as np
 
 from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
+from primspace.segmentation.inferred import relabel_by_inference
 from primspace.segmentation.result import SegmentationResult, label_segments
 
 __all__ = ["FADE", "TRANSLATE", "OFFSETS", "by_offset", "with_codes", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
@@ -234,9 +235,8 @@ def with_codes(run, inputs: tuple, result: SegmentationResult, n_primitives: int
     (``inputs``: :func:`model_inputs`'s, read once)."""
     if int(infer_epochs) <= 0:
         return result
-    from primspace.segmentation.inferred import relabel_by_inference
-
-    return relabel_by_inference(run, inputs, result, n_primitives, int(infer_epochs), random_state)
+    fade = OFFSETS[result.chosen.get("offset", "fade")]
+    return relabel_by_inference(run, inputs, result, n_primitives, int(infer_epochs), fade, random_state)
 
 
 def by_offset(segment, offset: str) -> SegmentationResult:
