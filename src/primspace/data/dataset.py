@@ -69,6 +69,12 @@ class MotionDataset:
         Seconds between time steps.
     source : str
         Where the data came from (free text, kept in the file).
+    file_indices : array-like of int, shape (N,), optional
+        The number of each sample: its index in the data file ``path`` (or, without a
+        file, in the data set it was taken from). Default ``0..N-1``; :meth:`subset`
+        carries it, so ``data.subset([4, 9]).file_indices`` is ``[4, 9]``. Runs, cluster
+        outputs and predictions number samples by it (:mod:`primspace.data.schema`,
+        *Sample numbers*). Not stored in the file: a saved subset is a new file.
 
     Raises
     ------
@@ -97,7 +103,7 @@ class MotionDataset:
     dt: float = 1.0
     source: str = ""
     path: Path | None = field(default=None, repr=False)
-
+    file_indices: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         for array in ARRAYS:  # motor first: its errors come before the optional fields'
@@ -106,6 +112,7 @@ class MotionDataset:
                 setattr(self, array.name, array.coerce(value, self.path))
         for attr in _MEMBERS:  # names default from the converted arrays
             setattr(self, attr.name, attr.normalize(getattr(self, attr.name), self))
+        self.file_indices = _file_indices(self.file_indices, len(self), self.path)
         self.validate()
 
     # ----------------------------------------------------------------- shape summary
@@ -179,7 +186,14 @@ class MotionDataset:
             value = getattr(self, array.name)
             if value is not None:
                 taken[array.name] = as_view(value).subset(idx) if array.lazy else value[idx]
-        return dataclasses.replace(self, **taken)
+        return dataclasses.replace(self, **taken, file_indices=self.file_indices[idx])
+
+    def rows_of(self, file_indices) -> np.ndarray | None:
+        """The rows of this data set holding the samples numbered ``file_indices`` (in the
+        data file, :attr:`file_indices`), in that order; None if one of them is not here."""
+        row = {int(v): r for r, v in reversed(list(enumerate(self.file_indices)))}  # the first row of each number
+        found = [row.get(int(i)) for i in np.asarray(file_indices).reshape(-1)]
+        return None if any(r is None for r in found) else np.asarray(found, dtype=np.int64)
 
     def without_images(self) -> "MotionDataset":
         """The same samples with the images dropped."""
@@ -278,3 +292,14 @@ def _first_last(ids: np.ndarray, shown: int = 3) -> list[str]:
     """The first and last ``shown`` source ids (all of them when there are few), for ``info``."""
     ids = [str(v) for v in ids]
     return ids if len(ids) <= 2 * shown else ids[:shown] + ["..."] + ids[-shown:]
+
+
+def _file_indices(value, n: int, path) -> np.ndarray:
+    """``file_indices`` as int64 (N,): ``0..N-1`` when not given; one :class:`DataError` if malformed."""
+    if value is None:
+        return np.arange(n, dtype=np.int64)
+    out = np.asarray(value)
+    if out.shape != (n,) or (out.size and (out.dtype.kind not in "iu" or out.min() < 0)):
+        raise DataError(f"must be {n} non-negative integers (one per sample), got shape {out.shape}",
+                        path=path, field="file_indices")
+    return out.astype(np.int64)

@@ -27,7 +27,6 @@ checkpoint goes through :func:`unpack_checkpoint` (resume) or :func:`run_from_st
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import random
 from dataclasses import dataclass
@@ -51,6 +50,7 @@ from primspace.latent import LatentInitializer
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig
 from primspace.train.run import TrainedRun
+from primspace.train.rundata import check_run_data, fingerprint
 
 __all__ = [
     "CHECKPOINT_FORMAT", "CONFIG_NAME", "METRICS_NAME", "CHECKPOINT_NAME", "LATENTS_NAME", "LATENTS_INIT_NAME",
@@ -72,11 +72,10 @@ RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "thread
                      "frames_memory_gb", "loader_workers", "micro_batches"}
 
 
-def fingerprint(data: MotionDataset) -> str:
-    return hashlib.sha1(np.ascontiguousarray(data.motor, dtype=np.float32).tobytes()).hexdigest()
-
-
-def run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
+def run_config(kind, init, mc, tc, data, use_images, parent) -> dict:
+    """config.json of a run on ``data``, the selected samples: they are recorded by their
+    numbers in the data file (:attr:`~primspace.data.MotionDataset.file_indices`), so a run
+    fitted on ``data.subset(...)`` finds its samples in the file again."""
     from primspace import __version__
 
     return {
@@ -87,7 +86,7 @@ def run_config(kind, init, mc, tc, data, idx, use_images, parent) -> dict:
         "data": {
             "path": None if data.path is None else str(Path(data.path).resolve()),
             "n_samples": len(data),
-            "indices": idx.tolist(),
+            "indices": data.file_indices.tolist(),
             "images": bool(use_images),
             "joint_names": list(data.joint_names),
             "dt": data.dt,
@@ -426,26 +425,6 @@ class RunDirectory:
         kept = [h for h in read_metrics(self.path / METRICS_NAME) if h["epoch"] <= epoch]
         atomic_write_text(self.path / METRICS_NAME, "".join(json.dumps(h) + "\n" for h in kept))
         return kept
-
-
-def check_run_data(run: TrainedRun, dataset: MotionDataset) -> None:
-    """Refuse a data set that is not the one ``run`` was trained or inferred on.
-
-    Compares what a resume compares: joints and steps, the run's sample indices, and the
-    SHA-1 of those samples' joint values (``config.json`` ``data.motor_sha1``).
-    """
-    where = str(dataset.path) if dataset.path is not None else "the data set"
-    mc = run.model_config
-    if dataset.n_joints != mc.n_joints or dataset.length != mc.length:
-        raise UserError(
-            f"{where}: has T={dataset.length} steps x J={dataset.n_joints} joints; run {run.run_dir or '(in memory)'} "
-            f"was trained on T={mc.length} x J={mc.n_joints}: not its data"
-        )
-    if len(run.indices) and int(run.indices.max()) >= len(dataset):
-        raise UserError(f"{where}: has {len(dataset)} samples, run {run.run_dir or '(in memory)'} used sample {int(run.indices.max())}: not its data")
-    saved = run.config.get("data", {}).get("motor_sha1")
-    if saved is not None and fingerprint(dataset.subset(run.indices)) != saved:
-        raise UserError(f"{where}: its joint values differ from those run {run.run_dir or '(in memory)'} used (SHA-1 of the run's samples): not its data")
 
 
 def _numpy_state() -> dict:
