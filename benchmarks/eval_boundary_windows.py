@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.experiments.composite import segment_codes
-from primspace.experiments.composite_peers import held_out_sequences
+from primspace.experiments.composite.experiment import segment_codes
+from primspace.experiments.composite.peers import held_out_sequences
 from primspace.segmentation import boundaries_from_segments, boundary_f1
 from primspace.segmentation.peers import PEERS
 from primspace.train import load_run

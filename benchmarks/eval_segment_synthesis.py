@@ -23,7 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from primspace.data import MotionDataset
-from primspace.experiments.composite import split_sequences
+from primspace.experiments.composite.experiment import split_sequences
 from primspace.segmentation import segmentation_scores
 from primspace.segmentation.synthesis import segment_by_synthesis
 from primspace.train import load_run

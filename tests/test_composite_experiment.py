@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from primspace.experiments import presets as experiment_presets
-from primspace.experiments.composite import run_composite, segment_codes, split_sequences
+from primspace.experiments.composite.experiment import run_composite, segment_codes, split_sequences
 from primspace.experiments.presets import ExperimentPreset, default_model, default_train
 from primspace.experiments.workspace import ExperimentDir
 from primspace.sim.composite import CompositeConfig, generate_composite
@@ -61,7 +61,7 @@ def test_runs_are_segmented_and_scored(finished):
 
 
 def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
-    from primspace.experiments.composite_results import bounds_table, composite_table, recall_table
+    from primspace.experiments.composite.results import bounds_table, composite_table, recall_table
     from primspace.segmentation.peers import PEERS
 
     _, results = finished
@@ -188,7 +188,7 @@ SINGLE_TINY = ExperimentPreset(
 def by_primitives(long_data, tmp_path_factory):
     """The composite experiment with a model of single primitives (one seed): the simulator's
     seven primitives at two block placements, made beside the experiment's data."""
-    from primspace.experiments.composite_primitives import PRIMITIVES_FILE
+    from primspace.experiments.composite.primitives import PRIMITIVES_FILE
     from primspace.sim.config import GenerationConfig
     from primspace.sim.generate import generate_dataset
 
@@ -202,7 +202,7 @@ def by_primitives(long_data, tmp_path_factory):
 
 
 def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_primitives):
-    from primspace.experiments.composite_results import composite_table
+    from primspace.experiments.composite.results import composite_table
     from primspace.docs import render_composite
     from primspace.experiments.summary import summarize
 
@@ -239,7 +239,7 @@ def test_lasa_chains_leave_out_the_demonstrations_of_the_single_strokes():
     np.testing.assert_array_equal(chain_lasa(12, seed=0).motor, chain_lasa(12, seed=0, demos=range(7)).motor)
     with pytest.raises(UserError, match="demos"):
         chain_lasa(2, demos=(7,))
-    from primspace.experiments.composite_primitives import _check_unseen
+    from primspace.experiments.composite.primitives import _check_unseen
 
     _check_unseen(data)  # chains of the held-out demonstrations pass
     with pytest.raises(UserError, match="fitted on"):

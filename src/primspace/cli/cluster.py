@@ -297,7 +297,7 @@ def _primitives(held, primitives: Optional[int], data: Path) -> int:
 
 def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, _steps, _method):
     """Change points of the run's window codes (the run's own samples of ``ds``)."""
-    from primspace.experiments.composite import segment_codes
+    from primspace.experiments.composite.experiment import segment_codes
     from primspace.train import check_run_data
 
     window = trained.model_config.code_window

@@ -176,7 +176,7 @@ _experiment_command(
 _experiment_command(
     "composite", "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
     "segmented and labelled without labels (--preset demo or paper; docs/sequences.md).",
-    ("composite:run_composite",), "composite_results:composite_table", preset_names="COMPOSITE_PRESET_OF",
+    ("composite.experiment:run_composite",), "composite.results:composite_table", preset_names="COMPOSITE_PRESET_OF",
 )
 _experiment_command(
     "tune", "Fair baselines: tune each init's layer time constants and latent learning rate on a validation split "

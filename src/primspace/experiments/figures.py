@@ -162,7 +162,7 @@ def _draw_primitive_timelines(out_dir: str | Path, results: dict) -> list[Path]:
     """Per method of the model of single primitives, the timeline of the first seed's
     held-out demonstrations: scaled joints, true and found labels and boundaries."""
     from primspace import plots
-    from primspace.experiments.composite_results import METHODS
+    from primspace.experiments.composite.results import METHODS
     from primspace.plots.sequences import plot_code_timeline
     from primspace.segmentation import boundaries_from_segments
 

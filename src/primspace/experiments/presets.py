@@ -119,7 +119,7 @@ class ExperimentPreset:
         Composite presets: the experiment preset whose single primitives (its data, its
         optimiser, q = its ``cluster_latent_dim``) make the model that segments the long
         demonstrations by synthesis and by surprise
-        (:mod:`primspace.experiments.composite_primitives`); None: those methods do not run.
+        (:mod:`primspace.experiments.composite.primitives`); None: those methods do not run.
     segment_steps : (int, int) or None
         Their duration prior: the fewest and most steps of one primitive in the long
         demonstrations; None: 0.4 to 0.85 of the primitives' T.

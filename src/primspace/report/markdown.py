@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.experiments.claims import check_claims, eighth_loss
-from primspace.experiments.composite_results import (
+from primspace.experiments.composite.results import (
     PEER_RULES, bounds_table, composite_table, primitives_table, recall_table)
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, projection_lead, scene_table, tuning_table
 from primspace.experiments.summary import read_summary

@@ -14,7 +14,7 @@ import platform
 from pathlib import Path
 
 from primspace.experiments.claims import check_claims, claims_table
-from primspace.experiments.composite_results import bounds_table, composite_table, primitives_table, recall_table
+from primspace.experiments.composite.results import bounds_table, composite_table, primitives_table, recall_table
 from primspace.experiments.results import (
     predict_error_table,
     ANIMATION_RESULTS,

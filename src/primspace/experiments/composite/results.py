@@ -15,7 +15,7 @@ from primspace.experiments.results import _mean_std, final
 __all__ = ["METHODS", "composite_table", "primitives_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
 
 #: The segmentations by a model of single primitives
-#: (:mod:`primspace.experiments.composite_primitives`), in table order.
+#: (:mod:`primspace.experiments.composite.primitives`), in table order.
 METHODS = ("synthesis", "surprise")
 
 #: What each peer is, for the tables' readers (primspace.segmentation.peers has the rules).

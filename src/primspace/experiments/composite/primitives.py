@@ -1,6 +1,6 @@
 """The composite experiment's segmentation by a model of single primitives: synthesis and surprise.
 
-A sequence of codes (:mod:`primspace.experiments.composite`) models long demonstrations
+A sequence of codes (:mod:`primspace.experiments.composite.experiment`) models long demonstrations
 but does not find their primitives. A model of *single* primitives does
 (docs/sequences.md, issue 27): per seed, one run of the preset's ``primitives`` experiment
 preset (its data: the simulator's single primitives, or LASA's single strokes; its
@@ -33,7 +33,8 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
-from primspace.experiments.composite_results import METHODS
+from primspace.experiments.composite.results import METHODS
+from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries
 from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_preset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
@@ -129,10 +130,8 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
 
 
 def _timeline_arrays(name: str, fitted, held: MotionDataset, result) -> dict:
-    """The first :data:`~primspace.experiments.composite.TIMELINE_SAMPLES` held-out
+    """The first :data:`~primspace.experiments.composite.timeline.TIMELINE_SAMPLES` held-out
     demonstrations' scaled joints, true steps and ``name``'s found labels and boundaries."""
-    from primspace.experiments.composite import TIMELINE_SAMPLES, padded_boundaries
-
     n = min(TIMELINE_SAMPLES, len(held))
     return {"joints": fitted.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64)),
             "lengths": held.lengths[:n], "step_labels": held.step_labels[:n], "step_segments": held.step_segments[:n],

@@ -15,10 +15,10 @@ loss. The untrained codes of each init are segmented and scored too (the project
 
 Beside them, per seed on the same held-out demonstrations, the peers (ruptures change
 points, a Gaussian HMM, on the scaled joints) and the upper bounds (classifiers given the
-labels, and clustering given the true boundaries; :mod:`primspace.experiments.composite_peers`).
+labels, and clustering given the true boundaries; :mod:`primspace.experiments.composite.peers`).
 
 Per seed too, a model of single primitives segments the same held-out demonstrations by
-synthesis and by surprise (:mod:`primspace.experiments.composite_primitives`).
+synthesis and by surprise (:mod:`primspace.experiments.composite.primitives`).
 
 Results: ``results/composite.json`` (one row per run, ``peers``: a block per seed, and
 ``primitives``: a row per seed) and
@@ -36,16 +36,14 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments import figures
+from primspace.experiments.composite.primitives import run_primitives
+from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.runs import curves, fit_and_infer, load_run_data, shared_fits_last
 from primspace.experiments.sweep import GridPoint, run_dir_of
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["composite_key", "split_sequences", "segment_codes", "run_composite_point", "run_composite",
-           "TIMELINE_SAMPLES", "padded_boundaries"]
-
-#: Held-out demonstrations shown in the timeline figure.
-TIMELINE_SAMPLES = 4
+__all__ = ["composite_key", "split_sequences", "segment_codes", "run_composite_point", "run_composite"]
 
 
 def composite_key(init: str, latent_dim: int, seed: int) -> str:
@@ -170,8 +168,6 @@ def run_composite(exp: ExperimentDir) -> dict:
     previous = exp.read_results("composite") or {}
     with exp.stage("composite peers"):
         peers = _peers_by_seed(exp, data, runs, previous.get("peers", {}))
-    from primspace.experiments.composite_primitives import run_primitives
-
     results = {"runs": runs, "failures": grid.failures, "splits": splits, "window": preset.model.code_window,
                "label_names": list(data.label_names), "peers": peers,
                "primitives": run_primitives(exp, held_out)}
@@ -205,10 +201,10 @@ def _rescored(exp: ExperimentDir, runs: list[dict]) -> list[dict]:
 
 
 def _peers_by_seed(exp: ExperimentDir, data: MotionDataset, runs: list[dict], previous: dict) -> dict:
-    """Per seed with finished runs, :func:`~primspace.experiments.composite_peers.peers_block`
+    """Per seed with finished runs, :func:`~primspace.experiments.composite.peers.peers_block`
     on its held-out demonstrations, with every run's codes; a stored block is reused while
     the seed's runs and the peers' version are the same and no peer was missing."""
-    from primspace.experiments.composite_peers import peers_block
+    from primspace.experiments.composite.peers import peers_block
     from primspace.segmentation.peers import PEERS, PEERS_VERSION
     from primspace.train import load_run
 
@@ -234,9 +230,9 @@ def _peers_by_seed(exp: ExperimentDir, data: MotionDataset, runs: list[dict], pr
 
 def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
     """The code sequences, true and found boundaries and labels of the first
-    :data:`TIMELINE_SAMPLES` held-out demonstrations, per init of the first seed and q. The
-    found ones are those of the scored segmentation (all held-out demonstrations at once:
-    one noise level, one clustering), sliced."""
+    :data:`~primspace.experiments.composite.timeline.TIMELINE_SAMPLES` held-out
+    demonstrations, per init of the first seed and q. The found ones are those of the scored
+    segmentation (all held-out demonstrations at once: one noise level, one clustering), sliced."""
     from primspace.train import load_run
 
     data = exp.dataset()
@@ -257,12 +253,3 @@ def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
     exp.write_results("composite_timeline", {"inits": [r["init"] for r in chosen], "window": first["window"],
                                              "latent_dim": first["latent_dim"], "seed": first["seed"],
                                              "label_names": list(data.label_names)})
-
-
-def padded_boundaries(boundaries: list[np.ndarray]) -> np.ndarray:
-    """Ragged boundary lists as one (n, m) int array, -1 padded."""
-    width = max((len(b) for b in boundaries), default=0)
-    out = np.full((len(boundaries), max(width, 1)), -1, dtype=np.int64)
-    for i, b in enumerate(boundaries):
-        out[i, : len(b)] = b
-    return out

@@ -1,7 +1,7 @@
 """The composite experiment's peers and upper bounds, per seed, on the runs' held-out demonstrations.
 
 For each seed, on the same held-out demonstrations as that seed's runs (the split of
-:func:`~primspace.experiments.composite.split_sequences`), their joints scaled as every run
+:func:`~primspace.experiments.composite.experiment.split_sequences`), their joints scaled as every run
 scales them (:func:`~primspace.experiments.runs.experiment_scaler`) and cut to their valid
 steps:
 

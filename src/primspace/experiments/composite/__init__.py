@@ -1,0 +1,16 @@
+"""The composite experiment: long demonstrations of several primitives, segmented and scored.
+
+- :mod:`~primspace.experiments.composite.experiment`: the experiment (``primspace experiment
+  composite``): the grid of window-code runs, their segmentation and scores, then the peers
+  and the model of single primitives per seed.
+- :mod:`~primspace.experiments.composite.peers`: the peers (ruptures, a Gaussian HMM) and the
+  upper bounds per seed, on the runs' held-out demonstrations.
+- :mod:`~primspace.experiments.composite.primitives`: segmentation by a model of single
+  primitives (synthesis and surprise) per seed.
+- :mod:`~primspace.experiments.composite.timeline`: the arrays of the timeline figures.
+- :mod:`~primspace.experiments.composite.results`: the tables (read by the report, the
+  command line and the docs; imports no experiment).
+
+Each module imports only those listed after it (``results`` and ``timeline`` none of them).
+This package's ``__init__`` imports nothing, so reading its tables never loads the experiment.
+"""
