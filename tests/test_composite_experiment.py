@@ -81,7 +81,7 @@ def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
 
 
 def test_the_summary_keeps_the_peers_and_the_docs_render_them(finished):
-    from primspace.docs import render_composite
+    from primspace.report.markdown import render_composite
     from primspace.experiments.summary import summarize
 
     exp, results = finished
@@ -203,7 +203,7 @@ def by_primitives(long_data, tmp_path_factory):
 
 def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_primitives):
     from primspace.experiments.composite.results import composite_table
-    from primspace.docs import render_composite
+    from primspace.report.markdown import render_composite
     from primspace.experiments.summary import summarize
 
     exp, results = by_primitives

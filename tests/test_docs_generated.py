@@ -1,12 +1,13 @@
-"""README's and docs/reproduce.md's numbers are generated from the stored summaries
-(docs/results/*.json) by ``python -m primspace.docs``: the committed text must equal what
-it writes, so no number in those blocks is typed by hand or left stale."""
+"""The numbers of README, docs/results.md, docs/predict.md and docs/sequences.md are
+generated from the stored summaries (docs/results/*.json) by ``python -m
+primspace.report.markdown``: the committed text must equal what it writes, so no number
+in those blocks is typed by hand or left stale."""
 
 from pathlib import Path
 
 import pytest
 
-from primspace.docs import g, main, mean_spread, replace_blocks
+from primspace.report.markdown import g, main, mean_spread, replace_blocks
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -16,11 +17,11 @@ def test_committed_docs_equal_what_the_summaries_give(capsys):
 
 
 def test_a_stale_block_is_found_and_rewritten(tmp_path):
-    for target in ("README.md", "docs/reproduce.md", "docs/predict.md", "docs/sequences.md"):
+    for target in ("README.md", "docs/results.md", "docs/predict.md", "docs/sequences.md"):
         (tmp_path / target).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / target).write_text((ROOT / target).read_text(encoding="utf-8"), encoding="utf-8")
     readme = tmp_path / "README.md"
-    readme.write_text(readme.read_text().replace("<!-- generated: headline -->\n", "<!-- generated: headline -->\nhand-typed 0.99\n"))
+    readme.write_text(readme.read_text().replace("<!-- generated: glance -->\n", "<!-- generated: glance -->\nhand-typed 0.99\n"))
     (tmp_path / "docs" / "results").mkdir()
     for summary in (ROOT / "docs" / "results").glob("*.json"):
         (tmp_path / "docs" / "results" / summary.name).write_text(summary.read_text())
@@ -56,7 +57,7 @@ def _summary(name, motor, psnr):
 
 
 def test_two_summaries_are_compared_side_by_side_on_per_element_errors():
-    from primspace.docs import render_comparison
+    from primspace.report.markdown import render_comparison
 
     a = _summary("mean", {"projection": [1e-4, 3e-4], "zero": [1e-3, 1e-3]}, {"projection": [28.0, 30.0], "zero": [27.0, 27.0]})
     b = _summary("sum", {"projection": [2e-3, 2e-3], "zero": [4e-3, 6e-3]}, {"projection": [29.0, 29.0], "zero": [28.0, 28.0]})
@@ -66,13 +67,13 @@ def test_two_summaries_are_compared_side_by_side_on_per_element_errors():
     assert "| zero | 0.001 ± 0 | 0.005 ± 0.001 |" in text
 
 
-def test_the_headline_says_whether_projection_leads_zero_and_pca_after_tuning():
-    """Where a summary holds the tuned baselines, the headline counts the seeds where
-    projection's final eval loss is below zero's and pca's at the tuned q, tuned and
-    shared, seed by seed (counted here again from the summary's runs)."""
+def test_readmes_table_says_whether_projection_leads_zero_and_pca_after_tuning():
+    """Where a summary holds the tuned baselines, README's table counts the seeds where
+    projection's final eval loss is below zero's and pca's at the tuned q, tuned (counted
+    here again from the summary's runs, seed by seed)."""
     import json
 
-    from primspace.docs import headline
+    from primspace.report.markdown import glance
 
     summary = json.loads((ROOT / "docs" / "results" / "lasa.json").read_text())
     tune, intra = summary["results"]["tune"], summary["results"]["intra"]
@@ -83,39 +84,40 @@ def test_the_headline_says_whether_projection_leads_zero_and_pca_after_tuning():
         seeds = sorted(s for i, s in last if i == init and ("projection", s) in last)
         return f"{sum(last[('projection', s)] < last[(init, s)] for s in seeds)} of {len(seeds)}"
 
-    text = headline({"lasa": summary})
-    tuned, shared = tune["tuned"]["runs"], intra["runs"]
-    assert (f"projection ends below zero in {below(tuned, 'zero')} and below pca in {below(tuned, 'pca')} seeds "
-            f"at q = {q} ({below(shared, 'zero')} and {below(shared, 'pca')} with the shared setting)") in text
+    text = glance({"lasa": summary})
+    row = next(line for line in text.splitlines() if line.startswith("| *lasa* |"))
+    assert f"| {below(tune['tuned']['runs'], 'zero')} / {below(tune['tuned']['runs'], 'pca')} (q = {q}) |" in row
+    seeds = len({r["seed"] for r in intra["runs"]})
+    assert row.startswith(f"| *lasa* | {seeds} | {max(r['latent_dim'] for r in intra['runs'])} |")
     del summary["results"]["tune"]
-    assert "tuned on a validation split" not in headline({"lasa": summary})
+    assert "(q = " not in glance({"lasa": summary})
 
 
-def test_the_headline_reads_a_tune_run_in_another_directory():
-    """A summary named in docs.TUNED_IN gets its tune clause from the summary named there
-    (the paper preset's q = 20 was tuned in its own directory); that summary itself stays
-    out of the headline (not in docs.ORDER)."""
+def test_readmes_table_reads_a_tune_run_in_another_directory():
+    """A summary named in TUNED_IN gets its tuned cell from the summary named there (the
+    paper preset's q = 20 was tuned in its own directory); that summary itself stays out
+    of the table (not in ORDER)."""
     import json
 
-    from primspace.docs import TUNED_IN, headline
+    from primspace.report.markdown import TUNED_IN, glance
 
     name = next(iter(TUNED_IN))
     lasa = json.loads((ROOT / "docs" / "results" / "lasa.json").read_text())
     plain = json.loads(json.dumps(lasa))
     del plain["results"]["tune"]
-    text = headline({name: plain, TUNED_IN[name]: lasa})
-    assert text.count("tuned on a validation split") == 1
+    text = glance({name: plain, TUNED_IN[name]: lasa})
+    assert text.count("(q = ") == 1
     assert f"*{name}*" in text and f"*{TUNED_IN[name]}*" not in text
-    assert "tuned on a validation split" not in headline({name: plain})
+    assert "(q = " not in glance({name: plain})
 
 
 def test_a_tune_run_on_copied_runs_shows_only_its_tuning_table():
-    """docs/reproduce.md shows the summary a docs.TUNED_IN entry names by its tuning table
+    """docs/results.md shows the summary a TUNED_IN entry names by its tuning table
     alone (its shared-setting runs are the other summary's, shown there); without the
     other summary stored, it is shown whole."""
     import json
 
-    from primspace.docs import TUNED_IN, blocks
+    from primspace.report.markdown import TUNED_IN, blocks
 
     name = next(iter(TUNED_IN))
     lasa = json.loads((ROOT / "docs" / "results" / "lasa.json").read_text())

@@ -383,7 +383,7 @@ def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
 def test_a_summary_holds_what_the_claims_and_docs_read(finished):
     """The stored summary of a directory gives the same verdicts and numbers as the
     directory itself (the docs are generated from summaries), and stays small."""
-    from primspace.docs import render_summary
+    from primspace.report.markdown import render_summary
     from primspace.experiments.claims import check_claims
     from primspace.experiments.summary import read_summary, summarize
 

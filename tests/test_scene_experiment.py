@@ -68,7 +68,7 @@ def test_a_second_call_reuses_the_points_and_the_report_has_the_section(scene):
 
 
 def test_the_stored_summary_keeps_the_scene_table_and_the_docs_print_it(scene):
-    from primspace.docs import blocks
+    from primspace.report.markdown import blocks
     from primspace.experiments.summary import _round, summarize
 
     exp, results = scene
