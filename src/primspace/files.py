@@ -22,6 +22,10 @@ would), not ``mkstemp``'s private 0600.
 :func:`check_outside_inputs` refuses an output that is, contains or lies inside one of
 the command's inputs, so no flag combination can make a command overwrite or delete
 what it reads.
+
+This module knows files only, not what is in them: it sits below the data layer, which
+writes through it. Which command wrote a file, and the check of a command's file output
+that reads it (:func:`primspace.outputs.output_file`), are :mod:`primspace.outputs`'s.
 """
 
 from __future__ import annotations
@@ -41,7 +45,6 @@ from primspace.errors import OutputExistsError, UserError
 
 __all__ = [
     "check_output",
-    "output_file",
     "check_outside_inputs",
     "atomic_path",
     "atomic_directory",
@@ -73,39 +76,6 @@ def check_output(path: str | os.PathLike, overwrite: bool = False) -> Path:
         raise UserError(f"{path}: is a directory; --out must name a file")
     if path.exists() and not overwrite:
         raise OutputExistsError(path)
-    return path
-
-
-def output_file(
-    text: str | os.PathLike,
-    *,
-    inputs: Iterable = (),
-    overwrite: bool = False,
-    option: str = "--out",
-    writer: str | None = None,
-) -> Path:
-    """The checked path of a command's file output, as the user typed it.
-
-    Refused, each in one line: an empty name; ``dir/`` (a trailing separator names a
-    directory, so no file called ``dir`` is written) or an existing directory; a path that
-    is, contains or lies inside one of ``inputs`` (:func:`check_outside_inputs`); an
-    existing file unless ``overwrite`` (:func:`check_output`); with ``writer`` (the
-    command's mark, e.g. ``"primspace show"``), an existing file that is not an earlier
-    output of that command, even with ``overwrite``
-    (:func:`primspace.outputs.check_replaceable`).
-    """
-    raw = os.fspath(text)
-    if not raw.strip():
-        raise UserError(f"{option} is empty")
-    if raw.endswith(("/", os.sep)) or Path(raw).is_dir():
-        raise UserError(f"{raw}: is a directory; {option} must name a file")
-    path = Path(raw)
-    check_outside_inputs(path, inputs, option)
-    check_output(path, overwrite)
-    if writer is not None:
-        from primspace.outputs import check_replaceable
-
-        check_replaceable(path, writer, overwrite, option)
     return path
 
 

@@ -18,9 +18,13 @@ Folders are recognised by their own files instead: a run by its ``config.json``
 experiment by its ``experiment.json``.
 
 :func:`check_replaceable` is the rule every file-writing command applies (through
-:func:`primspace.files.output_file`): an existing file is refused without
-``--overwrite``, and with it unless it carries the command's own mark; the one-line error
-names the file and what it is (:func:`describe`).
+:func:`output_file`): an existing file is refused without ``--overwrite``, and with it
+unless it carries the command's own mark; the one-line error names the file and what it is
+(:func:`describe`).
+
+This module sits above the data layer (it reads a data set file's mark through
+:mod:`primspace.data.storage`) and above :mod:`primspace.files`, which the data layer
+writes through.
 """
 
 from __future__ import annotations
@@ -28,10 +32,12 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Iterable
 
 from primspace.errors import OutputExistsError, UserError
+from primspace.files import check_output, check_outside_inputs
 
-__all__ = ["MARK_KEY", "png_metadata", "gif_comment", "file_writer", "describe", "check_replaceable"]
+__all__ = ["MARK_KEY", "png_metadata", "gif_comment", "file_writer", "describe", "check_replaceable", "output_file"]
 
 #: The PNG text key of a figure's mark.
 MARK_KEY = "primspace"
@@ -184,4 +190,35 @@ def check_replaceable(path: str | os.PathLike, writer: str, overwrite: bool, opt
         what = "a symbolic link" if path.is_symlink() else describe(path)
         raise UserError(f"{path}: exists and is {what}; --overwrite replaces only an earlier output of {writer}: "
                         f"choose another {option}")
+    return path
+
+
+def output_file(
+    text: str | os.PathLike,
+    *,
+    inputs: Iterable = (),
+    overwrite: bool = False,
+    option: str = "--out",
+    writer: str | None = None,
+) -> Path:
+    """The checked path of a command's file output, as the user typed it.
+
+    Refused, each in one line: an empty name; ``dir/`` (a trailing separator names a
+    directory, so no file called ``dir`` is written) or an existing directory; a path that
+    is, contains or lies inside one of ``inputs``
+    (:func:`~primspace.files.check_outside_inputs`); an existing file unless ``overwrite``
+    (:func:`~primspace.files.check_output`); with ``writer`` (the command's mark, e.g.
+    ``"primspace show"``), an existing file that is not an earlier output of that command,
+    even with ``overwrite`` (:func:`check_replaceable`).
+    """
+    raw = os.fspath(text)
+    if not raw.strip():
+        raise UserError(f"{option} is empty")
+    if raw.endswith(("/", os.sep)) or Path(raw).is_dir():
+        raise UserError(f"{raw}: is a directory; {option} must name a file")
+    path = Path(raw)
+    check_outside_inputs(path, inputs, option)
+    check_output(path, overwrite)
+    if writer is not None:
+        check_replaceable(path, writer, overwrite, option)
     return path

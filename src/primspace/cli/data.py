@@ -99,7 +99,7 @@ def generate_command(
     """
     import time
 
-    from primspace.files import output_file
+    from primspace.outputs import output_file
     from primspace.sim import generate
     from primspace.sim.composite import COMPOSITE_PRESETS
     from primspace.sim.generate import generate_dataset
@@ -205,7 +205,7 @@ def show_command(
 ) -> None:
     """Draw one sample: a strip of camera frames and its joint curves."""
     from primspace.data.dataset import MotionDataset
-    from primspace.files import output_file
+    from primspace.outputs import output_file
     from primspace.plots import plot_sim_sample, save_figure
 
     if frames < 1:

@@ -216,7 +216,7 @@ def summarize_command(
     """Write the small summary of an experiment that the docs' tables are generated from
     (`python -m primspace.docs`); run it on the machine that ran the experiment (it records the CPU)."""
     from primspace.experiments.summary import summarize, write_summary
-    from primspace.files import output_file
+    from primspace.outputs import output_file
 
     # --overwrite replaces a summary only (recognised by its summary_version), never another file
     path = output_file(out, inputs=(directory,), overwrite=overwrite, writer="primspace summarize")

@@ -92,7 +92,7 @@ def import_command(
 
     Frames: each step takes the recorded frame nearest in time, fitted (--image-fit) and resized to --image-size.
     """
-    from primspace.files import output_file
+    from primspace.outputs import output_file
 
     length = _parse_length(length)
     source = None if src is None or str(src).lower() == "lasa" else src

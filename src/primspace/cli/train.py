@@ -327,7 +327,7 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     import numpy as np
 
     from primspace.data.dataset import MotionDataset
-    from primspace.files import output_file
+    from primspace.outputs import output_file
     from primspace.train import check_run_data, load_run
 
     if frames < min_frames:

@@ -3,6 +3,7 @@
 Modules: :mod:`~primspace.data.schema` (the fields of a data set, once),
 :mod:`~primspace.data.dataset` (:class:`MotionDataset`, in memory),
 :mod:`~primspace.data.storage` (its HDF5 file: reading, :class:`DatasetWriter`),
+:mod:`~primspace.data.checks` (the constructor's conversions and checks, without the class),
 :mod:`~primspace.data.images` (:class:`LazyImages`), :mod:`~primspace.data.indices`
 (sample indices), :mod:`~primspace.data.values` (number checks),
 :mod:`~primspace.data.resample`, :mod:`~primspace.data.scaling`,

@@ -29,15 +29,14 @@ from typing import Any
 
 import numpy as np
 
+from primspace.data.checks import convert_fields, validate_fields
 from primspace.data.images import LazyImages, as_view
 from primspace.data.indices import check_indices, mask_indices
-from primspace.data.schema import ARRAYS, ATTRIBUTES, SCHEMA_VERSION, names_of
+from primspace.data.schema import ARRAYS, SCHEMA_VERSION, names_of
 from primspace.data.storage import DatasetWriter, read_fields, write_dataset
 from primspace.errors import DataError
 
 __all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
-
-_MEMBERS = tuple(f for f in ATTRIBUTES if f.in_memory)  # attributes the class holds
 
 
 @dataclass(eq=False)
@@ -106,12 +105,7 @@ class MotionDataset:
     file_indices: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        for array in ARRAYS:  # motor first: its errors come before the optional fields'
-            value = getattr(self, array.name)
-            if value is not None or array.required:
-                setattr(self, array.name, array.coerce(value, self.path))
-        for attr in _MEMBERS:  # names default from the converted arrays
-            setattr(self, attr.name, attr.normalize(getattr(self, attr.name), self))
+        convert_fields(self)  # the arrays (motor first), then the names defaulted from them
         self.file_indices = _file_indices(self.file_indices, len(self), self.path)
         self.validate()
 
@@ -153,16 +147,7 @@ class MotionDataset:
         Each array is checked (``motor`` first), then the attribute naming its last
         axis, then the attributes of no array (``dt``), in the schema table's order.
         """
-        for array in ARRAYS:
-            if getattr(self, array.name) is None:
-                continue
-            array.validate(self)
-            names = names_of(array)
-            if names is not None and names.validate is not None:
-                names.validate(self)
-        for attr in _MEMBERS:
-            if attr.owner is None and attr.validate is not None:
-                attr.validate(self)
+        validate_fields(self)
 
     # ----------------------------------------------------------------------- subsets
     def subset(self, indices) -> "MotionDataset":

@@ -13,11 +13,13 @@ import contextlib
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from types import SimpleNamespace
+from typing import Sequence
 
 import h5py
 import numpy as np
 
+from primspace.data.checks import checked_fields
 from primspace.data.images import IMAGE_BLOCK, LazyImages, as_view, read_samples
 from primspace.data.schema import (
     ARRAYS, ATTRIBUTES, SCHEMA_VERSION, WRITER_ATTRIBUTE, Field, arrays_of, dims_of, field,
@@ -25,9 +27,6 @@ from primspace.data.schema import (
 from primspace.data.values import as_float32
 from primspace.errors import DataError, first_line
 from primspace.files import atomic_path
-
-if TYPE_CHECKING:
-    from primspace.data.dataset import MotionDataset
 
 __all__ = ["DatasetWriter", "file_writer", "read_fields", "write_dataset"]
 
@@ -183,8 +182,8 @@ def _str_list(v) -> list[str]:
 # ---------------------------------------------------------------------------- writing
 
 
-def write_dataset(ds: "MotionDataset", path: Path, overwrite: bool, compression_level: int, writer=None) -> Path:
-    """Write ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`)."""
+def write_dataset(ds, path: Path, overwrite: bool, compression_level: int, writer=None) -> Path:
+    """Write the data set ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`)."""
     settings = {a.writer_option: _option_value(a, getattr(ds, a.name)) for a in ARRAYS if a.writer_option}
     with DatasetWriter(
         path, n_samples=len(ds), length=ds.length, **{a.name: getattr(ds, a.name) for a in ATTRIBUTES if a.in_memory},
@@ -376,11 +375,13 @@ class DatasetWriter:
             (naming the source file and the field), or does not fit at ``start``, or
             one of its image chunks cannot be decoded (naming the source sample).
         """
-        from primspace.data.dataset import MotionDataset
-
         if self._file is None:
             raise RuntimeError("DatasetWriter.copy_from outside its with block")
-        source = MotionDataset.load(path)
+        values = read_fields(path)  # read and checked as MotionDataset.load does
+        try:
+            source = checked_fields(values, Path(path))
+        except DataError as exc:
+            raise exc.located(path=Path(path)) from None
         try:
             try:
                 block, sl = self._check_block(start, arrays_of(source))
@@ -416,10 +417,8 @@ class DatasetWriter:
                 then.append(attr.name)
         return first + then
 
-    def _check_block(self, start: int, arrays: dict) -> tuple["MotionDataset", slice]:
-        """Validate a block of samples against this file; return it and its slice."""
-        from primspace.data.dataset import MotionDataset
-
+    def _check_block(self, start: int, arrays: dict) -> tuple[SimpleNamespace, slice]:
+        """Validate a block of samples against this file (as :class:`MotionDataset` does); return it and its slice."""
         if self._file is None:
             raise RuntimeError("DatasetWriter.write outside its with block")
         motor = as_float32(arrays["motor"], "motor", self.path)
@@ -429,7 +428,7 @@ class DatasetWriter:
             if attr.owner is not None:
                 given = field(attr.owner).required or arrays.get(attr.owner) is not None
                 names[attr.name] = (getattr(self, attr.name) or None) if given else None
-        block = MotionDataset(**dict(arrays, motor=motor), **names, dt=self.dt) if k else None
+        block = checked_fields(dict(arrays, motor=motor, **names, dt=self.dt)) if k else None
         if block is None or not 0 <= start or start + k > self.n_samples:
             raise DataError(
                 f"block of {k} samples at {start} does not fit in N={self.n_samples}", path=self.path, field="motor"
@@ -452,7 +451,7 @@ class DatasetWriter:
                 )
         return block, slice(start, start + k)
 
-    def _store(self, block: "MotionDataset", sl: slice) -> None:
+    def _store(self, block: SimpleNamespace, sl: slice) -> None:
         """Store a checked block's in-memory arrays (all but the images); mark its samples written."""
         for array in _EAGER:
             value = getattr(block, array.name)
