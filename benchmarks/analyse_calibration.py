@@ -17,7 +17,7 @@ the latent learning rate and to the inference epochs. Prints a table with ratios
     python benchmarks/analyse_calibration.py --data watch.h5 --preset lasa --out OUT   # where projection loses
 
 ``--data`` takes any labelled data set (the second command: seglearn's wrist-sensor
-recordings of 7 physiotherapy exercises, docs/reproduce.md says how to make the file);
+recordings of 7 physiotherapy exercises, CHANGELOG.md, 0.5.0, says how to make the file);
 ``--preset`` trains as an experiment preset does (``lasa``: the tuned optimiser, 800 + 600
 epochs, 30 % fitted).
 

@@ -14,7 +14,7 @@ with random linear projection yields good results already without any training, 
 means the initial distribution of projected points did not change much during the first
 part of the training." This module tests that reading. The fitted codes do move
 (``‖Z − P m‖_F / ‖P m‖_F`` 5-7 % on the paper preset, 11-53 % on the smaller demo, LASA
-and wrist-sensor data: docs/reproduce.md, *Beyond the paper: the calibrated start*); where
+and wrist-sensor data: CHANGELOG.md, 0.5.0, *Beyond the paper: the calibrated start*); where
 they move most, and not linearly in ``P m`` (the wrist-sensor recordings, 46-53 %), the raw
 projection ends above zero init. (The LASA example reported in issue 16, projection ending
 above zero, did not reproduce: docs/model.md, *When the raw projection loses*.)

@@ -238,7 +238,7 @@ class ExperimentPreset:
 
 PRESETS: dict[str, ExperimentPreset] = {
     "paper": ExperimentPreset(name="paper", data_preset="paper"),
-    # Sized by measurement to fit `make demo` in 5 minutes on 2 cores (README, Performance).
+    # Sized by measurement to fit `make demo` in 5 minutes on 2 cores (docs/performance.md).
     "demo": ExperimentPreset(
         name="demo",
         data_preset="demo",

@@ -5,8 +5,8 @@ must live somewhere that is: :func:`summarize` reduces an experiment directory t
 JSON object (tens of kilobytes) that holds every number the docs' tables and the claims
 are made from, and nothing else: loss curves cut to a few epochs, success counts, the
 accuracy of each clustering, the inter folds. ``docs/results/NAME.json`` holds one per
-run we report; ``python -m primspace.docs`` writes the tables of README and
-docs/reproduce.md from them, and a test keeps the committed text equal to what it writes.
+run we report; ``python -m primspace.report.markdown`` writes the tables of README and
+docs/results.md from them, and a test keeps the committed text equal to what it writes.
 
 The claims (:func:`primspace.experiments.claims.check_claims`) read a summary's
 ``results`` exactly as they read a directory, so a rule that changes is re-judged from

@@ -168,7 +168,7 @@ def calibration(out_dir: Path, report: HtmlReport) -> None:
         "with random linear projection yields good results already without any training, which means the initial "
         "distribution of projected points did not change much during the first part of the training.\" The "
         "movement below tests that reading: the fitted codes do move (5-7 % on the paper preset, 11-53 % on the "
-        "smaller demo, LASA and wrist-sensor data; docs/reproduce.md). Calibrated projection starts a new code at "
+        "smaller demo, LASA and wrist-sensor data; CHANGELOG.md, 0.5.0). Calibrated projection starts a new code at "
         "B P m + c instead: a ridge regression (with intercept, its strength chosen by leave-one-out on the training "
         "part) from the training samples' P m to their fitted codes, fitted at the end of projection's fit; same θ, "
         "same P. Movement and R² below are the projection fit's, on its training part (R² of P m: how well P m "
