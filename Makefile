@@ -10,7 +10,7 @@ TORCH  ?= torch==2.13.0
 # Panda model files it bundles (it would otherwise pull gymnasium and friends).
 ROBOT_ASSETS := gymnasium-robotics==1.4.2
 
-.PHONY: demo test install install-test bench clean
+.PHONY: demo test docs install install-test bench clean
 
 $(VENV)/bin/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,11 @@ demo: install
 
 test: install-test
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+# the docs' generated numbers (from docs/results/*.json) and the API reference (build/api/index.html)
+docs: install-test
+	$(PY) -m primspace.report.markdown
+	$(PY) docs/build_api.py build/api
 
 bench: install
 	$(PY) benchmarks/bench_generate.py
