@@ -37,7 +37,8 @@ class ClusterSpectral(str, Enum):
 @app.command("cluster")
 def cluster_command(
     src: Path = typer.Argument(
-        ..., help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened) or an (N, q) .npy of latents."
+        ..., help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened), an (N, q) .npy of "
+        "latents, or a run directory (its codes, scored with the labels of its samples in its data file)."
     ),
     k: int = typer.Option(..., "--k", "-k", help="Number of clusters K."),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (labels.csv, result.json, clustering.png)."),
@@ -69,7 +70,6 @@ def cluster_command(
     overwrite: bool = typer.Option(False, help="Replace a non-empty OUT directory."),
 ) -> None:
     """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
-    from primspace.cluster.inputs import load_points
     from primspace.cluster.outputs import check_output_directory
     from primspace.files import check_outside_inputs
 
@@ -78,7 +78,7 @@ def cluster_command(
     r2_target = _parse_r2(r2)
     _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
-    points = load_points(src, labels)
+    points = _points(src, labels)
     if k > points.X.shape[0]:
         raise UserError(f"--k {k} exceeds the {points.X.shape[0]} samples in {src}")
     options = {"affine": not linear, "tau": tau, "tau_relative": tau_relative, "r2_target": r2_target,
@@ -86,11 +86,45 @@ def cluster_command(
                "spectral": spectral.value, "n_init": n_init, "random_state": seed}
     result = _cluster(src, points, k, options, do_sweep, grid)
     record = {"input": str(src), "points": points.description, **result.to_dict()}
-    _write_outputs(out, overwrite, src, result, record)
+    _write_outputs(out, overwrite, src, result, record, points.samples)
     if as_json:
         echo_json(record)
         return
     _print_summary(out, result)
+
+
+def _points(src: Path, labels: Optional[Path]):
+    """The points: a data file's trajectories, an ``.npy`` of codes, or a run's codes (a run
+    directory, or the ``latents.npy`` in one) numbered by its samples' indices in the data
+    file and labelled from it (``--labels``: one label per code, in the run's order)."""
+    from primspace.cluster.inputs import ClusterPoints, load_points, read_labels
+
+    maybe_run = src.is_dir() or src.name == "latents.npy"  # cheap: only then read what a run is
+    if maybe_run:
+        from primspace.train.rundir import CONFIG_NAME, LATENTS_NAME
+
+        run_dir = src if src.is_dir() else src.parent if src.name == LATENTS_NAME else None
+        maybe_run = run_dir is not None and (run_dir / CONFIG_NAME).is_file()
+    if not maybe_run:
+        return load_points(src, labels)
+    from primspace.train import load_run
+    from primspace.train.rundata import load_fitted_data
+
+    trained = load_run(run_dir)
+    X = trained.latents.astype("float64")
+    true, names, whence = None, None, ""
+    if labels is not None:
+        true = read_labels(labels, len(X))
+    elif trained.data_path is not None and Path(trained.data_path).is_file():
+        fitted = load_fitted_data(trained)  # checked: the run's own samples, in its order
+        if fitted.labels is not None:
+            true, names, whence = fitted.labels.astype("int64"), list(fitted.label_names), f", labels of {fitted.path}"
+    else:
+        typer.echo(f"note: run {run_dir} has no data file to read labels from ({trained.data_path or 'none recorded'}): "
+                   "clustered without scores (give --labels)", err=True)
+    description = f"codes of run {run_dir}: {X.shape[0]} x {X.shape[1]}, numbered by the data file's index{whence}"
+    return ClusterPoints(X=X, labels=true, label_names=names, path=src, description=description,
+                         samples=trained.indices)
 
 
 def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
@@ -107,8 +141,9 @@ def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
         raise UserError(f"{src}: {first_line(exc)}") from None
 
 
-def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict) -> None:
-    """``labels.csv``, ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
+def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, samples=None) -> None:
+    """``labels.csv`` (``samples``: each point's index in the data file; default the row),
+    ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
     from primspace.cluster import clustering_figure, sweep_figure
     from primspace.cluster.outputs import CLUSTER_OUTPUT, atomic_directory, write_json, write_labels_csv, write_sweep_csv
     from primspace.plots import save_figure
@@ -120,7 +155,7 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict) 
         result, title=f"{src.name}: tau = {result.tau:.3g}, R^2 = {result.r2:.4f}, rank {result.rank}{acc}{shown}"
     )
     with atomic_directory(out, overwrite) as tmp:
-        write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true)
+        write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true, samples)
         write_json(tmp / "result.json", record)
         save_figure(figure, tmp / "clustering.png", writer=CLUSTER_OUTPUT.command)
         if result.sweep is not None:

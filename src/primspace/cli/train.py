@@ -336,6 +336,9 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     path = data if data is not None else trained.data_path
     if path is None:
         raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
+    if data is None and not Path(path).is_file():
+        raise UserError(f"{path}: no such file: it is the data file run {run} was fitted on (recorded in its "
+                        "config.json); if it moved, pass --data NEW_PATH")
     # the data file is an input even when it is the run's (not given as --data): never written over
     out = output_file(out, inputs=(run, path), overwrite=overwrite, writer=writer)
     ds = MotionDataset.load(path)
@@ -343,7 +346,8 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     rows = np.flatnonzero(trained.indices == int(sample))
     if rows.size == 0:
         shown = ", ".join(map(str, trained.indices[:5])) + (" ..." if len(trained.indices) > 5 else "")
-        raise UserError(f"sample {sample} is not one of the run's {len(trained.indices)} samples ({shown})")
+        raise UserError(f"sample {sample} is not one of the run's {len(trained.indices)} samples ({shown}; a sample "
+                        f"is numbered by its index in the data file, {path})")
     if not 0 <= int(sample) < len(ds):
         raise UserError(f"sample {sample} out of range for {len(ds)} samples")
     return out, trained, ds, int(rows[0])

@@ -9,6 +9,9 @@
 ``LATENTS.npy``
     An ``(N, q)`` array, one latent code per row, used as is; true labels from an optional
     ``(N,)`` integer ``.npy`` (``-1`` = unknown).
+
+A run's codes (``primspace cluster RUN``) are read by the command line, which knows runs:
+points numbered by the run's samples (``ClusterPoints.samples``), labelled from its data file.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import numpy as np
 
 from primspace.errors import DataError, UserError, first_line
 
-__all__ = ["ClusterPoints", "load_points", "H5_SUFFIXES"]
+__all__ = ["ClusterPoints", "load_points", "read_labels", "H5_SUFFIXES"]
 
 H5_SUFFIXES = (".h5", ".hdf5")
 
@@ -39,6 +42,10 @@ class ClusterPoints:
     path : Path
     description : str
         How ``X`` was built, for reports.
+    samples : ndarray of shape (N,), int64, or None
+        The number of each point's sample: its index in the data file (a run's codes: the
+        run's samples, :mod:`primspace.data.schema` *Sample numbers*); None: the row
+        (a data file's trajectories, or codes that belong to no run).
     """
 
     X: np.ndarray
@@ -46,6 +53,7 @@ class ClusterPoints:
     label_names: list[str] | None
     path: Path
     description: str
+    samples: np.ndarray | None = None
 
 
 def trajectory_matrix(motor) -> np.ndarray:
@@ -106,7 +114,7 @@ def load_points(path: str | os.PathLike, labels: str | os.PathLike | None = None
     if X.shape[0] == 0:
         raise DataError("holds no points", path=path)
     if labels is not None:
-        true, names = _read_labels(Path(labels), X.shape[0]), None
+        true, names = read_labels(Path(labels), X.shape[0]), None
     return ClusterPoints(X=X, labels=true, label_names=names, path=path, description=description)
 
 
@@ -123,7 +131,8 @@ def _read_npy(path: Path, field: str) -> np.ndarray:
     return loaded
 
 
-def _read_labels(path: Path, n: int) -> np.ndarray:
+def read_labels(path: Path, n: int) -> np.ndarray:
+    """An ``(n,)`` integer ``.npy`` of true labels (``-1`` = unknown); one :class:`DataError` naming what is wrong."""
     lab = _read_npy(path, "labels")
     if lab.shape != (n,):
         raise DataError(f"must have shape ({n},) to match the points, got {lab.shape}", path=path, field="labels")

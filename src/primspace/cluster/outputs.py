@@ -2,7 +2,7 @@
 
 Layout of ``DIR``::
 
-    labels.csv        sample, predicted[, true]   (true: -1 = unknown)
+    labels.csv        sample, predicted[, true]   (sample: the data file's index; true: -1 = unknown)
     result.json       input, options, tau / tau_relative / R^2 / rank, singular values,
                       eigenvalues, spectral method, scores (or null), seconds
     clustering.png    the paper-style figure (affinity ordered by true label; predicted
@@ -130,16 +130,15 @@ def figure_indices(n: int, max_points: int = FIGURE_MAX_POINTS, seed: int = 0) -
     return np.sort(np.random.default_rng(seed).choice(n, size=max_points, replace=False))
 
 
-def write_labels_csv(path: str | os.PathLike, labels_pred, labels_true=None) -> None:
-    """``sample,predicted[,true]`` per point, atomically."""
+def write_labels_csv(path: str | os.PathLike, labels_pred, labels_true=None, samples=None) -> None:
+    """``sample,predicted[,true]`` per point, atomically; ``sample`` is ``samples`` (the
+    points' indices in the data file) or, without them, the row."""
     pred = np.asarray(labels_pred)
+    numbers = np.arange(pred.size) if samples is None else np.asarray(samples)
+    columns = [numbers, pred] + ([] if labels_true is None else [np.asarray(labels_true)])
     buf = io.StringIO()
-    if labels_true is None:
-        buf.write("sample,predicted\n")
-        np.savetxt(buf, np.column_stack([np.arange(pred.size), pred]), fmt="%d", delimiter=",")
-    else:
-        buf.write("sample,predicted,true\n")
-        np.savetxt(buf, np.column_stack([np.arange(pred.size), pred, np.asarray(labels_true)]), fmt="%d", delimiter=",")
+    buf.write("sample,predicted\n" if labels_true is None else "sample,predicted,true\n")
+    np.savetxt(buf, np.column_stack(columns), fmt="%d", delimiter=",")
     atomic_write_text(path, buf.getvalue())
 
 

@@ -20,6 +20,15 @@ frames, ``P`` generative factors; ``J`` and ``P`` are also the lengths of
 ``joint_names`` and ``param_names``. :func:`markdown_table` renders the arrays as the
 table of ``docs/data.md`` (a test keeps the two equal).
 
+Sample numbers
+--------------
+One rule everywhere: a sample is numbered by its index in its data file (from 0). The
+``--indices`` files, a run's record (``config.json`` ``data.indices``), ``reconstruct`` and
+``animate`` ``--sample``, the ``sample`` column of ``cluster`` and ``segment`` outputs and a
+prediction's ``indices`` all use it. In memory, :attr:`MotionDataset.file_indices` carries
+the numbers through :meth:`MotionDataset.subset`, so the rows of ``data.subset([4, 9])`` are
+samples 4 and 9; a file written from a subset is a new data file, numbered from 0.
+
 Examples
 --------
 >>> from primspace.data.schema import ARRAYS, field
