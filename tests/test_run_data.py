@@ -81,6 +81,9 @@ def test_a_moved_data_file_is_named_as_the_runs_with_how_to_give_it(fitted, tmp_
     message = str(err.value)
     assert "gone.h5: no such file: it is the data file run" in message and "recorded in its config.json" in message
     assert "fitted_data=MotionDataset.load(PATH)" in message and "\n" not in message
+    from primspace.cli.app import as_flags  # the command line (predict) names its flag instead
+
+    assert as_flags(message).endswith("give its new place as --fitted-data PATH")
     np.testing.assert_array_equal(load_fitted_data(run, MotionDataset.load(moved)).motor,
                                   MotionDataset.load(moved).subset(PICKED).motor)
 

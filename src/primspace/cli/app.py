@@ -57,6 +57,8 @@ _PARAMETER_FLAGS = (
     (re.compile(r"\boverwrite=True\b"), "--overwrite"),
     (re.compile(r"\bepochs=(\d+)"), r"--epochs \1"),
     (re.compile(r"\bout_dir\b"), "--out"),
+    (re.compile(r"\bfitted_data=MotionDataset\.load\(PATH\)"), "--fitted-data PATH"),  # train.rundata
+    (re.compile(r"\bfitted_data=(?= )"), "--fitted-data FILE"),
 )
 
 

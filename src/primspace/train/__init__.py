@@ -66,7 +66,8 @@ _HOME = {
     "uses_images": "api",
     "load_run": "rundir",
     "write_run": "rundir",
-    "check_run_data": "rundir",
+    "check_run_data": "rundata",
+    "load_fitted_data": "rundata",
     "read_indices": "primspace.data.indices",  # an index file, checked by data.check_indices
 }
 __all__ = list(_HOME)
@@ -97,4 +98,5 @@ if TYPE_CHECKING:  # for type checkers and IDEs
     )
     from primspace.train.estimator import AutoDecoder  # noqa: F401
     from primspace.train.run import TrainedRun  # noqa: F401
-    from primspace.train.rundir import check_run_data, load_run, write_run  # noqa: F401
+    from primspace.train.rundata import check_run_data, load_fitted_data  # noqa: F401
+    from primspace.train.rundir import load_run, write_run  # noqa: F401
