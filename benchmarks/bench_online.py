@@ -8,8 +8,8 @@ On one CPU core (``torch.set_num_threads(1)``), in one process:
 2. offline inference of held-out samples from the first t steps,
    ``infer(observe=t, epochs=--offline-epochs)`` (the run's start and ``latent_lr``; 600
    epochs, the paper's evaluation, by default), at t = 25 % and 50 % of T,
-   and its error of the remaining steps (:func:`primspace.peers.unobserved_mse`, scaled units);
-3. online inference (:func:`primspace.train.online.infer_online`) of the same samples
+   and its error of the remaining steps (:func:`primspace.predict.metrics.unobserved_mse`, scaled units);
+3. online inference (:func:`primspace.predict.online.infer_online`) of the same samples
    from the same start for each k: latency per arriving step (mean, p95, ms; and the
    process CPU time per step, which a busy machine does not inflate) and the error of
    the remaining steps after the same t, as a ratio to the offline one; at the run's
@@ -17,7 +17,7 @@ On one CPU core (``torch.set_num_threads(1)``), in one process:
    along the stream (moments carried) instead of a fresh one per step;
 4. for each rate, the smallest k whose error is within 10 % of the offline one at both t,
    and its latency;
-5. the mixture online (:func:`primspace.train.online_mixture.mixture_online`, no
+5. the mixture online (:meth:`primspace.predict.MixturePredictor.predict_online`, no
    gradient): latency per step, and its error as a ratio to its own offline prediction
    from the same prefix (1.0 by construction) and to the gradient inference's;
 6. ``--images``: the latency with 48x64 frames and an image head (the vision term on
@@ -49,7 +49,7 @@ from threadpoolctl import threadpool_limits
 from primspace.data import MotionDataset
 from primspace.model import ModelConfig
 from primspace.train import TrainConfig, fit
-from primspace.train.online import OnlineInference, infer_online, offline_errors
+from primspace.predict.online import OnlineInference, infer_online, offline_errors
 
 T, J, Q, H, W = 61, 9, 40, 48, 64
 WITHIN = 1.10  # "reaches the offline error within 10 %"
@@ -102,14 +102,15 @@ def _fit(images: bool, args) -> tuple:
 def mixture_bench(run, held, train, ts, off, figures: dict) -> None:
     """The mixture online (no gradient): latency per step; its error against its own offline
     prediction from the same prefix (equal by construction) and against gradient inference."""
-    from primspace.train.online_mixture import mixture_online, prepare_noises
-    from primspace.train.predict import predict
+    from primspace.predict import MixturePredictor, fit_predictor, predict
 
     t0 = time.perf_counter()
-    noises = prepare_noises(run, range(1, T + 1), fitted_data=train)
+    predictor = fit_predictor(MixturePredictor(run, condition=False), run, train)
+    for t in range(1, T + 1):
+        predictor.online_noise(t)
     prepared = time.perf_counter() - t0
     cpu = time.process_time()
-    result = mixture_online(run, held, fitted_data=train, noises=noises)
+    result = predictor.predict_online(run.scaler.transform(held.motor), held.lengths)
     cpu = (time.process_time() - cpu) / len(result.steps)
     errors = [result.error_at(t) for t in ts]
     own = [float(np.nanmean(predict(run, held, observe=t, init="mixture", fitted_data=train, frames=False,

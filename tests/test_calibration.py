@@ -233,7 +233,7 @@ def test_cli_infer_calibrated_and_its_refusal(run_cli, train_set, eval_set, tmp_
 
 
 def test_the_estimator_transforms_from_the_calibrated_start(train_set, eval_set):
-    from primspace.train import AutoDecoder
+    from primspace import AutoDecoder
 
     model = AutoDecoder(SMALL, _tc(epochs=3), init="projection", progress=False).fit(train_set)
     z = model.transform(eval_set, epochs=0, init="calibrated")

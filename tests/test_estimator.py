@@ -7,7 +7,8 @@ import torch
 from sklearn.base import clone
 
 from primspace.errors import OutputExistsError, UserError
-from primspace.train import AutoDecoder, TrainConfig, fit, infer, load_run, reconstruct
+from primspace import AutoDecoder
+from primspace.train import TrainConfig, fit, infer, load_run, reconstruct
 from test_train import SMALL, primitives
 
 TC = TrainConfig(epochs=3, batch_size=12, threads=1, seed=3)

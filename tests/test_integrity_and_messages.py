@@ -273,7 +273,8 @@ def test_train_with_nothing_to_learn_is_refused(run_cli, tmp_path, data_file, ex
 def decoder():
     from test_train import SMALL, primitives
 
-    from primspace.train import AutoDecoder, TrainConfig
+    from primspace import AutoDecoder
+    from primspace.train import TrainConfig
 
     model = AutoDecoder(SMALL, TrainConfig(epochs=0, threads=1, seed=0), progress=False)
     model.fit(primitives(2, seed=0))

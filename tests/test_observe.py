@@ -8,7 +8,8 @@ import torch
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.latent import appendix_a_observed
-from primspace.train import AutoDecoder, TrainConfig, fit, infer
+from primspace import AutoDecoder
+from primspace.train import TrainConfig, fit, infer
 from primspace.train.loop import DataTensors
 from primspace.train.observe import Observation, observation_masks
 from test_train import SMALL, primitives
@@ -169,13 +170,20 @@ def test_nearest_returns_a_fitted_code(trained, train_set, eval_set):
     assert np.array_equal(own.initial_latents, trained.latents)  # each fitted sample is nearest to itself
 
 
-def test_calibrated_for_the_fraction_is_cached_and_starts_lower(trained, train_set, eval_set):
-    trained.observed_calibrations.clear()
+def test_calibrated_for_the_fraction_is_kept_by_the_predictor_and_starts_lower(trained, train_set, eval_set):
+    from primspace.predict import GradientPredictor, fit_predictor
+    from primspace.train.observe import Observation
+
     cal = _infer(trained, eval_set, observe=0.25, init="calibrated", fitted_data=train_set, epochs=0)
-    (key, cached), = trained.observed_calibrations.items()
-    assert key == (0.25, 0.25) and np.isfinite(cal.initial_latents).all()
-    _infer(trained, eval_set, observe=0.25, init="calibrated", fitted_data=train_set, epochs=0)
-    assert trained.observed_calibrations[key] is cached  # reused, not fitted again
+    assert np.isfinite(cal.initial_latents).all()
+    predictor = fit_predictor(GradientPredictor(trained, "calibrated", epochs=0), trained, train_set)
+    rule = Observation.build(0.25)
+    start = predictor.start_codes(eval_set, trained.scaler.transform(eval_set.motor), rule)
+    (key, cached), = predictor.cache_.items()
+    assert key == (0.25, 0.25)
+    np.testing.assert_allclose(start, cal.initial_latents, rtol=1e-5, atol=1e-6)  # the same start as infer's
+    predictor.start_codes(eval_set, trained.scaler.transform(eval_set.motor), rule)
+    assert predictor.cache_[key] is cached  # reused, not fitted again
     raw = _infer(trained, eval_set, observe=0.25, init="projection", epochs=0)
     assert cal.history[0]["loss"] < raw.history[0]["loss"]
 
@@ -242,45 +250,54 @@ def linear_scene():
     run = fit(train, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), progress=False)
     weights = np.random.default_rng(5).normal(0, 1, (2, SMALL.latent_dim))
     codes = lambda x: (0.5 + x @ weights).astype(np.float32)  # noqa: E731
-    run = dataclasses.replace(run, latents=codes(a), observed_calibrations={})
+    run = dataclasses.replace(run, latents=codes(a))
     return run, train, test, codes(b)
 
 
-def test_the_frames_start_recovers_codes_linear_in_the_first_frame(linear_scene):
-    from primspace.train.frames_start import frames_start_codes
+def _frames_start(run, data, rule, fitted, cache=None):
+    """The frames start of ``data`` (infer's ``calibrated`` under ``observe='none'``), fitted on ``fitted``."""
+    from primspace.train.starts import FittedDemonstrations, fitted_samples, fitted_start
 
+    demos = FittedDemonstrations.of(run, fitted_samples(run, fitted))
+    observed = observation_masks(rule, data)[0]
+    return fitted_start(run, "calibrated", demos, data, run.scaler.transform(data.motor), observed, rule, cache)
+
+
+def test_the_frames_start_recovers_codes_linear_in_the_first_frame(linear_scene):
     run, train, test, truth = linear_scene
     rule = Observation.build("none", "first")
-    start = frames_start_codes(run, test, rule, fitted_data=train)
+    start = _frames_start(run, test, rule, train)
     err_frames = float(np.sqrt(np.mean((start - truth) ** 2)))
     err_zero = float(np.sqrt(np.mean(truth**2)))
     assert err_frames < 0.1 * err_zero, (err_frames, err_zero)
     changed = test.images.copy()
     changed[:, 1:] = 255 - changed[:, 1:]  # frames after the first are not observed
-    again = frames_start_codes(run, MotionDataset(test.motor, images=changed), rule, fitted_data=train)
+    again = _frames_start(run, MotionDataset(test.motor, images=changed), rule, train)
     np.testing.assert_array_equal(again, start)
     inferred = infer(run, test, epochs=0, observe="none", observe_frames="first", init="calibrated",
                      fitted_data=train, progress=False)  # infer's own start is this one
     np.testing.assert_allclose(inferred.initial_latents, start, rtol=1e-5, atol=1e-6)
-    assert ("frames", "none", "first") in run.observed_calibrations
+    cache = {}
+    _frames_start(run, test, rule, train, cache)
+    assert ("frames", "none", "first") in cache  # a predictor keeps it
 
 
 def test_the_frames_start_is_deterministic_for_a_seed(linear_scene):
     import dataclasses
 
-    from primspace.train.frames_start import frame_matrix, frames_start_codes
+    from primspace.train.frames_start import frame_matrix
 
     run, train, test, _ = linear_scene
     rule = Observation.build("none", 0.5)
-    fresh = lambda r: dataclasses.replace(r, observed_calibrations={})  # noqa: E731
-    a = frames_start_codes(fresh(run), test, rule, fitted_data=train)
-    b = frames_start_codes(fresh(run), test, rule, fitted_data=train)
+    fresh = lambda r: r  # noqa: E731 - nothing is cached on a run
+    a = _frames_start(fresh(run), test, rule, train)
+    b = _frames_start(fresh(run), test, rule, train)
     np.testing.assert_array_equal(a, b)
     assert np.array_equal(frame_matrix(0, 3, 6, 10), frame_matrix(0, 3, 6, 10))
     assert not np.array_equal(frame_matrix(0, 3, 6, 10), frame_matrix(1, 3, 6, 10))  # another run seed
     assert not np.array_equal(frame_matrix(0, 3, 6, 10), frame_matrix(0, 4, 6, 10))  # another step
     other = fresh(dataclasses.replace(run, train_config=dataclasses.replace(run.train_config, seed=9)))
-    assert not np.array_equal(frames_start_codes(other, test, rule, fitted_data=train), a)
+    assert not np.array_equal(_frames_start(other, test, rule, train), a)
 
 
 def test_the_frames_projection_in_chunks_is_the_whole_projection():
@@ -299,18 +316,16 @@ def test_the_frames_projection_in_chunks_is_the_whole_projection():
 
 
 def test_the_frames_start_refuses_in_one_line(linear_scene, image_set):
-    from primspace.train.frames_start import frames_start, frames_start_codes
-
     run, train, test, _ = linear_scene
     rule = Observation.build("none", "first")
     with pytest.raises(UserError, match=r"^init 'calibrated' from frames alone .* the data set has no frames$"):
-        frames_start_codes(run, test.without_images(), rule, fitted_data=train)
+        _frames_start(run, test.without_images(), rule, train)
     with pytest.raises(UserError, match="the fitted data has no frames"):
         import dataclasses
-        frames_start(dataclasses.replace(run, observed_calibrations={}), rule, fitted_data=train.without_images())
+        _frames_start(run, test, rule, train.without_images())
     no_head = fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False)
     with pytest.raises(UserError, match="needs a run with an image head"):
-        frames_start_codes(no_head, image_set, rule, fitted_data=image_set)
+        _frames_start(no_head, image_set, rule, image_set)
     with pytest.raises(UserError, match="start by 'calibrated' \\(from the frames\\)"):
         _infer(run, test, observe="none", observe_frames="first", init="pca", fitted_data=train)
     with pytest.raises(UserError, match="has no frames"):  # infer's own check, before any start

@@ -8,7 +8,7 @@ import torch
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.train import TrainConfig, fit, infer, reconstruct
-from primspace.train.online import OnlineInference, infer_online, offline_errors
+from primspace.predict.online import OnlineInference, infer_online, offline_errors
 from primspace.model import ModelConfig
 from test_train import SMALL, primitives
 

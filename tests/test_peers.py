@@ -8,14 +8,8 @@ import numpy as np
 import pytest
 
 from primspace.errors import UserError
-from primspace.peers import (
-    MeanMotionPeer,
-    NearestPeer,
-    ProMPPeer,
-    best_noise,
-    observed_prefix,
-    unobserved_mse,
-)
+from primspace.predict.metrics import observed_prefix, unobserved_mse
+from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
 
 T = 40
 

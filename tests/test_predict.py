@@ -8,10 +8,10 @@ import pytest
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
-from primspace.peers import unobserved_mse
+from primspace.predict.metrics import unobserved_mse
 from primspace.train import TrainConfig, fit
-from primspace.train.mixture import NOISE_GRID, CodeMixture, continuity_correction
-from primspace.train.predict import MIXTURE, predict
+from primspace.predict.candidates import NOISE_GRID, CodeMixture, continuity_correction
+from primspace.predict import MIXTURE, predict
 from conftest import assert_user_error
 from test_train import SMALL, primitives
 
@@ -138,7 +138,7 @@ def test_more_observed_predicts_better_with_the_mixture(trained, train_set, eval
 
 def test_continuity_lowers_the_error_right_after_the_observed_part(trained, train_set, eval_set):
     kw = dict(observe=0.5, init="nearest", epochs=0, fitted_data=train_set, frames=False)
-    plain, joined = predict(trained, eval_set, **kw), predict(trained, eval_set, continuity=True, **kw)
+    plain, joined = predict(trained, eval_set, continuity=False, **kw), predict(trained, eval_set, **kw)
     truth, s = trained.scaler.transform(eval_set.motor), 15
     gap = lambda p: np.abs(trained.scaler.transform(p.motor)[:, s] - truth[:, s]).mean()  # noqa: E731
     assert gap(joined) < gap(plain)
@@ -219,7 +219,7 @@ def test_predict_command_refuses_bad_input_with_exit_2(run_cli, eval_set, tmp_pa
 
 
 def test_the_estimator_predicts_in_physical_units(train_set, eval_set):
-    from primspace.train import AutoDecoder
+    from primspace import AutoDecoder
 
     model = AutoDecoder(model_config=SMALL, train_config=TrainConfig(epochs=10, **FAST), init="projection",
                         progress=False).fit(train_set)
@@ -264,15 +264,27 @@ def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
     assert config["data"]["source_ids"] == [ids[i] for i in config["data"]["indices"]]
 
 
-def test_the_mixture_is_decoded_once_per_run(trained, train_set, eval_set):
-    first = predict(trained, eval_set, observe=0.2, init=MIXTURE, fitted_data=train_set, frames=False)
-    built = trained.mixture
-    second = predict(trained, eval_set, observe=0.6, init=MIXTURE, fitted_data=train_set, frames=False)
-    assert built is not None and trained.mixture is built  # the second fraction reuses the decoded candidates
+def test_the_mixture_is_decoded_once_per_predictor_and_nothing_is_cached_on_the_run(trained, train_set, eval_set):
+    """Issue 37: the prepared state lives in the predictor (fitted once), never on the run."""
+    from primspace.predict import MixturePredictor, fit_predictor
+    from primspace.train.observe import Observation
+
+    predictor = fit_predictor(MixturePredictor(trained), trained, train_set)
+    built = predictor.mixture_
+    scaled = trained.scaler.transform(eval_set.motor)
+    first = predictor.forecast(scaled, Observation.build(0.2), lengths=eval_set.lengths)
+    second = predictor.forecast(scaled, Observation.build(0.6), lengths=eval_set.lengths)
+    assert predictor.mixture_ is built  # the second fraction reuses the decoded candidates
     assert first.details["mixture"]["candidates"] == second.details["mixture"]["candidates"] == len(built.candidates)
+    assert not hasattr(trained, "mixture") and not hasattr(trained, "observed_calibrations")
+    via_predict = predict(trained, eval_set, observe=0.2, init=MIXTURE, fitted_data=train_set, frames=False)
+    np.testing.assert_allclose(trained.scaler.transform(via_predict.motor), first.motor, rtol=1e-5, atol=1e-6)
 
 
 def test_one_leave_one_out_search_per_rule(trained, train_set, eval_set, monkeypatch):
+    from primspace.predict import MixturePredictor, code_mixture, fit_predictor
+    from primspace.train.observe import Observation
+
     searches = []
     original = CodeMixture.choose_noise
 
@@ -281,12 +293,13 @@ def test_one_leave_one_out_search_per_rule(trained, train_set, eval_set, monkeyp
         return original(self, *args, **kwargs)
 
     monkeypatch.setattr(CodeMixture, "choose_noise", counted)
-    trained.mixture = None  # a fresh mixture: nothing chosen yet
-    kw = dict(init=MIXTURE, fitted_data=train_set, frames=False)
-    plain = predict(trained, eval_set, observe=0.3, **kw)
-    joined = predict(trained, eval_set, observe=0.3, continuity=True, **kw)  # the same rule: the same search
-    predict(trained, eval_set, observe=0.3, condition=False, **kw)  # posterior mean only: its own search
-    predict(trained, eval_set, observe=0.5, **kw)  # another rule
+    shared = code_mixture(trained)  # one set of candidates for the three predictors
+    make = lambda **kw: fit_predictor(MixturePredictor(trained, candidates=shared, **kw), trained, train_set)  # noqa: E731
+    scaled, lengths = trained.scaler.transform(eval_set.motor), eval_set.lengths
+    plain = make().forecast(scaled, Observation.build(0.3), lengths=lengths)
+    joined = make(continuity=False).forecast(scaled, Observation.build(0.3), lengths=lengths)  # the same search
+    make(condition=False).forecast(scaled, Observation.build(0.3), lengths=lengths)  # posterior mean only: its own
+    make().forecast(scaled, Observation.build(0.5), lengths=lengths)  # another rule
     assert len(searches) == 3 and searches[1] == (None,)
     assert plain.details["mixture"] == joined.details["mixture"]
 
@@ -320,10 +333,13 @@ def test_the_predicted_subset_keeps_each_labels_share_and_follows_the_seed():
 
 
 def test_the_online_mixture_is_the_offline_mixture_after_every_step(trained, train_set, eval_set):
-    from primspace.train.online_mixture import mixture_online, prepare_noises
+    """One object, offline and online: after step t the online prediction is the offline one of
+    the same prefix without the ensemble conditioning (condition=False)."""
+    from primspace.predict import MixturePredictor, fit_predictor
 
-    noises = prepare_noises(trained, range(4, 31), fitted_data=train_set)
-    result = mixture_online(trained, eval_set, start_step=4, fitted_data=train_set, noises=noises, prediction_after=9)
+    predictor = fit_predictor(MixturePredictor(trained, condition=False), trained, train_set)
+    scaled = trained.scaler.transform(eval_set.motor)
+    result = predictor.predict_online(scaled, eval_set.lengths, start_step=4, prediction_after=9)
     assert result.steps.tolist() == list(range(4, 31)) and result.iterations == 0 and (result.latency > 0).all()
     for t in (4, 9, 20):
         offline = predict(trained, eval_set, observe=t, init=MIXTURE, fitted_data=train_set, frames=False,
@@ -333,7 +349,7 @@ def test_the_online_mixture_is_the_offline_mixture_after_every_step(trained, tra
             np.testing.assert_allclose(result.prediction, offline.motor, rtol=1e-5, atol=1e-6)
     assert result.error_at(20) < result.error_at(4)  # the posterior sharpens as steps arrive
     with pytest.raises(UserError, match="prediction_after"):
-        mixture_online(trained, eval_set, start_step=4, fitted_data=train_set, noises=noises, prediction_after=2)
+        predictor.predict_online(scaled, eval_set.lengths, start_step=4, prediction_after=2)
 
 
 def test_predict_online_with_the_mixture_keeps_the_prediction_after_the_observed_steps(trained, train_set, eval_set):
@@ -344,3 +360,22 @@ def test_predict_online_with_the_mixture_keeps_the_prediction_after_the_observed
     np.testing.assert_allclose(online.errors["motor_mse"], offline.errors["motor_mse"], rtol=1e-5)
     curve = online.details["online"]["remaining_error"]
     assert len(curve) == eval_set.length and online.details["online"]["latency_ms_mean"] > 0
+
+
+def test_the_best_predictor_is_the_default_of_python_the_estimator_and_the_command_line():
+    """Issue 37: the mixture with the continuity correction (the best we have measured,
+    docs/predict.md) is what `predict`, `AutoDecoder.predict` and `primspace predict` do when
+    nothing is named."""
+    import inspect
+
+    from primspace import AutoDecoder
+    from primspace.cli.predict import predict_command
+    from primspace.predict import DEFAULT_PREDICTOR
+
+    assert DEFAULT_PREDICTOR == MIXTURE
+    python = inspect.signature(predict).parameters
+    estimator = inspect.signature(AutoDecoder.predict).parameters
+    cli = inspect.signature(predict_command).parameters
+    assert python["init"].default == estimator["init"].default == MIXTURE
+    assert python["continuity"].default is estimator["continuity"].default is True
+    assert cli["init"].default.default is None and cli["continuity"].default.default is True  # None: DEFAULT_PREDICTOR

@@ -14,7 +14,8 @@ from tensorboard.backend.event_processing.event_file_loader import EventFileLoad
 from test_train import SMALL, primitives
 
 from primspace.errors import UserError
-from primspace.train import AutoDecoder, TrainConfig, fit, infer
+from primspace import AutoDecoder
+from primspace.train import TrainConfig, fit, infer
 from primspace.train.logger import TensorBoardLogger, scalars
 
 TC = TrainConfig(epochs=3, batch_size=4, threads=1)

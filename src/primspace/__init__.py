@@ -15,4 +15,14 @@ try:
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "AutoDecoder"]
+
+
+def __getattr__(name: str):
+    """``primspace.AutoDecoder`` (:mod:`primspace.estimator`), loaded on first use: ``import
+    primspace`` does not import torch."""
+    if name == "AutoDecoder":
+        from primspace.estimator import AutoDecoder
+
+        return AutoDecoder
+    raise AttributeError(f"module 'primspace' has no attribute {name!r}")

@@ -87,15 +87,20 @@ def predict_command(
                                           "steps (0.25, the default), a number of steps (10), or none (frames only)."),
     observe_frames: Optional[str] = typer.Option(None, "--observe-frames", help="Observed frames: a fraction, a "
                                                  "number of steps, first (the first frame) or none. Default: as --observe."),
-    init: Optional[str] = typer.Option(None, "--init", help="The start: zero, random, projection, pca, calibrated, "
-                                       "nearest (default: the run's)."),
-    epochs: int = typer.Option(100, "--epochs", help="Inference epochs on the observed entries (0: the start as it is)."),
+    init: Optional[str] = typer.Option(None, "--init", help="The predictor: mixture (the default and the best: the "
+                                       "posterior over the fitted codes, no gradient), or a start of gradient inference: "
+                                       "zero, random, projection, pca, calibrated, nearest."),
+    continuity: bool = typer.Option(True, "--continuity/--no-continuity", help="Remove the jump at the last observed "
+                                    "step (default on, as in Python)."),
+    epochs: int = typer.Option(100, "--epochs", help="Gradient starts: inference epochs on the observed entries (0: the "
+                               "start as it is)."),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Samples of FILE to predict (.npy or text)."),
     fitted: Optional[Path] = typer.Option(None, "--fitted-data", help="The data file the run was fitted on "
-                                          "(default: the run's own), for --init nearest and calibrated."),
-    latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
-    threads: Optional[int] = typer.Option(None, "--threads"),
+                                          "(default: the run's own), read by mixture, nearest and calibrated."),
+    latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Gradient starts: the codes' learning rate "
+                                              "(default: the run's)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of a random start (default: the run's)."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="Threads of torch and BLAS (default: 1)."),
     online: bool = typer.Option(False, "--online", help="Steps arrive one at a time: --iterations inference steps "
                                 "after each, warm-started (predictive coding); result.json gets the latency per step "
                                 "and the error of the rest after each step."),
@@ -103,9 +108,9 @@ def predict_command(
     scene: bool = typer.Option(False, "--scene", help="The scene only: the first frame and the first joints, and the "
                                "primitive to perform (--primitive), searched in its cluster's affine subspace of the "
                                "fitted codes. Not with --observe, --observe-frames, --init, --online."),
-    primitive: Optional[int] = typer.Option(None, "--primitive", help="With --scene: the cluster id of the primitive "
-                                            "(clusters numbered by their first fitted demonstration; result.json "
-                                            "lists their sizes and majority labels)."),
+    primitive: Optional[str] = typer.Option(None, "--primitive", help="With --scene: the primitive to perform, a label "
+                                            "name of the fitted data (push) or a cluster id (clusters numbered by "
+                                            "their first fitted demonstration; result.json lists their majority labels)."),
     clusters: Optional[int] = typer.Option(None, "--clusters", help="With --scene: how many clusters of the fitted "
                                            "codes (default: the number of distinct labels of the fitted data)."),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
@@ -116,7 +121,7 @@ def predict_command(
     from primspace.cluster.outputs import OutputKind, atomic_directory
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
-    from primspace.train.predict import predict
+    from primspace.predict import DEFAULT_PREDICTOR, predict
 
     motor, frames = _amounts(scene, primitive, clusters, observe, observe_frames, init, online)
     check_outside_inputs(out, (file, indices, run, fitted))
@@ -127,14 +132,16 @@ def predict_command(
     common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
     with atomic_directory(out, overwrite, kind) as tmp:
         if scene:
-            from primspace.scene import predict_scene
+            from primspace.predict.scene import predict_scene
 
             prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
             command = {"scene": True, "primitive": primitive, "clusters": clusters}
         else:
-            prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init,
-                                 online=iterations if online else None, **common)
-            command = {"observe": motor, "observe_frames": frames, "init": init, "online": iterations if online else None}
+            init = init or DEFAULT_PREDICTOR
+            prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, continuity=continuity,
+                                 online=iterations if online else None, progress=None, **common)
+            command = {"observe": motor, "observe_frames": frames, "init": init, "continuity": continuity,
+                       "online": iterations if online else None}
         command = {"run": str(run), "data": str(file), **command, "epochs": epochs}
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)

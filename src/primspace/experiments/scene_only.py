@@ -1,23 +1,23 @@
-"""Acting from the scene only (issue 25, item 4; :mod:`primspace.scene`): "see the block,
+"""Acting from the scene only (issue 25, item 4; :mod:`primspace.predict.scene`): "see the block,
 do a push", success per primitive, on the intra split, over seeds.
 
 For each seed, the intra experiment's projection fit at the focus q (θ frozen) and its
 evaluation samples (at most :data:`~primspace.experiments.prediction.PREDICT_MAX_SAMPLES`,
 stratified by label: :func:`~primspace.experiments.prediction.predicted_subset`). Each
 sample gives only its first camera frame and its first joints, and asks for the cluster
-of the fitted codes whose majority label is its own (:func:`primspace.scene.run_scene_point`):
+of the fitted codes whose majority label is its own (:func:`primspace.predict.scene.run_scene_point`):
 the code is searched inside that cluster's affine subspace, :data:`SCENE_EPOCHS` epochs,
 and the decoder's whole motion is the prediction. Beside it, on the same samples:
 
 * ``mean motion (labels)``: the mean motion of the sample's primitive over the fitted
-  demonstrations (:class:`primspace.peers.MeanMotionPeer`, given the label), the peer
+  demonstrations (:class:`primspace.predict.peers.MeanMotionPeer`, given the label), the peer
   that also sees no step of the new motion;
 * ``reproduction (whole motion)``: the same run's codes inferred from the whole
   motion (the intra experiment's ``infer`` run), decoded: what the model does when it
   has seen everything, the ceiling of the scene-only code.
 
 Per primitive (label name) and over all: the samples, the MSE of the steps after the
-first (scaled units, :func:`primspace.peers.unobserved_mse`) and, on simulator data,
+first (scaled units, :func:`primspace.predict.metrics.unobserved_mse`) and, on simulator data,
 the success judged by replaying the motion (:func:`primspace.sim.success.evaluate_dataset`).
 A sample whose label no cluster holds is not acted (``unassigned``).
 """
@@ -31,15 +31,17 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments.intra import run_intra
-from primspace.experiments.prediction import (PREDICT_MAX_SAMPLES, _judgeable, _mean, _spread, epochs_tail,
-                                              predicted_subset, projection_seeds)
+from primspace.experiments.prediction import (PREDICT_MAX_SAMPLES, epochs_tail, judgeable, predicted_subset,
+                                              projection_seeds)
+from primspace.experiments.prediction_table import mean_std_count
+from primspace.predict.metrics import finite_mean
 from primspace.experiments.runs import focus_runs, phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = ["SCENE_EPOCHS", "SCENE_METHODS", "run_scene", "run_scene_only_point", "scene_summary"]
 
-#: Optimisation epochs of the subspace coordinates (:func:`primspace.scene.infer_in_subspace`).
+#: Optimisation epochs of the subspace coordinates (:func:`primspace.predict.scene.infer_in_subspace`).
 #: 100: the code moves inside a subspace of a few directions, fitted to one step and one
 #: frame; half of the prediction grid's 200 gradient epochs, which fit a whole prefix.
 SCENE_EPOCHS = 100
@@ -67,7 +69,7 @@ def _per_primitive(test: MotionDataset, scaled: np.ndarray, truth: np.ndarray, a
                    motor: np.ndarray | None) -> dict:
     """{label name or "all": {"n", "mse", "success" (when ``motor`` is given: judged)}} of the
     ``acted`` samples; ``scaled`` / ``truth`` in scaled units, ``motor`` physical."""
-    from primspace.peers import unobserved_mse
+    from primspace.predict.metrics import unobserved_mse
 
     rows = np.flatnonzero(acted)
     if not rows.size:
@@ -83,7 +85,7 @@ def _per_primitive(test: MotionDataset, scaled: np.ndarray, truth: np.ndarray, a
     out = {}
     for name in [n for n in test.label_names if n in set(names)] + [ALL]:
         own = np.ones(len(rows), bool) if name == ALL else names == name
-        entry = {"n": int(own.sum()), "mse": _mean(mse[own])}
+        entry = {"n": int(own.sum()), "mse": finite_mean(mse[own])}
         if success is not None:
             entry["success"] = float(success[own].mean())
         out[name] = entry
@@ -104,8 +106,8 @@ def run_scene_only_point(run_dir: Path, data_path: str, fit_dir: str, infer_dir:
                          max_samples: int | None = PREDICT_MAX_SAMPLES) -> dict:
     """One seed: the scene-only motions of the run's evaluation samples (at most ``max_samples``),
     the mean motion of each sample's primitive and the reproduction, per primitive."""
-    from primspace.peers import MeanMotionPeer
-    from primspace.scene import run_scene_point
+    from primspace.predict.peers import MeanMotionPeer
+    from primspace.predict.scene import run_scene_point
     from primspace.train import TrainConfig, configure_process, load_run
 
     configure_process(TrainConfig(device="cpu", threads=1))
@@ -157,7 +159,7 @@ def run_scene(exp: ExperimentDir, epochs: int = SCENE_EPOCHS) -> dict:
                         "(an experiment whose --inits include projection)")
     if not load_run(phase_dir(exp.path, "projection", q, seeds[0], "fit")).model_config.has_images:
         raise UserError(_NO_FRAMES)
-    judge = _judgeable(exp.dataset())
+    judge = judgeable(exp.dataset())
     tail = epochs_tail(epochs, SCENE_EPOCHS)
     points = [
         GridPoint(f"scene{SCENE_VERSION}/projection-q{q}-s{s}{tail}",
@@ -184,5 +186,5 @@ def scene_summary(by_seed: dict) -> dict:
                 for key in cell:
                     if entry.get(key) is not None:
                         cell[key].append(entry[key])
-    return {m: {p: {k: _spread(v) for k, v in cell.items() if v} for p, cell in prims.items()}
+    return {m: {p: {k: mean_std_count(v) for k, v in cell.items() if v} for p, cell in prims.items()}
             for m, prims in table.items()}

@@ -18,7 +18,7 @@ continuation the model can generate and the error jumps: the model is *surprised
    says) predicts the
    next ``horizon`` steps; the **surprise** at ``k`` is the mean squared error of that
    prediction once those steps have arrived (a delay of ``horizon`` steps). This is the
-   fast form of the online inference of :mod:`primspace.train.online_mixture`: the
+   fast form of the online inference of :meth:`primspace.predict.MixturePredictor.predict_online`: the
    posterior over the model's codes given the prefix, taken at its mode, with the
    duration as one more unknown.
 3. **Boundaries**: the first ``k >= min_steps`` whose surprise exceeds the threshold ends

@@ -37,7 +37,6 @@ The package, one concept per module:
 - :mod:`~primspace.train.api`: :func:`fit`, :func:`infer`, :func:`reconstruct`,
   :func:`evaluate`, which accept each other's runs and work in memory unless given a
   directory;
-- :mod:`~primspace.train.estimator`: :class:`AutoDecoder`, the same in scikit-learn's words.
 
 A run directory holds the configs, ``metrics.jsonl`` (epoch 0 = the codes as initialised,
 before any update), the checkpoint (written atomically after epoch 0, every
@@ -51,7 +50,6 @@ from typing import TYPE_CHECKING
 # Loaded on first use (PEP 562), so that ``primspace.train.config`` (and the command
 # line's defaults) do not import torch; ``from primspace.train import fit`` works as usual.
 _HOME = {
-    "AutoDecoder": "estimator",
     "TrainConfig": "config",
     "TrainingDivergedError": "config",
     "configure_process": "config",
@@ -96,7 +94,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs
         lr_factor,
         resolve_device,
     )
-    from primspace.train.estimator import AutoDecoder  # noqa: F401
     from primspace.train.run import TrainedRun  # noqa: F401
     from primspace.train.rundata import check_run_data, load_fitted_data  # noqa: F401
     from primspace.train.rundir import load_run, write_run  # noqa: F401

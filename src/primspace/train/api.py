@@ -5,7 +5,8 @@ to motion) and :func:`evaluate` (the loss of given codes).
 Each accepts what the others return (a :class:`TrainedRun`) or a run directory, and runs
 in memory unless given an ``out_dir``. None of them changes process-wide settings
 (:func:`primspace.train.config.configure_process` does, called by entry points) or the
-caller's model.
+caller's model: ``TrainConfig.threads`` limits torch's and BLAS's threads while ``fit`` or
+``infer`` trains and is put back after (:func:`~primspace.train.config.thread_limit`).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from primspace.errors import UserError
 from primspace.calibration import CodeCalibration
 from primspace.latent import CALIBRATABLE, CALIBRATED, INFER_STARTS, NEAREST, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
-from primspace.train.config import TrainConfig, resolve_device
+from primspace.train.config import TrainConfig, resolve_device, thread_limit
 from primspace.train.logger import check_log_to
 from primspace.train.distributed import current_world
 from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop, opened_stream
@@ -40,8 +41,9 @@ from primspace.train.checks import (
     run_name,
     select,
 )
-from primspace.train.observe import Observation, observation_record, observed_start, observing_args
+from primspace.train.observe import Observation, observation_record
 from primspace.train.run import TrainedRun
+from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
 from primspace.train.rundir import (
     RunDirectory,
     load_run,
@@ -156,7 +158,7 @@ def fit(
     world = current_world(tc.micro_batches)
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to, world)
     device = world.device(resolve_device(tc.device, tc.amp))
-    seeds = _seeds(tc.seed)
+    seeds = derived_seeds(tc.seed)
     if ckpt is not None:
         parts = unpack_checkpoint(ckpt, out_dir)
         scaler, initializer = parts.scaler, parts.initializer
@@ -170,17 +172,18 @@ def fit(
         scaler = parent.scaler if parent is not None else scaler or JointScaler().fit(data.motor)
         model = _new_model(mc, seeds["model"], None if parent is None else parent.model.state_dict())
         scaled = scaler.transform(data.motor)
-        initializer = _initializer(init, parent, mc, scaled, seeds)
+        initializer = run_initializer(init, parent, mc, scaled, seeds)
         model.to(device)
         theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
-        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
+        codes = initial_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
         table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
     session = Session(
         store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
         frames_seed=seeds["frames"], calibrate=_calibrator(initializer, scaled, mc.latent_dim), log_to=log_to,
     )
-    session.run(ckpt, progress, label="fit")
+    with thread_limit(tc.threads):  # torch's and BLAS's threads, put back after (no process-wide change)
+        session.run(ckpt, progress, label="fit")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
 
 
@@ -227,8 +230,8 @@ def infer(
     indices : array-like of int, optional
         Samples of ``dataset`` to use.
     train_config : TrainConfig, optional
-        Default: the trained run's, with ``epochs`` and ``overrides`` applied
-        (e.g. ``latent_lr=...``, ``batch_size=...``, ``device=...``). ``lr`` is unused.
+        Default: the trained run's with the default ``threads``, ``epochs`` and ``overrides``
+        applied (e.g. ``latent_lr=...``, ``batch_size=...``, ``device=...``). ``lr`` is unused.
     initial_latents : ndarray (N, q), optional
         Starting codes, one row per selected sample; rows containing NaN start by
         ``init`` (e.g. to try another start with the same weights).
@@ -251,7 +254,7 @@ def infer(
     TrainedRun
     """
     parent = as_run(run)
-    base = train_config or replace(parent.train_config, threads=None)
+    base = train_config or replace(parent.train_config, threads=TrainConfig.threads)  # not the fit's machine's
     try:
         tc = replace(base, epochs=epochs, **overrides).validate()
     except TypeError as exc:
@@ -270,7 +273,7 @@ def infer(
     world = current_world(tc.micro_batches)
     store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to, world)
     device = world.device(resolve_device(tc.device, tc.amp))
-    seeds = _seeds(tc.seed)
+    seeds = derived_seeds(tc.seed)
     model = copy.deepcopy(parent.model)  # θ frozen, but the caller's model is never moved or changed
     if ckpt is not None:
         parts = unpack_checkpoint(ckpt, out_dir)
@@ -279,10 +282,8 @@ def infer(
         table = LatentTable.from_state_dict(parts.latents, device)
     else:
         scaled = parent.scaler.transform(data.motor)
-        observing = observing_args(init, observation, data, fitted_data)
-        seen = scaled if observing is None else scaled * observing["observed"][..., None]  # what a new pca fits
-        initializer = _initializer(init, parent, mc, seen, seeds)
-        codes = _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents, observing)
+        initializer, codes = inference_start(parent, init, data, scaled, observation, fitted_data, tc.seed,
+                                             initial_latents)
         table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
     session = Session(
@@ -290,7 +291,8 @@ def infer(
         initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
         frames_seed=seeds["frames"], calibration=parent.calibration, observation=observation, log_to=log_to,
     )
-    session.run(ckpt, progress, label="infer")
+    with thread_limit(tc.threads):
+        session.run(ckpt, progress, label="infer")
     return run_from_state(session.state(), session.history, None if store is None else store.path)
 
 
@@ -431,35 +433,11 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
     return RunDirectory(out_dir), ckpt
 
 
-def _start_codes(init: str, parent: TrainedRun | None, initializer: LatentInitializer, scaled, seed: int,
-                 initial_latents: np.ndarray | None = None, observing: dict | None = None) -> np.ndarray:
-    """The starting codes (float64): the initialiser's, mapped by the parent's calibration for
-    ``calibrated``; rows of ``initial_latents`` without NaN replace them. ``observing``: the
-    arguments of :func:`~primspace.train.observe.observed_start` (under an observation, or ``nearest``)."""
-    if observing is None:
-        codes = initializer.transform(scaled, random_state=seed)
-        codes = (parent.calibration.transform(codes) if init == CALIBRATED else codes).astype(np.float64)
-    else:
-        codes = observed_start(init, parent, initializer, scaled, seed=seed, **observing)
-    if initial_latents is not None:
-        given = ~np.isnan(initial_latents).any(axis=1)
-        codes[given] = initial_latents[given]
-    return codes
-
-
 def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: int):
     """What fits a run's calibration map from its final codes (None: its initialiser has no data map)."""
     if initializer.method not in CALIBRATABLE:
         return None
     return lambda codes: CodeCalibration(latent_dim).fit(initializer.transform(scaled), codes)
-
-
-def _initializer(init: str, parent: TrainedRun | None, mc: ModelConfig, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
-    """The parent's initialiser for the same init (its ``P``); otherwise one fitted here
-    (one code per window of ``mc.code_window`` steps when set)."""
-    if parent is not None and init in (parent.init, CALIBRATED, NEAREST):
-        return parent.initializer
-    return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
 
 
 def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDecoder:
@@ -470,13 +448,6 @@ def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDe
     if state is not None:
         model.load_state_dict(state)
     return model
-
-
-def _seeds(seed: int) -> dict:
-    """Independent seeds for each use of randomness, all derived from ``seed``."""
-    names = ("model", "projection", "codes_fit", "codes_infer", "shuffle", "frames")  # append only: keeps the others
-    values = np.random.SeedSequence(int(seed)).generate_state(len(names), dtype=np.uint32)
-    return {name: int(v) for name, v in zip(names, values)}
 
 
 def _run_path(run: TrainedRun | None) -> str | None:

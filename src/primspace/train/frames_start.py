@@ -23,9 +23,9 @@ With ``infer(..., observe="none", observe_frames=..., init="calibrated")`` the s
   projected a chunk of steps at a time (:data:`PROJECTION_BYTES` of ``P`` at most) and the
   images read a block of samples at a time: the whole ``P`` is never held;
 * ``B, c``: a :class:`~primspace.calibration.CodeCalibration` from the fitted
-  demonstrations' ``x`` (the same observation rule applied to them) to their fitted codes,
-  fitted on first use and cached in memory on the run (``TrainedRun.observed_calibrations``,
-  keyed by ``("frames",) + rule``). One map over the whole code (``K·q`` outputs, windows not
+  demonstrations' ``x`` (the same observation rule applied to them) to their fitted codes
+  (a caller starting many times keeps it: :func:`primspace.train.starts.fitted_start`'s
+  ``cache``, keyed by ``("frames",) + rule``). One map over the whole code (``K·q`` outputs, windows not
   pooled), pulled towards **zero** (``prior="zero"``), not towards the identity as the
   motor calibration is: ``x`` is not a code (it lives in frame space), so ``B = I`` has no
   meaning here, and a strong penalty then leaves the mean fitted code, a sensible start.
@@ -41,10 +41,10 @@ from primspace.calibration import CodeCalibration
 from primspace.data import MotionDataset
 from primspace.data.images import IMAGE_BLOCK, as_view
 from primspace.errors import UserError
-from primspace.train.observe import fitted_samples, observation_masks
+from primspace.train.observe import Observation, observation_masks
 
 __all__ = ["FRAMES_PROJECTION_KEY", "PROJECTION_BYTES", "FramesStart", "frame_matrix", "frames_projection",
-           "mean_frame", "frames_start", "frames_start_codes"]
+           "mean_frame", "frames_start", "frames_start_codes", "check_frames_start"]
 
 #: Mixed with the run's seed (and the step) to draw ``P_t``: keeps these draws apart from the run's others.
 FRAMES_PROJECTION_KEY = 25
@@ -94,11 +94,11 @@ def frames_projection(images, observed, mean: np.ndarray, dim: int, seed: int, *
     return out
 
 
-def mean_frame(data: MotionDataset) -> np.ndarray:
-    """The mean of every valid frame of ``data`` in [0, 1]: float64 ``(H, W, 3)``."""
-    valid = observation_masks(None, data)[0]
-    total, count = np.zeros(data.images.shape[2:], dtype=np.float64), 0
-    for start, block in as_view(data.images).iter_blocks(IMAGE_BLOCK):
+def mean_frame(images, valid: np.ndarray) -> np.ndarray:
+    """The mean of every valid frame of ``images`` (n, T, H, W, 3) in [0, 1], ``valid`` (n, T):
+    float64 ``(H, W, 3)``."""
+    total, count = np.zeros(images.shape[2:], dtype=np.float64), 0
+    for start, block in as_view(images).iter_blocks(IMAGE_BLOCK):
         rows = valid[start : start + len(block)]
         total += block[rows].sum(axis=0, dtype=np.float64)
         count += int(rows.sum())
@@ -135,47 +135,43 @@ class FramesStart:
         return self.calibration.transform(self.project(images, observed)).astype(np.float64)
 
 
-def _check(parent, data: MotionDataset, what: str) -> None:
-    """One line: a run without an image head, or ``data`` without frames."""
+def check_frames_start(parent, data: MotionDataset | None, what: str) -> None:
+    """One line: a run without an image head, or ``data`` without frames (None: not checked)."""
     if not parent.model_config.has_images:
         raise UserError("init 'calibrated' from frames alone (observe='none') needs a run with an image head; "
                         "this run was fitted on joints only")
-    if not data.has_images:
+    if data is not None and not data.has_images:
         where = str(data.path) if data.path is not None else what
         raise UserError(f"init 'calibrated' from frames alone (observe='none') reads frames, and {where} has no frames")
 
 
-def frames_start(parent, observation, fitted_data: MotionDataset | None = None) -> FramesStart:
-    """The run's :class:`FramesStart` for ``observation`` (motor ``"none"``): fitted on first
-    use on the fitted demonstrations under the same rule, cached in
-    ``parent.observed_calibrations`` under ``("frames",) + observation.key``.
+def frames_start(parent, observation, images, lengths: np.ndarray) -> FramesStart:
+    """The run's :class:`FramesStart` for ``observation`` (motor ``"none"``), fitted on the frames
+    ``images`` (m, T, H, W, 3) of the run's fitted demonstrations (in its order; None: they
+    have none) of valid ``lengths`` under the same rule.
 
     Raises
     ------
     UserError
-        A run without an image head, fitted data without frames, a run without a data
-        file and no ``fitted_data``.
+        A run without an image head, fitted data without frames.
     """
-    key = ("frames",) + tuple(observation.key)
-    cache = parent.observed_calibrations
-    if key not in cache:
-        fitted = fitted_samples(parent, fitted_data)
-        _check(parent, fitted, "the fitted data")
-        dim = int(parent.model_config.code_size)
-        seed = int(parent.train_config.seed)
-        mean = mean_frame(fitted)
-        x = frames_projection(fitted.images, observation_masks(observation, fitted)[1], mean, dim, seed)
-        calibration = CodeCalibration(dim, prior="zero").fit(x, parent.latents)
-        cache[key] = FramesStart(mean.astype(np.float32), seed, dim, calibration)
-    return cache[key]
+    if not parent.model_config.has_images:
+        check_frames_start(parent, None, "the fitted data")
+    if images is None:
+        raise UserError("init 'calibrated' from frames alone (observe='none') reads frames, and the fitted data "
+                        "has no frames")
+    dim = int(parent.model_config.code_size)
+    seed = int(parent.train_config.seed)
+    length = images.shape[1]
+    mean = mean_frame(images, Observation.build(1.0).masks(lengths, length)[0])
+    x = frames_projection(images, observation.masks(lengths, length)[1], mean, dim, seed)
+    calibration = CodeCalibration(dim, prior="zero").fit(x, parent.latents)
+    return FramesStart(mean.astype(np.float32), seed, dim, calibration)
 
 
-def frames_start_codes(parent, data: MotionDataset, observation, fitted_data: MotionDataset | None = None) -> np.ndarray:
+def frames_start_codes(start: FramesStart, data: MotionDataset, observation) -> np.ndarray:
     """Starting codes (float64, (n, K·q)) of ``data`` from its observed frames alone
-    (module docstring); ``parent``: the trained run, ``fitted_data``: the data set it was
-    fitted on (default: its data file)."""
-    _check(parent, data, "the data set")
-    start = frames_start(parent, observation, fitted_data)
+    (module docstring), by the run's :class:`FramesStart` ``start``."""
     if tuple(data.images.shape[2:]) != tuple(start.mean.shape):
         raise UserError(f"frames of size {tuple(data.images.shape[2:4])} differ from the run's "
                         f"{tuple(start.mean.shape[:2])}")

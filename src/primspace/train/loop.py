@@ -34,7 +34,7 @@ from primspace.train.observe import observation_masks
 from primspace.train.rundir import RunDirectory, checkpoint_state, restore_rng, unpack_checkpoint
 from primspace.train.streaming import FrameStream, should_stream
 
-__all__ = ["DataTensors", "Session", "batch_loss", "batch_frames", "evaluate_loop", "epoch_values", "local_parts",
+__all__ = ["DataTensors", "Session", "batch_loss", "code_step", "batch_frames", "evaluate_loop", "epoch_values", "local_parts",
            "frame_batches", "open_stream", "opened_stream"]
 
 
@@ -179,6 +179,21 @@ def batch_loss(
     if tc.code_smoothness > 0 and config.code_window is not None:
         loss = loss + tc.code_smoothness * code_variation(z, config, mask)
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
+
+
+def code_step(model, table: LatentTable, idx: torch.Tensor, tensors: DataTensors, tc: TrainConfig, autocast,
+              to_code=None) -> torch.Tensor:
+    """One Adam step of the rows ``idx`` of ``table`` with θ frozen, each row on the gradient of
+    its own sample's loss (:func:`batch_loss` of the batch ``idx``; its mean over the batch
+    scaled each row's gradient by 1/B, undone here). ``to_code``: maps the table's rows to
+    the decoder's codes (e.g. coordinates in a subspace, ``mean + a @ basis``); None: the rows
+    are the codes. Returns the detached ``[loss, motor, vision]`` means.
+    """
+    rows = table.batch(idx)
+    loss, values = batch_loss(model, rows if to_code is None else to_code(rows), idx, tensors, tc, autocast)
+    loss.backward()
+    table.step(idx, rows.grad.mul_(idx.numel()))
+    return values
 
 
 def code_variation(z: torch.Tensor, config, mask: torch.Tensor | None) -> torch.Tensor:

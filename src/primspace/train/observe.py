@@ -1,27 +1,11 @@
-"""Inference from what has been seen so far: observation masks and the starts that read them.
+"""Inference from what has been seen so far: the observation rule (what the loss reads).
 
 One mechanism for every "which entries were observed" (docs/model.md, *Inference from what
 has been seen so far*): an :class:`Observation` rule gives, for each sample, a motor mask
 and a frame mask (N, T) over its steps, combined with the padding of demonstrations of
 different lengths (:func:`primspace.data.steps.valid_steps`). The loss counts only the
-observed entries (:class:`primspace.train.loop.DataTensors`), and the starts of
-:func:`primspace.train.infer` read the same masks:
-
-* ``zero``, ``random``: as without observation (they read no data);
-* ``projection``: ``P (M ⊙ m)``, the run's ``P`` (paper, *Initialization of Latent
-  Vectors*) applied to the scaled motor sequence with its unobserved steps set to zero;
-  Appendix A then holds for the observed parts (:func:`primspace.latent.appendix_a_observed`);
-* ``pca``: ``V_q (M ⊙ (m − mean))``, the principal directions (the run's when it was fitted
-  with ``pca``; else fitted here on the zero-filled observed part of the data inferred);
-* ``calibrated``: the ridge map towards the identity
-  (:class:`primspace.calibration.CodeCalibration`) from the fitted demonstrations' observed
-  projections (the same rule applied to them) to their fitted codes; fitted on demand and
-  cached in memory on the :class:`~primspace.train.run.TrainedRun`, keyed by the rule;
-* ``nearest``: the fitted code of the fitted demonstration whose motor is nearest over the
-  new sample's observed steps (Euclidean, scaled units);
-* ``calibrated`` with no joints observed (``observe="none"``) and frames observed: a random
-  projection of the observed frames minus the run's mean frame, mapped to the fitted codes
-  by a calibration fitted the same way (:mod:`primspace.train.frames_start`).
+observed entries (:class:`primspace.train.loop.DataTensors`); the starts of
+:func:`primspace.train.infer` read the same masks (:mod:`primspace.train.starts`).
 
 The rule is recorded in an infer run's ``config.json`` (``observe``), so a resume checks it.
 """
@@ -33,15 +17,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from primspace.calibration import CodeCalibration
 from primspace.data import MotionDataset
 from primspace.data.steps import valid_steps
 from primspace.errors import UserError
-from primspace.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitializer
-from primspace.train.rundir import check_run_data
 
-__all__ = ["Observation", "NOTHING", "FIRST", "observation_masks", "observation_record", "observing_args",
-           "observed_start", "observed_calibration", "nearest_codes", "fitted_samples"]
+__all__ = ["Observation", "NOTHING", "FIRST", "observation_masks", "observation_record"]
 
 #: ``observe`` / ``observe_frames`` value: nothing of that modality is observed.
 NOTHING = "none"
@@ -128,7 +108,7 @@ class Observation:
 
     @property
     def key(self) -> tuple:
-        """What a cached start (``TrainedRun.observed_calibrations``) is keyed by."""
+        """What a start or a predictor prepared for this rule is keyed by (hashable)."""
         return (self.motor, self.frames)
 
     def check(self, data: MotionDataset, use_images: bool, has_image_head: bool) -> None:
@@ -165,113 +145,3 @@ def observation_record(observation: Observation | None, data: MotionDataset, use
         return {}
     observation.check(data, use_images, has_image_head)
     return {"observe": observation.to_dict()}
-
-
-# ------------------------------------------------------------------------- the starts
-
-
-def observing_args(init: str, observation: Observation | None, data: MotionDataset,
-                   fitted_data: MotionDataset | None) -> dict | None:
-    """The arguments of :func:`observed_start` for ``data`` (its motor mask as ``observed``);
-    None when the start reads no mask (no observation and not ``nearest``: today's starts)."""
-    if observation is None and init != NEAREST:
-        return None
-    return {"observed": observation_masks(observation, data)[0], "observation": observation, "fitted_data": fitted_data,
-            "data": data}
-
-
-def observed_start(init: str, parent, initializer: LatentInitializer, scaled: np.ndarray, observed: np.ndarray,
-                   seed: int, observation: Observation | None, fitted_data: MotionDataset | None,
-                   data: MotionDataset | None = None) -> np.ndarray:
-    """Starting codes (float64, (n, K·q)) of ``scaled`` motor observed at ``observed`` (n, T).
-
-    ``zero`` / ``random`` / ``projection`` / ``pca``: the initialiser's codes of the observed
-    part (:meth:`~primspace.latent.LatentInitializer.transform`); ``calibrated``: those
-    mapped by the calibration for this rule (:func:`observed_calibration`), or with no
-    joints observed the frames start of ``data`` (:func:`~primspace.train.frames_start.frames_start_codes`);
-    ``nearest``: :func:`nearest_codes`. ``parent``: the trained run; ``fitted_data``: the
-    data set it was fitted on (default: its data file); ``data``: the samples (their frames).
-    """
-    if init == NEAREST:
-        fitted_set = fitted_samples(parent, fitted_data)
-        fitted, valid = parent.scaler.transform(fitted_set.motor), observation_masks(None, fitted_set)[0]
-        return nearest_codes(scaled, observed, fitted, valid, parent.latents)
-    if observation is not None and observation.motor == NOTHING and init not in ("zero", "random"):
-        if init == CALIBRATED and data is not None:
-            from primspace.train.frames_start import frames_start_codes  # it reads this module's masks
-
-            return frames_start_codes(parent, data, observation, fitted_data)
-        raise UserError(f"init {init!r} starts from the observed joints, and observe='none' observes none: "
-                        "start by 'calibrated' (from the frames), 'zero' or 'random'")
-    codes = initializer.transform(scaled, random_state=seed, observed=observed)
-    if init == CALIBRATED:
-        codes = observed_calibration(parent, observation, fitted_data).transform(codes)
-    return codes.astype(np.float64)
-
-
-def observed_calibration(parent, observation: Observation | None, fitted_data: MotionDataset | None) -> CodeCalibration:
-    """The ridge map (towards the identity) from the fitted demonstrations' observed codes
-    ``P (M_i ⊙ m_i)`` to their fitted codes, for ``observation`` (the run's own map without one).
-
-    Fitted on first use and cached in ``parent.observed_calibrations`` (in memory, not
-    saved with the run), keyed by the rule.
-    """
-    if observation is None:
-        return parent.calibration
-    cache = parent.observed_calibrations
-    if observation.key not in cache:
-        if parent.initializer.method not in CALIBRATABLE:
-            raise UserError(f"init 'calibrated' needs a run fitted with projection or pca init, not "
-                            f"'{parent.initializer.method}'")
-        data = fitted_samples(parent, fitted_data)
-        scaled = parent.scaler.transform(data.motor)
-        motor_mask, _ = observation_masks(observation, data)
-        initial = parent.initializer.transform(scaled, observed=motor_mask)
-        cache[observation.key] = CodeCalibration(parent.model_config.latent_dim).fit(initial, parent.latents)
-    return cache[observation.key]
-
-
-def nearest_codes(scaled: np.ndarray, observed: np.ndarray, fitted: np.ndarray, fitted_valid: np.ndarray,
-                  fitted_codes: np.ndarray) -> np.ndarray:
-    """For each sample, the code of the fitted demonstration whose motor is nearest over its observed steps.
-
-    The squared distance is the mean over the entries observed in the sample and valid in
-    the fitted demonstration (all of its observed entries, when the fitted demonstrations
-    have one length: then the Euclidean distance of the observed parts); a demonstration
-    sharing no step is never nearest. Ties go to the first.
-
-    Parameters
-    ----------
-    scaled : ndarray (n, T, J)
-    observed : ndarray (n, T) bool
-    fitted : ndarray (m, T, J)
-        The fitted demonstrations, scaled.
-    fitted_valid : ndarray (m, T) bool
-    fitted_codes : ndarray (m, K·q)
-
-    Returns
-    -------
-    ndarray (n, K·q) float64: rows of ``fitted_codes``.
-    """
-    j = scaled.shape[2]
-    a, m = scaled.reshape(len(scaled), -1), np.repeat(np.asarray(observed, dtype=np.float64), j, axis=1)
-    b, v = fitted.reshape(len(fitted), -1), np.repeat(np.asarray(fitted_valid, dtype=np.float64), j, axis=1)
-    a, b = a * m, b * v
-    sums = (a**2) @ v.T + m @ (b**2).T - 2.0 * a @ b.T  # Σ over shared entries of (a - b)²
-    counts = m @ v.T
-    dist = np.where(counts > 0, np.maximum(sums, 0.0) / np.maximum(counts, 1.0), np.inf)
-    return np.asarray(fitted_codes, dtype=np.float64)[np.argmin(dist, axis=1)]
-
-
-def fitted_samples(parent, fitted_data: MotionDataset | None) -> MotionDataset:
-    """The parent's own samples (checked against its record): from ``fitted_data`` or its data file."""
-    if fitted_data is None:
-        if parent.data_path is None:
-            raise UserError("this start reads the demonstrations the run was fitted on, and the run has no data file: "
-                            "give fitted_data= (the data set it was fitted on)")
-        fitted_data = MotionDataset.load(parent.data_path)
-    if not isinstance(fitted_data, MotionDataset):
-        raise UserError(f"fitted_data must be a MotionDataset, got {type(fitted_data).__name__}")
-    check_run_data(parent, fitted_data)
-    return fitted_data.subset(parent.indices)
-

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -61,14 +60,9 @@ class TrainedRun:
         The map from the initialiser's codes to the fitted codes (``init="calibrated"``):
         fitted at the end of a ``fit`` whose initialiser is ``projection`` or ``pca``, carried
         by the runs inferred from it; None otherwise.
-    observed_calibrations : dict
-        Calibration maps for inference from a part of each motion (``init="calibrated"``
-        with ``observe=``), keyed by the observation rule
-        (:func:`primspace.train.observe.observed_calibration`): fitted on first use, kept in
-        memory only (not saved with the run).
-    mixture : CodeMixture or None
-        The fitted codes' decoded candidates for prediction (``init="mixture"``,
-        :func:`primspace.train.predict.code_mixture`): built on first use, kept in memory only.
+
+    Nothing a predictor prepares (decoded candidates, calibrations per observation rule) is
+    kept here: the predictors of :mod:`primspace.predict` hold their own state.
     """
 
     run_dir: Path | None
@@ -89,8 +83,6 @@ class TrainedRun:
     config: dict = field(repr=False, default_factory=dict)
     state: dict | None = field(repr=False, default=None)
     calibration: CodeCalibration | None = field(repr=False, default=None)
-    observed_calibrations: dict = field(repr=False, compare=False, default_factory=dict)
-    mixture: Any = field(repr=False, compare=False, default=None)
 
     @property
     def final_loss(self) -> float | None:

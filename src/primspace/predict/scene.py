@@ -15,8 +15,8 @@ cluster mean), by the masked loss of inference (:func:`primspace.train.loop.batc
 on the observed entries: the first step's joints and the first frame. Row-wise Adam
 (:class:`~primspace.latent.LatentTable`), the whole set in order, on the CPU, seeded by the
 run's seed: the same call gives the same codes. The decoder's whole sequence is the
-prediction (:class:`~primspace.train.predict.Prediction`), scored on the steps after the
-first (:func:`primspace.peers.unobserved_mse`).
+prediction (:class:`~primspace.predict.Prediction`), scored on the steps after the
+first (:func:`primspace.predict.metrics.unobserved_mse`).
 
 **Which cluster is which primitive.** Cluster ids are numbered by the order of their
 first member among the run's fitted samples (the run's ``indices`` order): the cluster
@@ -46,14 +46,16 @@ from primspace.data import MotionDataset
 from primspace.data.steps import valid_steps
 from primspace.errors import UserError
 from primspace.latent import LatentTable
-from primspace.peers import unobserved_mse
+from primspace.predict.api import Prediction
+from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS
+from primspace.predict.metrics import frame_errors, unobserved_mse
 from primspace.progress import progress_bar
 from primspace.train.api import as_run, reconstruct, uses_images
 from primspace.train.checks import select
 from primspace.train.config import lr_factor
-from primspace.train.loop import DataTensors, batch_loss
-from primspace.train.observe import FIRST, Observation, fitted_samples, observation_masks
-from primspace.train.predict import DEFAULT_PREDICT_EPOCHS, Prediction, frame_errors
+from primspace.train.loop import DataTensors, code_step
+from primspace.train.observe import FIRST, Observation, observation_masks
+from primspace.train.starts import fitted_samples
 
 __all__ = ["SCENE", "SCENE_VARIANCE", "SceneClusters", "cluster_codes", "scene_clusters", "affine_subspace",
            "infer_in_subspace", "predict_scene", "run_scene_point"]
@@ -102,13 +104,30 @@ class SceneClusters:
         return np.bincount(self.labels, minlength=self.n_clusters).astype(int).tolist()
 
     def check(self, primitive) -> int:
-        """``primitive`` as a cluster id, or one line naming the valid range."""
+        """``primitive`` as a cluster id, or one line naming the valid range. A label name (a str,
+        e.g. ``"push"``) is the cluster whose members' majority label has that name (of several,
+        the largest); a str of digits is a cluster id."""
         k = self.n_clusters
+        if isinstance(primitive, str):
+            if primitive.strip().isdigit():
+                primitive = int(primitive)
+            else:
+                return self.named(primitive)
         if isinstance(primitive, (bool, np.bool_)) or not isinstance(primitive, (int, np.integer)) \
                 or not 0 <= primitive < k:
             raise UserError(f"primitive {primitive!r} is out of range: the run's fitted codes form {k} clusters, "
                             f"choose 0..{k - 1}")
         return int(primitive)
+
+    def named(self, name: str) -> int:
+        """The cluster of the primitive called ``name`` (majority label name; of several, the largest)."""
+        hits = [k for k in range(self.n_clusters) if self.names[k] == name]
+        if not hits:
+            known = sorted({n for n in self.names if n is not None})
+            raise UserError(f"no cluster of the fitted codes is mostly {name!r}: "
+                            + (f"the clusters are mostly {', '.join(map(repr, known))}" if known
+                               else "the fitted data has no label names; give the cluster id"))
+        return max(hits, key=lambda k: self.sizes[k])
 
     def subspace(self, primitive: int, rank: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Cluster ``primitive``'s affine subspace: mean (K·q,) and basis (r, K·q) (:func:`affine_subspace`)."""
@@ -214,12 +233,9 @@ def infer_in_subspace(run, data: MotionDataset, mean: np.ndarray, basis: np.ndar
         torch.manual_seed(tc.seed)
         for epoch in range(tc.epochs if r else 0):
             table.lr = tc.latent_lr * lr_factor(epoch, tc.epochs, tc.final_lr_fraction)
-            for start in range(0, n, tc.batch_size):
+            for start in range(0, n, tc.batch_size):  # each code on its own sample's gradient
                 idx = torch.arange(start, min(n, start + tc.batch_size))
-                a = table.batch(idx)
-                loss, _ = batch_loss(model, mu + a @ u, idx, tensors, tc, contextlib.nullcontext())
-                loss.backward()
-                table.step(idx, a.grad.mul_(idx.numel()))  # each code on its own sample's gradient
+                code_step(model, table, idx, tensors, tc, contextlib.nullcontext(), to_code=lambda a: mu + a @ u)
             advance()
     return (np.asarray(mean, dtype=np.float64) + table.numpy().astype(np.float64) @ np.asarray(basis)).astype(np.float32)
 
@@ -235,7 +251,7 @@ def _check_scene(parent, data: MotionDataset) -> None:
         raise UserError(f"the scene mode reads the first camera frame, and {where} has no frames")
 
 
-def predict_scene(run, data: MotionDataset, primitive: int, *, clusters: SceneClusters | None = None,
+def predict_scene(run, data: MotionDataset, primitive: int | str, *, clusters: SceneClusters | None = None,
                   n_clusters: int | None = None, rank: int | None = None, epochs: int = DEFAULT_PREDICT_EPOCHS,
                   indices=None, fitted_data: MotionDataset | None = None, frames: bool = True,
                   progress: bool | None = None, **overrides) -> Prediction:
@@ -247,8 +263,9 @@ def predict_scene(run, data: MotionDataset, primitive: int, *, clusters: SceneCl
         A fitted run with an image head (θ frozen; the run is not changed).
     data : MotionDataset
         The scenes (with frames); every step after the first is the answer the errors are measured against.
-    primitive : int
-        The cluster id of the primitive to perform (:func:`scene_clusters`: ids by first member).
+    primitive : int or str
+        The primitive to perform: a label name of the fitted data (``"push"``: the cluster
+        mostly of that label) or a cluster id (:func:`scene_clusters`: ids by first member).
     clusters : SceneClusters, optional
         The run's clusters, computed once (:func:`scene_clusters`); default: computed here.
     n_clusters : int, optional
@@ -258,7 +275,7 @@ def predict_scene(run, data: MotionDataset, primitive: int, *, clusters: SceneCl
     epochs : int
         Optimisation epochs of the subspace coordinates (0: the cluster mean).
     indices, fitted_data, frames, progress, **overrides
-        As in :func:`primspace.train.predict.predict` (``latent_lr``, ``batch_size``, ``seed`` ...).
+        As in :func:`primspace.predict.predict` (``latent_lr``, ``batch_size``, ``seed`` ...).
 
     Returns
     -------

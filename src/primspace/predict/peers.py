@@ -1,13 +1,12 @@
 """The peers that primspace's motion prediction is measured against (issue 25).
 
-The task: a test demonstration's first steps are observed (a boolean mask ``observed``
-``(n, T)``, a prefix of its valid steps); predict the rest. Every peer is fitted on motor
-arrays ``(n, T, J)`` (already scaled by the caller, e.g. to [-1, 1]) with optional
-``lengths`` (steps at and after a sample's length are padding: absent) and integer
-``labels`` (its primitive), and returns the whole predicted sequence ``(n_test, T, J)``,
-the observed part included. A peer's ``predict`` reads the observed steps of ``motor``
-only: the unobserved ones are set to zero before anything looks at them (they may even be
-NaN).
+Each is a :class:`~primspace.predict.base.Predictor` (the one surface of every predictor):
+fitted on motor arrays ``(n, T, J)`` (already scaled by the caller, e.g. to [-1, 1]) with
+optional ``lengths`` (steps at and after a sample's length are padding: absent) and
+integer ``labels`` (its primitive), it returns the whole predicted sequence
+``(n_test, T, J)``, the observed part included. A peer's ``predict`` reads the observed
+steps of ``motor`` only: the unobserved ones are set to zero before anything looks at them
+(they may even be NaN). Frames are not read.
 
 * :class:`ProMPPeer`: a Probabilistic Movement Primitive (the maintained
   ``movement-primitives`` package, extra ``predict``), one per primitive (``per_label``:
@@ -15,10 +14,10 @@ NaN).
   conditioned on every observed step.
 * :class:`NearestPeer`: the fitted demonstration nearest on the observed steps, whole.
 * :class:`MeanMotionPeer`: the mean motion of the sample's primitive (or of all).
-* :func:`unobserved_mse`: the error of a prediction, the one place it is defined (the
-  primspace prediction is scored by the same function).
 * :func:`best_noise`: the ProMP's observation noise chosen *on the answer*.
-* :func:`observed_prefix`: the mask of the first ``ceil(fraction * length)`` steps.
+
+The error of a prediction is :func:`primspace.predict.metrics.unobserved_mse`, for the
+peers and primspace's predictors alike.
 """
 
 from __future__ import annotations
@@ -29,11 +28,10 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from primspace.errors import UserError
+from primspace.predict.base import Predictor, observed_mask
+from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 
-__all__ = [
-    "ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise", "unobserved_mse",
-    "observed_prefix",
-]
+__all__ = ["ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise"]
 
 _PROMP_MISSING = "the ProMP peer needs the movement-primitives package: pip install 'primspace[predict]'"
 
@@ -52,119 +50,24 @@ def _phase(length: int) -> np.ndarray:
     return np.linspace(0.0, 1.0, int(length))
 
 
-def _as_motor(motor, name: str = "motor") -> np.ndarray:
-    arr = np.asarray(motor, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[0] == 0 or arr.shape[1] == 0 or arr.shape[2] == 0:
-        raise UserError(f"{name} must be a non-empty (n, T, J) array, got shape {arr.shape}")
-    return arr
-
-
-def _as_lengths(lengths, n: int, steps: int) -> np.ndarray:
-    if lengths is None:
-        return np.full(n, steps, dtype=np.int64)
-    arr = np.asarray(lengths)
-    if arr.shape != (n,):
-        raise UserError(f"lengths must have shape ({n},) like motor's first axis, got {arr.shape}")
-    if arr.size and (not np.all(np.equal(np.mod(arr, 1), 0)) or arr.min() < 1 or arr.max() > steps):
-        raise UserError(f"lengths must be whole numbers in [1, {steps}] (T = {steps})")
-    return arr.astype(np.int64)
-
-
-def _as_labels(labels, n: int) -> np.ndarray | None:
-    if labels is None:
-        return None
-    arr = np.asarray(labels)
-    if arr.shape != (n,):
-        raise UserError(f"labels must have shape ({n},) like motor's first axis, got {arr.shape}")
-    if arr.size and not np.issubdtype(arr.dtype, np.integer):
-        raise UserError(f"labels must be integers, got dtype {arr.dtype}")
-    return arr.astype(np.int64)
-
-
-def _valid(lengths: np.ndarray, steps: int) -> np.ndarray:
-    """``(n, T)``: True on the valid (not padding) steps."""
-    return np.arange(steps)[None, :] < lengths[:, None]
-
-
-def _as_observed(observed, shape: tuple[int, int], valid: np.ndarray) -> np.ndarray:
-    arr = np.asarray(observed)
-    if arr.shape != shape:
-        raise UserError(f"observed must have shape (n, T) = {shape} like motor's first two axes, got {arr.shape}")
-    if arr.dtype != bool:
-        raise UserError(f"observed must be a boolean mask, got dtype {arr.dtype}")
-    bad = np.flatnonzero(np.any(arr & ~valid, axis=1))
-    if bad.size:
-        raise UserError(f"observed marks padding steps (at or after the length) of sample {int(bad[0])}")
-    return arr
-
-
-def observed_prefix(n: int, steps: int, fraction: float, lengths=None) -> np.ndarray:
-    """The mask ``(n, T)`` of the first ``ceil(fraction * length)`` steps of each sample.
-
-    Parameters
-    ----------
-    n, steps : int
-        Samples and T.
-    fraction : float
-        In [0, 1]; ``ceil`` is taken with a 1e-9 tolerance, so ``0.1 * 100`` is 10 steps.
-    lengths : array-like of int, optional
-        Valid steps per sample (default T each): the prefix is a fraction of these.
-    """
-    if not 0.0 <= fraction <= 1.0:
-        raise UserError(f"the observed fraction must be in [0, 1], got {fraction}")
-    lengths = _as_lengths(lengths, n, steps)
-    counts = np.array([math.ceil(fraction * length - 1e-9) for length in lengths], dtype=np.int64)
-    return np.arange(steps)[None, :] < counts[:, None]
-
-
-def unobserved_mse(predicted, truth, observed, lengths=None) -> np.ndarray:
-    """Per-sample mean squared error over the valid, unobserved steps (all joints).
-
-    This is the one definition of the prediction error: the peers and primspace's own
-    prediction are scored by it.
-
-    Parameters
-    ----------
-    predicted, truth : array-like, shape (n, T, J)
-    observed : array-like of bool, shape (n, T)
-        The steps that were given to the predictor: not scored.
-    lengths : array-like of int, optional
-        Valid steps per sample; steps at or after it are padding and not scored.
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        The mean over the scored steps and joints; NaN for a sample with none.
-    """
-    predicted = _as_motor(predicted, "predicted")
-    truth = _as_motor(truth, "truth")
-    if predicted.shape != truth.shape:
-        raise UserError(f"predicted has shape {predicted.shape} but truth has {truth.shape}")
-    n, steps, joints = truth.shape
-    valid = _valid(_as_lengths(lengths, n, steps), steps)
-    observed = np.asarray(observed)
-    if observed.shape != (n, steps):
-        raise UserError(f"observed must have shape (n, T) = {(n, steps)}, got {observed.shape}")
-    scored = valid & ~observed.astype(bool)
-    sq = np.where(scored[..., None], (predicted - truth) ** 2, 0.0).sum(axis=(1, 2))
-    count = scored.sum(axis=1) * joints
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(count > 0, sq / np.maximum(count, 1), np.nan)
-
-
-class _Peer:
+class _Peer(Predictor):
     """What the peers share: checking the fitted and the queried data, label groups."""
 
     per_label: bool = True
 
+    @property
+    def needs_labels(self) -> bool:
+        """A peer per primitive is given the test sample's label."""
+        return self.per_label
+
     def _fit_data(self, motor, labels, lengths):
-        motor = _as_motor(motor)
+        motor = check_motor(motor)
         n, steps, joints = motor.shape
-        lengths = _as_lengths(lengths, n, steps)
-        labels = _as_labels(labels, n)
+        lengths = check_lengths(lengths, n, steps)
+        labels = check_labels(labels, n)
         if self.per_label and labels is None:
             raise UserError(f"{type(self).__name__}(per_label=True) needs the labels of the fitted demonstrations")
-        if not np.all(np.isfinite(motor[_valid(lengths, steps)])):
+        if not np.all(np.isfinite(motor[valid_mask(lengths, steps)])):
             raise UserError("motor contains NaN or inf on valid steps")
         return motor, labels, lengths
 
@@ -182,15 +85,15 @@ class _Peer:
         """Checked query data; the unobserved steps of ``motor`` are zeroed (never read)."""
         if not hasattr(self, "n_joints_"):
             raise UserError(f"{type(self).__name__}: call fit before predict")
-        motor = _as_motor(motor)
+        motor = check_motor(motor)
         n, steps, joints = motor.shape
         if joints != self.n_joints_:
             raise UserError(f"motor has {joints} joints but the peer was fitted on {self.n_joints_}")
         if same_steps and steps != self.n_steps_:
             raise UserError(f"motor has T = {steps} steps but the peer was fitted on T = {self.n_steps_}")
-        lengths = _as_lengths(lengths, n, steps)
-        observed = _as_observed(observed, (n, steps), _valid(lengths, steps))
-        labels = _as_labels(labels, n)
+        lengths = check_lengths(lengths, n, steps)
+        observed = observed_mask(observed, lengths, (n, steps))
+        labels = check_labels(labels, n)
         if self.per_label:
             if labels is None:
                 raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
@@ -248,7 +151,7 @@ class ProMPPeer(_Peer):
         self.n_basis, self.noise, self.per_label = int(n_basis), float(noise), bool(per_label)
         self.ridge, self.n_iter = float(ridge), int(n_iter)
 
-    def fit(self, motor, labels=None, lengths=None) -> "ProMPPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> "ProMPPeer":
         """Fit one ProMP per label (or one for all) on the valid steps; returns self."""
         promp_cls = _promp_class()
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
@@ -289,7 +192,7 @@ class ProMPPeer(_Peer):
             promp = promp.condition_position(y, y_cov=cov, t=float(t), t_max=1.0)
         return promp
 
-    def predict(self, motor, observed, labels=None, lengths=None, noise: float | None = None) -> np.ndarray:
+    def predict(self, motor, observed, labels=None, lengths=None, frames=None, noise: float | None = None) -> np.ndarray:
         """Conditioned mean motion ``(n, T, J)`` given each sample's observed steps.
 
         Parameters
@@ -345,7 +248,7 @@ class NearestPeer(_Peer):
     def __init__(self, per_label: bool = False) -> None:
         self.per_label = bool(per_label)
 
-    def fit(self, motor, labels=None, lengths=None) -> "NearestPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> "NearestPeer":
         """Keep the demonstrations (valid steps and labels); returns self."""
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         self.motor_, self.labels_, self.lengths_ = motor.copy(), labels, lengths
@@ -358,7 +261,7 @@ class NearestPeer(_Peer):
     def neighbours(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
         """Index (into the fitted demonstrations) of each test sample's nearest one."""
         seen, observed, labels, lengths = self._query(motor, observed, labels, lengths)
-        valid_fit = _valid(self.lengths_, self.n_steps_)
+        valid_fit = valid_mask(self.lengths_, self.n_steps_)
         chosen = np.empty(len(seen), dtype=np.int64)
         for i in range(len(seen)):
             both = valid_fit & observed[i][None, :]
@@ -372,7 +275,7 @@ class NearestPeer(_Peer):
             chosen[i] = int(np.argmin(dist))
         return chosen
 
-    def predict(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
+    def predict(self, motor, observed, labels=None, lengths=None, frames=None) -> np.ndarray:
         """The nearest fitted demonstration of each test sample, ``(n, T, J)``."""
         return self.motor_[self.neighbours(motor, observed, labels, lengths)].copy()
 
@@ -392,11 +295,11 @@ class MeanMotionPeer(_Peer):
     def __init__(self, per_label: bool = True) -> None:
         self.per_label = bool(per_label)
 
-    def fit(self, motor, labels=None, lengths=None) -> "MeanMotionPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> "MeanMotionPeer":
         """Compute the mean motion per label (or of all); returns self."""
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         steps = motor.shape[1]
-        valid = _valid(lengths, steps)
+        valid = valid_mask(lengths, steps)
         self.means_ = {}
         for key, idx in self._groups(labels, len(motor)).items():
             count = valid[idx].sum(axis=0)
@@ -410,10 +313,10 @@ class MeanMotionPeer(_Peer):
     def _fitted_labels(self):
         return [k for k in self.means_ if k is not None]
 
-    def predict(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
+    def predict(self, motor, observed, labels=None, lengths=None, frames=None) -> np.ndarray:
         """The mean motion of each test sample's label (or of all), ``(n, T, J)``."""
         _, _, labels, _ = self._query(motor, observed, labels, lengths)
-        return np.stack([self.means_[self._key(labels, i)] for i in range(len(observed))])
+        return np.stack([self.means_[self._key(labels, i)] for i in range(len(labels if labels is not None else motor))])
 
 
 class NoiseChoice(NamedTuple):

@@ -5,9 +5,10 @@ trained with the decoder's weights ("train"), and codes for new demonstrations f
 gradient descent with the weights frozen ("evaluation", paper *Main Results*). In
 scikit-learn terms: ``fit_transform`` trains θ and the codes and returns the codes,
 ``transform`` infers codes for new data, ``inverse_transform`` decodes codes into motion.
-It wraps :func:`~primspace.train.fit`, :func:`~primspace.train.infer` and
-:func:`~primspace.train.reconstruct` (same seed, same numbers) and, like them, works in
-memory unless given a checkpoint directory.
+It wraps :func:`~primspace.train.fit`, :func:`~primspace.train.infer`,
+:func:`~primspace.train.reconstruct` and :func:`~primspace.predict.predict` (same seed, same
+numbers) and, like them, works in memory unless given a checkpoint directory. It sits above
+both :mod:`primspace.train` and :mod:`primspace.predict`: ``from primspace import AutoDecoder``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from sklearn.base import BaseEstimator
 from primspace.data import MotionDataset
 from primspace.errors import UserError, first_line
 from primspace.model import ModelConfig
+from primspace.predict import DEFAULT_PREDICT_EPOCHS, DEFAULT_PREDICTOR, predict
 from primspace.train.api import evaluate, fit, infer, reconstruct
 from primspace.train.config import TrainConfig
 from primspace.train.run import TrainedRun
@@ -155,28 +157,29 @@ class AutoDecoder(BaseEstimator):
         )
         return self.inference_.latents
 
-    def predict(self, X: MotionDataset, *, observe=0.25, observe_frames=None, init: str = "mixture",
-                epochs: int | None = None, continuity: bool = True, **overrides):
+    def predict(self, X: MotionDataset, *, observe=0.25, observe_frames=None, init: str = DEFAULT_PREDICTOR,
+                epochs: int | None = None, continuity: bool = True, fitted_data: MotionDataset | None = None,
+                **overrides):
         """The rest of each motion of ``X`` from its observed beginning (issue 25; docs/predict.md).
 
         The code is found from the observed entries only (``init``: ``"mixture"``, the
         posterior mean over the fitted codes, or a start followed by ``epochs`` of
-        gradient inference, :func:`primspace.train.predict.predict`); the decoder's whole
+        gradient inference, :func:`primspace.predict.predict`); the decoder's whole
         sequence is the prediction. ``continuity``: the residual at the last observed step
-        decays to zero at the end.
+        decays to zero at the end. ``fitted_data``: the data set the model was fitted on
+        (default: the one given to :meth:`fit`, else the run's data file).
 
         Returns
         -------
         (motor, frames)
             Joint values in physical units (n, T, J) float32 and frames (n, T, H, W, 3)
-            uint8 (None without an image head). The :class:`~primspace.train.predict.Prediction`
+            uint8 (None without an image head). The :class:`~primspace.predict.Prediction`
             with the errors of the unobserved steps is kept as ``prediction_``.
         """
-        from primspace.train.predict import DEFAULT_PREDICT_EPOCHS, predict
-
+        fitted_data = getattr(self, "fit_data_", None) if fitted_data is None else fitted_data
         self.prediction_ = predict(
             self._fitted(), X, observe=observe, observe_frames=observe_frames, init=init,
-            epochs=DEFAULT_PREDICT_EPOCHS if epochs is None else epochs, fitted_data=getattr(self, "fit_data_", None),
+            epochs=DEFAULT_PREDICT_EPOCHS if epochs is None else epochs, fitted_data=fitted_data,
             continuity=continuity, progress=self.progress, **overrides,
         )
         return self.prediction_.motor, self.prediction_.frames

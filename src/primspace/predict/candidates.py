@@ -1,5 +1,7 @@
 """The fitted codes as a prior for prediction: a mixture over decoded candidates (issue 25).
 
+The maths of :class:`~primspace.predict.mixture.MixturePredictor` (the predictor that uses it).
+
 Inferring a code from the beginning of a motion by gradient descent fits the observed
 part and leaves the rest anywhere: nothing holds the code near the codes the decoder was
 trained on (docs/predict.md, *What a first try shows*). ProMPs win that comparison by

@@ -19,7 +19,7 @@ processed together as one batch, each within its own valid length):
    forecast.
 
 The code before the first step comes from the chosen start under an observation of
-``start_step`` steps (:func:`~primspace.train.observe.observed_start`, exactly the start
+``start_step`` steps (:func:`~primspace.train.starts.inference_start`, exactly the start
 of ``infer(..., observe=start_step)``).
 
 Differences from :func:`~primspace.train.infer`: the learning rate is constant (infer's
@@ -30,7 +30,7 @@ decoder is causal, so the iterations run the recurrence over the observed prefix
 (``t / T`` of a full pass; not with a code window); a step costs ``k`` forward/backward
 passes over ``t`` steps and one motor-only forward pass over ``T``.
 
-The error of the remaining steps is :func:`primspace.peers.unobserved_mse` (motor MSE in
+The error of the remaining steps is :func:`primspace.predict.metrics.unobserved_mse` (motor MSE in
 scaled units over each sample's valid steps after ``t``), the measure that
 :func:`offline_errors` applies to ``infer(..., observe=t)``, and the peers of prediction
 theirs, so that they all read alike.
@@ -50,14 +50,15 @@ import torch
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.latent import INFER_STARTS, LatentTable
-from primspace.peers import unobserved_mse
+from primspace.predict.metrics import unobserved_mse
 from primspace.progress import progress_bar
-from primspace.train.api import _initializer, _seeds, _start_codes, as_run, infer, uses_images
+from primspace.train.api import as_run, infer, uses_images
 from primspace.train.checks import check_calibrated, check_data_fits, check_init
 from primspace.train.config import resolve_device
-from primspace.train.loop import DataTensors, autocast_for, batch_loss
-from primspace.train.observe import Observation, observing_args
+from primspace.train.loop import DataTensors, autocast_for, code_step
+from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
+from primspace.train.starts import inference_start
 
 __all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors"]
 
@@ -90,7 +91,7 @@ class OnlineResult:
         The codes before the first step (the chosen start).
     errors : ndarray (n, S) float64
         Motor MSE (scaled units) of the prediction of the remaining valid steps ``> t``
-        (:func:`~primspace.peers.unobserved_mse`); NaN for a sample with none left.
+        (:func:`~primspace.predict.metrics.unobserved_mse`); NaN for a sample with none left.
     latency : ndarray (S,) float64
         Seconds of each arriving step: its ``k`` iterations and the decode
         (``time.perf_counter``; CUDA synchronised).
@@ -180,12 +181,15 @@ class OnlineInference:
         moments carried from step to step. The fresh one forecast better at every ``k``
         on ``benchmarks/bench_online.py`` (old moments damp and misdirect the steps
         that follow new evidence).
+    start_codes : ndarray (n, K·q), optional
+        The codes before the first step, computed by the caller (e.g. a predictor that
+        keeps its calibrations); default: the start of ``init``.
     """
 
     def __init__(self, run: TrainedRun | str | os.PathLike, data: MotionDataset, *, iterations: int,
                  init: str | None = None, start_step: int = 1, latent_lr: float | None = None,
                  fitted_data: MotionDataset | None = None, device: str = "cpu", images: bool | None = None,
-                 seed: int | None = None, carry_moments: bool = False) -> None:
+                 seed: int | None = None, carry_moments: bool = False, start_codes: np.ndarray | None = None) -> None:
         parent = as_run(run)
         if not isinstance(data, MotionDataset):
             raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
@@ -205,7 +209,7 @@ class OnlineInference:
         self.run, self.device = parent, resolve_device(device)
         self.lengths = np.full(self.n, self.length) if data.lengths is None else np.asarray(data.lengths)
         scaled = parent.scaler.transform(data.motor)
-        start = _start(parent, self.init, data, scaled, self.start_step, fitted_data, self.tc.seed)
+        start = _start(parent, self.init, data, scaled, self.start_step, fitted_data, self.tc.seed, start_codes)
         self.table = LatentTable(torch.from_numpy(start.astype(np.float32)).to(self.device), lr)
         self.start_codes = self.table.numpy()
         self.model = copy.deepcopy(parent.model).to(self.device).eval().requires_grad_(False)
@@ -242,12 +246,8 @@ class OnlineInference:
                     moment.zero_()
             seen = self._targets(self.t)
             try:
-                for _ in range(self.iterations):
-                    z = self.table.batch(self._idx)
-                    loss, _ = batch_loss(self.model, z, self._idx, seen, self.tc, self._autocast)
-                    loss.backward()
-                    # the batch mean scaled z.grad by 1/n: each code steps on its own sample's gradient, as in infer
-                    self.table.step(self._idx, z.grad.mul_(self.n))
+                for _ in range(self.iterations):  # each code on its own sample's gradient, as in infer
+                    code_step(self.model, self.table, self._idx, seen, self.tc, self._autocast)
             finally:
                 self.model.config = self._full
         with torch.no_grad():
@@ -275,7 +275,8 @@ class OnlineInference:
 def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, iterations: int,
                  init: str | None = None, start_step: int = 1, latent_lr: float | None = None,
                  fitted_data: MotionDataset | None = None, device: str = "cpu", images: bool | None = None,
-                 seed: int | None = None, carry_moments: bool = False, progress: bool | None = None) -> OnlineResult:
+                 seed: int | None = None, carry_moments: bool = False, progress: bool | None = None,
+                 start_codes: np.ndarray | None = None) -> OnlineResult:
     """Online inference over a data set: steps ``start_step..T`` arrive one at a time.
 
     After each step, the codes are corrected on the error of the steps seen so far
@@ -286,7 +287,7 @@ def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, it
 
     Parameters
     ----------
-    run, data, iterations, init, start_step, latent_lr, fitted_data, device, images, seed, carry_moments
+    run, data, iterations, init, start_step, latent_lr, fitted_data, device, images, seed, carry_moments, start_codes
         As :class:`OnlineInference`.
     progress : bool, optional
         Progress bar (default: when stderr is a terminal).
@@ -297,7 +298,7 @@ def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, it
     """
     online = OnlineInference(run, data, iterations=iterations, init=init, start_step=start_step,
                              latent_lr=latent_lr, fitted_data=fitted_data, device=device, images=images, seed=seed,
-                             carry_moments=carry_moments)
+                             carry_moments=carry_moments, start_codes=start_codes)
     steps = np.arange(online.start_step, online.length + 1)
     codes = np.empty((online.n, len(steps), online.start_codes.shape[1]), dtype=np.float32)
     errors = np.empty((online.n, len(steps)))
@@ -331,7 +332,7 @@ def offline_errors(run: TrainedRun | str | os.PathLike, data: MotionDataset, ste
     The reference for the online figures: for each ``t``, ``infer(run, data,
     observe=t, epochs=epochs, init=init)`` (its start, loss and schedule), its codes
     decoded, and the prediction of the valid steps after ``t`` compared with the real
-    ones (:func:`~primspace.peers.unobserved_mse`, the online measure): the internal state corrected by
+    ones (:func:`~primspace.predict.metrics.unobserved_mse`, the online measure): the internal state corrected by
     the error to convergence rather than step by step.
 
     Parameters
@@ -379,15 +380,11 @@ def offline_errors(run: TrainedRun | str | os.PathLike, data: MotionDataset, ste
 
 
 def _start(parent: TrainedRun, init: str, data: MotionDataset, scaled: np.ndarray, start_step: int,
-           fitted_data: MotionDataset | None, seed: int) -> np.ndarray:
-    """The codes before the first step: ``infer(..., observe=start_step)``'s start (its initialiser
-    rule and seed, :func:`~primspace.train.observe.observed_start`)."""
+           fitted_data: MotionDataset | None, seed: int, start_codes: np.ndarray | None) -> np.ndarray:
+    """The codes before the first step: ``infer(..., observe=start_step)``'s start
+    (:func:`~primspace.train.starts.inference_start`), or ``start_codes`` when given."""
     observation = Observation.build(int(start_step))
-    observing = observing_args(init, observation, data, fitted_data)
-    seen = scaled * observing["observed"][..., None]  # what a new pca fits, as infer
-    seeds = _seeds(seed)
-    initializer = _initializer(init, parent, parent.model_config, seen, seeds)
-    return _start_codes(init, parent, initializer, scaled, seeds["codes_infer"], None, observing)
+    return inference_start(parent, init, data, scaled, observation, fitted_data, seed, start_codes)[1]
 
 
 def _prefix_mask(n: int, length: int, t: int) -> np.ndarray:

@@ -1,0 +1,40 @@
+"""Predicting the rest of a motion: predictors with one surface, ours and the peers' (issue 37).
+
+Every predictor is fitted once on the fitted demonstrations and then predicts whole
+sequences from their observed steps (:mod:`primspace.predict.base`):
+
+* :class:`MixturePredictor`: the posterior over the run's fitted codes, offline and online
+  (no gradient; the default, the best we have measured);
+* :class:`GradientPredictor`: gradient inference of the code from a start, offline and online;
+* :mod:`primspace.predict.scene`: the whole motion from the first frame and joints, the primitive given;
+* the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
+
+:func:`predict` runs one on a data set and scores it (:func:`~primspace.predict.metrics.unobserved_mse`,
+the one error); :func:`grid_predictions` runs the experiment's rows on one split.
+"""
+
+from primspace.predict.api import (
+    DEFAULT_PREDICTOR,
+    MIXTURE,
+    PREDICT_STARTS,
+    Prediction,
+    fit_predictor,
+    make_predictor,
+    predict,
+    run_predictor,
+)
+from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
+from primspace.predict.candidates import CodeMixture, continuity_correction
+from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS, GradientPredictor
+from primspace.predict.grid import grid_predictions
+from primspace.predict.metrics import finite_mean, frame_errors, observed_prefix, unobserved_mse
+from primspace.predict.mixture import MixturePredictor, code_mixture
+from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+
+__all__ = [
+    "Predictor", "Forecast", "observed_mask", "observation_rule", "Prediction", "predict", "make_predictor",
+    "fit_predictor", "run_predictor", "grid_predictions", "MixturePredictor", "GradientPredictor", "CodeMixture",
+    "code_mixture", "continuity_correction", "ProMPPeer", "NearestPeer", "MeanMotionPeer", "best_noise",
+    "unobserved_mse", "frame_errors", "finite_mean", "observed_prefix", "MIXTURE", "PREDICT_STARTS",
+    "DEFAULT_PREDICTOR", "DEFAULT_PREDICT_EPOCHS",
+]

@@ -1,0 +1,110 @@
+"""The one surface of every predictor: fit once, then predict the rest of each motion (issue 37).
+
+Every predictor of :mod:`primspace.predict`, primspace's own and the peers alike, is an
+object with the same two methods, as the maintained peers are (ProMP in
+``movement-primitives``, scikit-learn's estimators):
+
+``fit(motor, labels=None, lengths=None, frames=None)``
+    once, on the fitted demonstrations: ``motor`` ``(m, T, J)`` in the run's scaled units,
+    their integer ``labels`` (primitives; read by the predictors given the primitive),
+    valid ``lengths`` and camera ``frames`` ``(m, T, H, W, 3)`` uint8. primspace's own
+    predictors are built on a trained run (``Predictor(run, ...)``); their ``motor`` rows are
+    the run's fitted samples in its order, the rows of its codes.
+
+``predict(motor, observed, labels=None, lengths=None, frames=None)``
+    the whole sequence ``(n, T, J)`` (scaled units; the observed part reproduced or
+    corrected towards what was seen) of each new motion from its observed steps.
+    ``observed`` is either a boolean mask ``(n, T)`` (a prefix of each sample's valid
+    steps) or an :class:`~primspace.train.observe.Observation` rule (a fraction or a number
+    of steps; with frames, a rule for them too). A predictor reads only the observed steps
+    of ``motor`` (and ``frames``); ``labels`` are the primitive asked for, read only by the
+    predictors given it.
+
+``forecast(...)`` (same arguments) returns a :class:`Forecast`: the motion, and for
+primspace's predictors the codes that decode to it (from which frames are decoded) and
+what the predictor chose (``details``). ``predict`` is ``forecast(...).motor``.
+
+The predictors that prepare something per observation rule from the fitted
+demonstrations (the mixture's noise, a calibration) need the rule: a mask that observes
+the same number of steps in every sample is that number of steps; for prefixes of
+different lengths pass the rule itself (``Observation.build(0.25)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from primspace.errors import UserError
+from primspace.predict.metrics import check_lengths, check_observed, valid_mask
+from primspace.train.observe import Observation
+
+__all__ = ["Predictor", "Forecast", "observed_mask", "observation_rule"]
+
+
+@dataclass
+class Forecast:
+    """What :meth:`Predictor.forecast` returns.
+
+    Attributes
+    ----------
+    motor : ndarray (n, T, J) float64
+        The predicted sequences, scaled units.
+    codes : ndarray (n, K·q) float32 or None
+        The codes that decode to them (primspace's predictors; None for the peers).
+    details : dict
+        What the predictor chose (e.g. the mixture's noise), for ``result.json``.
+    """
+
+    motor: np.ndarray
+    codes: np.ndarray | None = None
+    details: dict = field(default_factory=dict)
+
+
+class Predictor(BaseEstimator):
+    """The interface (module docstring). Subclasses implement :meth:`fit` and :meth:`forecast`
+    (or :meth:`predict`, for predictors without codes)."""
+
+    #: True when :meth:`predict` needs the labels of the samples (it is given the primitive).
+    needs_labels = False
+
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> "Predictor":  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def predict(self, motor, observed, labels=None, lengths=None, frames=None) -> np.ndarray:
+        """The whole sequences ``(n, T, J)`` (scaled units) from the observed steps."""
+        return self.forecast(motor, observed, labels, lengths, frames).motor
+
+    def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
+        """:meth:`predict` with the codes and choices behind it (:class:`Forecast`)."""
+        return Forecast(np.asarray(self.predict(motor, observed, labels, lengths, frames), dtype=np.float64))
+
+
+def observed_mask(observed, lengths, shape: tuple[int, int], frames: bool = False) -> np.ndarray:
+    """The boolean mask ``(n, T)`` of ``observed`` (a mask, or an Observation rule applied to
+    ``lengths``); ``frames``: the frames' mask of a rule (a mask stands for both)."""
+    n, steps = shape
+    lengths = check_lengths(lengths, n, steps)
+    if isinstance(observed, Observation):
+        return observed.masks(lengths, steps)[1 if frames else 0]
+    return check_observed(observed, shape, valid_mask(lengths, steps))
+
+
+def observation_rule(observed, lengths, shape: tuple[int, int]) -> Observation:
+    """The rule behind ``observed``: itself when it is one; for a mask, the number of steps
+    it observes in every sample (a prefix of the same length in each; one UserError otherwise)."""
+    if isinstance(observed, Observation):
+        return observed
+    mask = observed_mask(observed, lengths, shape)
+    counts = mask.sum(axis=1)
+    prefix = np.arange(shape[1])[None, :] < counts[:, None]
+    if not np.array_equal(mask, prefix):
+        raise UserError("observed must be a prefix of each sample's steps")
+    if counts.size == 0 or counts.min() != counts.max():
+        raise UserError("observed holds prefixes of different lengths: pass the rule instead of the mask "
+                        "(e.g. Observation.build(0.25) for a quarter of each motion)")
+    if counts[0] < 1:
+        raise UserError("observed marks no step: nothing to predict from")
+    return Observation.build(int(counts[0]))

@@ -1,0 +1,98 @@
+"""The rows of the prediction experiment on one split: ours and the peers, one loop (issue 37).
+
+:func:`grid_predictors` builds every row as a :class:`~primspace.predict.base.Predictor`
+(primspace's gradient starts, the mixture's variants sharing one set of decoded candidates,
+the mixture given the labels as a diagnostic, and the peers: ProMP given the labels and one
+for all, the nearest neighbour, the mean motion given the labels) and fits each once on the
+run's fitted demonstrations; :func:`grid_forecasts` runs them all on the same samples
+under one observation rule. The ProMPs' observation noise is chosen on the answer
+(:func:`~primspace.predict.peers.best_noise`: flattering them), as docs/predict.md says.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from primspace.data import MotionDataset
+from primspace.predict.api import fit_predictor, make_predictor, predict, run_predictor
+from primspace.predict.base import Forecast, Predictor
+from primspace.predict.metrics import finite_mean, unobserved_mse
+from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
+from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.train.observe import Observation
+from primspace.train.run import TrainedRun
+from primspace.train.starts import fitted_samples
+
+__all__ = ["grid_predictors", "grid_forecasts", "grid_predictions", "PEERS", "POSTERIOR_MEAN", "LABELS_DIAGNOSTIC",
+           "MIXTURE_ROWS"]
+
+#: The peers' rows (labels: the peer is given the test sample's primitive).
+PEERS = ("promp (labels)", "promp (one for all)", "nearest neighbour", "mean motion (labels)")
+#: The mixture's posterior mean alone (no ensemble conditioning).
+POSTERIOR_MEAN = "mixture (posterior mean)"
+#: The mixture given the labels: candidates of the sample's own primitive only (a diagnostic).
+LABELS_DIAGNOSTIC = "mixture (labels; diagnostic)"
+#: The mixture's rows: (name, continuity correction, ensemble conditioning allowed, given the labels).
+MIXTURE_ROWS = ((MIXTURE, True, True, False), (POSTERIOR_MEAN, True, False, False),
+                ("mixture (no continuity)", False, True, False), (LABELS_DIAGNOSTIC, True, False, True))
+
+
+def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int) -> dict[str, Predictor]:
+    """Every row, fitted once on ``run``'s fitted demonstrations (read from ``fitted_data``, the
+    data set it was fitted on): ``starts`` (gradient starts and ``mixture``: all its rows), then the peers."""
+    fitted = fitted_samples(run, fitted_data)
+    rows: dict[str, Predictor] = {}
+    candidates = code_mixture(run) if MIXTURE in starts else None
+    for start in starts:
+        if start != MIXTURE:
+            rows[start] = make_predictor(run, start, epochs=epochs, continuity=True, progress=False)
+            continue
+        for name, continuity, condition, per_label in MIXTURE_ROWS:
+            if per_label and fitted.labels is None:
+                continue
+            rows[name] = MixturePredictor(run, condition=condition, continuity=continuity, candidates=candidates,
+                                          per_label=per_label)
+    rows.update({"promp (labels)": ProMPPeer(per_label=True), "promp (one for all)": ProMPPeer(per_label=False),
+                 "nearest neighbour": NearestPeer(), "mean motion (labels)": MeanMotionPeer()})
+    for predictor in rows.values():
+        fit_predictor(predictor, run, fitted_data)
+    return rows
+
+
+def grid_forecasts(rows: dict[str, Predictor], run: TrainedRun, test: MotionDataset, fraction: float) -> dict:
+    """``{row: Forecast}`` of every fitted row on ``test`` with the first ``fraction`` of each
+    motion observed (scaled units)."""
+    rule = Observation.build(fraction)
+    lengths = test.lengths if test.lengths is not None else np.full(len(test), test.length)
+    observed = rule.masks(lengths, test.length)[0]
+    scaled = run.scaler.transform(test.motor)
+    left = (np.arange(test.length)[None, :] < lengths[:, None]) & ~observed
+    out = {}
+    for name, predictor in rows.items():
+        if isinstance(predictor, ProMPPeer) and left.any():
+            out[name] = Forecast(best_noise(predictor, scaled, observed, test.labels, lengths).predicted)
+        else:  # at 100 % observed there is no answer to choose the ProMPs' noise on: their default
+            out[name] = run_predictor(predictor, run, test, rule)
+    return out
+
+
+def grid_predictions(run: TrainedRun, fitted_data: MotionDataset, test: MotionDataset, fractions, *,
+                     starts=("zero", "projection", "calibrated", "nearest", MIXTURE), epochs: int,
+                     online_iterations: int | None = None) -> dict:
+    """``{row: {fraction: mean unobserved MSE}}`` of every row (and, with ``online_iterations``,
+    the online gradient start ``projection`` and the online mixture) on ``test``."""
+    rows = grid_predictors(run, fitted_data, starts, epochs)
+    scaled, lengths = run.scaler.transform(test.motor), test.lengths
+    table: dict = {}
+    for f in fractions:
+        key = f"{f:g}"
+        observed = Observation.build(f).masks(lengths if lengths is not None else np.full(len(test), test.length),
+                                              test.length)[0]
+        for name, forecast in grid_forecasts(rows, run, test, f).items():
+            table.setdefault(name, {})[key] = finite_mean(unobserved_mse(forecast.motor, scaled, observed, lengths))
+        if online_iterations is not None:
+            for name, init in (("online projection", "projection"), ("online mixture", MIXTURE)):
+                p = predict(run, test, observe=f, init=init, online=online_iterations, fitted_data=fitted_data,
+                            frames=False, progress=False)
+                table.setdefault(name, {})[key] = finite_mean(p.errors["motor_mse"])
+    return table

@@ -1,0 +1,219 @@
+"""The mixture over the fitted codes as a predictor, offline and online (issue 25; issue 37).
+
+:class:`MixturePredictor` predicts the rest of a motion without a gradient step: the
+posterior over decoded candidates built from the run's fitted codes
+(:class:`~primspace.predict.candidates.CodeMixture`, whose docstring gives the maths),
+its posterior mean or its ensemble conditioned on the observed entries, whichever the
+leave-one-out prediction of the fitted demonstrations prefers, then the continuity
+correction (:func:`~primspace.predict.candidates.continuity_correction`).
+
+**Online** (:meth:`MixturePredictor.predict_online`): after step ``t`` the prediction is a
+function of the prefix ``1..t`` alone, so following a motion online gives exactly the
+offline prediction of the same prefix *without the ensemble conditioning*
+(``condition=False``; tested), and an arriving step costs one update of the squared
+distances to the decoded candidates (``c x J`` numbers per motion), the posterior weights
+and the weighted mean. Predictive coding in the paper's words, "Predicted information is
+compared with the real one and internal state is corrected based on the error" (paper,
+*Background*): the internal state is the posterior over the candidates, corrected by each
+step's error. The conditioning is left out online because its leave-one-out choice costs
+seconds per prefix length; the offline default conditions, so online and offline differ
+by that choice (docs/predict.md, *Online*).
+
+What does not depend on the new motion is prepared in :meth:`MixturePredictor.fit` and on
+first use of a rule, from the fitted demonstrations only: the candidates (decoded once)
+and ``σ²`` (and ``r``) per observation rule or prefix length.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from primspace.errors import UserError
+from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
+from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
+from primspace.predict.metrics import check_lengths, check_motor, unobserved_mse, valid_mask
+from primspace.predict.online import OnlineResult
+from primspace.progress import progress_bar
+from primspace.train.api import as_run, reconstruct
+from primspace.train.observe import NOTHING, Observation
+
+__all__ = ["MixturePredictor", "MIXTURE"]
+
+#: The name of the mixture among the starts of :func:`primspace.predict.predict`.
+MIXTURE = "mixture"
+
+
+class MixturePredictor(Predictor):
+    """The posterior over the run's fitted codes (module docstring).
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+        The trained run (θ frozen; not changed).
+    condition : bool
+        Let the leave-one-out choice take the ensemble conditioning
+        (:meth:`~primspace.predict.candidates.CodeMixture.conditioned`); False: the
+        posterior mean only.
+    continuity : bool
+        Apply the continuity correction to the prediction.
+    candidates : CodeMixture, optional
+        The run's decoded candidates, shared with other predictors of the same run (they
+        are decoded once); default: built in :meth:`fit`.
+    per_label : bool
+        Given the primitive: only the candidates built from fitted codes of the sample's own
+        label (``labels`` of :meth:`fit` and :meth:`predict`), their posterior mean with the
+        noise the label-free posterior mean chose (``condition`` must be False).
+    """
+
+    def __init__(self, run, condition: bool = True, continuity: bool = True, candidates: CodeMixture | None = None,
+                 per_label: bool = False):
+        self.run = run
+        self.condition = condition
+        self.continuity = continuity
+        self.candidates = candidates
+        self.per_label = per_label
+
+    @property
+    def needs_labels(self) -> bool:
+        """Given the primitive: the samples' labels are read."""
+        return bool(self.per_label)
+
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> "MixturePredictor":
+        """Decode the candidates (unless given) and keep the fitted demonstrations ``motor``
+        (scaled, the run's fitted samples in its order) for the leave-one-out choices."""
+        self.run_ = as_run(self.run)
+        motor = check_motor(motor)
+        if len(motor) != len(self.run_.latents):
+            raise UserError(f"the mixture is fitted on the run's {len(self.run_.latents)} fitted demonstrations "
+                            f"(one per code), got {len(motor)}")
+        self.fitted_, self.valid_ = motor, valid_mask(check_lengths(lengths, *motor.shape[:2]), motor.shape[1])
+        self.fitted_lengths_ = check_lengths(lengths, *motor.shape[:2])
+        self.mixture_ = self.candidates if self.candidates is not None else code_mixture(self.run_)
+        self.noises_: dict = {}  # σ² per prefix length, online
+        if self.per_label:
+            if labels is None or self.condition:
+                raise UserError("a mixture given the primitive needs the fitted labels and condition=False")
+            self.source_labels_ = np.asarray(labels)[self.mixture_.sources]  # (c, 2)
+        return self
+
+    def choice(self, rule: Observation) -> dict:
+        """The leave-one-out choice (``noise``, ``condition``, ``loo``) for ``rule``: made on first
+        use and kept with the candidates, so predictors sharing them share the search."""
+        key = (rule.key, bool(self.condition))
+        choices = self.mixture_.choices
+        if key not in choices:
+            observed = rule.masks(self.fitted_lengths_, self.fitted_.shape[1])[0]
+            choices[key] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_,
+                                                      conditions=CONDITION_GRID if self.condition else (None,))
+        return choices[key]
+
+    def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
+        """Posterior (or conditioned) sequences, the posterior-mode codes and the choice."""
+        motor = check_motor(motor)
+        rule = observation_rule(observed, lengths, motor.shape[:2])
+        if rule.motor == NOTHING:
+            raise UserError("init 'mixture' weighs the fitted codes by the observed joints, and observe='none' "
+                            "observes none: start by 'zero' or 'random'")
+        mask = observed_mask(observed, lengths, motor.shape[:2])
+        choice = self.choice(rule)
+        seen = np.where(mask[..., None], motor, 0.0)
+        if self.per_label:
+            scaled, codes = self._given_labels(seen, mask, labels, choice["noise"])
+        else:
+            scaled, codes = self.mixture_.predict(seen, mask, noise=choice["noise"], condition=choice["condition"])
+        if self.continuity:
+            valid = valid_mask(check_lengths(lengths, *motor.shape[:2]), motor.shape[1])
+            scaled = continuity_correction(scaled, seen, mask, valid)
+        details = {"mixture": {"candidates": int(len(self.mixture_.candidates)), **choice}}
+        return Forecast(scaled, codes.astype(np.float32), details)
+
+    def _given_labels(self, seen: np.ndarray, mask: np.ndarray, labels, noise: float) -> tuple:
+        """The posterior mean over the candidates built from the sample's own label only, and its mode."""
+        if labels is None or len(labels) != len(seen):
+            raise UserError("a mixture given the primitive needs each sample's label")
+        labels = np.asarray(labels)[:, None]
+        other = ~((self.source_labels_[None, :, 0] == labels) & (self.source_labels_[None, :, 1] == labels))
+        w = self.mixture_.weights(seen, mask, noise, exclude=other)
+        return np.einsum("nc,ctj->ntj", w, self.mixture_.decoded), self.mixture_.candidates[np.argmax(w, axis=1)]
+
+    def online_noise(self, t: int) -> float:
+        """``σ²`` of the posterior mean for a prefix of ``t`` steps (leave-one-out, kept)."""
+        if t not in self.noises_:
+            observed = Observation.build(int(t)).masks(self.fitted_lengths_, self.fitted_.shape[1])[0]
+            self.noises_[t] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_, conditions=(None,))["noise"]
+        return self.noises_[t]
+
+    def predict_online(self, motor, lengths=None, *, start_step: int = 1, prediction_after: int | None = None,
+                       progress: bool | None = None) -> OnlineResult:
+        """The prediction after each arriving step ``start_step..T`` (module docstring).
+
+        Equal, after step ``t``, to ``forecast(motor, Observation.build(t))`` of a predictor
+        with ``condition=False`` (tested). ``σ²`` for every prefix length is chosen before the
+        first step arrives and not counted in the latency.
+
+        Returns
+        -------
+        OnlineResult
+            ``iterations`` 0, ``latent_lr`` NaN (no gradient); ``codes`` the posterior mode
+            after each step (``start_codes``: after the first); ``latency`` the seconds of
+            each step's update, weights, mean and correction for the whole batch;
+            ``prediction`` after step ``prediction_after`` (default T), physical units.
+        """
+        truth = check_motor(motor)
+        n, length, _ = truth.shape
+        if isinstance(start_step, bool) or not isinstance(start_step, (int, np.integer)) or not 1 <= start_step <= length:
+            raise UserError(f"start_step must be a whole number in 1..T={length}, got {start_step!r}")
+        steps = np.arange(int(start_step), length + 1)
+        keep = length if prediction_after is None else int(prediction_after)
+        if keep not in steps:
+            raise UserError(f"prediction_after must be a step in {int(start_step)}..{length}, got {prediction_after!r}")
+        noises = {int(t): self.online_noise(int(t)) for t in steps}
+        lengths = check_lengths(lengths, n, length)
+        valid = valid_mask(lengths, length)
+        mixture = self.mixture_
+        by_step = np.ascontiguousarray(mixture.decoded.transpose(1, 0, 2))  # (T, c, J): a step's candidates together
+        squares = (by_step**2).sum(axis=2)  # (T, c)
+
+        def arrive(t: int) -> np.ndarray:  # (n, c): the squared distances of step t (1-based), valid samples only
+            x = truth[:, t - 1]
+            step = (x**2).sum(axis=1)[:, None] + squares[t - 1][None] - 2.0 * x @ by_step[t - 1].T
+            return valid[:, t - 1, None] * np.maximum(step, 0.0)
+
+        d2 = np.zeros((n, by_step.shape[1]))
+        for t in range(1, int(start_step)):  # the steps before the first arrival
+            d2 += arrive(t)
+        codes = np.empty((n, len(steps), mixture.candidates.shape[1]), dtype=np.float32)
+        errors, latency, kept = np.empty((n, len(steps))), np.empty(len(steps)), None
+        with progress_bar(len(steps), "online mixture", enabled=progress) as advance:
+            for s, t in enumerate(steps):
+                t0 = time.perf_counter()
+                d2 += arrive(int(t))
+                energy = d2 / (2.0 * noises[int(t)])
+                w = np.exp(-(energy - energy.min(axis=1, keepdims=True)))
+                w /= w.sum(axis=1, keepdims=True)
+                predicted = mixture.posterior_mean(w)
+                observed = (np.arange(length) < t)[None, :] & valid
+                if self.continuity:
+                    predicted = continuity_correction(predicted, truth, observed, valid)
+                latency[s] = time.perf_counter() - t0
+                codes[:, s] = mixture.candidates[np.argmax(w, axis=1)]
+                kept = predicted if t == keep else kept
+                errors[:, s] = unobserved_mse(predicted, truth, observed, lengths)
+                advance()
+        return OnlineResult(steps=steps, codes=codes, start_codes=codes[:, 0].copy(), errors=errors, latency=latency,
+                            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32), iterations=0,
+                            init=MIXTURE, latent_lr=float("nan"))
+
+
+def code_mixture(run) -> CodeMixture:
+    """The run's :class:`~primspace.predict.candidates.CodeMixture`: its fitted codes' candidates,
+    decoded once (scaled motor). Build it once and share it between predictors of one run."""
+    parent = as_run(run)
+    scaler = parent.scaler
+
+    def decode(codes):
+        return scaler.transform(reconstruct(parent, codes.astype(np.float32), images=False, batch_size=1024)[0])
+
+    return CodeMixture(parent.latents, decode)
