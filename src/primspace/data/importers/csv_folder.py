@@ -6,6 +6,19 @@ name as its label; files directly in the folder are unlabelled. A column named `
 strictly increasing, and a file may have only one such column. Joint values must fit in
 float32, the type they are stored in: a larger finite value is refused before the cast,
 naming the file, line and column.
+
+Durations
+---------
+Each file is resampled to ``length`` steps whatever its duration: time is normalised per
+demonstration, as the paper resamples its motion-capture sequences and as every importer
+does, so that a primitive demonstrated slower or faster is the same shape over the same T
+steps. The data set's ``dt`` is then the mean duration / (``length`` - 1). When the files'
+durations differ (by their time columns), nothing is lost silently: each file's duration
+in seconds is kept as the parameter ``duration`` (``params``, ``param_names``), and the
+``source`` text says the range (``csv:demos; durations 1.2-2.5 s, each resampled to 61
+steps, dt = their mean / 60``). Refusing them instead would refuse nearly every set of
+human demonstrations; putting them on one clock would need padding (valid lengths), which
+the data set keeps only for demonstrations of several primitives.
 """
 
 from __future__ import annotations
@@ -66,6 +79,7 @@ def import_csv_folder(path: str | os.PathLike, length: int) -> MotionDataset:
         bad = files[exc.index] if exc.index is not None else root
         raise exc.located(path=bad) from None
     dt = float(np.mean(durations)) / (length - 1) if durations and np.mean(durations) > 0 else 1.0
+    params, note = _durations(durations, len(files), length)
     try:
         return MotionDataset(
             motor=motor,
@@ -73,11 +87,23 @@ def import_csv_folder(path: str | os.PathLike, length: int) -> MotionDataset:
             label_names=names,
             joint_names=joint_names,
             dt=dt,
-            source=f"csv:{root.name}",
+            params=params,
+            param_names=None if params is None else ["duration"],
+            source=f"csv:{root.name}{note}",
             source_ids=[f"csv:{root.name}/{file.relative_to(root).as_posix()}" for file in files],
         )
     except DataError as exc:
         raise exc.located(path=root) from None
+
+
+def _durations(durations: list[float], n: int, length: int) -> tuple[np.ndarray | None, str]:
+    """Each file's duration as the parameter ``duration`` (N, 1), and the note for ``source``,
+    when the files have time columns and their durations differ (module docstring); else (None, '')."""
+    if len(durations) != n or max(durations) - min(durations) <= 1e-9 * max(durations):
+        return None, ""
+    note = (f"; durations {min(durations):.4g}-{max(durations):.4g} s, each resampled to {length} steps, "
+            f"dt = their mean / {length - 1}")
+    return np.asarray(durations, dtype=np.float64)[:, None], note
 
 
 def _read_csv(file: Path, index: int) -> tuple[list[str], np.ndarray]:
