@@ -121,8 +121,6 @@ def predict_command(
     from primspace.cluster.outputs import OutputKind, atomic_directory
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
-    from primspace.predict import DEFAULT_PREDICTOR, predict
-
     motor, frames = _amounts(scene, primitive, clusters, observe, observe_frames, init, online)
     check_outside_inputs(out, (file, indices, run, fitted))
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
@@ -131,22 +129,29 @@ def predict_command(
     configure_process(TrainConfig(threads=threads).validate())
     common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
     with atomic_directory(out, overwrite, kind) as tmp:
-        if scene:
-            from primspace.predict.scene import predict_scene
-
-            prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
-            command = {"scene": True, "primitive": primitive, "clusters": clusters}
-        else:
-            init = init or DEFAULT_PREDICTOR
-            prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, continuity=continuity,
-                                 online=iterations if online else None, progress=None, **common)
-            command = {"observe": motor, "observe_frames": frames, "init": init, "continuity": continuity,
-                       "online": iterations if online else None}
+        prediction, command = _predict(run, dataset, scene, primitive, clusters, motor, frames, init, continuity,
+                                       iterations if online else None, common)
         command = {"run": str(run), "data": str(file), **command, "epochs": epochs}
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
     typer.echo(_summary_line(out, result, prediction, online, judged))
+
+
+def _predict(run, dataset, scene: bool, primitive, clusters, motor, frames, init, continuity: bool, online, common):
+    """The prediction (scene mode or from the observed beginning) and what result.json records of the command."""
+    from primspace.predict import DEFAULT_PREDICTOR, predict
+
+    if scene:
+        from primspace.predict.scene import predict_scene
+
+        prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
+        return prediction, {"scene": True, "primitive": primitive, "clusters": clusters}
+    init = init or DEFAULT_PREDICTOR
+    prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, continuity=continuity,
+                         online=online, progress=None, **common)
+    return prediction, {"observe": motor, "observe_frames": frames, "init": init, "continuity": continuity,
+                        "online": online}
 
 
 def _inputs(file: Path, indices: Path | None, fitted: Path | None) -> tuple:
