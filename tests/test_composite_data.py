@@ -106,10 +106,10 @@ def test_hdf5_round_trip_keeps_the_fields(tiny, tmp_path):
 
 
 def test_block_moves_with_push_and_pull_and_each_primitive_is_judged():
-    from primspace.sim.generate import _worker_scene
+    from primspace.sim.generate import worker_scene
 
     plan = SequencePlan((0.5, 0.05, 0.05), ("push", "pull", "touch"), (31, 33, 32))
-    seq = simulate_sequence(_worker_scene(), TINY, plan, 0)  # verify: every script passes its judge
+    seq = simulate_sequence(worker_scene(), TINY, plan, 0)  # verify: every script passes its judge
     seg = seq["step_segments"]
     assert seq["block"][0, 0] == pytest.approx(0.5)
     assert seq["block"][seg == 1][0, 0] == pytest.approx(SCRIPT.push_target_x, abs=2e-3)  # pull starts where push left it

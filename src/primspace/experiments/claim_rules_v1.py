@@ -18,7 +18,7 @@ import numpy as np
 
 from primspace.experiments.results import LEARNED_CODES
 
-__all__ = ["Claim", "CLAIMS_V1"]
+__all__ = ["Claim", "CLAIMS_V1", "losses_by_q", "has_inits"]
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,7 @@ def _final(curve: list) -> float:
     return float(vals[-1]) if vals else float("nan")
 
 
-def _by_q(results: dict, phase: str, at: int = -1) -> dict[int, dict[str, float]]:
+def losses_by_q(results: dict, phase: str, at: int = -1) -> dict[int, dict[str, float]]:
     """``{q: {init: loss}}`` averaged over seeds, at epoch index ``at`` of ``phase``."""
     acc: dict[int, dict[str, list]] = {}
     for r in results["runs"]:
@@ -48,7 +48,8 @@ def _by_q(results: dict, phase: str, at: int = -1) -> dict[int, dict[str, float]
     return {q: {i: float(np.mean(v)) for i, v in d.items()} for q, d in sorted(acc.items())}
 
 
-def _need(d: dict, *inits: str) -> bool:
+def has_inits(d: dict, *inits: str) -> bool:
+    """Whether ``d`` (by init) holds every one of ``inits``."""
     return all(i in d for i in inits)
 
 
@@ -58,8 +59,8 @@ LOW_DIMENSIONAL_Q = 20
 
 
 def _random_fit_bad(results: dict) -> tuple[bool | None, str]:
-    fits = _by_q(results, "fit")
-    qs = [q for q, d in fits.items() if _need(d, "random", "projection")]
+    fits = losses_by_q(results, "fit")
+    qs = [q for q, d in fits.items() if has_inits(d, "random", "projection")]
     if not qs:
         return None, "needs random and projection runs"
     q = min(qs)
@@ -74,8 +75,8 @@ def _zero_within_2x(phase: str, what: str) -> Callable[[dict], tuple[bool | None
     """The check "zero's final ``phase`` loss lies within a factor of 2 of projection's at every q"."""
 
     def check(results: dict) -> tuple[bool | None, str]:
-        finals = _by_q(results, phase)
-        ratios = {q: d["zero"] / d["projection"] for q, d in finals.items() if _need(d, "zero", "projection")}
+        finals = losses_by_q(results, phase)
+        ratios = {q: d["zero"] / d["projection"] for q, d in finals.items() if has_inits(d, "zero", "projection")}
         if not ratios:
             return None, "needs zero and projection runs"
         ok = all(0.5 <= r <= 2 for r in ratios.values())
@@ -85,8 +86,8 @@ def _zero_within_2x(phase: str, what: str) -> Callable[[dict], tuple[bool | None
 
 
 def _random_infer_fails(results: dict) -> tuple[bool | None, str]:
-    finals, starts = _by_q(results, "infer"), _by_q(results, "infer", 0)
-    qs = [q for q, d in finals.items() if _need(d, "random", "projection")]
+    finals, starts = losses_by_q(results, "infer"), losses_by_q(results, "infer", 0)
+    qs = [q for q, d in finals.items() if has_inits(d, "random", "projection")]
     if not qs:
         return None, "needs random and projection runs"
     ratios = {q: finals[q]["random"] / finals[q]["projection"] for q in qs}
@@ -98,8 +99,8 @@ def _random_infer_fails(results: dict) -> tuple[bool | None, str]:
 
 
 def _projection_good_untrained(results: dict) -> tuple[bool | None, str]:
-    finals, starts = _by_q(results, "infer"), _by_q(results, "infer", 0)
-    qs = [q for q, d in finals.items() if _need(d, "zero", "projection")]
+    finals, starts = losses_by_q(results, "infer"), losses_by_q(results, "infer", 0)
+    qs = [q for q, d in finals.items() if has_inits(d, "zero", "projection")]
     if not qs:
         return None, "needs zero and projection runs"
     cmp = {q: (starts[q]["projection"], finals[q]["zero"]) for q in qs}
@@ -111,7 +112,7 @@ def _projection_good_untrained(results: dict) -> tuple[bool | None, str]:
 
 def _success_projection_higher(results: dict) -> tuple[bool | None, str]:
     gen = results.get("generated", {})
-    if not _need(gen, "zero", "projection"):
+    if not has_inits(gen, "zero", "projection"):
         return None, "needs zero and projection runs"
     parts, ok = [], True
     for prim in ("pull", "push", "grasp"):
@@ -127,7 +128,7 @@ def _success_projection_higher(results: dict) -> tuple[bool | None, str]:
 
 def _clustering_similar(results: dict) -> tuple[bool | None, str]:
     acc = {r["init"]: r["accuracy"] for r in results.get("latent", []) if r.get("codes") == LEARNED_CODES}
-    if not _need(acc, "zero", "projection"):
+    if not has_inits(acc, "zero", "projection"):
         return None, "needs zero and projection codes"
     diff = acc["projection"] - acc["zero"]
     return abs(diff) <= 0.1, f"accuracy zero {acc['zero']:.2f}, projection {acc['projection']:.2f} (q = {results.get('latent_dim')})"
@@ -137,7 +138,7 @@ def _inter_improved(results: dict) -> tuple[bool | None, str]:
     by: dict[str, list] = {}
     for r in results["runs"]:
         by.setdefault(r["init"], []).append(r)
-    if not _need(by, "zero", "projection"):
+    if not has_inits(by, "zero", "projection"):
         return None, "needs zero and projection folds"
     stats = {}
     for init, runs in by.items():

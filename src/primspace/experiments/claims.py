@@ -40,7 +40,7 @@ from typing import Callable, Mapping, NamedTuple
 
 import numpy as np
 
-from primspace.experiments.claim_rules_v1 import CLAIMS_V1, _by_q, _need  # the same readings of the results
+from primspace.experiments.claim_rules_v1 import CLAIMS_V1, has_inits, losses_by_q  # the same readings of the results
 from primspace.experiments.results import LEARNED_CODES, read_results
 from primspace.stats import wilson_interval
 
@@ -99,8 +99,8 @@ PAIRED_SHARE = 0.8
 
 
 def _random_fit_bad(results: dict) -> Outcome:
-    fits = _by_q(results, "fit")
-    qs = [q for q, d in fits.items() if _need(d, "random", "projection")]
+    fits = losses_by_q(results, "fit")
+    qs = [q for q, d in fits.items() if has_inits(d, "random", "projection")]
     if not qs:
         return Outcome(None, "needs random and projection runs")
     q = min(qs)
@@ -115,8 +115,8 @@ def _zero_within(phase: str, what: str) -> Callable[[dict], Outcome]:
     """The check "zero's final ``phase`` loss lies within :data:`SIMILAR_FACTOR` of projection's at every q"."""
 
     def check(results: dict) -> Outcome:
-        finals = _by_q(results, phase)
-        ratios = {q: d["zero"] / d["projection"] for q, d in finals.items() if _need(d, "zero", "projection")}
+        finals = losses_by_q(results, phase)
+        ratios = {q: d["zero"] / d["projection"] for q, d in finals.items() if has_inits(d, "zero", "projection")}
         if not ratios:
             return Outcome(None, "needs zero and projection runs")
         ok = all(1 / SIMILAR_FACTOR <= r <= SIMILAR_FACTOR for r in ratios.values())
@@ -126,8 +126,8 @@ def _zero_within(phase: str, what: str) -> Callable[[dict], Outcome]:
 
 
 def _random_not_converged(results: dict) -> Outcome:
-    finals, starts = _by_q(results, "infer"), _by_q(results, "infer", 0)
-    qs = [q for q, d in finals.items() if _need(d, "random", "projection")]
+    finals, starts = losses_by_q(results, "infer"), losses_by_q(results, "infer", 0)
+    qs = [q for q, d in finals.items() if has_inits(d, "random", "projection")]
     if not qs:
         return Outcome(None, "needs random and projection runs")
     drops = {q: starts[q]["random"] / finals[q]["random"] for q in qs}
@@ -143,8 +143,8 @@ def _random_not_converged(results: dict) -> Outcome:
 
 
 def _projection_good_untrained(results: dict) -> Outcome:
-    finals, starts = _by_q(results, "infer"), _by_q(results, "infer", 0)
-    qs = [q for q, d in finals.items() if _need(d, "zero", "projection")]
+    finals, starts = losses_by_q(results, "infer"), losses_by_q(results, "infer", 0)
+    qs = [q for q, d in finals.items() if has_inits(d, "zero", "projection")]
     if not qs:
         return Outcome(None, "needs zero and projection runs")
     cmp = {q: (starts[q]["projection"], finals[q]["zero"]) for q in qs}
@@ -198,7 +198,7 @@ def _success_at(gen: dict, tolerance: str | None) -> tuple[bool | str | None, li
 
 def _success_projection_higher(results: dict) -> Outcome:
     gen = results.get("generated", {})
-    if not _need(gen, "zero", "projection"):
+    if not has_inits(gen, "zero", "projection"):
         return Outcome(None, "needs zero and projection runs")
     ok, parts = _success_at(gen, None)
     if ok is None:
@@ -215,7 +215,7 @@ def _chance(results: dict) -> float | None:
 
 def _clustering_similar(results: dict) -> Outcome:
     acc = {r["init"]: r["accuracy"] for r in results.get("latent", []) if r.get("codes") == LEARNED_CODES}
-    if not _need(acc, "zero", "projection"):
+    if not has_inits(acc, "zero", "projection"):
         return Outcome(None, "needs zero and projection codes")
     numbers = f"accuracy zero {acc['zero']:.2f}, projection {acc['projection']:.2f} (q = {results.get('latent_dim')})"
     similar = abs(acc["projection"] - acc["zero"]) <= SIMILAR_ACCURACY
@@ -246,7 +246,7 @@ def _inter_improved(results: dict) -> Outcome:
     for r in results["runs"]:
         points = [h for h in r["phase2"] if h.get("loss") is not None]
         by.setdefault(r["init"], {})[(r["fold"], r.get("seed", 0))] = (eighth_loss(points), points[-1]["loss"])
-    if not _need(by, "zero", "projection"):
+    if not has_inits(by, "zero", "projection"):
         return Outcome(None, "needs zero and projection folds")
     z, p = by["zero"], by["projection"]
     measures = []

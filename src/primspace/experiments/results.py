@@ -42,6 +42,7 @@ __all__ = [
     "read_arrays",
     "read_meta",
     "final",
+    "mean_std",
     "final_loss_table",
     "qualitative_check",
     "latent_table",
@@ -205,7 +206,7 @@ def probe_table(results: dict) -> tuple[list[str], list[list]]:
     return ["init", "q", "seed", "codes", *[f"R² {n}" for n in names], "mean R²"], rows
 
 
-def _mean_std(values: list) -> str:
+def mean_std(values: list) -> str:
     """``mean ± std`` (population std over seeds) of the values that are not None."""
     v = np.asarray([x for x in values if x is not None], dtype=float)
     return "—" if v.size == 0 else f"{v.mean():.3g} ± {v.std():.2g}"
@@ -223,10 +224,10 @@ def spread_table(results: dict, probe: dict | None = None) -> tuple[list[str], l
     probes = {(p["latent_dim"], p["init"], p["seed"]): p["inferred"]["mean_r2"] for p in (probe or {}).get("runs", [])}
     rows = []
     for (q, init), runs in sorted(groups.items()):
-        row = [init, q, len(runs), _mean_std([final([h["loss"] for h in r["fit"]]) for r in runs]),
-               _mean_std([r["infer"][0]["loss"] for r in runs]), _mean_std([final([h["loss"] for h in r["infer"]]) for r in runs])]
+        row = [init, q, len(runs), mean_std([final([h["loss"] for h in r["fit"]]) for r in runs]),
+               mean_std([r["infer"][0]["loss"] for r in runs]), mean_std([final([h["loss"] for h in r["infer"]]) for r in runs])]
         if probe is not None:
-            row.append(_mean_std([probes.get((q, init, r["seed"])) for r in runs]))
+            row.append(mean_std([probes.get((q, init, r["seed"])) for r in runs]))
         rows.append(row)
     columns = ["init", "q", "seeds", "final fit loss", "eval loss before inference", "final eval loss"]
     return columns + (["probe R² (inferred codes)"] if probe is not None else []), rows
@@ -253,8 +254,8 @@ def outcome_spread_table(clustering: dict | None, success: dict | None) -> tuple
     rows = []
     for init in list(dict.fromkeys([*rates, *acc])):
         r = rates.get(init, [])
-        rows.append([init, max(len(r), len(acc.get(init, []))), _mean_std([x for x, _ in r]),
-                     _mean_std([g for _, g in r]), _mean_std(acc.get(init, []))])
+        rows.append([init, max(len(r), len(acc.get(init, []))), mean_std([x for x, _ in r]),
+                     mean_std([g for _, g in r]), mean_std(acc.get(init, []))])
     return ["init", "seeds", "success, all primitives", "success, grasp", "latent clustering accuracy"], rows
 
 
@@ -339,10 +340,10 @@ def calibration_table(results: dict) -> tuple[list[str], list[list]] | None:
     rows = []
     for q in qs:
         d = diag.get(q, [])
-        row = [q, len(losses[(q, "calibrated")]), _mean_std([x["movement"] for x in d]),
-               _mean_std([x["identity_r2"] for x in d]), _mean_std([x["heldout_r2"] for x in d])]
+        row = [q, len(losses[(q, "calibrated")]), mean_std([x["movement"] for x in d]),
+               mean_std([x["identity_r2"] for x in d]), mean_std([x["heldout_r2"] for x in d])]
         for which in (0, 1):
-            row += [_mean_std([v[which] for v in losses[(q, init)]]) if (q, init) in losses else "—"
+            row += [mean_std([v[which] for v in losses[(q, init)]]) if (q, init) in losses else "—"
                     for init in CALIBRATION_COMPARED]
         rows.append(row)
     columns = ["q", "seeds", "movement ‖Z−Pm‖/‖Pm‖", "R² of P m", "held-out R² of the map"]
@@ -395,7 +396,7 @@ def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], l
             if q != tuned_at:  # tuned at one q, applied at every q: the choice is q = tuned_at's
                 choice, validation = f"q = {tuned_at}'s choice", "—"
             wins = " → ".join(_projection_below(finals, kind, init, q) for kind in ("shared", "tuned"))
-            rows.append([q, init, choice, validation, _mean_std(s), _mean_std(t), "—" if init == "projection" else wins])
+            rows.append([q, init, choice, validation, mean_std(s), mean_std(t), "—" if init == "projection" else wins])
     return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
             "final eval loss, tuned", "projection lower, seeds (shared → tuned)"], rows
 

@@ -352,10 +352,10 @@ def generate_chunk(config: CompositeConfig, seed: int, start: int, stop: int) ->
         last valid value, ``images`` or None, ``labels`` -1, ``params`` the block's start,
         ``lengths``, ``step_labels``, ``step_segments``) and ``ik_error`` (k,).
     """
-    from primspace.sim.generate import _worker_scene
+    from primspace.sim.generate import worker_scene
     from primspace.sim.render import Camera
 
-    scene, k = _worker_scene(), stop - start
+    scene, k = worker_scene(), stop - start
     out = {"start": start, **_arrays(config, k), "ik_error": np.empty(k)}
     camera = Camera(scene, *config.image_size) if config.image_size is not None else None
     try:
@@ -420,7 +420,7 @@ def generate_composite(config_or_preset="composite-demo", seed: int = 0, out: st
     from primspace.data.schema import arrays_of
     from primspace.files import check_output
     from primspace.parallel import default_workers, run_jobs
-    from primspace.sim.generate import _finished
+    from primspace.sim.generate import finished_shards
     from primspace.sim.shards import shard_ranges
 
     config, seed = resolve_composite(config_or_preset), int(seed)
@@ -435,13 +435,13 @@ def generate_composite(config_or_preset="composite-demo", seed: int = 0, out: st
             with DatasetWriter(out, n_samples=config.n_sequences, length=config.length, image_size=config.image_size,
                                with_labels=True, with_params=True, with_steps=True, overwrite=overwrite,
                                writer="primspace generate", **settings) as writer:
-                for chunk in _finished(jobs):
+                for chunk in finished_shards(jobs):
                     writer.write(chunk["start"], **arrays_of(chunk))
         except DataError as exc:
             raise exc.located(path=out) from None
         return Path(out)
     arrays = _arrays(config, config.n_sequences)
-    for chunk in _finished(jobs):
+    for chunk in finished_shards(jobs):
         sl = slice(chunk["start"], chunk["start"] + len(chunk["motor"]))
         for name, values in arrays_of(chunk).items():
             if values is not None:

@@ -71,6 +71,8 @@ __all__ = [
     "shard_dir",
     "shard_manifest",
     "simulate_sample",
+    "worker_scene",
+    "finished_shards",
 ]
 
 #: The name benchmarks/bench_merge.py imports (the settings of a generated file).
@@ -126,7 +128,7 @@ def simulate_sample(scene, camera, config: GenerationConfig, label: int, x: floa
 _SCENE = None
 
 
-def _worker_scene():
+def worker_scene():
     """One scene per process (the model is compiled once; the block size changes per sample)."""
     global _SCENE
     if _SCENE is None:
@@ -148,7 +150,7 @@ def generate_shard(config: GenerationConfig, seed: int, sample_indices) -> dict[
     from primspace.sim.render import Camera
 
     indices = [int(i) for i in sample_indices]
-    scene = _worker_scene()
+    scene = worker_scene()
     k = len(indices)
     out = {"start": indices[0] if indices else 0, **_buffers(config, k), "ik_error": np.empty(k)}
     camera = Camera(scene, config.height, config.width) if config.images else None
@@ -323,7 +325,7 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
     jobs = run_jobs(generate_shard, [(config, seed, range(a, b)) for a, b in shard_ranges(config.n_samples)], **run_options)
     n = config.n_samples
     arrays = _buffers(config, n)
-    for shard in _finished(jobs):
+    for shard in finished_shards(jobs):
         sl = slice(shard["start"], shard["start"] + len(shard["motor"]))
         for name, values in arrays_of(shard).items():
             if values is not None:
@@ -348,7 +350,7 @@ def _buffers(config: GenerationConfig, n: int) -> dict:
     return {"images": None, **empty_arrays(dims, names)}
 
 
-def _finished(jobs):
+def finished_shards(jobs):
     """Shard dicts as jobs finish (in memory); the first failure becomes an error (closing the jobs)."""
     try:
         for outcome in jobs:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.experiments.results import _mean_std, final
+from primspace.experiments.results import final, mean_std
 
 __all__ = ["METHODS", "composite_table", "primitives_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
 
@@ -54,12 +54,12 @@ def composite_table(results: dict) -> tuple[list[str], list[list]]:
         seg = [r["segmentation"] for r in runs]
         raw = [r["segmentation_untrained"] for r in runs]
         rows.append([
-            init, q, len(runs), _mean_std([r["infer"][0]["loss"] for r in runs]),
-            _mean_std([final([h["loss"] for h in r["infer"]]) for r in runs]),
-            *[_mean_std([s["boundary"][k] for s in seg]) for k in ("precision", "recall", "f1")],
+            init, q, len(runs), mean_std([r["infer"][0]["loss"] for r in runs]),
+            mean_std([final([h["loss"] for h in r["infer"]]) for r in runs]),
+            *[mean_std([s["boundary"][k] for s in seg]) for k in ("precision", "recall", "f1")],
             _within_transition(seg),
-            _mean_std([s["accuracy"] for s in seg]), _mean_std([s.get("accuracy_true_boundaries") for s in seg]),
-            _mean_std([s["boundary"]["f1"] for s in raw]), _mean_std([s["accuracy"] for s in raw]),
+            mean_std([s["accuracy"] for s in seg]), mean_std([s.get("accuracy_true_boundaries") for s in seg]),
+            mean_std([s["boundary"]["f1"] for s in raw]), mean_std([s["accuracy"] for s in raw]),
             f"{np.mean([s['segments_found'] for s in seg]):.0f} / {np.mean([s['segments_true'] for s in seg]):.0f}",
         ])
     rows += _primitive_rows(results)
@@ -75,7 +75,7 @@ def composite_table(results: dict) -> tuple[list[str], list[list]]:
 def _within_transition(scores: list[dict]) -> str:
     """Mean ± std of the F1 that counts a boundary anywhere within the tolerance of the
     transition (data with transitions; "—" for others and for results scored before 0.8)."""
-    return _mean_std([(s.get("boundary_transition") or {}).get("f1") for s in scores])
+    return mean_std([(s.get("boundary_transition") or {}).get("f1") for s in scores])
 
 
 def _primitive_rows(results: dict) -> list[list]:
@@ -88,8 +88,8 @@ def _primitive_rows(results: dict) -> list[list]:
         if not got:
             continue
         rows.append([f"{name} ({seeds[0]['preset']} single primitives)", seeds[0]["latent_dim"], len(got), "—", "—",
-                     *[_mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
-                     _within_transition(got), _mean_std([m["accuracy"] for m in got]), "—", "—", "—",
+                     *[mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
+                     _within_transition(got), mean_std([m["accuracy"] for m in got]), "—", "—", "—",
                      f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean([m['segments_true'] for m in got]):.0f}"])
     return rows
 
@@ -109,10 +109,10 @@ def primitives_table(results: dict) -> tuple[list[str], list[list]] | None:
         per = ", ".join(f"{s}: {m['boundary']['f1']:.2f} / {m['accuracy']:.2f}" for s, m in got)
         offsets = [m.get("offset") for _, m in got if m.get("offset")]
         chosen = ", ".join(f"{o} ({offsets.count(o)} of {len(got)})" for o in dict.fromkeys(offsets)) or "—"
-        rows.append([name, len(got), chosen, _mean_std([m["boundary"]["f1"] for _, m in got]),
-                     _mean_std([m["accuracy"] for _, m in got]),
-                     _mean_std([m.get("accuracy_template_labels") for _, m in got]),
-                     _mean_std([m.get("threshold") for _, m in got]) if name == "surprise" else "—", per])
+        rows.append([name, len(got), chosen, mean_std([m["boundary"]["f1"] for _, m in got]),
+                     mean_std([m["accuracy"] for _, m in got]),
+                     mean_std([m.get("accuracy_template_labels") for _, m in got]),
+                     mean_std([m.get("threshold") for _, m in got]) if name == "surprise" else "—", per])
     first = seeds[0]
     return [f"method ({first['preset']} preset, q = {first['latent_dim']}, {first['n_templates']} single primitives "
             "fitted)", "seeds", "offset model chosen", "boundary F1", "step labelling accuracy",
@@ -129,8 +129,8 @@ def _peer_rows(results: dict) -> list[list]:
             if not name.startswith("hmm") else []
         true = [b["segments_true"] for b in blocks if name in b.get("methods", {})]
         rows.append([f"peer: {name}", "—", len(got), "—", "—",
-                     *[_mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
-                     _within_transition(got), _mean_std([m["accuracy"] for m in got]), _mean_std(oracle), "—", "—",
+                     *[mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
+                     _within_transition(got), mean_std([m["accuracy"] for m in got]), mean_std(oracle), "—", "—",
                      f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean(true):.0f}"])
     return rows
 
@@ -155,9 +155,9 @@ def bounds_table(results: dict) -> tuple[list[str], list[list]] | None:
     for key in _bound_keys(blocks):
         got = [b["bounds"][key] for b in blocks if key in b["bounds"]]
         sup = [g["supervised"] for g in got if g["supervised"]]
-        rows.append([_feature_name(key), len(got), _mean_std([s["logistic"]["accuracy"] for s in sup]),
-                     _mean_std([s["logistic"]["first"] for s in sup]), _mean_std([s["logistic"]["later"] for s in sup]),
-                     _mean_std([s["nearest"]["accuracy"] for s in sup]), _mean_std([g["clustered"] for g in got])])
+        rows.append([_feature_name(key), len(got), mean_std([s["logistic"]["accuracy"] for s in sup]),
+                     mean_std([s["logistic"]["first"] for s in sup]), mean_std([s["logistic"]["later"] for s in sup]),
+                     mean_std([s["nearest"]["accuracy"] for s in sup]), mean_std([g["clustered"] for g in got])])
     return ["features of a true segment", "seeds", "logistic regression, given labels (CV)", "first segments",
             "later segments", "nearest neighbour, given labels (CV)", "clustered without labels"], rows
 
