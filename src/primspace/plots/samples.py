@@ -13,7 +13,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["plot_motion_sample", "plot_sim_sample", "plot_reconstruction", "plot_image_strips", "reconstruction_title"]
+__all__ = ["plot_motion_sample", "plot_sim_sample", "plot_reconstruction", "plot_image_strips", "reconstruction_title",
+           "step_segments"]
 
 
 def plot_motion_sample(
@@ -26,6 +27,8 @@ def plot_motion_sample(
     n_frames: int = 8,
     dt: float | None = None,
     title: str = "",
+    segments: Sequence[tuple[int, int, str]] | None = None,
+    observed: np.ndarray | None = None,
 ) -> Figure:
     """One demonstration: a strip of camera frames above its joint curves.
 
@@ -47,6 +50,11 @@ def plot_motion_sample(
     dt : float, optional
         Seconds per step (the time axis is in steps otherwise).
     title : str
+    segments : sequence of (start, stop, name), optional
+        The primitives of a long demonstration, steps ``start`` to ``stop - 1`` each:
+        drawn as coloured bands behind the curves, named above the first panel.
+    observed : ndarray (T,) bool, optional
+        The observed steps of a prediction: shaded grey, the rest is predicted.
     """
     motor = np.asarray(motor)
     t_len, n_joints = motor.shape
@@ -59,7 +67,8 @@ def plot_motion_sample(
     grid = fig.add_gridspec(len(strips) + n_rows_j, max(n_frames, 1), height_ratios=[1.2] * len(strips) + [1.6] * n_rows_j)
     _frame_strips(fig, grid, strips, np.linspace(0, t_len - 1, n_frames).round().astype(int))
     sub = grid[len(strips):, :].subgridspec(n_rows_j, n_cols, hspace=0.6, wspace=0.25)
-    _joint_curves(fig, sub, motor, generated_motor, names, n_cols, n_rows_j, dt)
+    axes = _joint_curves(fig, sub, motor, generated_motor, names, n_cols, n_rows_j, dt)
+    _step_bands(axes, segments, observed, dt if dt else 1.0)
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
@@ -80,12 +89,32 @@ def _frame_strips(fig: Figure, grid, strips: list, frame_idx: np.ndarray) -> Non
                 ax.set_ylabel(label, fontsize=8)
 
 
-def _joint_curves(fig: Figure, sub, motor, generated_motor, names, n_cols: int, n_rows_j: int, dt) -> None:
-    """One panel per joint: ground truth (solid black), generated (dashed orange)."""
+def _step_bands(axes: list, segments, observed, dt: float) -> None:
+    """Behind every joint panel: a coloured band per segment (its name above the first
+    panel) and the observed steps shaded grey (the legend says which is which)."""
+    colors = plt.get_cmap("tab10").colors
+    names = list(dict.fromkeys(name for _, _, name in segments or ()))
+    for ax in axes:
+        for start, stop, name in segments or ():
+            ax.axvspan((start - 0.5) * dt, (stop - 0.5) * dt, color=colors[names.index(name) % 10], alpha=0.18, lw=0)
+        if observed is not None and np.any(observed):
+            ax.axvspan(-0.5 * dt, (np.flatnonzero(observed)[-1] + 0.5) * dt, color="0.6", alpha=0.3, lw=0,
+                       label="observed" if ax is axes[0] else None)
+    for start, stop, name in segments or ():
+        axes[0].text((start + stop - 1) / 2 * dt, 1.02, name, transform=axes[0].get_xaxis_transform(),
+                     ha="center", va="bottom", fontsize=7, color=colors[names.index(name) % 10])
+    if observed is not None and np.any(observed):
+        axes[0].legend(fontsize=7, loc="best")
+
+
+def _joint_curves(fig: Figure, sub, motor, generated_motor, names, n_cols: int, n_rows_j: int, dt) -> list:
+    """One panel per joint: ground truth (solid black), generated (dashed orange); the panels."""
     t_len, n_joints = motor.shape
     time = np.arange(t_len) * (dt if dt else 1.0)
+    axes = []
     for j in range(n_joints):
         ax = fig.add_subplot(sub[j // n_cols, j % n_cols])
+        axes.append(ax)
         ax.plot(time, motor[:, j], color="black", lw=1.4, label="ground truth" if generated_motor is not None else None)
         if generated_motor is not None:
             ax.plot(time, np.asarray(generated_motor)[:, j], color="tab:orange", lw=1.4, ls="--", label="generated")
@@ -95,6 +124,7 @@ def _joint_curves(fig: Figure, sub, motor, generated_motor, names, n_cols: int, 
             ax.legend(fontsize=7, loc="best")
         if j // n_cols == n_rows_j - 1:
             ax.set_xlabel("time [s]" if dt else "step", fontsize=7)
+    return axes
 
 
 def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
@@ -124,11 +154,28 @@ def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
         parts.append(", ".join(
             f"{n} {v * 100:.1f} cm" if n in cm else f"{n} {v:.4g}" for n, v in zip(dataset.param_names, values)
         ))
-    images = None if dataset.images is None else np.asarray(dataset.images[i])
+    valid = dataset.length if dataset.lengths is None else int(dataset.lengths[i])  # the padding is no part of it
+    images = None if dataset.images is None else np.asarray(dataset.images[i])[:valid]
+    observed = getattr(dataset, "observed", None)  # a prediction's observed steps, where the data set has them
     return plot_motion_sample(
-        dataset.motor[i], images, joint_names=[n.removeprefix("robot:panda0_") for n in dataset.joint_names],
-        n_frames=n_frames, dt=dataset.dt, title=" | ".join(parts),
+        dataset.motor[i][:valid], images, joint_names=[n.removeprefix("robot:panda0_") for n in dataset.joint_names],
+        n_frames=n_frames, dt=dataset.dt, title=" | ".join(parts), segments=step_segments(dataset, i),
+        observed=None if observed is None else np.asarray(observed[i], dtype=bool)[:valid],
     )
+
+
+def step_segments(dataset, index: int) -> list[tuple[int, int, str]] | None:
+    """The segments of a long demonstration (its step fields) as ``(start, stop, name)``;
+    None for a data set of single primitives."""
+    if dataset.step_segments is None:
+        return None
+    i = int(index)
+    valid = int(dataset.lengths[i])
+    seg, lab = dataset.step_segments[i, :valid], dataset.step_labels[i, :valid]
+    starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
+    stops = np.r_[starts[1:], valid]
+    names = dataset.label_names
+    return [(int(a), int(b), names[lab[a]] if 0 <= lab[a] < len(names) else "?") for a, b in zip(starts, stops)]
 
 
 def plot_reconstruction(
