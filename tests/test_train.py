@@ -2,6 +2,7 @@
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -162,9 +163,10 @@ def test_same_seed_same_numbers_other_seed_differs(train_set, tmp_path):
 def test_resume_continues_exactly(train_set, image_set, tmp_path, with_images):
     data = image_set if with_images else train_set
     mc = ModelConfig(latent_dim=4, layer_sizes=(12, 6), image_channels=(4, 4, 4), p_hidden=16, motor_hidden=16)
-    tc = _tc(epochs=4, batch_size=5)
+    # a constant rate: resuming 2 epochs up to 4 stretches a decaying schedule (fit's docstring)
+    tc = _tc(epochs=4, batch_size=5, final_lr_fraction=1.0)
     straight = fit(data, tmp_path / "straight", model_config=mc, train_config=tc, progress=False)
-    fit(data, tmp_path / "split", model_config=mc, train_config=_tc(epochs=2, batch_size=5), progress=False)
+    fit(data, tmp_path / "split", model_config=mc, train_config=replace(tc, epochs=2), progress=False)
     resumed = fit(data, tmp_path / "split", model_config=mc, train_config=tc, resume=True, progress=False)
     assert [h["epoch"] for h in resumed.history] == [0, 1, 2, 3, 4]
     for a, b in zip(straight.history, resumed.history):

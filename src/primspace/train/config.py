@@ -7,14 +7,17 @@ line's defaults, read from :class:`TrainConfig`) load without it.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
 import sys
 from dataclasses import asdict, dataclass
+from typing import Iterator
 
 from primspace.errors import UserError, config_from_dict
 
-__all__ = ["TrainConfig", "TrainingDivergedError", "LOSS_REDUCTIONS", "lr_factor", "resolve_device", "configure_process"]
+__all__ = ["TrainConfig", "TrainingDivergedError", "LOSS_REDUCTIONS", "lr_factor", "resolve_device", "configure_process",
+           "thread_limit"]
 
 #: :attr:`TrainConfig.loss_reduction`'s values: primspace's per-element means, the paper's sums.
 LOSS_REDUCTIONS = ("mean", "sum")
@@ -40,7 +43,10 @@ class TrainConfig:
         Learning rate of the codes (row-wise Adam, :class:`primspace.latent.LatentTable`).
     final_lr_fraction : float
         Both learning rates follow a cosine from their value in the first epoch to this
-        fraction of it in the last (1.0: constant). The factor depends only on the epoch
+        fraction of it in the last (1.0: constant). Default 0.1, the experiment presets'
+        (:func:`primspace.experiments.presets.default_train`): on the paper preset (343
+        fitted, q = 40, 800 epochs, motor only) a constant rate ended at loss 2.4e-4, the
+        decay at 2.0e-5 (issue 37). The factor depends only on the epoch
         index and ``epochs``, so a resumed run continues the same schedule (unless
         ``epochs`` is changed on resume, which stretches the rest of it).
     motor_weight, vision_weight : float
@@ -95,9 +101,14 @@ class TrainConfig:
     log_initial : bool
         Log epoch 0: the loss of the initial codes, before any update.
     threads : int, optional
-        ``torch.set_num_threads`` for the process, applied by :func:`configure_process`
-        (which the ``primspace`` command and experiment workers call; the library itself
-        never changes process-wide state). None: leave as is.
+        CPU threads of torch's intra-op pool and of numpy's BLAS while :func:`~primspace.train.fit`
+        or :func:`~primspace.train.infer` runs, put back after (:func:`thread_limit`;
+        :func:`configure_process` sets them for the whole process). Default 1: more threads
+        than free cores make torch's threads wait on each other (a small fit on a 2-core
+        machine that others used took 8.2 s with 1 thread, 52.8 s with 2, torch's
+        default), and one thread gives the same numbers on every machine (the count
+        changes float summation order). Raise it on a machine of your own with an image
+        head or large batches. None: leave both as they are.
     tune_malloc : bool
         On Linux/glibc CPU runs, keep freed memory in the heap (``mallopt``) so large
         activation buffers are reused instead of page-faulted in every batch (the image
@@ -127,7 +138,7 @@ class TrainConfig:
     batch_size: int = 32
     lr: float = 1e-3
     latent_lr: float = 1e-2
-    final_lr_fraction: float = 1.0
+    final_lr_fraction: float = 0.1
     motor_weight: float = 1.0
     vision_weight: float = 1.0
     vision_frames: int | None = None
@@ -139,7 +150,7 @@ class TrainConfig:
     checkpoint_every: int | None = None
     checkpoint_seconds: float = 60.0
     log_initial: bool = True
-    threads: int | None = None
+    threads: int | None = 1
     tune_malloc: bool = True
     stream_frames: bool | None = None
     frames_memory_gb: float | None = None
@@ -233,19 +244,48 @@ def resolve_device(device: str = "auto", amp: bool = False) -> "torch.device":  
     return dev
 
 
-def configure_process(tc: TrainConfig) -> None:
-    """Apply the process-wide settings of ``tc``: the torch CPU thread count
-    (``threads``), glibc's heap thresholds on a CPU device (``tune_malloc``) and cuDNN's
-    kernel autotuning on CUDA.
+@contextlib.contextmanager
+def thread_limit(threads: int | None) -> Iterator[None]:
+    """Run the body with ``threads`` CPU threads for torch's intra-op pool
+    (``torch.set_num_threads``) and for numpy's BLAS (``threadpoolctl``), then put both
+    back as they were: what :func:`~primspace.train.fit` and :func:`~primspace.train.infer`
+    do with ``TrainConfig.threads``, so the library leaves no process-wide change behind.
+    None: leave both as they are.
+    """
+    if threads is None:
+        yield
+        return
+    import torch
+    from threadpoolctl import threadpool_limits
 
-    The library never changes process-wide state itself: entry points call this (the
+    before = torch.get_num_threads()
+    try:
+        if before != threads:
+            torch.set_num_threads(threads)
+        with threadpool_limits(limits=threads, user_api="blas"):
+            yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)
+
+
+def configure_process(tc: TrainConfig) -> None:
+    """Apply the process-wide settings of ``tc``: the CPU thread count of torch and of
+    numpy's BLAS (``threads``), glibc's heap thresholds on a CPU device (``tune_malloc``)
+    and cuDNN's kernel autotuning on CUDA.
+
+    The library never changes process-wide state itself (``fit`` and ``infer`` limit
+    the threads only while they run, :func:`thread_limit`): entry points call this (the
     ``primspace`` command's train / infer, an experiment's worker job) before training.
     """
     import torch
+    from threadpoolctl import threadpool_limits
 
     device = resolve_device(tc.device, tc.amp)
-    if tc.threads is not None and torch.get_num_threads() != tc.threads:
-        torch.set_num_threads(tc.threads)
+    if tc.threads is not None:
+        if torch.get_num_threads() != tc.threads:
+            torch.set_num_threads(tc.threads)
+        threadpool_limits(limits=tc.threads, user_api="blas")
     if device.type == "cuda":
         torch.backends.cudnn.benchmark = True  # fixed shapes: let cuDNN pick the fastest kernels
     elif tc.tune_malloc:
