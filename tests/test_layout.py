@@ -5,14 +5,28 @@
   length) unless its docstring says why it is long;
 - no star imports;
 - layers import downwards only (docs/architecture.md): data and the simulator know
-  nothing of models; training knows nothing of experiments; figures know nothing of
-  training; experiments know nothing of the report; nothing imports the command line.
+  nothing of models; training knows nothing of prediction or experiments; figures know
+  nothing of training; experiments know nothing of the report; nothing imports the
+  command line;
+- no import cycle among primspace's modules (issue 37), and no private name (``_x``)
+  imported from another module.
+
+Imports are read from the source (``ast``): function-level imports and those under
+``TYPE_CHECKING`` count; relative imports (``from ..train import fit``) are resolved. A
+name imported from a package resolves to the module that provides it: its submodule
+(``from primspace.experiments import figures``), the module its ``__init__`` imports the
+name from (``from primspace.data import MotionDataset`` -> ``primspace.data.dataset``; a
+name the package forwards lazily too, ``primspace.train.fit`` -> ``primspace.train.api``),
+else the package itself. A package's ``__init__`` depends on what it imports when it is
+imported; its lazy forwards (in functions, under ``TYPE_CHECKING``) are its names'
+dependencies, not its own.
 """
 
 from __future__ import annotations
 
 import ast
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
@@ -25,34 +39,33 @@ MAX_FUNCTION_LINES = 60
 
 # package (or module) -> what it may never import
 FORBIDDEN = {
-    "data": ("sim", "latent", "model", "model_config", "train", "cluster", "plots", "experiments", "report", "demo", "cli"),
-    "sim": ("latent", "model", "model_config", "train", "cluster", "plots", "experiments", "report", "demo", "cli"),
-    "cluster": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
-    "probe": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    "data": ("sim", "latent", "model", "model_config", "train", "predict", "cluster", "plots", "experiments", "report",
+             "demo", "cli"),
+    "sim": ("latent", "model", "model_config", "train", "predict", "cluster", "plots", "experiments", "report", "demo",
+            "cli"),
+    "cluster": ("sim", "latent", "model", "train", "predict", "experiments", "report", "demo", "cli"),
+    "probe": ("sim", "latent", "model", "train", "predict", "experiments", "report", "demo", "cli"),
     # the segmentation package: the windows method, scores, results, peers (ruptures, hmmlearn) and
     # upper bounds (classifiers given the labels) see motion arrays and codes only ...
-    "segmentation": ("sim", "latent", "model", "train", "experiments", "report", "demo", "cli"),
+    "segmentation": ("sim", "latent", "model", "train", "predict", "experiments", "report", "demo", "cli"),
     # ... the methods of a single-primitive model decode a trained run (train)
     "segmentation.synthesis": ("sim", "experiments", "report", "demo", "cli"),
     "segmentation.surprise": ("sim", "experiments", "report", "demo", "cli"),
     "segmentation.inferred": ("sim", "experiments", "report", "demo", "cli"),
-    # the peers of prediction (ProMP, nearest neighbour, mean motion): they see motion arrays only
-    "peers": ("sim", "latent", "model", "train", "cluster", "experiments", "report", "demo", "cli"),
-    "model_config": ("model", "latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
-    "model": ("latent", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
-    "latent": ("model", "train", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
-    "train": ("sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
-    "plots": ("train", "model", "latent", "experiments", "report", "demo", "cli"),
-    # the scene-only prediction: above train and cluster (it uses both), below the experiments
-    "scene": ("experiments", "report", "demo", "cli"),
+    "model_config": ("model", "latent", "train", "predict", "sim", "cluster", "plots", "experiments", "report", "demo",
+                     "cli"),
+    "model": ("latent", "train", "predict", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
+    "latent": ("model", "train", "predict", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
+    "train": ("sim", "cluster", "predict", "plots", "experiments", "report", "demo", "cli"),
+    # prediction: one floor above train (and cluster, for the scene mode), below the experiments
+    "predict": ("sim", "plots", "experiments", "report", "demo", "cli"),
+    "plots": ("train", "predict", "model", "latent", "experiments", "report", "demo", "cli"),
     "experiments": ("report", "demo", "cli"),
     "report": ("demo", "cli"),
     "demo": ("cli",),
     # small statistics helpers: the standard library only
-    "stats": ("data", "sim", "cluster", "probe", "segmentation",
-              "model_config", "model", "latent", "train", "plots", "experiments", "report", "demo", "cli", "docs"),
-    # the docs' generated numbers: read from stored summaries, above the experiments and the report
-    "docs": ("cli",),
+    "stats": ("data", "sim", "cluster", "probe", "segmentation", "model_config", "model", "latent", "train", "predict",
+              "plots", "experiments", "report", "demo", "cli"),
 }
 
 
@@ -95,21 +108,178 @@ def test_module_size_and_function_length(path):
             assert doc and "long" in doc.lower(), f"{path.name}:{node.lineno} {node.name}: {lines} lines of code"
 
 
+# ------------------------------------------------------------------------ the import graph
+
+#: Every module of primspace by its full name (``primspace.train.api``; a package by its own).
+PATHS = {f"primspace.{_name(p)}".rstrip("."): p for p in MODULES}
+
+
+class Import(NamedTuple):
+    """One import of a primspace module, as written (relative imports resolved)."""
+
+    module: str  # the importing module
+    line: int
+    named: str  # the module it names: ``primspace.train`` for ``from ..train import fit``
+    name: str | None  # the name imported from it; None for ``import primspace.x``
+    eager: bool  # run when ``module`` is imported (not in a function, not under TYPE_CHECKING)
+    bound: str | None = None  # the name it binds in ``module`` (``as`` ...), for a from-import
+
+
+def _nodes(node: ast.AST, eager: bool = True):
+    """Every import statement under ``node``, with whether it runs at import time."""
+    for child in ast.iter_child_nodes(node):
+        if isinstance(child, (ast.Import, ast.ImportFrom)):
+            yield child, eager
+        deferred = isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)) or (
+            isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test))
+        yield from _nodes(child, eager and not deferred)
+
+
+def _imports_in(module: str, tree: ast.Module) -> list[Import]:
+    """The imports of primspace modules in ``tree``, the source of ``module`` (star imports: name ``*``)."""
+    package = module if PATHS[module].name == "__init__.py" else module.rpartition(".")[0]
+    out = []
+    for node, eager in _nodes(tree):
+        if isinstance(node, ast.Import):
+            out += [Import(module, node.lineno, a.name, None, eager) for a in node.names]
+            continue
+        named = node.module or ""
+        if node.level:  # from . import x, from ..train import fit
+            parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+            named = ".".join(parts + ([named] if named else []))
+        out += [Import(module, node.lineno, named, a.name, eager, a.asname or a.name) for a in node.names]
+    return [i for i in out if i.named == "primspace" or i.named.startswith("primspace.")]
+
+
+IMPORTS = {m: _imports_in(m, _tree(p)) for m, p in PATHS.items()}
+
+
+def _provided() -> dict[str, dict[str, tuple[str, str]]]:
+    """Per package: the names its ``__init__`` imports, each with the module and name it is imported as."""
+    out = {}
+    for module, path in PATHS.items():
+        if path.name == "__init__.py":
+            out[module] = {i.bound: (i.named, i.name) for i in IMPORTS[module] if i.name not in (None, "*")}
+    return out
+
+
+PROVIDED = _provided()
+
+
+def _target(imp: Import) -> str | None:
+    """The module ``imp`` depends on (module docstring); None when it names no module."""
+    module, name, seen = imp.named, imp.name, set()
+    while module in PATHS and name not in (None, "*") and f"{module}.{name}" not in PATHS:
+        if name not in PROVIDED.get(module, {}) or module in seen:
+            return module  # a name the module defines itself
+        seen.add(module)
+        module, name = PROVIDED[module][name]
+    if module in PATHS and name not in (None, "*") and f"{module}.{name}" in PATHS:
+        return f"{module}.{name}"
+    return module if module in PATHS else None
+
+
+def _edges() -> dict[str, dict[str, Import]]:
+    """module -> {module it depends on: the first import that says so}."""
+    edges: dict[str, dict[str, Import]] = {m: {} for m in PATHS}
+    for module, imports in IMPORTS.items():
+        forwards = PATHS[module].name == "__init__.py"  # a package's lazy imports are its names'
+        for imp in imports:
+            target = _target(imp)
+            if target is not None and target != module and (imp.eager or not forwards):
+                edges[module].setdefault(target, imp)
+    return edges
+
+
+def _cycles(edges: dict[str, dict]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan, iterative)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    for root in edges:
+        if root in index:
+            continue
+        work = [(root, iter(edges[root]))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(edges[child])))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(SRC)))
 def test_no_star_imports_and_layers_import_downwards(path):
-    module = _name(path)
-    forbidden = FORBIDDEN.get(_layer(f"primspace.{module}"), ())
+    module = f"primspace.{_name(path)}".rstrip(".")
+    forbidden = FORBIDDEN.get(_layer(module), ())
     for node in ast.walk(_tree(path)):
         if isinstance(node, ast.ImportFrom):
             assert all(a.name != "*" for a in node.names), f"{module}: star import from {node.module}"
-            names = [node.module or ""]
-        elif isinstance(node, ast.Import):
-            names = [a.name for a in node.names]
-        else:
-            continue
-        for imported in names:
-            if imported.startswith("primspace."):
-                assert _top(imported) not in forbidden, f"primspace.{module} imports {imported}"
+    for imp in IMPORTS[module]:  # the package named and the module that provides the name
+        for imported in {imp.named, _target(imp) or imp.named}:
+            assert _top(imported) not in forbidden, f"{module}:{imp.line} imports {imported}"
+
+
+def test_every_import_names_a_module_that_exists():
+    """A lazy import of a moved or deleted module fails only when its function runs."""
+    missing = [f"{i.module}:{i.line} {i.named}" for imports in IMPORTS.values() for i in imports if _target(i) is None]
+    assert not missing, "imports of no module:\n" + "\n".join(missing)
+
+
+def test_no_import_cycles():
+    """No module depends on itself through others (issue 37): each cycle with its imports."""
+    edges = _edges()
+    report = []
+    for component in _cycles(edges):
+        inside = set(component)
+        report.append("cycle:\n" + "\n".join(f"  {i.module}:{i.line} -> {t}" for m in component
+                                            for t, i in edges[m].items() if t in inside))
+    assert not report, f"{len(report)} import cycle(s):\n" + "\n".join(report)
+
+
+def test_no_private_name_is_imported_from_another_module():
+    """A name with a leading underscore is its module's own: shared helpers get public names."""
+    private = [f"{i.module}:{i.line} from {i.named} import {i.name}" for imports in IMPORTS.values() for i in imports
+               if i.name and i.name.startswith("_") and not i.name.endswith("__") and _target(i) != i.module]
+    assert not private, "private names imported from another module:\n" + "\n".join(private)
+
+
+def test_the_import_graph_sees_every_form():
+    """The reader resolves relative imports, ``import primspace.x`` and a package's forwarded names."""
+    def target(module: str, source: str) -> str | None:
+        return _target(_imports_in(module, ast.parse(source))[0])
+
+    assert target("primspace.predict.api", "from ..train import fit") == "primspace.train.api"
+    assert target("primspace.predict.api", "from . import base") == "primspace.predict.base"
+    assert target("primspace.data.dataset", "from .storage import read_fields") == "primspace.data.storage"
+    assert target("primspace.experiments.intra", "import primspace.sim") == "primspace.sim"
+    assert target("primspace.experiments.intra", "from primspace.data import MotionDataset") == "primspace.data.dataset"
+    assert target("primspace.cli.app", "from primspace import __version__") == "primspace"
+    assert target("primspace.cli.app", "from primspace.nowhere import x") is None
+    assert {"primspace.data.storage", "primspace.files"} <= set(_edges()["primspace.data.dataset"]) | set(
+        _edges()["primspace.data.storage"])
+    assert _cycles({"a": {"b": 0}, "b": {"c": 0}, "c": {"a": 0}, "d": {"a": 0}}) == [["a", "b", "c"]]
 
 
 def test_the_layer_table_names_real_packages():
