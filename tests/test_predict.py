@@ -379,3 +379,10 @@ def test_the_best_predictor_is_the_default_of_python_the_estimator_and_the_comma
     assert python["init"].default == estimator["init"].default == MIXTURE
     assert python["continuity"].default is estimator["continuity"].default is True
     assert cli["init"].default.default is None and cli["continuity"].default.default is True  # None: DEFAULT_PREDICTOR
+
+
+def test_the_predicted_data_set_keeps_the_data_files_sample_numbers(trained, train_set, eval_set):
+    """Issue 37, section 3: predicted.h5 names each row by the data file's index, as result.json does."""
+    p = predict(trained, eval_set, observe=0.5, indices=[3, 1], fitted_data=train_set, frames=False)
+    assert p.indices.tolist() == [3, 1]
+    assert list(p.to_dataset(eval_set).source_ids) == ["sample 3", "sample 1"]

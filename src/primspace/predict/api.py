@@ -110,7 +110,9 @@ class Prediction:
     def to_dataset(self, source: MotionDataset) -> MotionDataset:
         """The prediction as a data set of ``source``'s schema: its labels, lengths, names
         and step fields kept, motor (and frames, when predicted) replaced; padded steps
-        keep ``source``'s values (they are not part of any sample)."""
+        keep ``source``'s values (they are not part of any sample). Its rows keep the
+        source's sample numbers: ``source_ids`` (``"sample i"``, ``i`` the data file's index,
+        where the source has none)."""
         taken = source.subset(self.indices)
         lengths = taken.lengths if taken.lengths is not None else np.full(len(taken), taken.length)
         valid = valid_steps(lengths, taken.length)
@@ -118,7 +120,10 @@ class Prediction:
         images = self.frames if self.frames is not None else None
         note = f"predicted by primspace (observe {self.observation}, init {self.init})"
         source_text = f"{taken.source}; {note}" if taken.source else note
-        return dataclasses.replace(taken.without_images(), motor=motor, images=images, source=source_text, path=None)
+        ids = taken.source_ids  # row k is sample indices[k] of the source: said in every row
+        ids = np.array([f"sample {int(i)}" for i in self.indices]) if ids is None else ids
+        return dataclasses.replace(taken.without_images(), motor=motor, images=images, source=source_text, path=None,
+                                   source_ids=ids)
 
 
 def make_predictor(run, init: str = DEFAULT_PREDICTOR, *, epochs: int = DEFAULT_PREDICT_EPOCHS, continuity: bool = True,
