@@ -10,7 +10,7 @@ TORCH  ?= torch==2.13.0
 # Panda model files it bundles (it would otherwise pull gymnasium and friends).
 ROBOT_ASSETS := gymnasium-robotics==1.4.2
 
-.PHONY: demo test docs install install-test bench clean
+.PHONY: demo test lint docs install install-test bench clean
 
 $(VENV)/bin/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -32,7 +32,10 @@ install-test: $(VENV)/.installed-test
 demo: install
 	$(VENV)/bin/primspace demo
 
-test: install-test
+lint: install-test
+	$(VENV)/bin/ruff check src tests benchmarks
+
+test: install-test lint
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 # the docs' generated numbers (from docs/results/*.json) and the API reference (build/api/index.html)

@@ -286,7 +286,7 @@ def test_corrupted_image_chunk_is_a_data_error_on_every_read_path(tmp_path):
     path = ds.save(tmp_path / "d.h5")
     _corrupt_chunk(path, 3)
     back = MotionDataset.load(path)  # lazy: loading reads no image chunk
-    where = rf"d\.h5, field 'images', sample 3: cannot be read, its stored data is corrupted or truncated"
+    where = r"d\.h5, field 'images', sample 3: cannot be read, its stored data is corrupted or truncated"
     with pytest.raises(DataError, match=where):
         back.load_images()
     with pytest.raises(DataError, match=where):

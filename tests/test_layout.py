@@ -59,6 +59,8 @@ FORBIDDEN = {
     "train": ("sim", "cluster", "predict", "plots", "experiments", "report", "demo", "cli"),
     # prediction: one floor above train (and cluster, for the scene mode), below the experiments
     "predict": ("sim", "plots", "experiments", "report", "demo", "cli"),
+    # the estimator (AutoDecoder) sits above train and predict, below the experiments
+    "estimator": ("sim", "experiments", "report", "demo", "cli"),
     "plots": ("train", "predict", "model", "latent", "experiments", "report", "demo", "cli"),
     "experiments": ("report", "demo", "cli"),
     "report": ("demo", "cli"),

@@ -3,7 +3,6 @@ masked loss, the starts under observation and Appendix A for the observed part."
 
 import numpy as np
 import pytest
-import torch
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
@@ -321,7 +320,6 @@ def test_the_frames_start_refuses_in_one_line(linear_scene, image_set):
     with pytest.raises(UserError, match=r"^init 'calibrated' from frames alone .* the data set has no frames$"):
         _frames_start(run, test.without_images(), rule, train)
     with pytest.raises(UserError, match="the fitted data has no frames"):
-        import dataclasses
         _frames_start(run, test, rule, train.without_images())
     no_head = fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False)
     with pytest.raises(UserError, match="needs a run with an image head"):

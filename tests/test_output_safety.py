@@ -18,7 +18,7 @@ from conftest import assert_user_error
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
-from primspace.files import atomic_path, atomic_write_text, check_outside_inputs, remove_stale_temporaries, temp_prefix
+from primspace.files import atomic_write_text, check_outside_inputs, remove_stale_temporaries, temp_prefix
 
 TRAIN = ("--layers", "8,4", "--threads", "1", "--batch-size", "4", "--latent-dim", "3", "--no-images")
 

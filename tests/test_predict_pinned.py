@@ -11,7 +11,6 @@ the refactor must reproduce them.
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from conftest import pinned_for_this_cpu

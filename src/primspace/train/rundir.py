@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from primspace.calibration import CodeCalibration
-from primspace.data import JointScaler, MotionDataset
+from primspace.data import JointScaler
 from primspace.errors import OutputExistsError, UserError
 from primspace.files import (
     atomic_path,
