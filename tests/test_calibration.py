@@ -129,26 +129,27 @@ def test_a_projection_fit_ends_with_its_calibration_saved(trained):
 def test_infer_calibrated_starts_from_the_map_and_resumes_exactly(trained, eval_set, tmp_path):
     scaled = trained.scaler.transform(eval_set.motor)
     expected = trained.calibration.transform(trained.initializer.transform(scaled))
-    full = infer(trained.run_dir, eval_set, tmp_path / "full", epochs=6, init="calibrated", progress=False)
+    constant = {"final_lr_fraction": 1.0}  # extended on resume below: a decay would be stretched (fit's docstring)
+    full = infer(trained.run_dir, eval_set, tmp_path / "full", epochs=6, init="calibrated", progress=False, **constant)
     assert full.init == "calibrated"
     np.testing.assert_allclose(full.initial_latents, expected, rtol=1e-6)
     assert not (tmp_path / "full" / "calibration.json").exists()  # only the fit's diagnostics are written
     # the inferred run carries the map: it can start another inference the same way
     np.testing.assert_array_equal(full.calibration.coef_, trained.calibration.coef_)
-    tc = replace_epochs(trained.train_config, 3)
+    tc = replace_epochs(trained.train_config, 3, **constant)
     infer(trained.run_dir, eval_set, tmp_path / "part", init="calibrated", epochs=3, train_config=tc, progress=False)
     resumed = infer(trained.run_dir, eval_set, tmp_path / "part", init="calibrated", epochs=6, resume=True,
-                    progress=False)
+                    progress=False, **constant)
     np.testing.assert_array_equal(resumed.latents, full.latents)
     # a calibrated start is lower than the raw projection's on these primitives
     raw = evaluate(trained, eval_set, trained.initializer.transform(scaled))["loss"]
     assert evaluate(trained, eval_set, expected)["loss"] < raw
 
 
-def replace_epochs(tc, epochs):
+def replace_epochs(tc, epochs, **changes):
     from dataclasses import replace
 
-    return replace(tc, epochs=epochs, threads=None)
+    return replace(tc, epochs=epochs, threads=1, **changes)
 
 
 def test_calibrated_is_refused_without_a_projection_or_pca_fit(train_set, eval_set, tmp_path):

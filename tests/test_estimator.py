@@ -11,7 +11,8 @@ from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer, load_run, reconstruct
 from test_train import SMALL, primitives
 
-TC = TrainConfig(epochs=3, batch_size=12, threads=1, seed=3)
+# a constant rate: a saved run is extended on resume below, which stretches a decay (fit's docstring)
+TC = TrainConfig(epochs=3, batch_size=12, threads=1, seed=3, final_lr_fraction=1.0)
 
 
 @pytest.fixture(scope="module")

@@ -179,21 +179,25 @@ def test_resume_continues_exactly(train_set, image_set, tmp_path, with_images):
 
 def test_resume_of_infer_continues_exactly(train_set, eval_set, tmp_path):
     fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), progress=False)
-    straight = infer(tmp_path / "run", eval_set, tmp_path / "a", epochs=4, progress=False)
-    infer(tmp_path / "run", eval_set, tmp_path / "b", epochs=2, progress=False)
-    resumed = infer(tmp_path / "run", eval_set, tmp_path / "b", epochs=4, resume=True, progress=False)
+    constant = {"final_lr_fraction": 1.0}  # extended on resume: a decay would be stretched (fit's docstring)
+    straight = infer(tmp_path / "run", eval_set, tmp_path / "a", epochs=4, progress=False, **constant)
+    infer(tmp_path / "run", eval_set, tmp_path / "b", epochs=2, progress=False, **constant)
+    resumed = infer(tmp_path / "run", eval_set, tmp_path / "b", epochs=4, resume=True, progress=False, **constant)
     assert [h["loss"] for h in straight.history] == [h["loss"] for h in resumed.history]
     np.testing.assert_array_equal(straight.latents, resumed.latents)
 
 
 def test_resume_drops_metrics_written_after_the_last_checkpoint(train_set, tmp_path):
-    fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), progress=False)
+    constant = {"final_lr_fraction": 1.0}  # extended on resume: a decay would be stretched (fit's docstring)
+    fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2, **constant), progress=False)
     with open(tmp_path / "run" / "metrics.jsonl", "a") as f:  # as if killed after logging epoch 3
         f.write(json.dumps({"epoch": 3, "loss": 9.0, "motor": 9.0, "vision": None}) + "\n")
-    run = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=3), resume=True, progress=False)
+    run = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=3, **constant), resume=True,
+              progress=False)
     assert [h["epoch"] for h in run.history] == [0, 1, 2, 3]
     # epoch 3 is the one trained on resuming, as in an uninterrupted run, in memory and on disk
-    straight = fit(train_set, tmp_path / "straight", model_config=SMALL, train_config=_tc(epochs=3), progress=False)
+    straight = fit(train_set, tmp_path / "straight", model_config=SMALL, train_config=_tc(epochs=3, **constant),
+                   progress=False)
     assert [h["loss"] for h in run.history] == [h["loss"] for h in straight.history]
     logged = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [(h["epoch"], h["loss"]) for h in logged] == [(h["epoch"], h["loss"]) for h in straight.history]
@@ -352,7 +356,8 @@ def test_resume_after_a_kill_continues_the_schedule_exactly(train_set, tmp_path,
     resumed = fit(train_set, tmp_path / "killed", model_config=SMALL, train_config=tc, resume=True, progress=False)
     assert [h["loss"] for h in resumed.history] == [h["loss"] for h in straight.history]
     np.testing.assert_array_equal(resumed.latents, straight.latents)
-    constant = fit(train_set, tmp_path / "constant", model_config=SMALL, train_config=_tc(epochs=4, batch_size=5), progress=False)
+    constant = fit(train_set, tmp_path / "constant", model_config=SMALL,
+                   train_config=_tc(epochs=4, batch_size=5, final_lr_fraction=1.0), progress=False)
     assert constant.history[-1]["loss"] != straight.history[-1]["loss"]  # the schedule does something
 
 
