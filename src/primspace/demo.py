@@ -24,6 +24,7 @@ from primspace.experiments.presets import PRESETS
 from primspace.experiments.results import LEARNED_CODES, final, qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
+from primspace.progress import announce
 from primspace.report import build_report
 
 __all__ = ["run_demo"]
@@ -33,10 +34,15 @@ def run_demo(out_dir: str | Path, *, workers: int = 2, progress: bool | None = N
     """Run the demo into ``out_dir``; return a text summary (report path, table, verdict)."""
     start = time.perf_counter()
     exp = ExperimentDir(out_dir, PRESETS["demo"], workers=workers, progress=progress)
+    announce(f"demo 1/5: the simulated data set ({exp.path})", enabled=progress)
     exp.dataset()
+    announce("demo 2/5: intra-primitive runs (fit on 20%, infer the rest, per init and q)", enabled=progress)
     intra = run_intra(exp)
+    announce("demo 3/5: clustering of the learned codes", enabled=progress)
     clustering = run_clustering(exp)
+    announce("demo 4/5: success of the generated motions, judged by the simulator", enabled=progress)
     success = run_success(exp)
+    announce("demo 5/5: the report", enabled=progress)
     report = build_report(exp.path)
     return _summary(exp, intra, clustering, success, report, time.perf_counter() - start)
 

@@ -1,9 +1,25 @@
-"""Progress bars for long work (rich), silent when asked or when not on a terminal."""
+"""Progress of long work on stderr: rich bars and spinners in a terminal, timestamped lines
+in a log (stderr not a terminal), nothing when asked.
+
+Three helpers, one rule for all: ``enabled=None`` (the default) draws in a terminal and
+writes lines otherwise; ``True`` draws; ``False`` is silent.
+
+* :func:`progress_bar`: work of counted steps (epochs, jobs);
+* :func:`stage`: one long call with nothing to count (a spinner and the time elapsed);
+* :func:`announce`: the heading of a stage of several (one line, in a terminal too).
+
+In a log, a step that ends within :data:`LOG_AFTER` seconds writes nothing (quick commands
+and tests stay clean); a longer one writes a line when it has run that long, a line each
+tenth of its steps, and a line when it ends, with its time.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import sys
+import threading
+import time
+from types import SimpleNamespace
 from typing import Callable, Iterator
 
 from rich.console import Console
@@ -11,12 +27,77 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    SpinnerColumn,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
 
-__all__ = ["progress_bar"]
+__all__ = ["LOG_AFTER", "announce", "progress_bar", "stage"]
+
+#: Seconds a step runs before it writes its lines to a log (stderr not a terminal).
+LOG_AFTER = 5.0
+
+
+def _mode(enabled: bool | None) -> str:
+    """``"bar"``, ``"log"`` or ``"off"`` for an ``enabled`` argument (module docstring)."""
+    if enabled is None:
+        return "bar" if sys.stderr.isatty() else "log"
+    return "bar" if enabled else "off"
+
+
+def _write(text: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {text}", file=sys.stderr, flush=True)
+
+
+class _LogLines:
+    """The lines of one step in a log: after :data:`LOG_AFTER` seconds, each tenth, the end."""
+
+    def __init__(self, description: str, total: int | None, fields: str):
+        self.description, self.total, self.fields = description, total, fields
+        self.done, self.values, self.started = 0, {}, time.monotonic()
+        self.shown, self.next_tenth = False, 1
+        self.lock = threading.Lock()
+        self.timer = threading.Timer(LOG_AFTER, self._first)
+        self.timer.daemon = True
+        self.timer.start()
+
+    def _state(self) -> str:
+        count = f"{self.done}/{self.total}" if self.total else str(self.done) if self.done else ""
+        shown = ""
+        if self.fields and self.values:
+            try:
+                shown = self.fields.format(task=SimpleNamespace(fields=self.values))
+            except (KeyError, ValueError, TypeError):
+                shown = ""
+        return ", ".join(p for p in (count, " ".join(shown.split())) if p)
+
+    def _first(self) -> None:
+        with self.lock:
+            if not self.shown:
+                self.shown = True
+                state = self._state()
+                _write(f"{self.description}: running" + (f" ({state})" if state else ""))
+
+    def advance(self, n: int, values: dict) -> None:
+        with self.lock:
+            self.done += n
+            self.values |= values
+            if not self.shown or not self.total or self.done * 10 < self.next_tenth * self.total:
+                return
+            while self.done * 10 >= self.next_tenth * self.total:
+                self.next_tenth += 1
+            if self.done < self.total:
+                _write(f"{self.description}: {self._state()}, {time.monotonic() - self.started:.0f} s")
+
+    def finish(self, ok: bool) -> None:
+        self.timer.cancel()
+        with self.lock:
+            if self.shown or time.monotonic() - self.started >= LOG_AFTER:
+                state = self._state()
+                end = "done" if ok else "stopped"
+                _write(f"{self.description}: {end}" + (f" ({state})" if state else "")
+                       + f" in {time.monotonic() - self.started:.1f} s")
 
 
 @contextlib.contextmanager
@@ -36,8 +117,8 @@ def progress_bar(
     description : str
         Text before the bar.
     enabled : bool, optional
-        Force the bar on or off. By default it shows only when stderr is a terminal,
-        so logs and tests stay clean.
+        True draws the bar, False is silent. By default it draws when stderr is a
+        terminal and otherwise writes a log's lines (module docstring).
     fields : str
         A rich format string shown after the bar, filled from the keyword arguments of
         ``advance`` (e.g. ``"loss {task.fields[loss]:.4g}"``).
@@ -48,10 +129,18 @@ def progress_bar(
     ...     for _ in range(3):
     ...         advance()
     """
-    if enabled is None:
-        enabled = sys.stderr.isatty()
-    if not enabled:
+    mode = _mode(enabled)
+    if mode == "off":
         yield lambda n=1, **kw: None
+        return
+    if mode == "log":
+        lines = _LogLines(description, total, fields)
+        ok = False
+        try:
+            yield lambda n=1, **kw: lines.advance(n, kw)
+            ok = True
+        finally:
+            lines.finish(ok)
         return
     columns = [
         TextColumn("[bold]{task.description}"),
@@ -69,6 +158,37 @@ def progress_bar(
             progress.update(task, advance=n, **kw)
 
         yield advance
+
+
+@contextlib.contextmanager
+def stage(description: str, *, enabled: bool | None = None) -> Iterator[None]:
+    """One long call with nothing to count: a spinner and the time elapsed in a terminal
+    (cleared when it ends), a log's lines otherwise (module docstring). Not around work
+    that draws bars of its own (rich shows one live display at a time): use
+    :func:`announce` there.
+    """
+    mode = _mode(enabled)
+    if mode == "off":
+        yield
+        return
+    if mode == "log":
+        with progress_bar(None, description, enabled=None):
+            yield
+        return
+    columns = [SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn()]
+    with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
+        progress.add_task(description, total=None)
+        yield
+
+
+def announce(text: str, *, enabled: bool | None = None) -> None:
+    """One line on stderr naming a stage of several (timestamped in a log); nothing when
+    ``enabled`` is False."""
+    mode = _mode(enabled)
+    if mode == "log":
+        _write(text)
+    elif mode == "bar":
+        Console(stderr=True).print(f"[bold]{text}[/bold]", highlight=False)
 
 
 def _placeholders(fields: str) -> dict:

@@ -1,0 +1,69 @@
+"""Long work is never silent: lines in a log when stderr is not a terminal (issue 37)."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from primspace import progress
+
+_STAMP = r"\[\d\d:\d\d:\d\d\] "
+
+
+@pytest.fixture
+def log_at_once(monkeypatch):
+    """Steps write their log lines from the start (not only after LOG_AFTER seconds)."""
+    monkeypatch.setattr(progress, "LOG_AFTER", 0.0)
+
+
+def test_a_counted_step_writes_a_line_when_it_runs_each_tenth_and_when_it_ends(capsys, log_at_once):
+    import time
+
+    with progress.progress_bar(20, "epochs", fields="loss {task.fields[loss]:.3g}") as advance:
+        time.sleep(0.05)  # the first line is the timer's
+        for i in range(20):
+            advance(loss=1.0 / (i + 1))
+    lines = capsys.readouterr().err.splitlines()
+    assert all(re.match(_STAMP, line) for line in lines), lines
+    assert "epochs: running" in lines[0]
+    assert 5 <= len(lines) <= 12, lines  # a line per tenth at most, not one per step
+    assert re.search(r"epochs: done \(20/20, loss 0\.05\) in [\d.]+ s$", lines[-1]), lines[-1]
+
+
+def test_a_quick_step_writes_nothing_and_false_is_silent(capsys, monkeypatch):
+    with progress.progress_bar(3, "quick") as advance:
+        advance(3)
+    monkeypatch.setattr(progress, "LOG_AFTER", 0.0)
+    with progress.progress_bar(3, "off", enabled=False) as advance, progress.stage("off too", enabled=False):
+        advance(3)
+    progress.announce("not shown", enabled=False)
+    assert capsys.readouterr().err == ""
+
+
+def test_a_stage_and_an_announcement_write_lines(capsys, log_at_once):
+    import time
+
+    progress.announce("demo 1/5: data")
+    with progress.stage("segment: 4 demonstrations by synthesis"):
+        time.sleep(0.05)
+    lines = capsys.readouterr().err.splitlines()
+    assert re.match(_STAMP + "demo 1/5: data$", lines[0])
+    assert "segment: 4 demonstrations by synthesis: running" in lines[1]
+    assert re.search(r"by synthesis: done in [\d.]+ s$", lines[2])
+
+
+def test_train_with_stderr_not_a_terminal_logs_its_epochs(run_cli, tmp_path, log_at_once):
+    from primspace.data import MotionDataset
+
+    rng = np.random.default_rng(0)
+    data = tmp_path / "d.h5"
+    MotionDataset(motor=rng.standard_normal((6, 10, 2)).astype(np.float32)).save(data)
+    res = run_cli("train", data, "--out", tmp_path / "run", "--epochs", "10", "--layers", "6,4", "--latent-dim", "2",
+                  "--batch-size", "3")
+    assert res.code == 0, res.err
+    lines = [line for line in res.err.splitlines() if line.strip()]
+    assert any(re.match(_STAMP + r"fit run: running", line) for line in lines), lines
+    assert re.match(_STAMP + r"fit run: done \(10/10, loss [\d.e-]+ +\d+ samples/s\) in", lines[-1]), lines
+    assert "wrote" in res.out
