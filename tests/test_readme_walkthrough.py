@@ -1,6 +1,7 @@
 """The README's command-line walk-through runs as written, on a robomimic-style file with
-camera frames made here: import -> info -> train (with images) -> infer -> reconstruct ->
-animate -> cluster (learned codes and raw trajectories).
+camera frames made here: import -> info -> one session split by index files (the ``seq``
+line, run by the shell) -> train (with images) on one half -> predict and infer the other
+half -> reconstruct -> cluster (learned codes and raw trajectories).
 
 It trains 800 + 600 epochs with images as the README says: about 5 minutes on 2 idle
 cores (10 min measured under load), too long for every CI run, so it runs only with
@@ -11,6 +12,7 @@ import json
 import os
 import re
 import shlex
+import subprocess
 from pathlib import Path
 
 import h5py
@@ -24,11 +26,15 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 ALTERNATIVES = ("--format csv", "demos.npz", "--format lerobot", "--format npy", "--filter-key")
 
 
-def _commands() -> list[list[str]]:
+def _lines() -> list[str]:
     section = README.read_text(encoding="utf-8").split("## Using it on your own demonstrations", 1)[1]
     block = re.search(r"```\n(.*?)```", section, flags=re.S).group(1).replace("\\\n", " ")
     lines = [line.split("#", 1)[0].strip() for line in block.splitlines()]
-    return [shlex.split(line)[1:] for line in lines if line.startswith("primspace") and not any(a in line for a in ALTERNATIVES)]
+    return [line for line in lines if line and not any(a in line for a in ALTERNATIVES)]
+
+
+def _commands() -> list[list[str]]:
+    return [shlex.split(line)[1:] for line in _lines() if line.startswith("primspace")]
 
 
 def _robomimic(path: Path, n: int, seed: int) -> None:
@@ -56,19 +62,23 @@ def test_readme_walkthrough_runs_as_written(run_cli, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     _robomimic(tmp_path / "lift.hdf5", 14, seed=0)
     commands = _commands()
-    assert [c[0] for c in commands] == ["import", "info", "train", "infer", "reconstruct", "animate", "cluster", "cluster"]
-    for args in commands:
-        if args[0] == "infer":  # the README's new demonstrations: a second file, imported the same way
-            _robomimic(tmp_path / "new.hdf5", 7, seed=1)
-            imported = commands[0][:1] + ["new.hdf5"] + commands[0][2:]
-            imported[imported.index("--out") + 1] = "new.h5"
-            assert run_cli(*imported).code == 0
+    assert [c[0] for c in commands] == ["import", "info", "train", "predict", "infer", "reconstruct", "cluster", "cluster"]
+    for line in _lines():
+        if not line.startswith("primspace"):  # the split: index files written by the shell
+            subprocess.run(line, shell=True, check=True, cwd=tmp_path)
+            continue
+        args = shlex.split(line)[1:]
         result = run_cli(*args)
         assert result.code == 0, (args, result.err)
+    fitted, new = (np.loadtxt(name, dtype=int).tolist() for name in ("fit.txt", "new.txt"))
+    assert fitted == list(range(0, 14, 2)) and new == list(range(1, 14, 2))
     with h5py.File("demos.h5") as f:
         assert f["images"].shape == (14, 61, 48, 64, 3) and f["motor"].shape == (14, 61, 9)
     last = json.loads(Path("runs/fit/metrics.jsonl").read_text().splitlines()[-1])
     assert last["epoch"] == 800 and last["vision"] is not None  # trained with the frames
-    assert read_png("sample3.png").shape[0] > 100
-    assert Path("sample3.gif").read_bytes()[:6] == b"GIF89a"
+    assert np.load("runs/fit/latents.npy").shape == (7, 20) and np.load("runs/new/latents.npy").shape == (7, 20)
+    with h5py.File("pred/predicted.h5") as f:
+        assert f["motor"].shape == (7, 61, 9)
+    assert Path("pred/result.json").is_file() and read_png("pred/prediction.png").shape[0] > 100
+    assert read_png("sample0.png").shape[0] > 100
     assert Path("clusters/labels.csv").is_file() and Path("clusters-raw/labels.csv").is_file()
