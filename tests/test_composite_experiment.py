@@ -145,7 +145,7 @@ def test_segment_refuses_a_run_with_one_code_per_sequence(long_data, tmp_path, r
     data = MotionDataset.load(long_data)
     fit(data, tmp_path / "run", model_config=ModelConfig(latent_dim=3, layer_sizes=(8, 4)),
         train_config=TrainConfig(epochs=1, batch_size=4), progress=False)
-    assert_user_error(run_cli("segment", tmp_path / "run", long_data, "--out", tmp_path / "seg"),
+    assert_user_error(run_cli("segment", tmp_path / "run", long_data, "--method", "windows", "--out", tmp_path / "seg"),
                       "one code per sequence", "--code-window")
 
 

@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from primspace.cli.app import app
+from primspace.cli.options import configure_threads, device_option, threads_option
 from primspace.cli.train import run_sample
 
 # primspace.plots.animation.MAX_FRAMES, repeated so that `primspace --help` does not load
@@ -26,6 +27,8 @@ def animate_command(
     frames: int = typer.Option(_MAX_FRAMES, "--frames", help="Most frames in the GIF (time is subsampled evenly; at least 2)."),
     no_replay: bool = typer.Option(False, "--no-replay", help="Leave out the simulator replaying the generated joints."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier animate output."),
+    device: str = device_option("cpu"),
+    threads: Optional[int] = threads_option(),
 ) -> None:
     """Animate one sample as a GIF: recorded, generated and simulator-replayed frames beside a joint trace.
 
@@ -34,8 +37,9 @@ def animate_command(
     from primspace.experiments.animations import sample_motion
     from primspace.plots import draw_animation
 
+    configure_threads(threads, device)
     out, trained, ds, _ = run_sample(run, sample, out, data, frames, overwrite, min_frames=2, writer=_ANIMATE_MARK)
-    arrays, info = sample_motion(trained, ds, sample, replay=not no_replay)
+    arrays, info = sample_motion(trained, ds, sample, replay=not no_replay, device=device)
     draw_animation(out, **arrays, joint_names=info["joint_names"], dt=info["dt"], title=info["title"], max_frames=frames,
                    writer=_ANIMATE_MARK, overwrite=overwrite)
     panels = ", ".join(info["panels"]) or "no camera frames"

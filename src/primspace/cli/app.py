@@ -95,9 +95,35 @@ def _usage_line(exc, args: list[str]) -> str:
     return text
 
 
+def click_command():
+    """The Click command of :data:`app`, its help made readable: an option of a few choices
+    shows a short metavar (its name) instead of ``<zero|random|...>``, which the help's
+    type column folds mid-word on a narrow terminal, and its help names the choices."""
+    root = typer.main.get_command(app)
+    todo = [root]
+    while todo:
+        group = todo.pop()
+        for sub in getattr(group, "commands", {}).values():
+            todo.append(sub)
+            for param in sub.params:
+                _short_choices(param)
+    return root
+
+
+def _short_choices(param) -> None:
+    described = getattr(param, "type_descriptor", None)
+    if param.param_type_name != "option" or described is None or not described.is_choice or param.metavar:
+        return
+    choices = [str(getattr(c, "value", c)) for c in described.choices]
+    param.metavar = param.name.upper()
+    words = set(re.findall(r"[\w-]+", param.help or ""))
+    if not all(c in words for c in choices):
+        param.help = ((param.help or "").rstrip() + f" One of: {', '.join(choices)}.").strip()
+
+
 def _run(args: list[str]) -> int:
     """Parse ``args`` and run the command; return the exit status (Click's errors propagate)."""
-    command = typer.main.get_command(app)
+    command = click_command()
     try:
         with command.make_context("primspace", args) as ctx:
             command.invoke(ctx)

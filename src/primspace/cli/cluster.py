@@ -11,7 +11,7 @@ import typer
 from primspace.errors import UserError, first_line
 
 from primspace.cli.app import app
-from primspace.cli.options import echo_json
+from primspace.cli.options import configure_threads, echo_json, threads_option
 
 
 # ====================================================================== clustering
@@ -37,10 +37,12 @@ class ClusterSpectral(str, Enum):
 @app.command("cluster")
 def cluster_command(
     src: Path = typer.Argument(
-        ..., help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened), an (N, q) .npy of "
+        ..., metavar="DATA", help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened), an (N, q) .npy of "
         "latents, or a run directory (its codes, scored with the labels of its samples in its data file)."
     ),
-    k: int = typer.Option(..., "--k", "-k", help="Number of clusters K."),
+    k: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives K: the clusters to find "
+                                    "(required)."),
+    k_deprecated: Optional[int] = typer.Option(None, "--k", hidden=True, help="Deprecated name of --primitives."),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (labels.csv, result.json, clustering.png)."),
     tau: Optional[float] = typer.Option(None, "--tau", help="The paper's tau, absolute (> 0)."),
     tau_relative: Optional[float] = typer.Option(
@@ -73,14 +75,15 @@ def cluster_command(
     from primspace.cluster.outputs import check_output_directory
     from primspace.files import check_outside_inputs
 
+    k, k_flag = _primitives_option(k, k_deprecated)
     check_outside_inputs(out, (src, labels))
     check_output_directory(out, overwrite)
     r2_target = _parse_r2(r2)
-    _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init)
+    _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init, k_flag)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
     points = _points(src, labels)
     if k > points.X.shape[0]:
-        raise UserError(f"--k {k} exceeds the {points.X.shape[0]} samples in {src}")
+        raise UserError(f"{k_flag} {k} exceeds the {points.X.shape[0]} samples in {src}")
     options = {"affine": not linear, "tau": tau, "tau_relative": tau_relative, "r2_target": r2_target,
                "auto_criterion": auto_criterion.value, "affinity": affinity.value, "ones_weight": ones_weight,
                "spectral": spectral.value, "n_init": n_init, "random_state": seed}
@@ -188,9 +191,18 @@ def _print_summary(out: Path, result) -> None:
     typer.echo(f"wrote {out}/: labels.csv, result.json, clustering.png" + (", sweep.csv, sweep.json, sweep.png" if result.sweep else ""))
 
 
-def _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init) -> None:
+def _primitives_option(k: Optional[int], deprecated: Optional[int]) -> tuple[int, str]:
+    """``--primitives`` (``-k``) or its deprecated name ``--k``, and the flag to name in errors."""
+    if k is not None and deprecated is not None:
+        raise UserError("give --primitives (-k) once; --k is its deprecated name")
+    if k is None and deprecated is None:
+        raise UserError("missing option --primitives K (-k K): the number of primitives to find")
+    return (k, "--primitives") if k is not None else (deprecated, "--k")
+
+
+def _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init, k_flag: str = "--primitives") -> None:
     if k < 1:
-        raise UserError(f"--k must be at least 1, got {k}")
+        raise UserError(f"{k_flag} must be at least 1, got {k}")
     given = [name for name, v in (("--tau", tau), ("--tau-relative", tau_relative), ("--r2", r2)) if v is not None]
     if len(given) > 1:
         raise UserError(f"give at most one of --tau, --tau-relative, --r2; got {' and '.join(given)}")
@@ -253,27 +265,30 @@ class SegmentOffset(str, Enum):
 
 
 class SegmentMethod(str, Enum):
-    windows = "windows"
-    surprise = "surprise"
+    """``primspace.segmentation.METHODS``; the default is ``DEFAULT_METHOD`` (a test keeps them equal:
+    not imported here, so that the command line starts without scikit-learn)."""
+
     synthesis = "synthesis"
+    surprise = "surprise"
+    windows = "windows"
 
 
-_SEGMENT_RUN = typer.Argument(..., help="windows: a run trained with --code-window on DATA (fit or infer); "
-                              "surprise, synthesis: a run of single primitives (one code per demonstration).")
+_SEGMENT_RUN = typer.Argument(..., help="synthesis, surprise: a run of single primitives (one code per "
+                              "demonstration); windows: a run trained with --code-window on DATA (fit or infer).")
 _SEGMENT_METHOD = typer.Option(
-    SegmentMethod.windows, "--method", help="windows: change points of the run's window codes; surprise: where "
-    "the single-primitive run's prediction of the next steps fails; synthesis: the partition into segments that "
-    "the single-primitive run generates best (docs/sequences.md).")
+    None, "--method", show_default=False, help="synthesis (default): the partition into segments that the "
+    "single-primitive run generates best; surprise: where its prediction of the next steps fails; windows (the default "
+    "for a run trained with --code-window): change points of the run's window codes (docs/sequences.md).")
 _STEPS = "surprise, synthesis: the {} steps of a primitive in DATA (default {} x the run's T)."
 
 
 @app.command("segment")
 def segment_command(
     run: Path = _SEGMENT_RUN,
-    data: Path = typer.Argument(..., help="Long demonstrations (with lengths; windows: the run's data file)."),
+    data: Path = typer.Argument(..., metavar="DATA", help="Long demonstrations (with lengths; windows: the run's data file)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."),
-    method: SegmentMethod = _SEGMENT_METHOD,
-    primitives: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives (default: the data's label names)."),
+    method: Optional[SegmentMethod] = _SEGMENT_METHOD,
+    primitives: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives K (default: the data's label names)."),
     tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window; surprise, synthesis: 8)."),
     min_steps: Optional[int] = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
     max_steps: Optional[int] = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
@@ -284,6 +299,7 @@ def segment_command(
                                          "begun where the last ended meets the model's: fade (the start offset fades "
                                          "out), translate (kept throughout), auto (the one that explains DATA better)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
+    threads: Optional[int] = threads_option(),
 ) -> None:
     """Find the primitives in long demonstrations: boundaries (change points of a run's window
     codes, or the segments a single-primitive run generates best) and labels (affine subspace
@@ -298,14 +314,11 @@ def segment_command(
     kind = OutputKind("primspace segment", SEGMENT_FILES, frozenset({"window", "boundaries", "scores"}))
     check_outside_inputs(out, (run, data))
     check_output_directory(out, overwrite, kind)
-    if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None
-                                            or offset is not SegmentOffset.auto or infer_epochs):
-        raise UserError("--min-steps, --max-steps, --offset and --infer-epochs apply to --method surprise and synthesis")
-    if infer_epochs < 0:
-        raise UserError(f"--infer-epochs {infer_epochs}: must be at least 0")
-    if tolerance is not None and tolerance < 0:
-        raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tolerance}")
-    trained, ds = load_run(run), MotionDataset.load(data)
+    configure_threads(threads)
+    trained = load_run(run)
+    method = segment_method(method, trained)
+    _check_segment_options(method, min_steps, max_steps, offset, infer_epochs, tolerance)
+    ds = MotionDataset.load(data)
     segment = _segment_windows if method is SegmentMethod.windows else _segment_by_primitives
     samples, held, result, scores, window, k = segment(trained, ds, run, data, primitives, tolerance,
                                                        (min_steps, max_steps, offset.value, infer_epochs), method.value)
@@ -320,6 +333,26 @@ def segment_command(
         write_json(tmp / "result.json", record)
     typer.echo(_segment_summary(scores, len(held)))
     typer.echo(f"wrote {out}")
+
+
+def segment_method(method: Optional[SegmentMethod], trained) -> SegmentMethod:
+    """``--method``, or its default: ``primspace.segmentation.DEFAULT_METHOD`` (synthesis), and
+    windows for a run trained with --code-window (the one method such a run can use)."""
+    from primspace.segmentation import DEFAULT_METHOD
+
+    if method is not None:
+        return method
+    return SegmentMethod.windows if trained.model_config.code_window is not None else SegmentMethod(DEFAULT_METHOD)
+
+
+def _check_segment_options(method: SegmentMethod, min_steps, max_steps, offset, infer_epochs: int, tolerance) -> None:
+    if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None
+                                            or offset is not SegmentOffset.auto or infer_epochs):
+        raise UserError("--min-steps, --max-steps, --offset and --infer-epochs apply to --method surprise and synthesis")
+    if infer_epochs < 0:
+        raise UserError(f"--infer-epochs {infer_epochs}: must be at least 0")
+    if tolerance is not None and tolerance < 0:
+        raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tolerance}")
 
 
 def _primitives(held, primitives: Optional[int], data: Path) -> int:
@@ -357,9 +390,12 @@ def _segment_by_primitives(trained, ds, run: Path, data: Path, primitives, toler
     from primspace.segmentation.synthesis import segment_by_synthesis
     from primspace.sim.composite import transition_steps
 
+    from primspace.progress import stage
+
     k = _primitives(ds, primitives, data)
     segment = segment_by_surprise if method == "surprise" else segment_by_synthesis
-    result = segment(trained, ds, k, min_steps=steps[0], max_steps=steps[1], offset=steps[2], infer_epochs=steps[3])
+    with stage(f"segment: {len(ds)} demonstrations by {method}"):
+        result = segment(trained, ds, k, min_steps=steps[0], max_steps=steps[1], offset=steps[2], infer_epochs=steps[3])
     scores = segmentation_scores(result, ds, 8 if tolerance is None else tolerance, transition_steps(ds))
     return np.arange(len(ds)), ds, result, scores, 1, k
 

@@ -22,7 +22,7 @@ _GENERATE_MARK, _SHOW_MARK = "primspace generate", "primspace show"
 
 @app.command("info")
 def info_command(
-    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
+    file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text."),
 ) -> None:
     """Summarise a data set: N, T, J, joint names, source and source ids, label counts, images, joint ranges."""
@@ -35,6 +35,20 @@ def info_command(
     typer.echo(_format_summary(summary))
 
 
+def _labels_line(counts: dict | None, per_step: bool) -> str:
+    """The labels: samples per class; long demonstrations (``per_step``) are labelled step by
+    step (the ``steps`` line), not as a whole: their classes only. A sample of no class
+    (``-1``, ``<unknown>`` in the summary) counts as unlabelled."""
+    if counts is None:
+        return "  labels   none"
+    unlabelled = counts.get("<unknown>", 0)
+    classes = {k: v for k, v in counts.items() if k != "<unknown>"}
+    if per_step and not any(classes.values()):
+        return f"  labels   {len(classes)} classes, per step (below): {', '.join(classes)}"
+    text = ", ".join(f"{k} {v}" for k, v in classes.items()) + (f"; unlabelled {unlabelled}" if unlabelled else "")
+    return f"  labels   {len(classes)} classes: {text}"
+
+
 def _format_summary(s: dict) -> str:
     lines = [
         f"{s['path'] or '<memory>'}",
@@ -45,12 +59,8 @@ def _format_summary(s: dict) -> str:
         lines.append(f"  ids      {', '.join(s['source_ids'])}")
     img = s["image_shape"]
     lines.append(f"  images   {'x'.join(map(str, img)) + ' uint8 per sample' if img else 'none'}")
-    if s["label_counts"] is None:
-        lines.append("  labels   none")
-    else:
-        counts = ", ".join(f"{k} {v}" for k, v in s["label_counts"].items())
-        lines.append(f"  labels   {len(s['label_counts'])} classes: {counts}")
     steps = s.get("steps")
+    lines.append(_labels_line(s["label_counts"], steps is not None))
     if steps is not None:
         lo, hi = steps["lengths"]
         lines.append(f"  long     valid steps {lo}..{hi} (padded to T), {steps['segments'][0]}..{steps['segments'][1]} "
@@ -195,10 +205,10 @@ def _generate_composite(out: Path, preset: str, config_file, frames, workers, ba
 
 @app.command("show")
 def show_command(
-    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file (e.g. from primspace generate)."),
+    file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file (e.g. from primspace generate)."),
     sample: int = typer.Option(0, "--sample", "-i", help="Sample index."),
     out: str = typer.Option(..., "--out", "-o", help="PNG file to write."),
-    frames: int = typer.Option(8, "--frames", help="Camera frames in the strip."),
+    frames: int = typer.Option(8, "--frames", help="Camera frames in the strip (data with images)."),
     overwrite: bool = typer.Option(
         False, "--overwrite/--no-overwrite", help="Replace OUT if it is an earlier show output (nothing else)."
     ),

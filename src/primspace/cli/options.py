@@ -8,6 +8,29 @@ from typing import Optional
 import typer
 
 from primspace.errors import UserError
+from primspace.train.config import TrainConfig
+
+#: ``--threads``'s help, the same wherever torch runs (the default is ``TrainConfig.threads``).
+THREADS_HELP = ("CPU threads of torch and of numpy's BLAS (more than the free cores make them wait on each other: "
+                "13x slower on a busy machine; raise it on a machine of your own).")
+DEVICE_HELP = "Where the model runs: auto (CUDA when present), cpu, cuda or cuda:N."
+
+
+def threads_option(default=TrainConfig.threads, help: str = THREADS_HELP):
+    """``--threads`` (:attr:`TrainConfig.threads`, torch's intra-op threads and BLAS's)."""
+    return typer.Option(default, "--threads", help=help)
+
+
+def device_option(default: str = TrainConfig.device, help: str = DEVICE_HELP):
+    """``--device`` (:attr:`TrainConfig.device`)."""
+    return typer.Option(default, "--device", help=help)
+
+
+def configure_threads(threads: Optional[int], device: str = "cpu") -> None:
+    """An entry point's process-wide settings for commands that run a model without training it."""
+    from primspace.train import configure_process
+
+    configure_process(TrainConfig(threads=threads, device=device).validate())
 
 
 def echo_json(obj) -> None:
@@ -52,5 +75,17 @@ def echo_table(columns, rows) -> None:
 
     table = Table(*[str(c) for c in columns])
     for row in rows:
-        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
+        table.add_row(*[cell_text(v) for v in row])
     Console().print(table)
+
+
+def cell_text(value) -> str:
+    """A value as a table cell or an output line: numbers to 4 digits, a dict as ``key value, ...``
+    and a list as ``a, b`` (never Python's ``{'key': ...}``)."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {cell_text(v)}" for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return ", ".join(cell_text(v) for v in value)
+    return str(value)

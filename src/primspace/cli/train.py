@@ -14,7 +14,7 @@ from primspace.errors import UserError
 from primspace.cli.app import app
 from primspace.model_config import ModelConfig
 from primspace.train.config import TrainConfig
-from primspace.cli.options import float_list, int_list
+from primspace.cli.options import configure_threads, device_option, float_list, int_list, threads_option
 
 
 # =================================================================== model, train
@@ -166,26 +166,34 @@ def _launch(tc: TrainConfig, call) -> None:
 
 
 _TRAIN_INIT_HELP = "How the latent codes start (calibrated: only with --weights-from a projection or pca run)."
+#: The help of train's options that are plain TrainConfig fields.
+_HELP = {
+    "seed": "Seeds the weights, the projection P, random codes and the batch order (same seed, same machine: same "
+            "numbers).",
+    "batch_size": "Samples per mini-batch (every code is updated once per epoch, the weights once per batch).",
+    "motor_weight": "Weight of the joints' loss.",
+    "vision_weight": "Weight of the frames' loss (0: no image head is trained).",
+}
 
 
 @app.command("train")
 def train_command(
-    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file."),
+    file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create."),
     init: LatentInit = typer.Option(LatentInit.projection, "--init", help=_TRAIN_INIT_HELP),
     latent_dim: int = typer.Option(_MC.latent_dim, "--latent-dim", "-q", help="q, the size of each latent code."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs (with --resume: train up to this many)."),
     no_images: bool = typer.Option(False, "--no-images", help="Motor only: no image head, images ignored."),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to train on (.npy or text)."),
-    batch_size: int = typer.Option(_TC.batch_size, "--batch-size"),
+    batch_size: int = typer.Option(_TC.batch_size, "--batch-size", help=_HELP["batch_size"]),
     lr: float = typer.Option(_TC.lr, "--lr", help="Learning rate of the weights."),
     latent_lr: float = typer.Option(_TC.latent_lr, "--latent-lr", help="Learning rate of the latent codes."),
     final_lr_fraction: float = typer.Option(
         _TC.final_lr_fraction, "--final-lr-fraction",
         help="Cosine decay of both learning rates to this fraction by the last epoch (1: constant).",
     ),
-    motor_weight: float = typer.Option(_TC.motor_weight, "--motor-weight"),
-    vision_weight: float = typer.Option(_TC.vision_weight, "--vision-weight"),
+    motor_weight: float = typer.Option(_TC.motor_weight, "--motor-weight", help=_HELP["motor_weight"]),
+    vision_weight: float = typer.Option(_TC.vision_weight, "--vision-weight", help=_HELP["vision_weight"]),
     vision_frames: Optional[int] = typer.Option(
         _TC.vision_frames, "--vision-frames",
         help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
@@ -202,10 +210,10 @@ def train_command(
     layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
     taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
     image_channels: str = typer.Option(_csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."),
-    seed: int = typer.Option(_TC.seed, "--seed"),
-    device: str = typer.Option(_TC.device, "--device", help="auto, cpu, cuda or cuda:N."),
+    seed: int = typer.Option(_TC.seed, "--seed", help=_HELP["seed"]),
+    device: str = device_option(),
     amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
-    threads: Optional[int] = typer.Option(_TC.threads, "--threads", help="Torch CPU threads."),
+    threads: Optional[int] = threads_option(),
     checkpoint_every: Optional[int] = typer.Option(_TC.checkpoint_every, "--checkpoint-every", help="Also checkpoint every N epochs."),
     checkpoint_seconds: float = typer.Option(_TC.checkpoint_seconds, "--checkpoint-seconds", help="Checkpoint at least this often."),
     weights_from: Optional[Path] = typer.Option(
@@ -239,7 +247,7 @@ def train_command(
 @app.command("infer")
 def infer_command(
     run: Path = typer.Argument(..., help="A trained run directory."),
-    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the new samples."),
+    file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file with the new samples."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create for the new codes."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs of code optimisation."),
     init: Optional[LatentInit] = typer.Option(
@@ -253,11 +261,11 @@ def infer_command(
     seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
     loss_reduction: Optional[LossReduction] = typer.Option(
         None, "--loss-reduction", help="Default: the run's. " + _LOSS_REDUCTION_HELP),
-    device: str = typer.Option(_TC.device, "--device"),
-    amp: bool = typer.Option(_TC.amp, "--amp"),
-    threads: Optional[int] = typer.Option(_TC.threads, "--threads"),
-    resume: bool = typer.Option(False, "--resume"),
-    overwrite: bool = typer.Option(False, "--overwrite"),
+    device: str = device_option(),
+    amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
+    threads: Optional[int] = threads_option(),
+    resume: bool = typer.Option(False, "--resume", help="Continue the inference in OUT from its checkpoint."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier infer run."),
     log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
     stream_frames: Optional[bool] = _INFER_SCALE["stream_frames"],
     frames_memory_gb: Optional[float] = _INFER_SCALE["frames_memory_gb"],
@@ -290,8 +298,10 @@ def reconstruct_command(
     sample: int = typer.Option(..., "--sample", help="Sample index in the data file (one the run used)."),
     out: str = typer.Option(..., "--out", "-o", help="The PNG to write."),
     data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
-    frames: int = typer.Option(8, "--frames", help="Frames shown per strip."),
+    frames: int = typer.Option(8, "--frames", help="Camera frames shown in the strip (data with images)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier reconstruct output."),
+    device: str = device_option("cpu"),
+    threads: Optional[int] = threads_option(),
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
     import numpy as np
@@ -299,8 +309,9 @@ def reconstruct_command(
     from primspace.plots import plot_reconstruction, reconstruction_title, save_figure
     from primspace.train import reconstruct
 
+    configure_threads(threads, device)
     out, trained, ds, row = run_sample(run, sample, out, data, frames, overwrite, writer=_RECONSTRUCT_MARK)
-    motor, generated = reconstruct(trained, trained.latents[row : row + 1])  # the model runs here, not in plots
+    motor, generated = reconstruct(trained, trained.latents[row : row + 1], device=device)  # here, not in plots
     truth = ds.subset([int(sample)])
     images = None if truth.images is None else np.asarray(truth.images)[0]
     primitive = None if truth.labels is None or truth.labels[0] < 0 else truth.label_names[truth.labels[0]]

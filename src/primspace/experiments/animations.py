@@ -46,7 +46,7 @@ def replay_note(data, sample: int) -> str | None:
     return None
 
 
-def sample_motion(run, data, sample: int, *, replay: bool = True, scene=None) -> tuple[dict, dict]:
+def sample_motion(run, data, sample: int, *, replay: bool = True, scene=None, device: str = "cpu") -> tuple[dict, dict]:
     """The arrays of one sample's animation and what its title says.
 
     Parameters
@@ -61,6 +61,8 @@ def sample_motion(run, data, sample: int, *, replay: bool = True, scene=None) ->
         Replay the generated joints in the simulator (only for simulator data).
     scene : primspace.sim.scene.Scene, optional
         A scene to reuse across samples.
+    device : str
+        Where the model decodes (:func:`primspace.train.reconstruct`).
 
     Returns
     -------
@@ -77,7 +79,7 @@ def sample_motion(run, data, sample: int, *, replay: bool = True, scene=None) ->
 
     sample = int(sample)
     row = int(np.flatnonzero(run.indices == sample)[0])
-    motor, frames = reconstruct(run, run.latents[row : row + 1])
+    motor, frames = reconstruct(run, run.latents[row : row + 1], device=device)
     truth = data.subset([sample])
     arrays = {"motor": np.asarray(truth.motor[0]), "generated_motor": motor[0]}
     if truth.images is not None:
