@@ -11,7 +11,10 @@ import typer.main
 def _params(command: str) -> dict:
     from primspace.cli import app
 
-    return {p.name: p for p in typer.main.get_command(app).commands[command].params}
+    found = typer.main.get_command(app)
+    for name in command.split():
+        found = found.commands[name]
+    return {p.name: p for p in found.params}
 
 
 def _default(command: str, name: str):
@@ -57,9 +60,24 @@ def test_threads_default_is_the_train_configs_on_every_command_where_torch_runs(
     assert _default(command, "threads") == TrainConfig().threads
 
 
-@pytest.mark.parametrize("command", ["train", "infer", "reconstruct", "animate"])
+#: The experiments run torch in their runs: --threads and --device go to the preset's TrainConfig.
+_GRIDS = ["demo"] + [f"experiment {name}" for name in
+                     ("intra", "clustering", "success", "inter", "composite", "tune", "predict", "scene", "all")]
+
+
+@pytest.mark.parametrize("command", ["train", "infer", "reconstruct", "animate", *_GRIDS])
 def test_device_is_an_option_where_a_model_runs(command):
     assert "device" in _params(command)
+
+
+@pytest.mark.parametrize("command", _GRIDS)
+def test_threads_of_an_experiment_default_to_the_presets_one_per_run(command):
+    from primspace.experiments.presets import PRESETS
+
+    assert _default(command, "threads") is None and _default(command, "device") is None  # the preset's:
+    assert {p.train.threads for p in PRESETS.values()} == {1}
+    changed = PRESETS["demo"].with_overrides(threads=2, device="cpu").train
+    assert (changed.threads, changed.device) == (2, "cpu")
 
 
 def _blas_threads() -> int:

@@ -30,10 +30,13 @@ from primspace.report import build_report
 __all__ = ["run_demo"]
 
 
-def run_demo(out_dir: str | Path, *, workers: int = 2, progress: bool | None = None) -> str:
-    """Run the demo into ``out_dir``; return a text summary (report path, table, verdict)."""
+def run_demo(out_dir: str | Path, *, workers: int = 2, progress: bool | None = None, device: str | None = None,
+             threads: int | None = None) -> str:
+    """Run the demo into ``out_dir``; return a text summary (report path, table, verdict).
+    ``device``, ``threads``: each run's (None: the demo preset's, auto and 1)."""
     start = time.perf_counter()
-    exp = ExperimentDir(out_dir, PRESETS["demo"], workers=workers, progress=progress)
+    preset = PRESETS["demo"].with_overrides(device=device, threads=threads)
+    exp = ExperimentDir(out_dir, preset, workers=workers, progress=progress)
     announce(f"demo 1/5: the simulated data set ({exp.path})", enabled=progress)
     exp.dataset()
     announce("demo 2/5: intra-primitive runs (fit on 20%, infer the rest, per init and q)", enabled=progress)

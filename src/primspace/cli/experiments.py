@@ -11,7 +11,7 @@ import typer
 from primspace.errors import UserError
 
 from primspace.cli.app import app
-from primspace.cli.options import check_workers, echo_table, int_list, name_list
+from primspace.cli.options import check_workers, device_option, echo_table, int_list, name_list, threads_option
 from primspace.cli.train import LossReduction
 
 
@@ -90,6 +90,14 @@ def _fit_infer_epochs(text: str) -> tuple[int, int | None]:
     return (values + (None,))[:2]
 
 
+#: --device and --threads of the commands that run a grid of runs (the preset's TrainConfig).
+_RUN_DEVICE_HELP = "Where each run trains: auto, cpu, cuda or cuda:N (default: the preset's, auto)."
+_RUN_THREADS_HELP = ("CPU threads of torch and BLAS per run (default: the preset's, 1: the runs go in parallel, "
+                     "--workers of them).")
+_INITS_HELP = "Override the initialisations compared (by inter too, for inter and all), e.g. zero,projection,calibrated."
+_VISION_FRAMES_HELP = "Vision loss on K drawn frames per sequence and step (default: every frame)."
+
+
 def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None,
                         preset_names: str | None = None) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
@@ -110,17 +118,15 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
         workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
         seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."),
         latent_dims: Optional[str] = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."),
-        inits: Optional[str] = typer.Option(
-            None, "--inits", help="Override the initialisations compared (by inter too, for inter and all), e.g. zero,projection,calibrated."
-        ),
+        inits: Optional[str] = typer.Option(None, "--inits", help=_INITS_HELP),
         seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
         epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
         images: Optional[bool] = typer.Option(None, "--images/--no-images", help="Override whether the vision loss is trained."),
-        vision_frames: Optional[int] = typer.Option(
-            None, "--vision-frames", help="Vision loss on K drawn frames per sequence and step (default: every frame)."
-        ),
+        vision_frames: Optional[int] = typer.Option(None, "--vision-frames", help=_VISION_FRAMES_HELP),
         loss_reduction: Optional[LossReduction] = typer.Option(None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
+        device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
+        threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
     ) -> None:
         import importlib
 
@@ -133,6 +139,7 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             "images": images,
             "vision_frames": vision_frames,
             "loss_reduction": None if loss_reduction is None else loss_reduction.value,
+            "device": device, "threads": threads,
         }
         if epochs is not None:
             fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
@@ -236,11 +243,13 @@ def report_command(directory: Path = typer.Argument(..., help="An experiment dir
 def demo_command(
     out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Where the demo writes its data, runs and report."),
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+    device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
+    threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
 ) -> None:
     """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
     from primspace.demo import run_demo
     from primspace.parallel import default_workers
 
     check_workers(workers)
-    summary = run_demo(out, workers=workers or default_workers())
+    summary = run_demo(out, workers=workers or default_workers(), device=device, threads=threads)
     typer.echo(summary)

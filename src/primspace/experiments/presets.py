@@ -198,8 +198,8 @@ class ExperimentPreset:
     def with_overrides(self, **changes) -> "ExperimentPreset":
         """A copy with some fields changed (``None`` values are ignored), checked.
 
-        ``vision_frames`` and ``loss_reduction`` are :class:`~primspace.train.TrainConfig`
-        fields: they replace those of the preset's ``train``.
+        ``vision_frames``, ``loss_reduction``, ``device`` and ``threads`` are
+        :class:`~primspace.train.TrainConfig` fields: they replace those of the preset's ``train``.
 
         Raises
         ------
@@ -209,7 +209,7 @@ class ExperimentPreset:
         from primspace.latent import START_METHODS
 
         changes = {k: v for k, v in changes.items() if v is not None}
-        for key in ("vision_frames", "loss_reduction"):  # training settings: they go into the preset's TrainConfig
+        for key in ("vision_frames", "loss_reduction", "device", "threads"):  # training settings: they go into the preset's TrainConfig
             if key in changes:
                 changes["train"] = replace(changes.get("train", self.train), **{key: changes.pop(key)})
                 changes["train"].validate()
