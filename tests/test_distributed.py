@@ -32,7 +32,7 @@ from test_train import primitives
 from test_vision_frames import SMALL
 
 # 13 samples in batches of 4: the last batch has one sample, so one process has none
-BASE = dict(epochs=2, batch_size=4, threads=1, seed=0, checkpoint_every=1)
+BASE = dict(epochs=2, batch_size=4, threads=1, seed=0, checkpoint_every=1, final_lr_fraction=1.0)  # resumed to 3 below
 IMAGES = dict(BASE, vision_frames=3, loss_reduction="sum")
 MOTOR_ONLY = dict(BASE, vision_weight=0.0)  # the model has an image head, its loss is not trained
 INFER_ROWS = [0, 4, 5, 9, 12]

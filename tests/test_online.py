@@ -12,7 +12,7 @@ from primspace.predict.online import OnlineInference, infer_online, offline_erro
 from primspace.model import ModelConfig
 from test_train import SMALL, primitives
 
-FAST = dict(batch_size=12, threads=1)
+FAST = dict(batch_size=12, threads=1, final_lr_fraction=1.0)  # online steps at a constant rate, as infer here
 MODEL = ModelConfig(latent_dim=20, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=32, motor_hidden=32)
 
 

@@ -150,9 +150,10 @@ def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
     assert result["method"] == "synthesis" and result["n_primitives"] == 3 and len(result["boundaries"]) == 4
     assert 0 <= result["scores"]["boundary"]["f1"] <= 1 and result["scores"]["segments_true"] == 12
     assert np.load(tmp_path / "seg" / "step_labels.npy").shape == (4, 90)
-    assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--min-steps", "5", "--out",
+    windows = ("--method", "windows")  # a single-primitive run is segmented by synthesis unless told otherwise
+    assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", *windows, "--min-steps", "5", "--out",
                               tmp_path / "s2"), "--min-steps, --max-steps, --offset and --infer-epochs apply")
-    assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--out", tmp_path / "s3"),
+    assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", *windows, "--out", tmp_path / "s3"),
                       "--method windows needs a run trained with --code-window")
 
 
