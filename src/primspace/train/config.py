@@ -104,10 +104,11 @@ class TrainConfig:
         CPU threads of torch's intra-op pool and of numpy's BLAS while :func:`~primspace.train.fit`
         or :func:`~primspace.train.infer` runs, put back after (:func:`thread_limit`;
         :func:`configure_process` sets them for the whole process). Default 1: more threads
-        than free cores make torch's threads wait on each other (a small fit on a 2-core
-        machine that others used took 8.2 s with 1 thread, 52.8 s with 2, torch's
-        default), and one thread gives the same numbers on every machine (the count
-        changes float summation order). Raise it on a machine of your own with an image
+        than free cores make the threads wait on each other (on a 2-core machine that
+        others used, a small fit took 8.2-9.1 s with 1 thread, 52.8-173.9 s with 2 and
+        541.7 s with torch's default; numpy's BLAS 3.1 s with 1 thread, 17.2 s with 2), and
+        one thread gives the same numbers on every machine (the count changes float
+        summation order). Raise it on a machine of your own with an image
         head or large batches. None: leave both as they are.
     tune_malloc : bool
         On Linux/glibc CPU runs, keep freed memory in the heap (``mallopt``) so large
