@@ -65,5 +65,5 @@ def test_train_with_stderr_not_a_terminal_logs_its_epochs(run_cli, tmp_path, log
     assert res.code == 0, res.err
     lines = [line for line in res.err.splitlines() if line.strip()]
     assert any(re.match(_STAMP + r"fit run: running", line) for line in lines), lines
-    assert re.match(_STAMP + r"fit run: done \(10/10, loss [\d.e-]+ +\d+ samples/s\) in", lines[-1]), lines
+    assert re.match(_STAMP + r"fit run: done \(10/10, loss [\d.e-]+, \d+ samples/s\) in", lines[-1]), lines
     assert "wrote" in res.out

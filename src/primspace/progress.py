@@ -16,6 +16,7 @@ tenth of its steps, and a line when it ends, with its time.
 from __future__ import annotations
 
 import contextlib
+import re
 import sys
 import threading
 import time
@@ -70,7 +71,7 @@ class _LogLines:
                 shown = self.fields.format(task=SimpleNamespace(fields=self.values))
             except (KeyError, ValueError, TypeError):
                 shown = ""
-        return ", ".join(p for p in (count, " ".join(shown.split())) if p)
+        return ", ".join(p for p in (count, re.sub(r"\s{2,}", ", ", shown.strip())) if p)  # a bar's gaps: commas
 
     def _first(self) -> None:
         with self.lock:
@@ -193,7 +194,5 @@ def announce(text: str, *, enabled: bool | None = None) -> None:
 
 def _placeholders(fields: str) -> dict:
     """Initial values for the fields a format string names, so it renders before the first update."""
-    import re
-
     names = re.findall(r"task\.fields\[(\w+)\]", fields)
     return {name: float("nan") for name in names}
