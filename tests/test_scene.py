@@ -158,3 +158,35 @@ def test_primitive_without_scene_is_refused(run_cli, scene_files, tmp_path):
     res = run_cli("predict", scene_files / "run", scene_files / "data.h5", "--primitive", "0", "--out", tmp_path / "o")
     assert_user_error(res, "go with --scene")
     assert not (tmp_path / "o").exists()
+
+
+def test_a_primitive_is_asked_for_by_its_label_name(image_run, image_set, clusters):
+    """Issue 37: `--primitive push` performs the cluster mostly of label 'push' (clusters are
+    numbered by first member, not by label), and a name no cluster holds is refused in one line."""
+    for name in {n for n in clusters.names if n is not None}:
+        k = clusters.check(name)
+        assert clusters.names[k] == name
+        assert clusters.sizes[k] == max(s for s, n in zip(clusters.sizes, clusters.names) if n == name)
+    assert clusters.check(1) == 1
+    if "7" not in clusters.names:
+        with pytest.raises(UserError, match="choose 0..2"):
+            clusters.check("7")  # digits that name no cluster: a cluster id
+    with pytest.raises(UserError, match="no cluster of the fitted codes is mostly 'wave'"):
+        clusters.check("wave")
+
+
+def test_the_scene_predictor_is_the_scene_mode_with_the_predictor_interface(image_run, image_set, clusters):
+    from primspace.predict.scene import ScenePredictor
+
+    predictor = ScenePredictor(image_run, label_names=image_set.label_names, rank=1, epochs=3)
+    predictor.fit(None, image_set.labels)
+    assert predictor.needs_labels and np.array_equal(predictor.clusters_.labels, clusters.labels)
+    k = int(np.argmax(clusters.sizes))
+    scaled = image_run.scaler.transform(image_set.motor)
+    forecast = predictor.forecast(scaled, None, [k] * len(image_set), image_set.lengths, image_set.images)
+    direct = predict_scene(image_run, image_set, k, clusters=clusters, rank=1, epochs=3, frames=False)
+    np.testing.assert_allclose(forecast.codes, direct.codes, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(forecast.motor, image_run.scaler.transform(direct.motor), rtol=1e-4, atol=1e-5)
+    by_name = predictor.forecast(scaled, None, [clusters.names[k]] * len(image_set), image_set.lengths,
+                                 image_set.images)
+    np.testing.assert_array_equal(by_name.codes, forecast.codes)

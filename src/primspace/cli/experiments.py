@@ -221,7 +221,7 @@ def summarize_command(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier summary at OUT (nothing else)."),
 ) -> None:
     """Write the small summary of an experiment that the docs' tables are generated from
-    (`python -m primspace.docs`); run it on the machine that ran the experiment (it records the CPU)."""
+    (`python -m primspace.report.markdown`); run it on the machine that ran the experiment (it records the CPU)."""
     from primspace.experiments.summary import summarize, write_summary
     from primspace.outputs import output_file
 

@@ -6,7 +6,8 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
 * :class:`MixturePredictor`: the posterior over the run's fitted codes, offline and online
   (no gradient; the default, the best we have measured);
 * :class:`GradientPredictor`: gradient inference of the code from a start, offline and online;
-* :mod:`primspace.predict.scene`: the whole motion from the first frame and joints, the primitive given;
+* :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the whole motion from the first frame and
+  joints, the primitive given (a cluster id or a label name);
 * the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
 
 :func:`predict` runs one on a data set and scores it (:func:`~primspace.predict.metrics.unobserved_mse`,
@@ -30,11 +31,12 @@ from primspace.predict.grid import grid_predictions
 from primspace.predict.metrics import finite_mean, frame_errors, observed_prefix, unobserved_mse
 from primspace.predict.mixture import MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.predict.scene import ScenePredictor, predict_scene
 
 __all__ = [
     "Predictor", "Forecast", "observed_mask", "observation_rule", "Prediction", "predict", "make_predictor",
     "fit_predictor", "run_predictor", "grid_predictions", "MixturePredictor", "GradientPredictor", "CodeMixture",
-    "code_mixture", "continuity_correction", "ProMPPeer", "NearestPeer", "MeanMotionPeer", "best_noise",
+    "code_mixture", "continuity_correction", "ScenePredictor", "predict_scene", "ProMPPeer", "NearestPeer", "MeanMotionPeer", "best_noise",
     "unobserved_mse", "frame_errors", "finite_mean", "observed_prefix", "MIXTURE", "PREDICT_STARTS",
     "DEFAULT_PREDICTOR", "DEFAULT_PREDICT_EPOCHS",
 ]

@@ -134,7 +134,7 @@ def make_predictor(run, init: str = DEFAULT_PREDICTOR, *, epochs: int = DEFAULT_
     if init not in PREDICT_STARTS:
         raise UserError(f"unknown start {init!r}: choose one of {', '.join(PREDICT_STARTS)}")
     if init == MIXTURE:
-        return MixturePredictor(run, condition=condition, continuity=continuity)
+        return MixturePredictor(run, condition=condition, continuity=continuity, progress=progress)
     return GradientPredictor(run, init, epochs=epochs, continuity=continuity, overrides=overrides or None,
                              progress=progress)
 

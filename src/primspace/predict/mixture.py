@@ -35,7 +35,7 @@ from primspace.predict.base import Forecast, Predictor, observation_rule, observ
 from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.online import OnlineResult
-from primspace.progress import progress_bar
+from primspace.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
 
@@ -65,15 +65,19 @@ class MixturePredictor(Predictor):
         Given the primitive: only the candidates built from fitted codes of the sample's own
         label (``labels`` of :meth:`fit` and :meth:`predict`), their posterior mean with the
         noise the label-free posterior mean chose (``condition`` must be False).
+    progress : bool, optional
+        Show the decoding and the leave-one-out choices (a spinner in a terminal, a line per
+        stage in a log; default: as :func:`primspace.progress.stage`).
     """
 
     def __init__(self, run, condition: bool = True, continuity: bool = True, candidates: CodeMixture | None = None,
-                 per_label: bool = False):
+                 per_label: bool = False, progress: bool | None = False):
         self.run = run
         self.condition = condition
         self.continuity = continuity
         self.candidates = candidates
         self.per_label = per_label
+        self.progress = progress
 
     @property
     def needs_labels(self) -> bool:
@@ -90,7 +94,11 @@ class MixturePredictor(Predictor):
                             f"(one per code), got {len(motor)}")
         self.fitted_, self.valid_ = motor, valid_mask(check_lengths(lengths, *motor.shape[:2]), motor.shape[1])
         self.fitted_lengths_ = check_lengths(lengths, *motor.shape[:2])
-        self.mixture_ = self.candidates if self.candidates is not None else code_mixture(self.run_)
+        if self.candidates is not None:
+            self.mixture_ = self.candidates
+        else:
+            with stage(f"mixture: decoding the candidates of {len(motor)} fitted codes", enabled=self.progress):
+                self.mixture_ = code_mixture(self.run_)
         self.noises_: dict = {}  # σ² per prefix length, online
         if self.per_label:
             if labels is None or self.condition:
@@ -105,8 +113,10 @@ class MixturePredictor(Predictor):
         choices = self.mixture_.choices
         if key not in choices:
             observed = rule.masks(self.fitted_lengths_, self.fitted_.shape[1])[0]
-            choices[key] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_,
-                                                      conditions=CONDITION_GRID if self.condition else (None,))
+            with stage(f"mixture: choosing its noise by leave-one-out on {len(self.fitted_)} fitted demonstrations",
+                       enabled=self.progress):
+                choices[key] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_,
+                                                          conditions=CONDITION_GRID if self.condition else (None,))
         return choices[key]
 
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
@@ -169,7 +179,8 @@ class MixturePredictor(Predictor):
         keep = length if prediction_after is None else int(prediction_after)
         if keep not in steps:
             raise UserError(f"prediction_after must be a step in {int(start_step)}..{length}, got {prediction_after!r}")
-        noises = {int(t): self.online_noise(int(t)) for t in steps}
+        with stage(f"mixture: choosing its noise for {len(steps)} prefix lengths", enabled=self.progress):
+            noises = {int(t): self.online_noise(int(t)) for t in steps}
         lengths = check_lengths(lengths, n, length)
         valid = valid_mask(lengths, length)
         mixture = self.mixture_

@@ -47,6 +47,7 @@ from primspace.data.steps import valid_steps
 from primspace.errors import UserError
 from primspace.latent import LatentTable
 from primspace.predict.api import Prediction
+from primspace.predict.base import Forecast, Predictor
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS
 from primspace.predict.metrics import frame_errors, unobserved_mse
 from primspace.progress import progress_bar
@@ -57,7 +58,7 @@ from primspace.train.loop import DataTensors, code_step
 from primspace.train.observe import FIRST, Observation, observation_masks
 from primspace.train.starts import fitted_samples
 
-__all__ = ["SCENE", "SCENE_VARIANCE", "SceneClusters", "cluster_codes", "scene_clusters", "affine_subspace",
+__all__ = ["SCENE", "SCENE_VARIANCE", "SceneClusters", "ScenePredictor", "cluster_codes", "scene_clusters", "affine_subspace",
            "infer_in_subspace", "predict_scene", "run_scene_point"]
 
 #: ``Prediction.init`` and ``result.json``'s ``mode`` of a scene-only prediction.
@@ -106,13 +107,12 @@ class SceneClusters:
     def check(self, primitive) -> int:
         """``primitive`` as a cluster id, or one line naming the valid range. A label name (a str,
         e.g. ``"push"``) is the cluster whose members' majority label has that name (of several,
-        the largest); a str of digits is a cluster id."""
+        the largest); a str of digits that names no cluster is a cluster id."""
         k = self.n_clusters
         if isinstance(primitive, str):
-            if primitive.strip().isdigit():
-                primitive = int(primitive)
-            else:
+            if primitive in self.names or not primitive.strip().isdigit():
                 return self.named(primitive)
+            primitive = int(primitive)
         if isinstance(primitive, (bool, np.bool_)) or not isinstance(primitive, (int, np.integer)) \
                 or not 0 <= primitive < k:
             raise UserError(f"primitive {primitive!r} is out of range: the run's fitted codes form {k} clusters, "
@@ -306,6 +306,76 @@ def predict_scene(run, data: MotionDataset, primitive: int | str, *, clusters: S
     return Prediction(codes=codes, motor=motor, frames=predicted_frames, motor_observed=motor_observed,
                       frames_observed=frames_observed, indices=idx, errors=errors,
                       observation=_observation().to_dict(), init=SCENE, epochs=int(epochs), details=details)
+
+
+class ScenePredictor(Predictor):
+    """The scene mode as a predictor: each motion from its first frame and first joints, as the
+    primitive asked for (``labels`` of :meth:`forecast`: a cluster id or a label name each).
+
+    :meth:`fit` clusters the run's fitted codes (``motor`` is not read: the fitted codes are
+    the run's; ``labels`` name the clusters by majority and count them when ``n_clusters`` is
+    None); :meth:`forecast` searches each motion's code in its primitive's affine subspace
+    (:func:`infer_in_subspace`). ``observed`` is not read: the scene mode observes the first
+    step of the joints and the first frame, always.
+
+    Parameters
+    ----------
+    run : TrainedRun or path-like
+        A fitted run with an image head.
+    n_clusters : int, optional
+        Clusters of the fitted codes (default: the number of distinct fitted labels).
+    label_names : list of str, optional
+        The names of the fitted labels (so that a primitive may be asked for by name).
+    rank : int, optional
+        The subspace's dimension (default: 90 % of the cluster's variance).
+    epochs : int
+    overrides : dict, optional
+        Train-config overrides of the search (``latent_lr``, ``batch_size``, ``seed`` ...).
+    progress : bool, optional
+    """
+
+    needs_labels = True
+
+    def __init__(self, run, n_clusters: int | None = None, label_names=None, rank: int | None = None,
+                 epochs: int = DEFAULT_PREDICT_EPOCHS, overrides: dict | None = None, progress: bool | None = False):
+        self.run = run
+        self.n_clusters = n_clusters
+        self.label_names = label_names
+        self.rank = rank
+        self.epochs = epochs
+        self.overrides = overrides
+        self.progress = progress
+
+    def fit(self, motor=None, labels=None, lengths=None, frames=None) -> "ScenePredictor":
+        """Cluster the run's fitted codes (``labels``: the fitted demonstrations', in its order)."""
+        self.run_ = as_run(self.run)
+        n = self.n_clusters
+        if n is None:
+            if labels is None:
+                raise UserError("the scene mode clusters the fitted codes and needs the number of clusters "
+                                "(n_clusters) or the fitted labels to count them by")
+            labels = np.asarray(labels)
+            n = int(np.unique(labels[labels >= 0]).size)
+        self.clusters_ = cluster_codes(self.run_.latents, n, labels, self.label_names,
+                                       random_state=int(self.run_.train_config.seed))
+        return self
+
+    def forecast(self, motor, observed=None, labels=None, lengths=None, frames=None) -> Forecast:
+        """Each motion (scaled units) as the primitive ``labels[i]`` asks for, and its code."""
+        if labels is None or frames is None:
+            raise UserError("the scene mode needs each motion's primitive (labels) and its frames")
+        motor = np.asarray(motor, dtype=np.float64)
+        wanted = [self.clusters_.check(k) for k in labels]
+        physical = self.run_.scaler.inverse_transform(motor).astype(np.float32)
+        data = MotionDataset(motor=physical, lengths=None if lengths is None else np.asarray(lengths), images=frames)
+        codes = np.empty((len(motor), self.run_.latents.shape[1]), dtype=np.float32)
+        for k in sorted(set(wanted)):
+            rows = np.flatnonzero(np.asarray(wanted) == k)
+            mean, basis = self.clusters_.subspace(k, self.rank)
+            codes[rows] = infer_in_subspace(self.run_, data.subset(rows), mean, basis, epochs=self.epochs,
+                                            progress=self.progress, **(self.overrides or {}))
+        scaled = self.run_.scaler.transform(reconstruct(self.run_, codes, images=False)[0])
+        return Forecast(scaled, codes, {"mode": SCENE, "primitives": [int(k) for k in wanted]})
 
 
 def run_scene_point(fit, fitted: MotionDataset, test: MotionDataset, epochs: int) -> dict:
