@@ -386,3 +386,14 @@ def test_the_predicted_data_set_keeps_the_data_files_sample_numbers(trained, tra
     p = predict(trained, eval_set, observe=0.5, indices=[3, 1], fitted_data=train_set, frames=False)
     assert p.indices.tolist() == [3, 1]
     assert list(p.to_dataset(eval_set).source_ids) == ["sample 3", "sample 1"]
+
+
+def test_predicted_joints_stay_within_their_recorded_range(trained, train_set, eval_set):
+    """Issue 37, section 3: a predicted joint (a gripper) never leaves the range the fitted
+    demonstrations recorded, whatever the predictor."""
+    lo, hi = trained.scaler.data_min_, trained.scaler.data_max_
+    for init in ("random", MIXTURE):  # random's prediction leaves the range here without the bound
+        p = predict(trained, eval_set, observe=0.25, init=init, epochs=3, fitted_data=train_set, frames=False)
+        assert (p.motor >= lo - 1e-5).all() and (p.motor <= hi + 1e-5).all(), init
+    raw = predict(trained, eval_set, observe=0.25, init="zero", epochs=3, fitted_data=train_set, frames=False)
+    assert np.isfinite(raw.errors["motor_mse"]).all()

@@ -216,6 +216,10 @@ def predict(
     Returns
     -------
     Prediction
+        Its motion stays within each joint's recorded range (the minimum and maximum of
+        the fitted demonstrations, which the run's scaler maps onto [-1, 1]): a gripper
+        predicted beyond fully open or closed is set to that bound, and the errors are
+        those of the motion returned.
 
     Raises
     ------
@@ -241,6 +245,7 @@ def predict(
         forecast = run_predictor(fit_predictor(predictor, parent, fitted_data), parent, data, observation)
         codes, scaled, details = forecast.codes, forecast.motor, forecast.details
         init_used = getattr(predictor, "start_", MIXTURE)
+    scaled = np.clip(scaled, -1.0, 1.0)  # within each joint's recorded range (the scaler maps it onto [-1, 1])
     predicted_frames = None
     if frames and parent.model_config.has_images:
         predicted_frames = reconstruct(parent, codes, images=True)[1]
