@@ -24,7 +24,7 @@ import torch
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import UserError
 from primspace.calibration import CodeCalibration
-from primspace.latent import CALIBRATABLE, CALIBRATED, INFER_STARTS, NEAREST, LatentInitializer, LatentTable
+from primspace.latent import CALIBRATABLE, INFER_STARTS, LatentInitializer, LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device, thread_limit
 from primspace.train.logger import check_log_to
