@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from primspace.cli.app import app
+from primspace.cli.options import threads_option
 from primspace.errors import UserError
 
 #: The mark ``predict`` writes into its data file and figure (primspace.outputs).
@@ -81,7 +82,7 @@ def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | Non
 @app.command("predict")
 def predict_command(
     run: Path = typer.Argument(..., help="A fitted run directory (its weights are frozen)."),
-    file: Path = typer.Argument(..., help="A MotionDataset HDF5 file with the motions to predict."),
+    file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file with the motions to predict."),
     out: Path = typer.Option(..., "--out", "-o", help="The folder to write (predicted.h5, result.json, prediction.png)."),
     observe: Optional[str] = typer.Option(None, "--observe", help="Observed joints: a fraction of each motion's valid "
                                           "steps (0.25, the default), a number of steps (10), or none (frames only)."),
@@ -100,7 +101,7 @@ def predict_command(
     latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Gradient starts: the codes' learning rate "
                                               "(default: the run's)."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of a random start (default: the run's)."),
-    threads: Optional[int] = typer.Option(None, "--threads", help="Threads of torch and BLAS (default: 1)."),
+    threads: Optional[int] = threads_option(),
     online: bool = typer.Option(False, "--online", help="Steps arrive one at a time: --iterations inference steps "
                                 "after each, warm-started (predictive coding); result.json gets the latency per step "
                                 "and the error of the rest after each step."),
@@ -111,8 +112,9 @@ def predict_command(
     primitive: Optional[str] = typer.Option(None, "--primitive", help="With --scene: the primitive to perform, a label "
                                             "name of the fitted data (push) or a cluster id (clusters numbered by "
                                             "their first fitted demonstration; result.json lists their majority labels)."),
-    clusters: Optional[int] = typer.Option(None, "--clusters", help="With --scene: how many clusters of the fitted "
-                                           "codes (default: the number of distinct labels of the fitted data)."),
+    clusters: Optional[int] = typer.Option(None, "--primitives", "-k", help="With --scene: the number of primitives K, "
+                                           "the clusters of the fitted codes (default: the number of distinct labels of "
+                                           "the fitted data)."),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
 ) -> None:
@@ -178,7 +180,7 @@ def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames
     """One line for flags that do not go with (or without) ``--scene``."""
     if not scene:
         if primitive is not None or clusters is not None:
-            raise UserError("--primitive and --clusters go with --scene (the scene-only mode)")
+            raise UserError("--primitive and --primitives go with --scene (the scene-only mode)")
         return
     given = [name for name, value in (("--observe", observe), ("--observe-frames", observe_frames), ("--init", init),
                                       ("--online", online or None)) if value is not None]

@@ -183,7 +183,7 @@ def scene_clusters(run, n_clusters: int | None = None, *, fitted_data: MotionDat
         if labels is None:
             why = "has no data file" if fitted is None else "fitted data has no labels"
             raise UserError(f"the scene mode clusters the fitted codes and the run {why} to count primitives by: "
-                            "give the number of clusters (n_clusters, --clusters N)")
+                            "give the number of clusters (n_clusters, --primitives K)")
         n_clusters = int(np.unique(labels[labels >= 0]).size)
     return cluster_codes(parent.latents, n_clusters, labels, None if fitted is None else fitted.label_names,
                          r2_target=r2_target, random_state=int(parent.train_config.seed))
