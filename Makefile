@@ -33,7 +33,8 @@ demo: install
 	$(VENV)/bin/primspace demo
 
 lint: install-test
-	$(VENV)/bin/ruff check src tests benchmarks
+	$(VENV)/bin/ruff check src tests benchmarks docs
+	$(VENV)/bin/ruff format --check src tests benchmarks docs
 
 test: install-test lint
 	$(PY) -m pytest $(PYTEST_ARGS)

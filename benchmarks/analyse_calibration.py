@@ -59,13 +59,18 @@ def main() -> None:
     parser.add_argument("--latent-dim", type=int, default=8)
     parser.add_argument("--fit-epochs", type=int, help="Default: 400, or the preset's.")
     parser.add_argument("--infer-epochs", type=int, help="Default: 250, or the preset's.")
-    parser.add_argument("--preset", help="Train as this experiment preset does (its optimiser, epochs, train "
-                                         "fraction); default: TrainConfig() as `primspace train` without flags.")
+    parser.add_argument(
+        "--preset",
+        help="Train as this experiment preset does (its optimiser, epochs, train "
+        "fraction); default: TrainConfig() as `primspace train` without flags.",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--velocities", action="store_true", help="LASA with vx, vy beside x, y.")
     parser.add_argument("--data", type=Path, help="Another data set (.h5, with labels) instead of LASA.")
-    parser.add_argument("--figures-only", action="store_true", help="Redraw the figures from OUT/calibration_analysis.json.")
+    parser.add_argument(
+        "--figures-only", action="store_true", help="Redraw the figures from OUT/calibration_analysis.json."
+    )
     args = parser.parse_args()
     if args.figures_only:
         result = json.loads((args.out / "calibration_analysis.json").read_text())
@@ -112,8 +117,9 @@ def main() -> None:
 
     def run_from(start: str, epochs: int = args.infer_epochs, **overrides):
         if start in given:
-            return infer(proj, data, None, epochs=epochs, indices=held, initial_latents=given[start], progress=False,
-                         **overrides)
+            return infer(
+                proj, data, None, epochs=epochs, indices=held, initial_latents=given[start], progress=False, **overrides
+            )
         init = {"zero (same θ)": "zero"}.get(start, start)
         return infer(proj, data, None, epochs=epochs, indices=held, init=init, progress=False, **overrides)
 
@@ -122,20 +128,34 @@ def main() -> None:
     table = {}
     for name, run in inferred.items():
         losses = per_sample_loss(run, data)
-        table[name] = {"start": run.history[0]["loss"], "final": run.history[-1]["loss"],
-                       "curve": [h["loss"] for h in run.history], "per_sample": losses.tolist()}
+        table[name] = {
+            "start": run.history[0]["loss"],
+            "final": run.history[-1]["loss"],
+            "curve": [h["loss"] for h in run.history],
+            "per_sample": losses.tolist(),
+        }
 
     # codes before and after the fit (train part) and after inference (held-out part)
     cal = proj.calibration
     cos = (pm_train * z_train).sum(1) / (np.linalg.norm(pm_train, axis=1) * np.linalg.norm(z_train, axis=1))
     codes = {
-        "fit": {"movement": cal.movement_, "identity_r2": cal.identity_r2_, "heldout_r2": cal.heldout_r2_,
-                "alpha": cal.alpha_, "norm_pm": np.linalg.norm(pm_train, axis=1).tolist(),
-                "norm_fitted": np.linalg.norm(z_train, axis=1).tolist(), "cos": cos.tolist(),
-                "mean_fitted_norm": float(np.linalg.norm(z_train.mean(0))), "mean_pm_norm": float(np.linalg.norm(pm_train.mean(0)))},
+        "fit": {
+            "movement": cal.movement_,
+            "identity_r2": cal.identity_r2_,
+            "heldout_r2": cal.heldout_r2_,
+            "alpha": cal.alpha_,
+            "norm_pm": np.linalg.norm(pm_train, axis=1).tolist(),
+            "norm_fitted": np.linalg.norm(z_train, axis=1).tolist(),
+            "cos": cos.tolist(),
+            "mean_fitted_norm": float(np.linalg.norm(z_train.mean(0))),
+            "mean_pm_norm": float(np.linalg.norm(pm_train.mean(0))),
+        },
         "fit_losses": {i: r.history[-1]["loss"] for i, r in runs.items()},
         "norm_pm_new": np.linalg.norm(pm_new, axis=1).tolist(),
-        "norm_inferred": {s: np.linalg.norm(inferred[s].latents, axis=1).tolist() for s in ("projection", "calibrated", "zero (same θ)")},
+        "norm_inferred": {
+            s: np.linalg.norm(inferred[s].latents, axis=1).tolist()
+            for s in ("projection", "calibrated", "zero (same θ)")
+        },
     }
 
     # sensitivity: latent learning rate and inference epochs
@@ -143,7 +163,9 @@ def main() -> None:
     sensitivity = {"latent_lr": {}, "epochs": {}}
     for start in ("projection", "calibrated", "zero (same θ)"):
         sensitivity["latent_lr"][start] = {
-            str(f * base_lr): (table[start]["final"] if f == 1 else run_from(start, latent_lr=f * base_lr).history[-1]["loss"])
+            str(f * base_lr): (
+                table[start]["final"] if f == 1 else run_from(start, latent_lr=f * base_lr).history[-1]["loss"]
+            )
             for f in (0.3, 1, 3)
         }
         sensitivity["epochs"][start] = {
@@ -152,11 +174,23 @@ def main() -> None:
         }
 
     what = str(args.data) if args.data else "LASA, 26 shapes x 7, T = 61" + (", x y vx vy" if args.velocities else "")
-    result = {"setting": {"data": what, "n_fit": len(train), "n_infer": len(held),
-                          "latent_dim": args.latent_dim, "fit_epochs": args.fit_epochs, "infer_epochs": args.infer_epochs,
-                          "seed": args.seed, "preset": args.preset, "train_config": tc.to_dict()},
-              "starts": table, "codes": codes, "sensitivity": sensitivity,
-              "seconds": round(time.perf_counter() - start_time, 1)}
+    result = {
+        "setting": {
+            "data": what,
+            "n_fit": len(train),
+            "n_infer": len(held),
+            "latent_dim": args.latent_dim,
+            "fit_epochs": args.fit_epochs,
+            "infer_epochs": args.infer_epochs,
+            "seed": args.seed,
+            "preset": args.preset,
+            "train_config": tc.to_dict(),
+        },
+        "starts": table,
+        "codes": codes,
+        "sensitivity": sensitivity,
+        "seconds": round(time.perf_counter() - start_time, 1),
+    }
     (args.out / "calibration_analysis.json").write_text(json.dumps(result, indent=1))
     _figures(result, args.out)
     _print(result)
@@ -168,13 +202,19 @@ def _print(result: dict) -> None:
     print(f"{'start':<20}{'start loss':>12}{'final loss':>12}{'final / projection':>20}{'median':>10}{'worst 10%':>11}")
     for name, s in starts.items():
         per = np.sort(s["per_sample"])
-        print(f"{name:<20}{s['start']:>12.4g}{s['final']:>12.4g}{s['final'] / ref:>20.3g}{np.median(per):>10.3g}"
-              f"{per[int(0.9 * len(per)):].mean():>11.3g}")
+        print(
+            f"{name:<20}{s['start']:>12.4g}{s['final']:>12.4g}{s['final'] / ref:>20.3g}{np.median(per):>10.3g}"
+            f"{per[int(0.9 * len(per)) :].mean():>11.3g}"
+        )
     c = result["codes"]["fit"]
-    print(f"fit: movement {c['movement']:.3f}, R^2 of P m {c['identity_r2']:.3f}, held-out R^2 of the map {c['heldout_r2']:.3f}")
+    print(
+        f"fit: movement {c['movement']:.3f}, R^2 of P m {c['identity_r2']:.3f}, held-out R^2 of the map {c['heldout_r2']:.3f}"
+    )
     for what, d in result["sensitivity"].items():
-        print(f"sensitivity to {what}: " + "; ".join(f"{s}: " + ", ".join(f"{k} -> {v:.3g}" for k, v in vals.items())
-                                                     for s, vals in d.items()))
+        print(
+            f"sensitivity to {what}: "
+            + "; ".join(f"{s}: " + ", ".join(f"{k} -> {v:.3g}" for k, v in vals.items()) for s, vals in d.items())
+        )
     print(f"{result['seconds']:.0f} s")
 
 
@@ -188,18 +228,31 @@ def _figures(result: dict, out: Path) -> None:
     from primspace.plots import save_figure
     from primspace.plots.base import init_color
 
-    colours = {"zero (same θ)": "tab:cyan", "zero (own θ)": "tab:blue", "mean fitted code": "tab:gray",
-               "nearest neighbour": "tab:brown", "5 nearest": "tab:pink"}
+    colours = {
+        "zero (same θ)": "tab:cyan",
+        "zero (own θ)": "tab:blue",
+        "mean fitted code": "tab:gray",
+        "nearest neighbour": "tab:brown",
+        "5 nearest": "tab:pink",
+    }
     starts = result["starts"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for name, s in starts.items():
         colour = colours.get(name) or init_color(name)
         axes[0].plot(s["curve"], label=name, color=colour)
         axes[1].plot(np.sort(s["per_sample"]), np.linspace(0, 1, len(s["per_sample"])), label=name, color=colour)
-    axes[0].set(yscale="log", xlabel="inference epoch", ylabel="held-out loss (mean)",
-                title="Inference from each start (θ of the projection fit)")
-    axes[1].set(xscale="log", xlabel="per-sample final loss", ylabel="fraction of held-out samples",
-                title="Per-sample final losses (cumulative)")
+    axes[0].set(
+        yscale="log",
+        xlabel="inference epoch",
+        ylabel="held-out loss (mean)",
+        title="Inference from each start (θ of the projection fit)",
+    )
+    axes[1].set(
+        xscale="log",
+        xlabel="per-sample final loss",
+        ylabel="fraction of held-out samples",
+        title="Per-sample final losses (cumulative)",
+    )
     axes[0].legend(fontsize=7)
     save_figure(fig, out / "calibration_starts.png", dpi=90)
 
@@ -225,14 +278,29 @@ def _figures(result: dict, out: Path) -> None:
         ax.scatter(proj, other, s=8)
         lo, hi = min(proj.min(), other.min()), max(proj.max(), other.max())
         ax.plot([lo, hi], [lo, hi], "k:", lw=1)
-        ax.set(xscale="log", yscale="log", xlabel="projection: final loss", ylabel=f"{label}: final loss",
-               title=f"Per sample: projection vs {label}")
+        ax.set(
+            xscale="log",
+            yscale="log",
+            xlabel="projection: final loss",
+            ylabel=f"{label}: final loss",
+            title=f"Per sample: projection vs {label}",
+        )
     sens = result["sensitivity"]
     for start, vals in sens["latent_lr"].items():
-        axes[2].plot([float(k) for k in vals], list(vals.values()), "o-", label=start,
-                     color=colours.get(start) or init_color(start))
-    axes[2].set(xscale="log", yscale="log", xlabel="latent learning rate (inference)", ylabel="final held-out loss",
-                title="Sensitivity to the latent learning rate")
+        axes[2].plot(
+            [float(k) for k in vals],
+            list(vals.values()),
+            "o-",
+            label=start,
+            color=colours.get(start) or init_color(start),
+        )
+    axes[2].set(
+        xscale="log",
+        yscale="log",
+        xlabel="latent learning rate (inference)",
+        ylabel="final held-out loss",
+        title="Sensitivity to the latent learning rate",
+    )
     rates = [float(k) for k in next(iter(sens["latent_lr"].values()))]
     axes[2].set_xticks(rates, [f"{v:g}" for v in rates])
     axes[2].xaxis.set_minor_locator(matplotlib.ticker.NullLocator())

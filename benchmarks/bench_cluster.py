@@ -179,7 +179,9 @@ def main(argv=None) -> None:
     p.add_argument("--n-init", type=int, default=20)
     p.add_argument("--sklearn-n", type=float, default=1e4, help="size at which sklearn is compared (0: never)")
     p.add_argument("--sweep", action="store_true", help="time sweep() over an R^2 grid instead of one fit")
-    p.add_argument("--sweep-grid", default="", help="comma-separated R^2 targets for --sweep (default: the command's grid)")
+    p.add_argument(
+        "--sweep-grid", default="", help="comma-separated R^2 targets for --sweep (default: the command's grid)"
+    )
     p.add_argument("--repeat", type=int, default=1, help="--sweep: runs per size; the best is reported")
     p.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -187,8 +189,10 @@ def main(argv=None) -> None:
     if args.worker is not None:
         print(json.dumps(worker(args)))
         return
-    print(f"load before: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} "
-          f"(1/5/15 min), {os.cpu_count()} CPUs, threads {args.threads}, noise {args.noise}, R^2 target {args.r2}")
+    print(
+        f"load before: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} "
+        f"(1/5/15 min), {os.cpu_count()} CPUs, threads {args.threads}, noise {args.noise}, R^2 target {args.r2}"
+    )
     results = []
     for size in [int(float(s)) for s in args.sizes.split(",")]:
         r = run_worker(size, args)
@@ -201,9 +205,26 @@ def main(argv=None) -> None:
 
 def run_worker(size: int, args) -> dict:
     """One size in a fresh subprocess (its own peak memory and thread settings)."""
-    cmd = [sys.executable, __file__, "--worker", str(size), "--threads", str(args.threads), "--noise", str(args.noise),
-           "--r2", str(args.r2), "--n-init", str(args.n_init), "--sklearn-n", str(args.sklearn_n),
-           "--repeat", str(args.repeat), "--sweep-grid", args.sweep_grid] + (["--sweep"] if args.sweep else [])
+    cmd = [
+        sys.executable,
+        __file__,
+        "--worker",
+        str(size),
+        "--threads",
+        str(args.threads),
+        "--noise",
+        str(args.noise),
+        "--r2",
+        str(args.r2),
+        "--n-init",
+        str(args.n_init),
+        "--sklearn-n",
+        str(args.sklearn_n),
+        "--repeat",
+        str(args.repeat),
+        "--sweep-grid",
+        args.sweep_grid,
+    ] + (["--sweep"] if args.sweep else [])
     env = {**os.environ, "OMP_NUM_THREADS": str(args.threads), "OPENBLAS_NUM_THREADS": str(args.threads)}
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if proc.returncode != 0:
@@ -216,32 +237,46 @@ def print_sweep(r: dict) -> None:
     times = " ".join(f"{t:.2f}" for t in r["sweep_times"])
     per_value = (r["sweep_seconds"] - r["svd_seconds"]) / r["grid_values"]
     accuracy = " ".join("-" if a is None else f"{a:.3f}" for a in r["accuracy"])
-    print(f"n={r['n']:>9,}  sweep of {r['grid_values']} values {r['sweep_seconds']:7.2f} s (best of: {times})  "
-          f"svd {r['svd_seconds']:.2f} s, {per_value:.2f} s per value  | accuracy {accuracy}", flush=True)
+    print(
+        f"n={r['n']:>9,}  sweep of {r['grid_values']} values {r['sweep_seconds']:7.2f} s (best of: {times})  "
+        f"svd {r['svd_seconds']:.2f} s, {per_value:.2f} s per value  | accuracy {accuracy}",
+        flush=True,
+    )
 
 
 def print_fit(r: dict) -> None:
     phases = "  ".join(f"{k} {v:.2f}" for k, v in r["phases"].items())
-    print(f"n={r['n']:>9,}  fit {r['seconds']:7.2f} s  peak {r['process_peak_mb']:7.0f} MB (fit +{r['fit_peak_mb']:.0f}, "
-          f"data {r['data_mb']:.0f})  accuracy {r['accuracy']:.4f}  rank {r['rank']}  {r['method']}  | {phases}", flush=True)
+    print(
+        f"n={r['n']:>9,}  fit {r['seconds']:7.2f} s  peak {r['process_peak_mb']:7.0f} MB (fit +{r['fit_peak_mb']:.0f}, "
+        f"data {r['data_mb']:.0f})  accuracy {r['accuracy']:.4f}  rank {r['rank']}  {r['method']}  | {phases}",
+        flush=True,
+    )
     if "sklearn_seconds" in r:
-        print(f"           sklearn SpectralClustering(precomputed W) {r['sklearn_seconds']:.2f} s, accuracy "
-              f"{r['sklearn_accuracy']:.4f}; ours {r['seconds']:.2f} s: {r['sklearn_seconds'] / r['seconds']:.1f}x faster",
-              flush=True)
+        print(
+            f"           sklearn SpectralClustering(precomputed W) {r['sklearn_seconds']:.2f} s, accuracy "
+            f"{r['sklearn_accuracy']:.4f}; ours {r['seconds']:.2f} s: {r['sklearn_seconds'] / r['seconds']:.1f}x faster",
+            flush=True,
+        )
 
 
 def print_targets(results: list[dict]) -> None:
     big = [r for r in results if r["n"] == TARGETS["n"]]
     if big:
         r = big[0]
-        ok = r["seconds"] <= TARGETS["seconds"] and r["process_peak_mb"] / 1024 <= TARGETS["peak_gb"] and r["accuracy"] >= TARGETS["accuracy"]
+        ok = (
+            r["seconds"] <= TARGETS["seconds"]
+            and r["process_peak_mb"] / 1024 <= TARGETS["peak_gb"]
+            and r["accuracy"] >= TARGETS["accuracy"]
+        )
         print(f"target n=1e6: <= 90 s, <= 3 GB, accuracy >= 0.99: {'met' if ok else 'MISSED'}")
     cmp = [r for r in results if "sklearn_seconds" in r]
     if cmp:
         r = cmp[0]
         ratio = r["sklearn_seconds"] / r["seconds"]
         ok = ratio >= TARGETS["speedup"] and r["accuracy"] >= r["sklearn_accuracy"]
-        print(f"target n={r['n']:.0e}: >= 20x faster than sklearn at equal accuracy: {'met' if ok else 'MISSED'} ({ratio:.1f}x)")
+        print(
+            f"target n={r['n']:.0e}: >= 20x faster than sklearn at equal accuracy: {'met' if ok else 'MISSED'} ({ratio:.1f}x)"
+        )
 
 
 if __name__ == "__main__":

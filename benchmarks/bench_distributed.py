@@ -62,8 +62,14 @@ def _loader_rates(path: Path, batch: int, workers_list) -> list[dict]:
             seconds = time.perf_counter() - start
         finally:
             stream.close()
-        rows.append({"workers": workers, "samples_s": stream.samples / seconds, "mb_s": stream.nbytes / seconds / 1e6,
-                     "decode_ms": 1e3 * stream.decoded / stream.samples})
+        rows.append(
+            {
+                "workers": workers,
+                "samples_s": stream.samples / seconds,
+                "mb_s": stream.nbytes / seconds / 1e6,
+                "decode_ms": 1e3 * stream.decoded / stream.samples,
+            }
+        )
     return rows
 
 
@@ -82,6 +88,7 @@ def _timed(counters: dict) -> None:
                 return _original(self, *a, **kw)
             finally:
                 counters["blocking_comm"] += time.perf_counter() - start
+
         setattr(distributed.World, name, wrapped)
 
     def allreduce(state, bucket):
@@ -90,6 +97,7 @@ def _timed(counters: dict) -> None:
         def done(fut):
             counters["allreduce"] += time.perf_counter() - start
             return fut.value()[0]
+
         return default_hooks.allreduce_hook(None, bucket).then(done)
 
     make_ddp = loop.data_parallel
@@ -99,6 +107,7 @@ def _timed(counters: dict) -> None:
         if hasattr(model, "register_comm_hook"):
             model.register_comm_hook(None, allreduce)
         return model
+
     loop.data_parallel = data_parallel
 
     train_epoch = loop.Session._train_epoch
@@ -110,6 +119,7 @@ def _timed(counters: dict) -> None:
         counters["epochs"].append({k: after[k] - before[k] for k in ("waited", "allreduce", "blocking_comm")})
         counters["workers_mb"] = max(counters["workers_mb"], _workers_peak_mb(session.stream))
         return out
+
     loop.Session._train_epoch = epoch
 
 
@@ -129,8 +139,14 @@ def _workers_peak_mb(stream) -> float:
 
 def _train_process(rank: int, size: int, port: int, spec: dict, out: str) -> None:
     """One training process of a configuration; writes its measurements to ``out``-RANK.json."""
-    os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), RANK=str(rank), LOCAL_RANK=str(rank),
-                      WORLD_SIZE=str(size), LOCAL_WORLD_SIZE=str(size))
+    os.environ.update(
+        MASTER_ADDR="127.0.0.1",
+        MASTER_PORT=str(port),
+        RANK=str(rank),
+        LOCAL_RANK=str(rank),
+        WORLD_SIZE=str(size),
+        LOCAL_WORLD_SIZE=str(size),
+    )
     torch.set_num_threads(spec["threads"])
     from primspace.data import MotionDataset
     from primspace.model import ModelConfig
@@ -139,17 +155,28 @@ def _train_process(rank: int, size: int, port: int, spec: dict, out: str) -> Non
 
     counters = {"allreduce": 0.0, "blocking_comm": 0.0, "epochs": [], "workers_mb": 0.0}
     _timed(counters)
-    tc = TrainConfig(epochs=spec["epochs"], batch_size=spec["batch"], threads=spec["threads"], log_initial=False,
-                     device=spec["device"], stream_frames=spec["stream"], loader_workers=spec["workers"])
+    tc = TrainConfig(
+        epochs=spec["epochs"],
+        batch_size=spec["batch"],
+        threads=spec["threads"],
+        log_initial=False,
+        device=spec["device"],
+        stream_frames=spec["stream"],
+        loader_workers=spec["workers"],
+    )
     configure_process(tc)
     with launched(spec["device"]):
         data = MotionDataset.load(spec["path"])
         run = fit(data, model_config=ModelConfig(latent_dim=40), train_config=tc, progress=False)
     later = [h["seconds"] for h in run.history if h["epoch"] > 1] or [run.history[-1]["seconds"]]
     parts = counters["epochs"][1:] or counters["epochs"]
-    result = {"epoch_s": statistics.median(later), "n": len(data),
-              **{k: statistics.median(p[k] for p in parts) for k in ("waited", "allreduce", "blocking_comm")},
-              "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "workers_rss_mb": counters["workers_mb"]}
+    result = {
+        "epoch_s": statistics.median(later),
+        "n": len(data),
+        **{k: statistics.median(p[k] for p in parts) for k in ("waited", "allreduce", "blocking_comm")},
+        "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "workers_rss_mb": counters["workers_mb"],
+    }
     Path(f"{out}-{rank}.json").write_text(json.dumps(result))
 
 
@@ -181,8 +208,12 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--loader-workers", default="0,1,2")
     parser.add_argument("--processes", default="1,2", help="process counts to train with (gloo on the CPU)")
-    parser.add_argument("--train-workers", type=int, default=None,
-                        help="loader workers of a streamed training process (default: 1 alone, 0 with several)")
+    parser.add_argument(
+        "--train-workers",
+        type=int,
+        default=None,
+        help="loader workers of a streamed training process (default: 1 alone, 0 with several)",
+    )
     args = parser.parse_args()
     from primspace.data import MotionDataset
 
@@ -190,32 +221,49 @@ def main() -> None:
         path = _data(args.data, Path(tmp))
         data = MotionDataset.load(path)
         per_sample = data.images.nbytes / len(data)
-        print(f"{path}: {len(data)} motions, T = {data.length}, frames {data.image_size}, {per_sample / 1e6:.3f} MB "
-              f"per motion decoded, {os.path.getsize(path) / len(data) / 1e3:.1f} kB stored; {os.cpu_count()} cores")
+        print(
+            f"{path}: {len(data)} motions, T = {data.length}, frames {data.image_size}, {per_sample / 1e6:.3f} MB "
+            f"per motion decoded, {os.path.getsize(path) / len(data) / 1e3:.1f} kB stored; {os.cpu_count()} cores"
+        )
         print("\nloader (batches of %d, a pass after a warm-up pass)" % args.batch)
         print(f"{'workers':>8} {'samples/s':>10} {'MB/s':>8} {'decode ms/sample':>17}")
         rates = _loader_rates(path, args.batch, [int(w) for w in args.loader_workers.split(",")])
         for r in rates:
             print(f"{r['workers']:>8} {r['samples_s']:>10.1f} {r['mb_s']:>8.1f} {r['decode_ms']:>17.2f}")
-        print(f"\ntraining (batch {args.batch}, {args.threads} thread(s) per process, device {args.device}, q = 40, "
-              f"median of epochs 2..{args.epochs})")
-        print(f"{'processes':>9} {'frames':>14} {'epoch s':>8} {'samples/s':>10} {'wait data s':>12} "
-              f"{'allreduce s':>12} {'gather+sum s':>13} {'peak MB/proc':>13} {'workers MB':>11} {'100k epoch h':>13}")
+        print(
+            f"\ntraining (batch {args.batch}, {args.threads} thread(s) per process, device {args.device}, q = 40, "
+            f"median of epochs 2..{args.epochs})"
+        )
+        print(
+            f"{'processes':>9} {'frames':>14} {'epoch s':>8} {'samples/s':>10} {'wait data s':>12} "
+            f"{'allreduce s':>12} {'gather+sum s':>13} {'peak MB/proc':>13} {'workers MB':>11} {'100k epoch h':>13}"
+        )
         for processes in [int(p) for p in args.processes.split(",")]:
             streamed = args.train_workers if args.train_workers is not None else (0 if processes > 1 else 1)
             for stream, workers in ((False, 0), (True, streamed)):
-                spec = dict(path=str(path), epochs=args.epochs, batch=args.batch, threads=args.threads,
-                            device=args.device, stream=stream, workers=workers)
+                spec = dict(
+                    path=str(path),
+                    epochs=args.epochs,
+                    batch=args.batch,
+                    threads=args.threads,
+                    device=args.device,
+                    stream=stream,
+                    workers=workers,
+                )
                 res = _train(spec, processes, Path(tmp))
                 epoch = max(r["epoch_s"] for r in res)
                 sps = res[0]["n"] / epoch
                 mode = f"streamed, {workers} w" if stream else "in memory"
-                print(f"{processes:>9} {mode:>14} {epoch:>8.2f} {sps:>10.1f} {max(r['waited'] for r in res):>12.3f} "
-                      f"{max(r['allreduce'] for r in res):>12.3f} {max(r['blocking_comm'] for r in res):>13.3f} "
-                      f"{max(r['rss_mb'] for r in res):>13.0f} {max(r['workers_rss_mb'] for r in res):>11.0f} "
-                      f"{PROJECT_N / sps / 3600:>13.2f}")
-        print(f"\nat {PROJECT_N} motions the frames take {PROJECT_N * per_sample / 1e9:.1f} GB loaded; the loader "
-              f"reads {PROJECT_N / max(r['samples_s'] for r in rates) / 60:.1f} min per pass at its best rate here")
+                print(
+                    f"{processes:>9} {mode:>14} {epoch:>8.2f} {sps:>10.1f} {max(r['waited'] for r in res):>12.3f} "
+                    f"{max(r['allreduce'] for r in res):>12.3f} {max(r['blocking_comm'] for r in res):>13.3f} "
+                    f"{max(r['rss_mb'] for r in res):>13.0f} {max(r['workers_rss_mb'] for r in res):>11.0f} "
+                    f"{PROJECT_N / sps / 3600:>13.2f}"
+                )
+        print(
+            f"\nat {PROJECT_N} motions the frames take {PROJECT_N * per_sample / 1e9:.1f} GB loaded; the loader "
+            f"reads {PROJECT_N / max(r['samples_s'] for r in rates) / 60:.1f} min per pass at its best rate here"
+        )
 
 
 if __name__ == "__main__":

@@ -69,10 +69,15 @@ def stage_profile(per_primitive: int) -> dict[str, float]:
             totals["render"] += t3 - t2
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        with DatasetWriter(Path(tmp) / "w.h5", n_samples=len(indices), length=config.length, joint_names=JOINT_NAMES,
-                           image_size=(config.height, config.width)) as writer:
+        with DatasetWriter(
+            Path(tmp) / "w.h5",
+            n_samples=len(indices),
+            length=config.length,
+            joint_names=JOINT_NAMES,
+            image_size=(config.height, config.width),
+        ) as writer:
             for start in range(0, len(indices), 32):
-                writer.write(start, motor=motors[start:start + 32], images=frames[start:start + 32])
+                writer.write(start, motor=motors[start : start + 32], images=frames[start : start + 32])
         totals["HDF5 write"] = time.perf_counter() - t0
     return {k: v / len(indices) for k, v in totals.items()}
 
@@ -108,11 +113,15 @@ def main() -> None:
         return
     n, took, size = end_to_end(args.preset, args.workers, seed=0)
     rate = n / took
-    print(f"\nend to end: preset {args.preset}, {args.workers} workers: {n} trajectories in {took:.1f} s "
-          f"= {rate:.1f} trajectories/s ({size / 2**20:.1f} MiB file)")
-    print(f"  paper preset (1715) at this rate: {1715 / rate:.0f} s (target <= 180 s: "
-          f"{'met' if 1715 / rate <= 180 else 'NOT met'}); speed-up over one process: "
-          f"{rate * total:.2f}x with {args.workers} workers")
+    print(
+        f"\nend to end: preset {args.preset}, {args.workers} workers: {n} trajectories in {took:.1f} s "
+        f"= {rate:.1f} trajectories/s ({size / 2**20:.1f} MiB file)"
+    )
+    print(
+        f"  paper preset (1715) at this rate: {1715 / rate:.0f} s (target <= 180 s: "
+        f"{'met' if 1715 / rate <= 180 else 'NOT met'}); speed-up over one process: "
+        f"{rate * total:.2f}x with {args.workers} workers"
+    )
     print(f"load average after: {os.getloadavg()[0]:.2f} (1 min)")
 
 

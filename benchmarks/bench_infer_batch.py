@@ -51,20 +51,39 @@ def main() -> None:
         fit_idx, new_idx = np.sort(order[:n_fit]), np.sort(order[n_fit : n_fit + args.n_infer])
         tc = TrainConfig(epochs=args.epochs, batch_size=32, threads=1, final_lr_fraction=0.1)
         configure_process(tc)
-        fit(data, tmp / "fit", model_config=ModelConfig(latent_dim=20), train_config=tc, init="projection",
-            indices=fit_idx, images=False, progress=False)
+        fit(
+            data,
+            tmp / "fit",
+            model_config=ModelConfig(latent_dim=20),
+            train_config=tc,
+            init="projection",
+            indices=fit_idx,
+            images=False,
+            progress=False,
+        )
         codes, seconds = {}, {}
         for batch in (32, 256):
             start = time.perf_counter()
-            run = infer(tmp / "fit", data, tmp / f"infer-b{batch}", epochs=args.epochs, indices=new_idx,
-                        batch_size=batch, progress=False)
+            run = infer(
+                tmp / "fit",
+                data,
+                tmp / f"infer-b{batch}",
+                epochs=args.epochs,
+                indices=new_idx,
+                batch_size=batch,
+                progress=False,
+            )
             seconds[batch] = time.perf_counter() - start
             codes[batch] = run.latents.astype(np.float64)
             moved = np.linalg.norm(run.latents - run.initial_latents, axis=1).mean()
         diff = np.linalg.norm(codes[32] - codes[256], axis=1) / np.linalg.norm(codes[32], axis=1)
-        print(f"{len(new_idx)} samples, {args.epochs} epochs, q = 20 (fit on {n_fit}); codes moved {moved:.3g} on average")
+        print(
+            f"{len(new_idx)} samples, {args.epochs} epochs, q = 20 (fit on {n_fit}); codes moved {moved:.3g} on average"
+        )
         print(f"final codes, batch 256 vs 32: max relative difference {diff.max():.2e}, mean {diff.mean():.2e}")
-        print(f"time: batch 32 {seconds[32]:.1f} s, batch 256 {seconds[256]:.1f} s: {seconds[32] / seconds[256]:.2f}x faster")
+        print(
+            f"time: batch 32 {seconds[32]:.1f} s, batch 256 {seconds[256]:.1f} s: {seconds[32] / seconds[256]:.2f}x faster"
+        )
 
 
 if __name__ == "__main__":

@@ -75,12 +75,17 @@ def main() -> None:
         make_shard(shard, args.samples)
         size = shard.stat().st_size / args.samples
         print(f"shard: {args.samples} samples, 61 x 48 x 64 x 3 frames, {size / 1024:.1f} KiB a sample compressed")
-        times = {how: time_merge(shard, args.copies, how, tmp) for how in ("raw chunks", "decode + recompress", "compress only")}
+        times = {
+            how: time_merge(shard, args.copies, how, tmp)
+            for how in ("raw chunks", "decode + recompress", "compress only")
+        }
     raw = times["raw chunks"]
     for how, sec in times.items():
         print(f"  {how:<20} {sec * 1e3:7.2f} ms a sample  ({sec / raw:5.1f}x raw)")
-    print(f"paper preset (1715 samples): raw merge {1715 * raw:.1f} s, decode + recompress "
-          f"{1715 * times['decode + recompress']:.1f} s")
+    print(
+        f"paper preset (1715 samples): raw merge {1715 * raw:.1f} s, decode + recompress "
+        f"{1715 * times['decode + recompress']:.1f} s"
+    )
     print(f"load average after: {os.getloadavg()[0]:.2f} (1 min)")
 
 

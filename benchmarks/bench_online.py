@@ -89,13 +89,19 @@ def _fit(images: bool, args) -> tuple:
     train = primitives(math.ceil(n_train / 3), seed=0, images=images)
     held = primitives(math.ceil(args.samples / 3), seed=100, images=images).subset(np.arange(args.samples))
     mc = ModelConfig(latent_dim=Q, layer_sizes=(32, 12), image_size=(H, W) if images else None)
-    tc = TrainConfig(epochs=args.image_fit_epochs if images else args.fit_epochs, batch_size=32, seed=0,
-                     vision_frames=8 if images else None)
+    tc = TrainConfig(
+        epochs=args.image_fit_epochs if images else args.fit_epochs,
+        batch_size=32,
+        seed=0,
+        vision_frames=8 if images else None,
+    )
     t0 = time.perf_counter()
     run = fit(train, model_config=mc, train_config=tc, init="projection", progress=False)
     last = run.history[-1]
-    print(f"fit: {len(train)} samples, {tc.epochs} epochs, {time.perf_counter() - t0:.1f} s, "
-          f"final motor MSE {last['motor']:.2e}" + (f", vision {last['vision']:.2e}" if images else ""))
+    print(
+        f"fit: {len(train)} samples, {tc.epochs} epochs, {time.perf_counter() - t0:.1f} s, "
+        f"final motor MSE {last['motor']:.2e}" + (f", vision {last['vision']:.2e}" if images else "")
+    )
     return run, held, train
 
 
@@ -113,17 +119,43 @@ def mixture_bench(run, held, train, ts, off, figures: dict) -> None:
     result = predictor.predict_online(run.scaler.transform(held.motor), held.lengths)
     cpu = (time.process_time() - cpu) / len(result.steps)
     errors = [result.error_at(t) for t in ts]
-    own = [float(np.nanmean(predict(run, held, observe=t, init="mixture", fitted_data=train, frames=False,
-                                    condition=False, continuity=True).errors["motor_mse"])) for t in ts]
-    row = {"latency_mean_ms": 1e3 * result.latency_mean, "latency_p95_ms": 1e3 * result.latency_p95,
-           "cpu_ms_per_step": 1e3 * cpu, "prepare_s": prepared, "errors": errors, "offline_mixture": own,
-           "ratios_to_own_offline": [e / o for e, o in zip(errors, own)],
-           "ratios_to_gradient_offline": [e / o for e, o in zip(errors, off["mean_error"])]}
+    own = [
+        float(
+            np.nanmean(
+                predict(
+                    run,
+                    held,
+                    observe=t,
+                    init="mixture",
+                    fitted_data=train,
+                    frames=False,
+                    condition=False,
+                    continuity=True,
+                ).errors["motor_mse"]
+            )
+        )
+        for t in ts
+    ]
+    row = {
+        "latency_mean_ms": 1e3 * result.latency_mean,
+        "latency_p95_ms": 1e3 * result.latency_p95,
+        "cpu_ms_per_step": 1e3 * cpu,
+        "prepare_s": prepared,
+        "errors": errors,
+        "offline_mixture": own,
+        "ratios_to_own_offline": [e / o for e, o in zip(errors, own)],
+        "ratios_to_gradient_offline": [e / o for e, o in zip(errors, off["mean_error"])],
+    }
     figures["mixture_online"] = row
-    print(f"\nmixture online (no gradient; sigma² per prefix prepared from the fitted data in {prepared:.1f} s): "
-          f"{row['latency_mean_ms']:.2f} ms mean, {row['latency_p95_ms']:.2f} ms p95, {row['cpu_ms_per_step']:.2f} ms CPU "
-          "per step; error " + ", ".join(f"{e:.4f} (x{a:.2f} its offline, x{b:.2f} gradient offline)" for e, a, b in
-                                        zip(errors, row["ratios_to_own_offline"], row["ratios_to_gradient_offline"])))
+    print(
+        f"\nmixture online (no gradient; sigma² per prefix prepared from the fitted data in {prepared:.1f} s): "
+        f"{row['latency_mean_ms']:.2f} ms mean, {row['latency_p95_ms']:.2f} ms p95, {row['cpu_ms_per_step']:.2f} ms CPU "
+        "per step; error "
+        + ", ".join(
+            f"{e:.4f} (x{a:.2f} its offline, x{b:.2f} gradient offline)"
+            for e, a, b in zip(errors, row["ratios_to_own_offline"], row["ratios_to_gradient_offline"])
+        )
+    )
 
 
 def motor_bench(args, figures: dict) -> None:
@@ -131,13 +163,18 @@ def motor_bench(args, figures: dict) -> None:
     ts = [math.ceil(f * T) for f in (0.25, 0.5)]
     t0 = time.perf_counter()
     off = offline_errors(run, held, ts, epochs=args.offline_epochs, batch_size=len(held))
-    print(f"offline: infer(observe=t, {args.offline_epochs} epochs, latent_lr {run.train_config.latent_lr:g}) "
-          f"at t = {ts}: remaining-step MSE " + ", ".join(f"{e:.4f}" for e in off["mean_error"])
-          + f"  ({time.perf_counter() - t0:.1f} s)")
+    print(
+        f"offline: infer(observe=t, {args.offline_epochs} epochs, latent_lr {run.train_config.latent_lr:g}) "
+        f"at t = {ts}: remaining-step MSE "
+        + ", ".join(f"{e:.4f}" for e in off["mean_error"])
+        + f"  ({time.perf_counter() - t0:.1f} s)"
+    )
     figures["offline"] = {"steps": ts, "epochs": args.offline_epochs, "mean_error": off["mean_error"].tolist()}
     print(f"\nonline, {len(held)} held-out samples as one batch, load average {os.getloadavg()[0]:.1f}")
-    print(f"{'latent_lr':>9} {'moments':>8} {'k':>4} {'mean ms':>8} {'p95 ms':>8} {'cpu ms':>7}   "
-          + "   ".join(f"err@{t} (x offline)" for t in ts))
+    print(
+        f"{'latent_lr':>9} {'moments':>8} {'k':>4} {'mean ms':>8} {'p95 ms':>8} {'cpu ms':>7}   "
+        + "   ".join(f"err@{t} (x offline)" for t in ts)
+    )
     variants = [(lr, False) for lr in args.online_lrs] + ([(None, True)] if args.carried else [])
     rows = []
     for lr, carry in variants:
@@ -146,14 +183,22 @@ def motor_bench(args, figures: dict) -> None:
             result = infer_online(run, held, iterations=k, latent_lr=lr, carry_moments=carry)
             cpu = (time.process_time() - cpu) / len(result.steps)  # the whole stream, bookkeeping included
             errors = [result.error_at(t) for t in ts]
-            r = {"latent_lr": result.latent_lr, "moments": "carried" if carry else "fresh", "k": k,
-                 "latency_mean_ms": 1e3 * result.latency_mean, "latency_p95_ms": 1e3 * result.latency_p95,
-                 "cpu_ms_per_step": 1e3 * cpu, "errors": errors,
-                 "ratios": [e / o for e, o in zip(errors, off["mean_error"])]}
+            r = {
+                "latent_lr": result.latent_lr,
+                "moments": "carried" if carry else "fresh",
+                "k": k,
+                "latency_mean_ms": 1e3 * result.latency_mean,
+                "latency_p95_ms": 1e3 * result.latency_p95,
+                "cpu_ms_per_step": 1e3 * cpu,
+                "errors": errors,
+                "ratios": [e / o for e, o in zip(errors, off["mean_error"])],
+            }
             rows.append(r)
-            print(f"{r['latent_lr']:>9g} {r['moments']:>8} {k:>4} {r['latency_mean_ms']:>8.2f} "
-                  f"{r['latency_p95_ms']:>8.2f} {r['cpu_ms_per_step']:>7.2f}   "
-                  + "   ".join(f"{e:.4f} ({q:5.2f})" for e, q in zip(errors, r["ratios"])))
+            print(
+                f"{r['latent_lr']:>9g} {r['moments']:>8} {k:>4} {r['latency_mean_ms']:>8.2f} "
+                f"{r['latency_p95_ms']:>8.2f} {r['cpu_ms_per_step']:>7.2f}   "
+                + "   ".join(f"{e:.4f} ({q:5.2f})" for e, q in zip(errors, r["ratios"]))
+            )
     figures["online"] = rows
     mixture_bench(run, held, train, ts, off, figures)
     figures["smallest_k"] = {}
@@ -163,22 +208,28 @@ def motor_bench(args, figures: dict) -> None:
         figures["smallest_k"][str(lr)] = within[0]["k"] if within else None
         if within:
             best = within[0]
-            print(f"latent_lr {lr:g}: smallest k within 10 % of offline at t = {ts}: k = {best['k']}, latency "
-                  f"{best['latency_mean_ms']:.1f} ms mean, {best['latency_p95_ms']:.1f} ms p95, "
-                  f"{best['cpu_ms_per_step']:.1f} ms CPU (target < 20 ms)")
+            print(
+                f"latent_lr {lr:g}: smallest k within 10 % of offline at t = {ts}: k = {best['k']}, latency "
+                f"{best['latency_mean_ms']:.1f} ms mean, {best['latency_p95_ms']:.1f} ms p95, "
+                f"{best['cpu_ms_per_step']:.1f} ms CPU (target < 20 ms)"
+            )
         else:
             near = min(mine, key=lambda r: max(r["ratios"]))
-            print(f"latent_lr {lr:g}: no k of {args.iterations} within 10 % of offline at t = {ts}; closest k = "
-                  f"{near['k']} (x{max(near['ratios']):.2f}), latency {near['latency_mean_ms']:.1f} ms mean, "
-                  f"{near['cpu_ms_per_step']:.1f} ms CPU")
+            print(
+                f"latent_lr {lr:g}: no k of {args.iterations} within 10 % of offline at t = {ts}; closest k = "
+                f"{near['k']} (x{max(near['ratios']):.2f}), latency {near['latency_mean_ms']:.1f} ms mean, "
+                f"{near['cpu_ms_per_step']:.1f} ms CPU"
+            )
 
 
 def image_bench(args, figures: dict) -> None:
     print("\n=== with images (48x64 frames, image head)")
     run, held, _ = _fit(True, args)
     ts = [math.ceil(f * T) for f in (0.25, 0.5)]
-    print(f"single steps at t = {ts} ({len(held)} samples, {args.repeats} repeats each), "
-          f"load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"single steps at t = {ts} ({len(held)} samples, {args.repeats} repeats each), "
+        f"load average {os.getloadavg()[0]:.1f}"
+    )
     print(f"{'k':>4} " + " ".join(f"{'ms @' + str(t):>10}" for t in ts))
     rows = []
     for k in args.image_iterations:
@@ -203,8 +254,11 @@ def main() -> None:
     parser.add_argument("--train-samples", type=int, default=102)
     parser.add_argument("--fit-epochs", type=int, default=200)
     parser.add_argument("--offline-epochs", type=int, default=600, help="the paper's inference epochs")
-    parser.add_argument("--online-lrs", default="run,0.1",
-                        help="online latent learning rates, comma separated ('run': the run's latent_lr)")
+    parser.add_argument(
+        "--online-lrs",
+        default="run,0.1",
+        help="online latent learning rates, comma separated ('run': the run's latent_lr)",
+    )
     parser.add_argument("--carried", action="store_true", help="also run one Adam along the stream (run's rate)")
     parser.add_argument("--images", action="store_true", help="also time the steps with 48x64 frames")
     parser.add_argument("--image-train-samples", type=int, default=30)

@@ -102,7 +102,10 @@ def timed_epochs(dataset, cfg: ModelConfig, tc: TrainConfig, workdir: Path, *, e
 
 
 def bench_device(device: torch.device, args, workdir: Path) -> dict:
-    print(f"\n=== {device} " + ("(%d threads)" % torch.get_num_threads() if device.type == "cpu" else torch.cuda.get_device_name(device)))
+    print(
+        f"\n=== {device} "
+        + ("(%d threads)" % torch.get_num_threads() if device.type == "cpu" else torch.cuda.get_device_name(device))
+    )
     rate = matmul_rate(device)
     print(f"dense fp32 matmul 2048^3: {rate / 1e9:.1f} GFLOP/s")
     if device.type == "cuda":
@@ -113,47 +116,79 @@ def bench_device(device: torch.device, args, workdir: Path) -> dict:
     cfg = ModelConfig(latent_dim=Q, image_size=(H, W), n_joints=J, length=T)
     fit_flops = train_flops_per_sample(cfg, frozen=False)
     infer_flops = train_flops_per_sample(cfg, frozen=True)
-    print(f"counted FLOPs per sample: fit step {fit_flops / 1e9:.3f} GFLOP, infer step {infer_flops / 1e9:.3f} GFLOP "
-          f"(analytic forward {2 * MTRNNDecoder(cfg).macs_per_sample() / 1e9:.3f} GFLOP)")
+    print(
+        f"counted FLOPs per sample: fit step {fit_flops / 1e9:.3f} GFLOP, infer step {infer_flops / 1e9:.3f} GFLOP "
+        f"(analytic forward {2 * MTRNNDecoder(cfg).macs_per_sample() / 1e9:.3f} GFLOP)"
+    )
     results = {}
     variants = [("fp32", False, args.batch_size)]
     if device.type == "cuda":  # the recurrent loop is launch-bound on a GPU: larger batches amortise it
         variants += [("amp bf16", True, args.batch_size), ("amp bf16, batch 128", True, 128)]
     for name, amp, batch_size in variants:
-        tc = TrainConfig(epochs=args.epochs, batch_size=batch_size, device=str(device), amp=amp, log_initial=False,
-                         threads=args.threads if device.type == "cpu" else None)
+        tc = TrainConfig(
+            epochs=args.epochs,
+            batch_size=batch_size,
+            device=str(device),
+            amp=amp,
+            log_initial=False,
+            threads=args.threads if device.type == "cpu" else None,
+        )
         t = timed_epochs(data, cfg, tc, workdir, epochs=args.epochs)
         fit_sps, infer_sps = n / t["fit_s"], n / t["infer_s"]
         fit_rate, infer_rate = fit_flops * fit_sps, infer_flops * infer_sps
-        print(f"[{name}] fit epoch ({n} samples, batch {batch_size}): {t['fit_s']:.2f} s = {fit_sps:.1f} samples/s, "
-              f"{fit_rate / 1e9:.1f} GFLOP/s = {fit_rate / rate:.1%} of the fp32 matmul rate")
-        print(f"[{name}] infer epoch: {t['infer_s']:.2f} s = {infer_sps:.1f} samples/s, "
-              f"{infer_rate / 1e9:.1f} GFLOP/s = {infer_rate / rate:.1%} of the fp32 matmul rate")
+        print(
+            f"[{name}] fit epoch ({n} samples, batch {batch_size}): {t['fit_s']:.2f} s = {fit_sps:.1f} samples/s, "
+            f"{fit_rate / 1e9:.1f} GFLOP/s = {fit_rate / rate:.1%} of the fp32 matmul rate"
+        )
+        print(
+            f"[{name}] infer epoch: {t['infer_s']:.2f} s = {infer_sps:.1f} samples/s, "
+            f"{infer_rate / 1e9:.1f} GFLOP/s = {infer_rate / rate:.1%} of the fp32 matmul rate"
+        )
         schedule = PAPER_FIT_EPOCHS * PAPER_FIT_SAMPLES / fit_sps + PAPER_INFER_EPOCHS * PAPER_INFER_SAMPLES / infer_sps
-        print(f"[{name}] paper schedule (800 epochs fit x 343 + 600 epochs infer x 1372 samples), extrapolated: "
-              f"{schedule / 60:.1f} min (target on one H100: <= 5 min)")
-        results[name] = {"fit_samples_per_s": fit_sps, "infer_samples_per_s": infer_sps,
-                         "fit_fraction_of_matmul": fit_rate / rate, "infer_fraction_of_matmul": infer_rate / rate,
-                         "schedule_min": schedule / 60}
+        print(
+            f"[{name}] paper schedule (800 epochs fit x 343 + 600 epochs infer x 1372 samples), extrapolated: "
+            f"{schedule / 60:.1f} min (target on one H100: <= 5 min)"
+        )
+        results[name] = {
+            "fit_samples_per_s": fit_sps,
+            "infer_samples_per_s": infer_sps,
+            "fit_fraction_of_matmul": fit_rate / rate,
+            "infer_fraction_of_matmul": infer_rate / rate,
+            "schedule_min": schedule / 60,
+        }
     return {"matmul_flops": rate, "fit_flops_per_sample": fit_flops, "infer_flops_per_sample": infer_flops, **results}
 
 
 def bench_demo(workdir: Path) -> None:
     print("\n=== demo sizing: fit / infer epoch seconds, 126 samples, T=61, J=9, q=20, batch 32, CPU")
-    cases = [((48, 64), (64, 32, 16)), ((48, 64), (32, 16, 8)), ((24, 32), (64, 32, 16)), ((24, 32), (32, 16, 8)),
-             (None, (64, 32, 16))]
+    cases = [
+        ((48, 64), (64, 32, 16)),
+        ((48, 64), (32, 16, 8)),
+        ((24, 32), (64, 32, 16)),
+        ((24, 32), (32, 16, 8)),
+        (None, (64, 32, 16)),
+    ]
     for threads in (1, 2):
         for size, channels in cases:
             data = synthetic(126, size, seed=1)
             cfg = ModelConfig(latent_dim=20, image_channels=channels)
             tc = TrainConfig(epochs=3, batch_size=32, device="cpu", threads=threads, log_initial=False)
             configure_process(tc)
-            run = fit(data, workdir / "demo", model_config=cfg, train_config=tc, overwrite=True, progress=False,
-                      images=size is not None)
+            run = fit(
+                data,
+                workdir / "demo",
+                model_config=cfg,
+                train_config=tc,
+                overwrite=True,
+                progress=False,
+                images=size is not None,
+            )
             ev = infer(workdir / "demo", data, workdir / "demo_e", epochs=3, overwrite=True, progress=False)
             fit_s = statistics.median(h["seconds"] for h in run.history[1:])
             infer_s = statistics.median(h["seconds"] for h in ev.history[1:])
-            label = "no images" if size is None else f"{size[0]}x{size[1]} images, channels {','.join(map(str, channels))}"
+            label = (
+                "no images" if size is None else f"{size[0]}x{size[1]} images, channels {','.join(map(str, channels))}"
+            )
             print(f"  threads {threads}, {label:>36}: fit {fit_s:.3f} s/epoch, infer {infer_s:.3f} s/epoch")
 
 
@@ -170,8 +205,14 @@ def run_schedule(device: str, vision_frames: int | None, workdir: Path, fit_epoc
     data = synthetic(PAPER_FIT_SAMPLES + PAPER_INFER_SAMPLES, (H, W))
     fitted, inferred = data.subset(np.arange(PAPER_FIT_SAMPLES)), data.subset(np.arange(PAPER_FIT_SAMPLES, len(data)))
     cfg = ModelConfig(latent_dim=Q, image_size=(H, W), n_joints=J, length=T, layer_sizes=(32, 12), taus=(2.0, 8.0))
-    tc = TrainConfig(epochs=fit_epochs, batch_size=32, device=device, final_lr_fraction=0.1,
-                     vision_frames=vision_frames, log_initial=False)
+    tc = TrainConfig(
+        epochs=fit_epochs,
+        batch_size=32,
+        device=device,
+        final_lr_fraction=0.1,
+        vision_frames=vision_frames,
+        log_initial=False,
+    )
     configure_process(tc)
     label = f"schedule on {device}, vision frames {vision_frames or 'all 61'}, fit epochs {fit_epochs}"
     print(f"\n=== {label}", flush=True)
@@ -184,17 +225,32 @@ def run_schedule(device: str, vision_frames: int | None, workdir: Path, fit_epoc
         if phase == "fit":
             fit(fitted, workdir / "fit", model_config=cfg, train_config=tc, overwrite=True, progress=False)
         else:
-            infer(workdir / "fit", inferred, workdir / "infer", epochs=PAPER_INFER_EPOCHS, batch_size=256,
-                  overwrite=True, progress=False)
+            infer(
+                workdir / "fit",
+                inferred,
+                workdir / "infer",
+                epochs=PAPER_INFER_EPOCHS,
+                batch_size=256,
+                overwrite=True,
+                progress=False,
+            )
         _sync(torch.device(device))
         seconds[phase] = time.perf_counter() - t0
         stop.set()
         print(f"  {phase}: {seconds[phase]:.1f} s measured", flush=True)
     total = sum(seconds.values())
-    print(f"[{label}] the paper's schedule, measured: {total / 60:.2f} min (fit {seconds['fit']:.0f} s, "
-          f"infer {seconds['infer']:.0f} s; target on one H100: <= 5 min)", flush=True)
-    return {"device": device, "vision_frames": vision_frames, "fit_s": seconds["fit"], "infer_s": seconds["infer"],
-            "total_min": total / 60}
+    print(
+        f"[{label}] the paper's schedule, measured: {total / 60:.2f} min (fit {seconds['fit']:.0f} s, "
+        f"infer {seconds['infer']:.0f} s; target on one H100: <= 5 min)",
+        flush=True,
+    )
+    return {
+        "device": device,
+        "vision_frames": vision_frames,
+        "fit_s": seconds["fit"],
+        "infer_s": seconds["infer"],
+        "total_min": total / 60,
+    }
 
 
 def main() -> None:
@@ -209,8 +265,12 @@ def main() -> None:
     parser.add_argument("--schedule", action="store_true", help="run and time the paper's schedule itself")
     parser.add_argument("--schedule-device", default="cuda", help="device of --schedule (cuda or cpu)")
     parser.add_argument("--vision-frames", type=int, default=None, help="K drawn frames in --schedule (default: all)")
-    parser.add_argument("--schedule-fit-epochs", type=int, default=PAPER_FIT_EPOCHS,
-                        help="fit epochs of --schedule (fewer: to time the infer phase within a time box)")
+    parser.add_argument(
+        "--schedule-fit-epochs",
+        type=int,
+        default=PAPER_FIT_EPOCHS,
+        help="fit epochs of --schedule (fewer: to time the infer phase within a time box)",
+    )
     parser.add_argument("--no-epochs", action="store_true", help="skip the epoch measurements (with --schedule)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = parser.parse_args()
@@ -231,7 +291,9 @@ def main() -> None:
             if args.schedule_device == "cuda" and not torch.cuda.is_available():
                 print("\nno GPU: the schedule is not run (use --schedule-device cpu)")
             else:
-                figures["schedule"] = run_schedule(args.schedule_device, args.vision_frames, work / "schedule", args.schedule_fit_epochs)
+                figures["schedule"] = run_schedule(
+                    args.schedule_device, args.vision_frames, work / "schedule", args.schedule_fit_epochs
+                )
                 if args.json:  # written at once: a later, time-boxed step may not finish
                     args.json.write_text(json.dumps(figures, indent=2))
         if args.demo or args.demo_only:

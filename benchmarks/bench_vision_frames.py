@@ -47,14 +47,22 @@ def main() -> None:
             path = Path(tmp) / "demo.h5"
             generate_dataset("demo", seed=0, out=path, progress=False, workers=1)
         data = MotionDataset.load(path).load_images()
-        print(f"{len(data)} motions, T = {data.length}, frames {data.image_size}, q = {args.latent_dim}, "
-              f"{args.threads} threads, {args.epochs} epochs per timing, median epoch of {args.repeat} repeats")
+        print(
+            f"{len(data)} motions, T = {data.length}, frames {data.image_size}, q = {args.latent_dim}, "
+            f"{args.threads} threads, {args.epochs} epochs per timing, median epoch of {args.repeat} repeats"
+        )
         fit_s: dict = {k: [] for k in [None, *ks]}
         infer_s: dict = {k: [] for k in [None, *ks]}
         for _ in range(args.repeat):
             for k in [None, *ks]:
-                tc = TrainConfig(epochs=args.epochs, batch_size=16, threads=args.threads, log_initial=False,
-                                 vision_frames=k, device="cpu")
+                tc = TrainConfig(
+                    epochs=args.epochs,
+                    batch_size=16,
+                    threads=args.threads,
+                    log_initial=False,
+                    vision_frames=k,
+                    device="cpu",
+                )
                 configure_process(tc)
                 run = fit(data, model_config=ModelConfig(latent_dim=args.latent_dim), train_config=tc, progress=False)
                 fit_s[k].append(_epoch_seconds(run))

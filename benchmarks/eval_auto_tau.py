@@ -169,9 +169,13 @@ def evaluate(X: np.ndarray, y: np.ndarray) -> dict:
         started = time.perf_counter()
         model = LowRankSubspaceClustering(k, r2_target="auto", auto_criterion=criterion, random_state=0).fit(X)
         scores = clustering_scores(y, model.labels_)
-        out[f"auto:{criterion}"] = {"r2_target": model.auto_choice_.r2_target, "accuracy": scores["accuracy"],
-                                    "nmi": scores["nmi"], "scores": model.auto_choice_.to_dict()["scores"],
-                                    "seconds": time.perf_counter() - started}
+        out[f"auto:{criterion}"] = {
+            "r2_target": model.auto_choice_.r2_target,
+            "accuracy": scores["accuracy"],
+            "nmi": scores["nmi"],
+            "scores": model.auto_choice_.to_dict()["scores"],
+            "seconds": time.perf_counter() - started,
+        }
     return out
 
 
@@ -179,9 +183,16 @@ def format_table(results: dict) -> str:
     from primspace.cluster.auto import AUTO_CRITERIA
 
     cols = [f"auto:{c}" for c in AUTO_CRITERIA] + ["best", "default"]
-    head = "| data set | n | k | " + " | ".join(
-        f"{c} acc / NMI (R²)" if c.startswith("auto") else
-        ("best fixed acc / NMI (R²)" if c == "best" else "default 0.99 acc / NMI") for c in cols) + " |"
+    head = (
+        "| data set | n | k | "
+        + " | ".join(
+            f"{c} acc / NMI (R²)"
+            if c.startswith("auto")
+            else ("best fixed acc / NMI (R²)" if c == "best" else "default 0.99 acc / NMI")
+            for c in cols
+        )
+        + " |"
+    )
     lines = [head, "|" + "---|" * (3 + len(cols))]
     for name, r in results.items():
         cells = []

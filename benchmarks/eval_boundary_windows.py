@@ -45,13 +45,24 @@ def scores(exp: Path, seed: int, window: int = 8, q: int = 8) -> dict:
     held_idx = load_run(exp / "runs" / "composite" / f"projection-q{q}-s{seed}" / "infer").indices
     held, seqs = held_out_sequences(data, held_idx)
     truth = boundaries_from_segments(held.step_segments, held.lengths)
-    found = {f"primspace {i}": segment_codes(load_run(exp / "runs" / "composite" / f"{i}-q{q}-s{seed}" / "infer").latents,
-                                             held, window, q)[0].boundaries for i in INITS}
+    found = {
+        f"primspace {i}": segment_codes(
+            load_run(exp / "runs" / "composite" / f"{i}-q{q}-s{seed}" / "infer").latents, held, window, q
+        )[0].boundaries
+        for i in INITS
+    }
     n = len(data.label_names)
     found |= {p: PEERS[p].run(seqs, n, window, [len(b) for b in truth], seed).boundaries for p in COMPARED}
     half = window // 2  # [−W, 2W] = within 1.5 W of (t + W / 2)
-    return {k: (boundary_f1(truth, f, window)["f1"], boundary_f1(truth, [np.asarray(x) - half for x in f], window + half)["f1"],
-                boundary_f1(truth, f, 2 * window)["f1"], _late(truth, f, window)) for k, f in found.items()}
+    return {
+        k: (
+            boundary_f1(truth, f, window)["f1"],
+            boundary_f1(truth, [np.asarray(x) - half for x in f], window + half)["f1"],
+            boundary_f1(truth, f, 2 * window)["f1"],
+            _late(truth, f, window),
+        )
+        for k, f in found.items()
+    }
 
 
 def main() -> None:

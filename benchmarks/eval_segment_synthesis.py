@@ -53,10 +53,15 @@ def main() -> None:
             scores["seconds"] = time.perf_counter() - start
             rows.setdefault(init, []).append({"seed": seed, **scores})
             b = scores["boundary"]
-            print(f"{init} seed {seed}: F1 {b['f1']:.3f} (P {b['precision']:.3f}, R {b['recall']:.3f}), "
-                  f"accuracy {scores['accuracy']:.3f}, {scores['segments_found']} / {scores['segments_true']} segments, "
-                  f"{scores['seconds']:.1f} s", flush=True)
-    print("\n| single-primitive run | boundary precision / recall / F1 | step labelling accuracy | per seed (F1 / accuracy) |")
+            print(
+                f"{init} seed {seed}: F1 {b['f1']:.3f} (P {b['precision']:.3f}, R {b['recall']:.3f}), "
+                f"accuracy {scores['accuracy']:.3f}, {scores['segments_found']} / {scores['segments_true']} segments, "
+                f"{scores['seconds']:.1f} s",
+                flush=True,
+            )
+    print(
+        "\n| single-primitive run | boundary precision / recall / F1 | step labelling accuracy | per seed (F1 / accuracy) |"
+    )
     print("|---|---|---|---|")
     for init, seeds in rows.items():
         f1 = [r["boundary"]["f1"] for r in seeds]
@@ -64,8 +69,10 @@ def main() -> None:
         p = np.mean([r["boundary"]["precision"] for r in seeds])
         rc = np.mean([r["boundary"]["recall"] for r in seeds])
         per = ", ".join(f"{a:.2f} / {b:.2f}" for a, b in zip(f1, acc))
-        print(f"| {init} | {p:.2f} / {rc:.2f} / {np.mean(f1):.2f} ± {np.std(f1):.2f} | "
-              f"{np.mean(acc):.2f} ± {np.std(acc):.2f} | {per} |")
+        print(
+            f"| {init} | {p:.2f} / {rc:.2f} / {np.mean(f1):.2f} ± {np.std(f1):.2f} | "
+            f"{np.mean(acc):.2f} ± {np.std(acc):.2f} | {per} |"
+        )
     if args.out:
         with open(args.out, "w") as fh:
             json.dump({"args": vars(args), "rows": rows}, fh, indent=2)

@@ -47,8 +47,9 @@ def modules() -> list[str]:
 
 def build(out: Path) -> Path:
     """Write the reference into ``out``; return its ``index.html``."""
-    pdoc.render.configure(docformat="numpy", search=False, show_source=False,
-                          footer_text=f"primspace {primspace.__version__}")
+    pdoc.render.configure(
+        docformat="numpy", search=False, show_source=False, footer_text=f"primspace {primspace.__version__}"
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         # each package's submodules are named here too (so a broken one is left out alone): not a mistake

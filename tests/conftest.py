@@ -93,8 +93,17 @@ def figure_stats(rgb) -> dict:
     }
 
 
-def assert_figure(path, *, height=(200, 1500), width=(300, 2500), min_ink: float = 0.04, min_coloured: int = 500,
-                  min_colours: int = 300, colours=(), min_colour_pixels: int = 100) -> "np.ndarray":
+def assert_figure(
+    path,
+    *,
+    height=(200, 1500),
+    width=(300, 2500),
+    min_ink: float = 0.04,
+    min_coloured: int = 500,
+    min_colours: int = 300,
+    colours=(),
+    min_colour_pixels: int = 100,
+) -> "np.ndarray":
     """The PNG at ``path`` is a drawn figure, not a blank or empty one: its pixel size lies in the
     given ranges, at least ``min_ink`` of it is not white (a matplotlib figure with empty, labelled
     axes measured 0.03), at least ``min_coloured`` pixels are chromatic (an empty one has none) and
@@ -149,4 +158,3 @@ def pinned_for_this_cpu(table: dict, what: str, vendor: bool = False):
     if cls not in table:
         pytest.skip(f"{what}: pinned on {', '.join(sorted(table))} CPUs; this one is {cls}")
     return table[cls]
-

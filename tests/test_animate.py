@@ -50,8 +50,14 @@ def test_frames_show_each_panel_at_its_step_and_a_moving_cursor():
     t_len = 61
     recorded, generated, replayed = (_coloured_frames(t_len, c) for c in (RED, GREEN, BLUE))
     frames, steps = animation_frames(
-        _motor(t_len), _motor(t_len) + 0.1, images=recorded, generated_images=generated, replay_images=replayed,
-        joint_names=["a", "b", "c"], dt=0.5, title="three panels",
+        _motor(t_len),
+        _motor(t_len) + 0.1,
+        images=recorded,
+        generated_images=generated,
+        replay_images=replayed,
+        joint_names=["a", "b", "c"],
+        dt=0.5,
+        title="three panels",
     )
     assert len(frames) == MAX_FRAMES and np.array_equal(steps, frame_steps(t_len)) and steps[0] == 0 and steps[-1] == 60
     assert frames.dtype == np.uint8 and frames.shape[1] <= MAX_SIZE[0] and frames.shape[2] <= MAX_SIZE[1]
@@ -82,8 +88,13 @@ def test_frames_and_size_are_bounded():
     # a tighter pixel bound lowers the resolution; panels widen the figure
     small, _ = animation_frames(_motor(t_len), images=_coloured_frames(t_len, RED), max_frames=2, max_size=(100, 300))
     assert small.shape[1] <= 100 and small.shape[2] <= 300
-    three, _ = animation_frames(_motor(t_len), images=_coloured_frames(t_len, RED), generated_images=_coloured_frames(t_len, GREEN),
-                                replay_images=_coloured_frames(t_len, BLUE), max_frames=2)
+    three, _ = animation_frames(
+        _motor(t_len),
+        images=_coloured_frames(t_len, RED),
+        generated_images=_coloured_frames(t_len, GREEN),
+        replay_images=_coloured_frames(t_len, BLUE),
+        max_frames=2,
+    )
     assert three.shape[2] > frames.shape[2] > few.shape[2]
     with pytest.raises(ValueError, match="recorded frames must have shape"):
         animation_frames(_motor(t_len), images=_coloured_frames(t_len - 1, RED))
@@ -100,7 +111,9 @@ def _moving_square(t_len: int, colour, h: int = 36, w: int = 48) -> np.ndarray:
 
 def test_gif_is_a_looping_animation_of_the_frames_written_atomically(tmp_path):
     t_len = 40
-    frames, _ = animation_frames(_motor(t_len), images=_moving_square(t_len, RED), replay_images=_moving_square(t_len, BLUE))
+    frames, _ = animation_frames(
+        _motor(t_len), images=_moving_square(t_len, RED), replay_images=_moving_square(t_len, BLUE)
+    )
     path = save_gif(frames, tmp_path / "a.gif")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.gif"]  # no temporary left
     assert path.read_bytes()[:6] == b"GIF89a"
@@ -136,7 +149,9 @@ def sim_file(tmp_path_factory):
     """Touch and push at two block positions: 4 motions of 31 steps with 48 x 64 frames."""
     from primspace.sim.generate import GenerationConfig, generate_dataset
 
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), primitives=("touch", "push"), length=31)
+    config = GenerationConfig(
+        block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), primitives=("touch", "push"), length=31
+    )
     path = tmp_path_factory.mktemp("sim") / "sim.h5"
     generate_dataset(config, seed=0, out=path, progress=False)
     return path
@@ -151,8 +166,14 @@ def sim_run(sim_file, tmp_path_factory):
 
     ds = MotionDataset.load(sim_file).load_images()
     out = tmp_path_factory.mktemp("run") / "run"
-    fit(ds, out, model_config=ModelConfig(latent_dim=3, layer_sizes=(12, 6), image_channels=(4, 4, 4)),
-        train_config=TrainConfig(epochs=1, batch_size=4, threads=1), indices=[0, 1, 2], progress=False)
+    fit(
+        ds,
+        out,
+        model_config=ModelConfig(latent_dim=3, layer_sizes=(12, 6), image_channels=(4, 4, 4)),
+        train_config=TrainConfig(epochs=1, batch_size=4, threads=1),
+        indices=[0, 1, 2],
+        progress=False,
+    )
     return out
 
 
@@ -200,10 +221,15 @@ def test_animate_writes_a_gif_with_every_panel(run_cli, sim_run, tmp_path):
 
 def test_animate_refuses_bad_options_in_one_line(run_cli, sim_run, tmp_path):
     out = tmp_path / "a.gif"
-    assert_user_error(run_cli("animate", sim_run, "--sample", 3, "--out", out), "sample 3 is not one of the run's 3 samples")
+    assert_user_error(
+        run_cli("animate", sim_run, "--sample", 3, "--out", out), "sample 3 is not one of the run's 3 samples"
+    )
     assert_user_error(run_cli("animate", sim_run, "--sample", 99, "--out", out), "sample 99 is not one of the run's")
     for frames in (1, 0, -4):
-        assert_user_error(run_cli("animate", sim_run, "--sample", 0, "--out", out, "--frames", frames), f"--frames {frames}: must be at least 2")
+        assert_user_error(
+            run_cli("animate", sim_run, "--sample", 0, "--out", out, "--frames", frames),
+            f"--frames {frames}: must be at least 2",
+        )
     assert not out.exists()
     assert run_cli("animate", sim_run, "--sample", 0, "--out", out, "--frames", 3).code == 0
     before = out.read_bytes()
@@ -211,7 +237,9 @@ def test_animate_refuses_bad_options_in_one_line(run_cli, sim_run, tmp_path):
     assert out.read_bytes() == before
     assert run_cli("animate", sim_run, "--sample", 1, "--out", out, "--overwrite").code == 0
     assert out.read_bytes() != before
-    assert_user_error(run_cli("animate", sim_run, "--sample", 0, "--out", sim_run / "config.json", "--overwrite"), "config.json")
+    assert_user_error(
+        run_cli("animate", sim_run, "--sample", 0, "--out", sim_run / "config.json", "--overwrite"), "config.json"
+    )
 
 
 def test_animate_leaves_the_replay_out_for_data_not_of_the_simulator(run_cli, tmp_path):
@@ -220,12 +248,20 @@ def test_animate_leaves_the_replay_out_for_data_not_of_the_simulator(run_cli, tm
     from primspace.train import TrainConfig, fit
 
     rng = np.random.default_rng(0)
-    ds = MotionDataset(np.stack([_motor(10) * a for a in (1.0, 1.5, 2.0)]), images=rng.integers(0, 255, (3, 10, 8, 8, 3), dtype=np.uint8),
-                       labels=np.array([0, 1, 0]), dt=0.5)
+    ds = MotionDataset(
+        np.stack([_motor(10) * a for a in (1.0, 1.5, 2.0)]),
+        images=rng.integers(0, 255, (3, 10, 8, 8, 3), dtype=np.uint8),
+        labels=np.array([0, 1, 0]),
+        dt=0.5,
+    )
     ds.save(tmp_path / "d.h5")
-    fit(MotionDataset.load(tmp_path / "d.h5").load_images(), tmp_path / "run",
+    fit(
+        MotionDataset.load(tmp_path / "d.h5").load_images(),
+        tmp_path / "run",
         model_config=ModelConfig(latent_dim=2, layer_sizes=(8, 4), image_channels=(4, 4, 4)),
-        train_config=TrainConfig(epochs=1, batch_size=4, threads=1), progress=False)
+        train_config=TrainConfig(epochs=1, batch_size=4, threads=1),
+        progress=False,
+    )
     res = run_cli("animate", tmp_path / "run", "--sample", 1, "--out", tmp_path / "a.gif")
     assert res.code == 0, res.err
     assert "panels: recorded, generated, joint trace; no simulator replay: not the simulator's data" in res.out
@@ -252,7 +288,9 @@ def test_one_animation_per_primitive_in_the_report(sim_file, tmp_path):
     from primspace.experiments.workspace import ExperimentDir
     from primspace.report import build_report
 
-    exp = ExperimentDir(tmp_path / "out", replace(TINY, inits=("projection",)), data=sim_file, workers=1, progress=False)
+    exp = ExperimentDir(
+        tmp_path / "out", replace(TINY, inits=("projection",)), data=sim_file, workers=1, progress=False
+    )
     run_intra(exp)
     meta = json.loads((exp.path / "results" / "intra_animation.json").read_text())
     assert [a["name"] for a in meta["animations"]] == ["touch", "push"]
@@ -272,7 +310,9 @@ def test_one_animation_per_primitive_in_the_report(sim_file, tmp_path):
     drawn = figures.draw_animations(copy)
     assert sorted(p.name for p in drawn) == gifs
     for path in drawn:
-        assert all(np.array_equal(a, b) for a, b in zip(_gif_frames(path), _gif_frames(exp.path / "figures" / path.name)))
+        assert all(
+            np.array_equal(a, b) for a, b in zip(_gif_frames(path), _gif_frames(exp.path / "figures" / path.name))
+        )
 
     (exp.path / "figures" / "animation_push.gif").unlink()
     html = build_report(exp.path).read_text()

@@ -15,8 +15,9 @@ pytest.importorskip("pdoc")
 
 def test_the_api_reference_builds_and_names_the_public_classes(tmp_path):
     out = tmp_path / "api"
-    result = subprocess.run([sys.executable, str(ROOT / "docs" / "build_api.py"), str(out)],
-                            capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "docs" / "build_api.py"), str(out)], capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     assert (out / "index.html").is_file()
     pages = {p.relative_to(out).as_posix(): p.read_text(encoding="utf-8") for p in out.rglob("*.html")}

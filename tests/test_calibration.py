@@ -18,8 +18,14 @@ from primspace.train import evaluate, fit, infer, load_run
 def trained(train_set, tmp_path_factory):
     """A projection-init run whose codes move (a high latent learning rate)."""
     out = tmp_path_factory.mktemp("cal") / "run"
-    return fit(train_set, out, model_config=SMALL, train_config=_tc(epochs=40, latent_lr=0.05), init="projection",
-               progress=False)
+    return fit(
+        train_set,
+        out,
+        model_config=SMALL,
+        train_config=_tc(epochs=40, latent_lr=0.05),
+        init="projection",
+        progress=False,
+    )
 
 
 # ------------------------------------------------------------------- the ridge map
@@ -138,8 +144,16 @@ def test_infer_calibrated_starts_from_the_map_and_resumes_exactly(trained, eval_
     np.testing.assert_array_equal(full.calibration.coef_, trained.calibration.coef_)
     tc = replace_epochs(trained.train_config, 3, **constant)
     infer(trained.run_dir, eval_set, tmp_path / "part", init="calibrated", epochs=3, train_config=tc, progress=False)
-    resumed = infer(trained.run_dir, eval_set, tmp_path / "part", init="calibrated", epochs=6, resume=True,
-                    progress=False, **constant)
+    resumed = infer(
+        trained.run_dir,
+        eval_set,
+        tmp_path / "part",
+        init="calibrated",
+        epochs=6,
+        resume=True,
+        progress=False,
+        **constant,
+    )
     np.testing.assert_array_equal(resumed.latents, full.latents)
     # a calibrated start is lower than the raw projection's on these primitives
     raw = evaluate(trained, eval_set, trained.initializer.transform(scaled))["loss"]
@@ -153,13 +167,19 @@ def replace_epochs(tc, epochs, **changes):
 
 
 def test_calibrated_is_refused_without_a_projection_or_pca_fit(train_set, eval_set, tmp_path):
-    zero = fit(train_set, tmp_path / "zero", model_config=SMALL, train_config=_tc(epochs=1), init="zero", progress=False)
+    zero = fit(
+        train_set, tmp_path / "zero", model_config=SMALL, train_config=_tc(epochs=1), init="zero", progress=False
+    )
     assert zero.calibration is None and not (tmp_path / "zero" / "calibration.json").exists()
-    with pytest.raises(UserError, match="needs a run fitted with projection or pca init; this run's codes start from 'zero'"):
+    with pytest.raises(
+        UserError, match="needs a run fitted with projection or pca init; this run's codes start from 'zero'"
+    ):
         infer(zero, eval_set, tmp_path / "x", epochs=1, init="calibrated", progress=False)
     assert not (tmp_path / "x").exists()
     with pytest.raises(UserError, match="starts from a trained run's calibration map"):
-        fit(train_set, tmp_path / "y", model_config=SMALL, train_config=_tc(epochs=1), init="calibrated", progress=False)
+        fit(
+            train_set, tmp_path / "y", model_config=SMALL, train_config=_tc(epochs=1), init="calibrated", progress=False
+        )
     pca = fit(train_set, None, model_config=SMALL, train_config=_tc(epochs=1), init="pca", progress=False)
     assert pca.calibration is not None
 
@@ -171,30 +191,44 @@ def test_a_fit_saved_without_calibration_gets_it_on_resume(train_set, eval_set, 
     torch.save(state, tmp_path / "run" / "checkpoint.pt")
     with pytest.raises(UserError, match="resume its fit once"):
         infer(tmp_path / "run", eval_set, tmp_path / "x", epochs=1, init="calibrated", progress=False)
-    again = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), resume=True, progress=False)
+    again = fit(
+        train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), resume=True, progress=False
+    )
     np.testing.assert_array_equal(again.latents, run.latents)
     np.testing.assert_array_equal(again.calibration.coef_, run.calibration.coef_)
     # a map fitted another way (towards zero, as early 0.5 did) is refitted the current way
     state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
-    state["calibration"] = CodeCalibration(SMALL.latent_dim, prior="zero").fit(run.initial_latents, run.latents).state_dict()
+    state["calibration"] = (
+        CodeCalibration(SMALL.latent_dim, prior="zero").fit(run.initial_latents, run.latents).state_dict()
+    )
     torch.save(state, tmp_path / "run" / "checkpoint.pt")
     assert load_run(tmp_path / "run").calibration.prior == "zero"
-    third = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), resume=True, progress=False)
+    third = fit(
+        train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), resume=True, progress=False
+    )
     assert third.calibration.prior == "identity" and load_run(tmp_path / "run").calibration.prior == "identity"
     np.testing.assert_array_equal(third.calibration.coef_, run.calibration.coef_)
 
 
 def test_extending_a_fit_refits_its_calibration_at_the_new_end(train_set, tmp_path):
     fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), progress=False)
-    longer = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=4), resume=True, progress=False)
+    longer = fit(
+        train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=4), resume=True, progress=False
+    )
     scaled = longer.scaler.transform(train_set.motor)
     again = CodeCalibration(SMALL.latent_dim).fit(longer.initializer.transform(scaled), longer.latents)
     np.testing.assert_allclose(longer.calibration.coef_, again.coef_, rtol=1e-10)
 
 
 def test_weights_from_with_calibrated_codes_for_the_new_samples(trained, eval_set, tmp_path):
-    second = fit(eval_set, tmp_path / "second", train_config=_tc(epochs=1), weights_from=trained, init="calibrated",
-                 progress=False)
+    second = fit(
+        eval_set,
+        tmp_path / "second",
+        train_config=_tc(epochs=1),
+        weights_from=trained,
+        init="calibrated",
+        progress=False,
+    )
     scaled = trained.scaler.transform(eval_set.motor)
     expected = trained.calibration.transform(trained.initializer.transform(scaled))
     np.testing.assert_allclose(second.initial_latents, expected, rtol=1e-6)
@@ -220,8 +254,19 @@ def test_cli_infer_calibrated_and_its_refusal(run_cli, train_set, eval_set, tmp_
     res = run_cli("train", data, "--out", tmp_path / "proj", *args)
     assert res.code == 0, res.err
     assert "calibration (for --init calibrated): the fitted codes moved" in res.out
-    res = run_cli("infer", tmp_path / "proj", data, "--init", "calibrated", "--epochs", "2", "--out", tmp_path / "ev",
-                  "--threads", "1")
+    res = run_cli(
+        "infer",
+        tmp_path / "proj",
+        data,
+        "--init",
+        "calibrated",
+        "--epochs",
+        "2",
+        "--out",
+        tmp_path / "ev",
+        "--threads",
+        "1",
+    )
     assert res.code == 0, res.err
     assert "infer, 36 samples, init calibrated" in res.out
     res = run_cli("train", data, "--init", "zero", "--out", tmp_path / "zero", *args)

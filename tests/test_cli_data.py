@@ -56,9 +56,16 @@ def test_bad_npz_is_one_line_and_leaves_no_output(run_cli, tmp_path):
 
 
 def test_cli_argument_errors(run_cli, tmp_path):
-    assert_user_error(run_cli("import", "--format", "npz", "-T", "10", "--out", tmp_path / "o.h5"), "needs a source path")
-    assert_user_error(run_cli("import", tmp_path / "x.txt", "-T", "10", "--out", tmp_path / "o.h5"), "cannot tell the format")
-    assert_user_error(run_cli("import", "--format", "lasa", "-T", "10", "--shapes", "Nope", "--out", tmp_path / "o.h5"), "unknown LASA shape")
+    assert_user_error(
+        run_cli("import", "--format", "npz", "-T", "10", "--out", tmp_path / "o.h5"), "needs a source path"
+    )
+    assert_user_error(
+        run_cli("import", tmp_path / "x.txt", "-T", "10", "--out", tmp_path / "o.h5"), "cannot tell the format"
+    )
+    assert_user_error(
+        run_cli("import", "--format", "lasa", "-T", "10", "--shapes", "Nope", "--out", tmp_path / "o.h5"),
+        "unknown LASA shape",
+    )
     assert run_cli("import", "--format", "tar", "-T", "10", "--out", tmp_path / "o.h5").code == 2  # click's usage error
     assert not (tmp_path / "o.h5").exists()
 
@@ -68,7 +75,9 @@ def test_installed_entry_point_runs_as_a_process(tmp_path):
     env = dict(os.environ)
     bad = tmp_path / "notes.h5"
     bad.write_text("not hdf5")
-    proc = subprocess.run([sys.executable, "-m", "primspace", "info", str(bad)], capture_output=True, text=True, env=env)
+    proc = subprocess.run(
+        [sys.executable, "-m", "primspace", "info", str(bad)], capture_output=True, text=True, env=env
+    )
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1
     assert proc.stderr.startswith(f"primspace: error: {bad}: not a readable HDF5 file")

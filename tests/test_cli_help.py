@@ -28,8 +28,12 @@ def _commands():
 
 
 def test_every_option_and_argument_has_help():
-    missing = [(" ".join(path), p.opts[0] if p.opts else p.name) for path, command in _commands()
-               for p in command.params if not p.hidden and not (p.help or "").strip()]
+    missing = [
+        (" ".join(path), p.opts[0] if p.opts else p.name)
+        for path, command in _commands()
+        for p in command.params
+        if not p.hidden and not (p.help or "").strip()
+    ]
     assert not missing, missing
 
 
@@ -55,8 +59,11 @@ def test_no_help_text_is_folded_mid_word(run_cli, monkeypatch):
     for path, _ in _commands():
         wide = _words(_help(run_cli, monkeypatch, path, 400))
         for width in (100, 80):
-            pieces = sorted(w for w in _words(_help(run_cli, monkeypatch, path, width)) - wide
-                            if width == 100 or not w.endswith("…"))
+            pieces = sorted(
+                w
+                for w in _words(_help(run_cli, monkeypatch, path, width)) - wide
+                if width == 100 or not w.endswith("…")
+            )
             if pieces:
                 broken[(" ".join(path), width)] = pieces
     assert not broken, broken
@@ -109,8 +116,7 @@ def test_cluster_needs_the_number_of_primitives_once(run_cli, tmp_path):
 
 
 #: The positional argument that names a data set, by command: shown as DATA everywhere.
-_DATA_ARGUMENT = {"train": "file", "infer": "file", "info": "file", "show": "file", "cluster": "src",
-                  "segment": "data"}
+_DATA_ARGUMENT = {"train": "file", "infer": "file", "info": "file", "show": "file", "cluster": "src", "segment": "data"}
 
 
 def test_the_data_argument_has_one_name():

@@ -81,8 +81,10 @@ def test_auto_records_candidates_and_matches_the_fixed_fit():
 @pytest.mark.parametrize("criterion", AUTO_CRITERIA)
 def test_auto_is_deterministic(criterion):
     X, _ = planted(0.3, seed=1)
-    fits = [LowRankSubspaceClustering(4, r2_target="auto", auto_criterion=criterion, random_state=3).fit(X)
-            for _ in range(2)]
+    fits = [
+        LowRankSubspaceClustering(4, r2_target="auto", auto_criterion=criterion, random_state=3).fit(X)
+        for _ in range(2)
+    ]
     np.testing.assert_array_equal(fits[0].labels_, fits[1].labels_)
     np.testing.assert_array_equal(fits[0].auto_scores_, fits[1].auto_scores_)
     assert fits[0].tau_ == fits[1].tau_
@@ -166,16 +168,21 @@ def test_cli_r2_auto(run_cli, noisy_latents, tmp_path):
     record = json.loads((tmp_path / "a" / "result.json").read_text())
     assert record["tau_option"] == {"r2_target": "auto"} and record["auto"]["criterion"] == "relative_eigengap"
     assert record["scores"]["accuracy"] >= 0.95
-    res = run_cli("cluster", z, "--k", 4, "--r2", "AUTO", "--auto-criterion", "stability", "--json",
-                  "--out", tmp_path / "b")
+    res = run_cli(
+        "cluster", z, "--k", 4, "--r2", "AUTO", "--auto-criterion", "stability", "--json", "--out", tmp_path / "b"
+    )
     assert res.code == 0, res.err
     assert json.loads(res.out)["auto"]["criterion"] == "stability"
 
 
 @pytest.mark.parametrize(
     "value, fragment",
-    [("abc", "--r2 must be a number in (0, 1) or 'auto'"), ("1.5", "--r2 must lie in (0, 1)"),
-     ("nan", "--r2 must lie in (0, 1)"), ("0", "--r2 must lie in (0, 1)")],
+    [
+        ("abc", "--r2 must be a number in (0, 1) or 'auto'"),
+        ("1.5", "--r2 must lie in (0, 1)"),
+        ("nan", "--r2 must lie in (0, 1)"),
+        ("0", "--r2 must lie in (0, 1)"),
+    ],
 )
 def test_cli_bad_r2_is_one_line(run_cli, noisy_latents, tmp_path, value, fragment):
     z, _ = noisy_latents
@@ -184,5 +191,6 @@ def test_cli_bad_r2_is_one_line(run_cli, noisy_latents, tmp_path, value, fragmen
 
 def test_cli_auto_with_another_tau_option(run_cli, noisy_latents, tmp_path):
     z, _ = noisy_latents
-    assert_user_error(run_cli("cluster", z, "--k", 4, "--r2", "auto", "--tau", "1", "--out", tmp_path / "o"),
-                      "at most one of")
+    assert_user_error(
+        run_cli("cluster", z, "--k", 4, "--r2", "auto", "--tau", "1", "--out", tmp_path / "o"), "at most one of"
+    )

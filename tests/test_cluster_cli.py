@@ -163,19 +163,27 @@ def test_bad_data_is_one_line_naming_the_file(run_cli, tmp_path):
     x, y = subspace_latents()
     x[7, 2] = np.nan
     np.save(tmp_path / "nan.npy", x)
-    assert_user_error(run_cli("cluster", tmp_path / "nan.npy", "--k", 3, "--out", tmp_path / "o"), "nan.npy", "NaN or inf", "sample 7")
+    assert_user_error(
+        run_cli("cluster", tmp_path / "nan.npy", "--k", 3, "--out", tmp_path / "o"), "nan.npy", "NaN or inf", "sample 7"
+    )
     x[7, 2] = np.inf
     np.save(tmp_path / "inf.npy", x)
-    assert_user_error(run_cli("cluster", tmp_path / "inf.npy", "--k", 3, "--out", tmp_path / "o"), "inf.npy", "NaN or inf")
+    assert_user_error(
+        run_cli("cluster", tmp_path / "inf.npy", "--k", 3, "--out", tmp_path / "o"), "inf.npy", "NaN or inf"
+    )
     np.save(tmp_path / "flat.npy", np.arange(10.0))
     assert_user_error(run_cli("cluster", tmp_path / "flat.npy", "--k", 2, "--out", tmp_path / "o"), "flat.npy", "2-D")
     np.save(tmp_path / "ok.npy", subspace_latents()[0])
     np.save(tmp_path / "short.npy", y[:5])
     assert_user_error(
         run_cli("cluster", tmp_path / "ok.npy", "--k", 3, "--labels", tmp_path / "short.npy", "--out", tmp_path / "o"),
-        "short.npy", "labels", "(90,)",
+        "short.npy",
+        "labels",
+        "(90,)",
     )
-    assert_user_error(run_cli("cluster", tmp_path / "missing.npy", "--k", 3, "--out", tmp_path / "o"), "missing.npy", "no such file")
+    assert_user_error(
+        run_cli("cluster", tmp_path / "missing.npy", "--k", 3, "--out", tmp_path / "o"), "missing.npy", "no such file"
+    )
     (tmp_path / "z.txt").write_text("1 2")
     assert_user_error(run_cli("cluster", tmp_path / "z.txt", "--k", 3, "--out", tmp_path / "o"), "z.txt", ".npy")
     assert not (tmp_path / "o").exists()

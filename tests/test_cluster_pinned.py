@@ -89,8 +89,13 @@ def labels_text(labels) -> str:
 
 def array_summary(a) -> dict:
     a = np.asarray(a, dtype=np.float64)
-    return {"shape": list(a.shape), "sum": float(a.sum()), "sumsq": float(np.square(a).sum()),
-            "first": float(a.flat[0]), "last": float(a.flat[-1])}
+    return {
+        "shape": list(a.shape),
+        "sum": float(a.sum()),
+        "sumsq": float(np.square(a).sum()),
+        "first": float(a.flat[0]),
+        "last": float(a.flat[-1]),
+    }
 
 
 def estimator_record(model, labels_true=None) -> dict:
@@ -131,15 +136,31 @@ ESTIMATOR_CASES = {
 SWEEP_CASES = {
     # name: (data, sweep keyword arguments)
     "planted/r2 grid": ("planted", {"n_clusters": 3, "random_state": 0, "return_labels": True}),
-    "planted/taus": ("planted", {"n_clusters": 3, "taus": [1e-9, 0.01, 0.1, 1.0, 10.0], "random_state": 4, "return_labels": True}),
-    "planted/tau_relatives": ("planted", {"n_clusters": 3, "tau_relatives": [2.0, 50.0, 1e4], "affine": False,
-                                          "random_state": 1, "n_init": 5}),
-    "planted/abs": ("planted", {"n_clusters": 3, "r2_targets": [0.9, 0.99], "affinity": "abs", "ones_weight": 0.5,
-                                "random_state": 0, "return_labels": True}),
+    "planted/taus": (
+        "planted",
+        {"n_clusters": 3, "taus": [1e-9, 0.01, 0.1, 1.0, 10.0], "random_state": 4, "return_labels": True},
+    ),
+    "planted/tau_relatives": (
+        "planted",
+        {"n_clusters": 3, "tau_relatives": [2.0, 50.0, 1e4], "affine": False, "random_state": 1, "n_init": 5},
+    ),
+    "planted/abs": (
+        "planted",
+        {
+            "n_clusters": 3,
+            "r2_targets": [0.9, 0.99],
+            "affinity": "abs",
+            "ones_weight": 0.5,
+            "random_state": 0,
+            "return_labels": True,
+        },
+    ),
     "large/r2 grid": ("large", {"n_clusters": 4, "r2_targets": [0.9, 0.999], "random_state": 0, "return_labels": True}),
     "trajectories/experiment": ("trajectories", {"n_clusters": 3, "r2_targets": EXPERIMENT_GRID, "random_state": 0}),
-    "trajectories/all labels": ("trajectories", {"n_clusters": 4, "r2_targets": (0.99, 0.9999), "random_state": 0,
-                                                 "return_labels": True}),
+    "trajectories/all labels": (
+        "trajectories",
+        {"n_clusters": 4, "r2_targets": (0.99, 0.9999), "random_state": 0, "return_labels": True},
+    ),
 }
 
 
@@ -211,20 +232,55 @@ def write_cli_inputs(folder: Path) -> dict:
     np.save(folder / "big_y.npy", big_y)
     motor, labels, names = trajectories()
     MotionDataset(motor, labels=labels, label_names=names).save(folder / "motion.h5")
-    return {"z": folder / "z.npy", "y": folder / "y.npy", "big": folder / "big.npy", "big_y": folder / "big_y.npy",
-            "motion": folder / "motion.h5"}
+    return {
+        "z": folder / "z.npy",
+        "y": folder / "y.npy",
+        "big": folder / "big.npy",
+        "big_y": folder / "big_y.npy",
+        "motion": folder / "motion.h5",
+    }
 
 
 def cli_cases(inputs: dict) -> dict:
     return {
         "latents --sweep": [inputs["z"], "--k", 3, "--labels", inputs["y"], "--sweep"],
-        "latents --json": [inputs["z"], "--k", 3, "--labels", inputs["y"], "--tau-relative", 300, "--json", "--seed", 5],
-        "latents --sweep-taus --linear": [inputs["z"], "--k", 3, "--sweep-taus", "1e-9,0.05,0.5,5", "--linear",
-                                          "--affinity", "abs", "--n-init", 4],
+        "latents --json": [
+            inputs["z"],
+            "--k",
+            3,
+            "--labels",
+            inputs["y"],
+            "--tau-relative",
+            300,
+            "--json",
+            "--seed",
+            5,
+        ],
+        "latents --sweep-taus --linear": [
+            inputs["z"],
+            "--k",
+            3,
+            "--sweep-taus",
+            "1e-9,0.05,0.5,5",
+            "--linear",
+            "--affinity",
+            "abs",
+            "--n-init",
+            4,
+        ],
         "big --sweep": [inputs["big"], "--k", 4, "--labels", inputs["big_y"], "--r2", 0.999, "--sweep"],
         "motion --sweep --json": [inputs["motion"], "--k", 3, "--r2", 0.9999, "--sweep", "--json"],
-        "motion --tau --ones-weight": [inputs["motion"], "--k", 3, "--tau", 0.05, "--ones-weight", 3.0,
-                                       "--spectral", "dense"],
+        "motion --tau --ones-weight": [
+            inputs["motion"],
+            "--k",
+            3,
+            "--tau",
+            0.05,
+            "--ones-weight",
+            3.0,
+            "--spectral",
+            "dense",
+        ],
     }
 
 
@@ -241,8 +297,15 @@ def record_cli(tmp: Path, monkeypatch=None) -> dict:
     real_clustering, real_sweep = plots.plot_clustering, plots.plot_tau_sweep
 
     def spy_clustering(affinity, labels_pred, labels_true=None, **kwargs):
-        calls.append({"figure": "clustering", "affinity": array_summary(affinity), "labels_pred": labels_text(labels_pred),
-                      "labels_true": None if labels_true is None else labels_text(labels_true), **kwargs})
+        calls.append(
+            {
+                "figure": "clustering",
+                "affinity": array_summary(affinity),
+                "labels_pred": labels_text(labels_pred),
+                "labels_true": None if labels_true is None else labels_text(labels_true),
+                **kwargs,
+            }
+        )
         return real_clustering(affinity, labels_pred, labels_true, **kwargs)
 
     def spy_sweep(rows, **kwargs):
@@ -317,7 +380,11 @@ def assert_same(actual, expected, where="") -> None:
             for j, (a, e) in enumerate(zip(a_row, e_row)):
                 assert_same(_cell(a), _cell(e), f"{where}[{i},{j}]")
     else:
-        assert type(actual) is type(expected) or (isinstance(actual, int) and isinstance(expected, int)), (where, actual, expected)
+        assert type(actual) is type(expected) or (isinstance(actual, int) and isinstance(expected, int)), (
+            where,
+            actual,
+            expected,
+        )
         assert actual == expected, (where, actual, expected)
 
 
@@ -373,6 +440,7 @@ def test_experiment_grid_rows_are_the_command_grid_rows():
 
 
 # ---------------------------------------------------------------------- the record
+
 
 def pinned() -> dict:
     """The recorded numbers (``test_cluster_pinned.json`` beside this file)."""

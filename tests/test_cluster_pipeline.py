@@ -102,7 +102,7 @@ def test_an_svd_of_other_points_or_settings_is_refused(change, message):
     svd = LowRankSubspaceClustering(3).decompose(X)
     settings = {k: v for k, v in change.items() if k != "rows"}
     with pytest.raises(ValueError, match=message):
-        LowRankSubspaceClustering(3, **settings).fit(X[change.get("rows", 0):], svd=svd)
+        LowRankSubspaceClustering(3, **settings).fit(X[change.get("rows", 0) :], svd=svd)
     with pytest.raises(ValueError, match="SelfRepresentationSVD"):
         LowRankSubspaceClustering(3).fit(X, svd="svd")
 
@@ -128,15 +128,47 @@ def test_sweep_refuses_bad_grids_before_any_work(svd_calls):
 def test_pipeline_result_is_the_estimators_and_round_trips_through_json():
     X, y = planted()
     est = LowRankSubspaceClustering(3, tau_relative=300.0, random_state=5)
-    result = cluster_points(X, est, labels_true=y, label_names=["a", "b", "c"], sweep_param="tau", sweep_values=[0.1, 1.0])
+    result = cluster_points(
+        X, est, labels_true=y, label_names=["a", "b", "c"], sweep_param="tau", sweep_values=[0.1, 1.0]
+    )
     model = clone(est).fit(X)
     np.testing.assert_array_equal(result.labels, model.labels_)
-    assert (result.tau, result.r2, result.rank, result.tau_option) == (model.tau_, model.r2_, model.rank_, {"tau_relative": 300.0})
-    assert result.summary() == {"tau": model.tau_, "r2": model.r2_, "rank": model.rank_, "accuracy": 1.0, "nmi": 1.0, "ari": 1.0}
+    assert (result.tau, result.r2, result.rank, result.tau_option) == (
+        model.tau_,
+        model.r2_,
+        model.rank_,
+        {"tau_relative": 300.0},
+    )
+    assert result.summary() == {
+        "tau": model.tau_,
+        "r2": model.r2_,
+        "rank": model.rank_,
+        "accuracy": 1.0,
+        "nmi": 1.0,
+        "ari": 1.0,
+    }
     summary = result.to_dict()
-    assert list(summary) == ["n_samples", "n_features", "n_clusters", "affine", "affinity", "ones_weight", "tau_option", "tau",
-                             "tau_relative", "r2", "rank", "spectral_method", "eigenvalues", "singular_values", "n_init",
-                             "seed", "seconds", "scores", "sweep"]
+    assert list(summary) == [
+        "n_samples",
+        "n_features",
+        "n_clusters",
+        "affine",
+        "affinity",
+        "ones_weight",
+        "tau_option",
+        "tau",
+        "tau_relative",
+        "r2",
+        "rank",
+        "spectral_method",
+        "eigenvalues",
+        "singular_values",
+        "n_init",
+        "seed",
+        "seconds",
+        "scores",
+        "sweep",
+    ]
     assert [r["value"] for r in summary["sweep"]] == [0.1, 1.0]
     full = json.loads(json.dumps(result.to_dict(include_arrays=True)))
     again = ClusteringResult.from_dict(full)
@@ -156,7 +188,9 @@ def test_figures_are_drawn_from_the_result_alone():
     est = LowRankSubspaceClustering(3, random_state=0)
     result = cluster_points(X, est, labels_true=y, sweep_param="r2_target", sweep_values=[0.9, 0.99])
     model = clone(est).fit(X)
-    np.testing.assert_array_equal(result.figure_affinity(), affinity_from_factor(model.representation_factor_, rows=result.figure_indices))
+    np.testing.assert_array_equal(
+        result.figure_affinity(), affinity_from_factor(model.representation_factor_, rows=result.figure_indices)
+    )
     for fig, title in ((clustering_figure(result, title="t"), "t"), (sweep_figure(result, title="s"), "s")):
         texts = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, "get_text"))]
         assert title in texts and len(fig.axes) >= 2

@@ -34,7 +34,10 @@ def tiny():
 
 def _segments_of(plan: SequencePlan, transition: int) -> list[tuple[int, int]]:
     """(label, steps) of each segment the plan should produce."""
-    return [(get_primitive(name).label, d + (transition if k else 0)) for k, (name, d) in enumerate(zip(plan.chain, plan.durations))]
+    return [
+        (get_primitive(name).label, d + (transition if k else 0))
+        for k, (name, d) in enumerate(zip(plan.chain, plan.durations))
+    ]
 
 
 def test_step_fields_follow_the_drawn_chains(tiny):
@@ -64,13 +67,16 @@ def _steps_near_boundaries(ds, i: int, transition: int):
     those within a script and the largest in each window around a segment boundary (the
     last 2 steps of a script, the transition, the first 2 of the next script)."""
     n = int(ds.lengths[i])
-    steps = {"arm": np.abs(np.diff(ds.motor[i, :n, :7], axis=0)).max(axis=1), "fingers": np.abs(np.diff(ds.motor[i, :n, 7]))}
+    steps = {
+        "arm": np.abs(np.diff(ds.motor[i, :n, :7], axis=0)).max(axis=1),
+        "fingers": np.abs(np.diff(ds.motor[i, :n, 7])),
+    }
     seg = ds.step_segments[i, :n]
     starts = np.flatnonzero(np.diff(seg)) + 1  # first step of segments 1, 2, ...
     pos = np.arange(n) - np.searchsorted(seg, seg)  # step within its segment
     in_script = ((seg == 0) | (pos > transition))[1:]  # change t -> t + 1 inside one script
     within = {k: v[in_script] for k, v in steps.items()}
-    near = {k: [v[b - 2:b + transition + 2].max() for b in starts] for k, v in steps.items()}
+    near = {k: [v[b - 2 : b + transition + 2].max() for b in starts] for k, v in steps.items()}
     return within, near
 
 
@@ -112,7 +118,9 @@ def test_block_moves_with_push_and_pull_and_each_primitive_is_judged():
     seq = simulate_sequence(worker_scene(), TINY, plan, 0)  # verify: every script passes its judge
     seg = seq["step_segments"]
     assert seq["block"][0, 0] == pytest.approx(0.5)
-    assert seq["block"][seg == 1][0, 0] == pytest.approx(SCRIPT.push_target_x, abs=2e-3)  # pull starts where push left it
+    assert seq["block"][seg == 1][0, 0] == pytest.approx(
+        SCRIPT.push_target_x, abs=2e-3
+    )  # pull starts where push left it
     assert seq["block"][-1, 0] == pytest.approx(SCRIPT.pull_target_x, abs=2e-3)
     assert len(seq["motor"]) == 31 + 33 + 32 + 2 * 8
 
@@ -156,8 +164,15 @@ def test_presets_and_settings_are_checked():
     demo, big = COMPOSITE_PRESETS["composite-demo"], COMPOSITE_PRESETS["composite"]
     assert demo.max_primitives == 3 and demo.image_size is None and 60 <= demo.n_sequences <= 90
     assert big.max_primitives == 4 and big.n_sequences >= 500 and big.length == 4 * 70 + 3 * big.transition_steps
-    bad = ({"min_primitives": 1}, {"duration": (20, 30)}, {"block_x": (0.3, 0.6)}, {"image_size": (0, 64)},
-           {"primitives": ("push", "pull"), "max_primitives": 3}, {"primitives": ("touch", "jump")}, {"colour": 1})
+    bad = (
+        {"min_primitives": 1},
+        {"duration": (20, 30)},
+        {"block_x": (0.3, 0.6)},
+        {"image_size": (0, 64)},
+        {"primitives": ("push", "pull"), "max_primitives": 3},
+        {"primitives": ("touch", "jump")},
+        {"colour": 1},
+    )
     for settings in bad:
         with pytest.raises(UserError):
             resolve_composite(settings)
@@ -174,8 +189,23 @@ def test_generate_command_takes_composite_presets(run_cli, monkeypatch, tmp_path
     monkeypatch.setitem(composite.COMPOSITE_PRESETS, "composite-tiny", tiny)
     out, settings = tmp_path / "long.h5", tmp_path / "s.json"
     settings.write_text('{"n_sequences": 3}')
-    res = run_cli("generate", "--preset", "composite-tiny", "--out", out, "--workers", 1, "--config", settings,
-                  "--height", 12, "--width", 16, "--seed", 4)
+    res = run_cli(
+        "generate",
+        "--preset",
+        "composite-tiny",
+        "--out",
+        out,
+        "--workers",
+        1,
+        "--config",
+        settings,
+        "--height",
+        12,
+        "--width",
+        16,
+        "--seed",
+        4,
+    )
     assert res.code == 0, res.err
     assert "3 long demonstrations of 2-2 primitives" in res.out and "images 12x16" in res.out
     ds = MotionDataset.load(out)
@@ -184,6 +214,7 @@ def test_generate_command_takes_composite_presets(run_cli, monkeypatch, tmp_path
     n = int(ds.lengths[0])
     assert (images[n:] == images[n - 1]).all() and not (images[0] == images[n // 2]).all()
     assert '"seed": 4' in ds.source
-    assert_user_error(run_cli("generate", "--preset", "composite-tiny", "--out", tmp_path / "r.h5", "--backend", "ray"),
-                      "locally")
+    assert_user_error(
+        run_cli("generate", "--preset", "composite-tiny", "--out", tmp_path / "r.h5", "--backend", "ray"), "locally"
+    )
     assert_user_error(run_cli("generate", "--preset", "huge", "--out", tmp_path / "h.h5"), "composite-demo")

@@ -17,9 +17,16 @@ from primspace.sim.composite import CompositeConfig, generate_composite
 from conftest import assert_user_error
 
 TINY = ExperimentPreset(
-    name="composite-tiny", data_preset="composite-demo", train_fraction=0.5, inits=("zero", "projection"),
-    latent_dims=(4,), fit_epochs=3, infer_epochs=2, images=False,
-    model=replace(default_model(), layer_sizes=(12, 6), code_window=8), train=replace(default_train(), batch_size=4),
+    name="composite-tiny",
+    data_preset="composite-demo",
+    train_fraction=0.5,
+    inits=("zero", "projection"),
+    latent_dims=(4,),
+    fit_epochs=3,
+    infer_epochs=2,
+    images=False,
+    model=replace(default_model(), layer_sizes=(12, 6), code_window=8),
+    train=replace(default_train(), batch_size=4),
 )
 
 
@@ -50,7 +57,9 @@ def test_runs_are_segmented_and_scored(finished):
     for r in results["runs"]:
         assert (r["window"], r["n_train"], r["n_eval"]) == (8, 4, 4)
         seg = r["segmentation"]
-        assert seg["tolerance"] == 8 and seg["segments_true"] == 8  # two primitives in each of 4 held-out demonstrations
+        assert (
+            seg["tolerance"] == 8 and seg["segments_true"] == 8
+        )  # two primitives in each of 4 held-out demonstrations
         assert seg["boundary_transition"]["f1"] >= seg["boundary"]["f1"]  # a 4-step transition widens the reach
         assert 0 <= seg["boundary"]["f1"] <= 1 and 0 < seg["accuracy"] <= 1
         assert len(r["infer"]) == 3  # epoch 0 and two inference epochs
@@ -68,8 +77,14 @@ def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
     block = results["peers"]["0"]
     assert (block["n_eval"], block["tolerance"], block["segments_true"]) == (4, 8, 8)
     assert block["inits"] == ["projection-q4", "zero-q4"]
-    assert {"raw", "relative", "codes projection-q4", "codes trajectory projection-q4", "codes zero-q4",
-            "untrained codes projection-q4"} <= set(block["bounds"])
+    assert {
+        "raw",
+        "relative",
+        "codes projection-q4",
+        "codes trajectory projection-q4",
+        "codes zero-q4",
+        "untrained codes projection-q4",
+    } <= set(block["bounds"])
     assert "untrained codes zero-q4" not in block["bounds"]  # all zero: nothing to read
     assert set(block["methods"]) | set(block["missing"]) == set(PEERS)
     for scores in block["methods"].values():
@@ -143,10 +158,18 @@ def test_segment_refuses_a_run_with_one_code_per_sequence(long_data, tmp_path, r
     from primspace.train import TrainConfig, fit
 
     data = MotionDataset.load(long_data)
-    fit(data, tmp_path / "run", model_config=ModelConfig(latent_dim=3, layer_sizes=(8, 4)),
-        train_config=TrainConfig(epochs=1, batch_size=4), progress=False)
-    assert_user_error(run_cli("segment", tmp_path / "run", long_data, "--method", "windows", "--out", tmp_path / "seg"),
-                      "one code per sequence", "--code-window")
+    fit(
+        data,
+        tmp_path / "run",
+        model_config=ModelConfig(latent_dim=3, layer_sizes=(8, 4)),
+        train_config=TrainConfig(epochs=1, batch_size=4),
+        progress=False,
+    )
+    assert_user_error(
+        run_cli("segment", tmp_path / "run", long_data, "--method", "windows", "--out", tmp_path / "seg"),
+        "one code per sequence",
+        "--code-window",
+    )
 
 
 def test_composite_presets_are_named_by_demo_paper_and_lasa():
@@ -166,7 +189,11 @@ def test_lasa_chains_are_continuous_real_shapes_with_their_steps_labelled():
     assert data.label_names == list(CHAIN_SHAPES) and data.length == 120
     for i in range(len(data)):
         n = int(data.lengths[i])
-        assert 60 <= n <= 120 and (data.step_labels[i, n:] == -1).all() and (data.motor[i, n:] == data.motor[i, n - 1]).all()
+        assert (
+            60 <= n <= 120
+            and (data.step_labels[i, n:] == -1).all()
+            and (data.motor[i, n:] == data.motor[i, n - 1]).all()
+        )
         steps = np.abs(np.diff(data.motor[i, :n], axis=0)).max(axis=1)
         junctions = np.flatnonzero(np.diff(data.step_segments[i, :n])) + 1
         assert len(junctions) in (1, 2) and (steps[junctions - 1] <= steps.max()).all()
@@ -179,8 +206,14 @@ def test_lasa_chains_are_continuous_real_shapes_with_their_steps_labelled():
 
 
 SINGLE_TINY = ExperimentPreset(
-    name="single-tiny", data_preset="demo", latent_dims=(4,), fit_epochs=3, images=False, cluster_latent_dim=4,
-    model=replace(default_model(), layer_sizes=(12, 6)), train=replace(default_train(), batch_size=4),
+    name="single-tiny",
+    data_preset="demo",
+    latent_dims=(4,),
+    fit_epochs=3,
+    images=False,
+    cluster_latent_dim=4,
+    model=replace(default_model(), layer_sizes=(12, 6)),
+    train=replace(default_train(), batch_size=4),
 )
 
 
@@ -194,8 +227,12 @@ def by_primitives(long_data, tmp_path_factory):
 
     preset = replace(TINY, seeds=(0,), primitives="single-tiny", segment_steps=(20, 40))
     exp = ExperimentDir(tmp_path_factory.mktemp("prim") / "out", preset, data=long_data, workers=1, progress=False)
-    generate_dataset(GenerationConfig(block_x=(0.5, 0.55), block_y=(0.0,), block_size=(0.05,), images=False), seed=0,
-                     out=exp.path / PRIMITIVES_FILE, progress=False)
+    generate_dataset(
+        GenerationConfig(block_x=(0.5, 0.55), block_y=(0.0,), block_size=(0.05,), images=False),
+        seed=0,
+        out=exp.path / PRIMITIVES_FILE,
+        progress=False,
+    )
     with pytest.MonkeyPatch.context() as patch:
         patch.setitem(experiment_presets.PRESETS, "single-tiny", SINGLE_TINY)
         yield exp, run_composite(exp)

@@ -29,8 +29,11 @@ def make_dataset(n=5, t=6, j=3, images=True, seed=0):
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
-    motor=arrays(np.float32, st.tuples(st.integers(1, 4), st.integers(2, 6), st.integers(1, 3)),
-                 elements=st.floats(-1e6, 1e6, width=32, allow_nan=False, allow_infinity=False)),
+    motor=arrays(
+        np.float32,
+        st.tuples(st.integers(1, 4), st.integers(2, 6), st.integers(1, 3)),
+        elements=st.floats(-1e6, 1e6, width=32, allow_nan=False, allow_infinity=False),
+    ),
     with_images=st.booleans(),
     with_labels=st.booleans(),
 )
@@ -128,7 +131,10 @@ def test_existing_output_is_refused_and_kept(tmp_path):
         (dict(motor=np.zeros((0, 4, 3))), "no samples"),
         (dict(motor=np.array([[[0.0], [np.inf]], [[0.0], [1.0]]])), "field 'motor', sample 0: contains NaN or inf"),
         (dict(motor=np.zeros((3, 4, 2)), labels=[0, 1]), "field 'labels'.*shape"),
-        (dict(motor=np.zeros((3, 4, 2)), labels=[0, 1, 2], label_names=["a", "b"]), "field 'labels', sample 2: label 2 out of range"),
+        (
+            dict(motor=np.zeros((3, 4, 2)), labels=[0, 1, 2], label_names=["a", "b"]),
+            "field 'labels', sample 2: label 2 out of range",
+        ),
         (dict(motor=np.zeros((3, 4, 2)), labels=[0.5, 1, 0]), "labels must be integers"),
         (dict(motor=np.zeros((2, 4, 2)), images=np.zeros((2, 4, 3, 3, 3), np.float32)), "images must be uint8"),
         (dict(motor=np.zeros((2, 4, 2)), images=np.zeros((2, 5, 3, 3, 3), np.uint8)), "5 time steps but motor has T=4"),
@@ -169,9 +175,15 @@ def test_corrupted_files_fail_with_file_field_and_index(tmp_path):
     with pytest.raises(DataError, match=r"int\.h5, field 'motor': must be floating point"):
         MotionDataset.load(_write_raw(tmp_path / "int.h5", motor=np.zeros((2, 3, 1), np.int64)))
     with pytest.raises(DataError, match=r"img\.h5, field 'images': must be uint8"):
-        MotionDataset.load(_write_raw(tmp_path / "img.h5", motor=np.zeros((2, 3, 1), np.float32), images=np.zeros((2, 3, 2, 2, 3), np.float32)))
+        MotionDataset.load(
+            _write_raw(
+                tmp_path / "img.h5", motor=np.zeros((2, 3, 1), np.float32), images=np.zeros((2, 3, 2, 2, 3), np.float32)
+            )
+        )
     with pytest.raises(DataError, match=r"lab\.h5, field 'labels', sample 1: label -3"):
-        MotionDataset.load(_write_raw(tmp_path / "lab.h5", motor=np.zeros((2, 3, 1), np.float32), labels=np.array([0, -3])))
+        MotionDataset.load(
+            _write_raw(tmp_path / "lab.h5", motor=np.zeros((2, 3, 1), np.float32), labels=np.array([0, -3]))
+        )
     with pytest.raises(DataError, match="no such file"):
         MotionDataset.load(tmp_path / "missing.h5")
 
@@ -187,8 +199,16 @@ def test_subset_errors():
 def test_writer_streams_blocks_in_any_order(tmp_path):
     ds = make_dataset(n=6)
     path = tmp_path / "w.h5"
-    with DatasetWriter(path, n_samples=6, length=6, joint_names=ds.joint_names, image_size=(4, 5),
-                       label_names=["a", "b"], param_names=["x", "y"], dt=0.5) as w:
+    with DatasetWriter(
+        path,
+        n_samples=6,
+        length=6,
+        joint_names=ds.joint_names,
+        image_size=(4, 5),
+        label_names=["a", "b"],
+        param_names=["x", "y"],
+        dt=0.5,
+    ) as w:
         for start in (4, 0, 2):
             sl = slice(start, start + 2)
             w.write(start, motor=ds.motor[sl], images=ds.images[sl], labels=ds.labels[sl], params=ds.params[sl])
@@ -242,7 +262,9 @@ def test_file_motor_too_large_for_float32_is_named_not_called_inf(tmp_path, dtyp
     )
     params = np.zeros((4, 2))
     params[3, 1] = -1e300
-    with pytest.raises(DataError, match=r"p\.h5, field 'params', sample 3: value -1e\+300 exceeds the float32 range .*\(column 1\)"):
+    with pytest.raises(
+        DataError, match=r"p\.h5, field 'params', sample 3: value -1e\+300 exceeds the float32 range .*\(column 1\)"
+    ):
         MotionDataset.load(_write_raw(tmp_path / "p.h5", motor=np.zeros((4, 3, 2), np.float32), params=params))
 
 
@@ -261,9 +283,14 @@ def test_constructor_and_writer_refuse_values_too_large_for_float32(tmp_path):
 
 def test_labels_that_do_not_fit_int32_are_refused_not_wrapped(tmp_path):
     # 2**32 would wrap to label 0, a valid label: silently wrong without the check
-    with pytest.raises(DataError, match=r"lab\.h5, field 'labels', sample 1: label 4294967296 is not a primitive index"):
-        MotionDataset.load(_write_raw(tmp_path / "lab.h5", motor=np.zeros((2, 3, 1), np.float32),
-                                      labels=np.array([0, 2**32], np.int64)))
+    with pytest.raises(
+        DataError, match=r"lab\.h5, field 'labels', sample 1: label 4294967296 is not a primitive index"
+    ):
+        MotionDataset.load(
+            _write_raw(
+                tmp_path / "lab.h5", motor=np.zeros((2, 3, 1), np.float32), labels=np.array([0, 2**32], np.int64)
+            )
+        )
 
 
 # ------------------------------------------------------------ corrupted image chunks
@@ -309,9 +336,17 @@ def test_corrupted_image_chunk_is_a_data_error_on_every_read_path(tmp_path):
         back.save(tmp_path / "copy.h5")
     for level in (4, 1):  # raw chunk copy (same compression) and decode/re-encode
         with pytest.raises(DataError, match=where):
-            with DatasetWriter(tmp_path / "merged.h5", n_samples=6, length=6, joint_names=ds.joint_names,
-                               image_size=(4, 5), label_names=["a", "b"], param_names=["x", "y"], dt=0.5,
-                               compression_level=level) as w:
+            with DatasetWriter(
+                tmp_path / "merged.h5",
+                n_samples=6,
+                length=6,
+                joint_names=ds.joint_names,
+                image_size=(4, 5),
+                label_names=["a", "b"],
+                param_names=["x", "y"],
+                dt=0.5,
+                compression_level=level,
+            ) as w:
                 w.copy_from(0, path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.h5"]
 

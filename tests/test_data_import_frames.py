@@ -112,10 +112,17 @@ def robomimic_demos(lengths=(30, 45, 20, 25), names=None) -> dict:
 def test_robomimic_joints_in_the_order_given_frames_aligned_and_resized(tmp_path):
     demos = robomimic_demos()
     write_robomimic(tmp_path / "lift.hdf5", demos)
-    ds = import_robomimic(tmp_path / "lift.hdf5", 61, joints=["robot0_gripper_qpos", "robot0_joint_pos"],
-                          images="agentview_image", image_size=(48, 64))
+    ds = import_robomimic(
+        tmp_path / "lift.hdf5",
+        61,
+        joints=["robot0_gripper_qpos", "robot0_joint_pos"],
+        images="agentview_image",
+        image_size=(48, 64),
+    )
     assert ds.motor.shape == (4, 61, 9) and ds.images.shape == (4, 61, 48, 64, 3) and ds.images.dtype == np.uint8
-    assert ds.joint_names == ["robot0_gripper_qpos_0", "robot0_gripper_qpos_1"] + [f"robot0_joint_pos_{j}" for j in range(7)]
+    assert ds.joint_names == ["robot0_gripper_qpos_0", "robot0_gripper_qpos_1"] + [
+        f"robot0_joint_pos_{j}" for j in range(7)
+    ]
     for i, obs in enumerate(demos.values()):
         want = np.concatenate([obs["robot0_gripper_qpos"], obs["robot0_joint_pos"]], axis=1)
         np.testing.assert_allclose(ds.motor[i], resample(want, 61), rtol=1e-5, atol=1e-5)
@@ -143,10 +150,16 @@ def test_robomimic_missing_keys_name_the_file_the_demo_and_the_keys_there(tmp_pa
     with pytest.raises(DataError) as err:
         import_robomimic(path, 20, joints=["robot0_joint_pos", "robot0_eef_pos"])
     msg = str(err.value)
-    assert msg.startswith(f"{path}, field 'robot0_eef_pos', sample 0:") and "data/demo_0/obs/robot0_eef_pos is missing" in msg
+    assert (
+        msg.startswith(f"{path}, field 'robot0_eef_pos', sample 0:")
+        and "data/demo_0/obs/robot0_eef_pos is missing" in msg
+    )
     assert "keys there: agentview_image, robot0_gripper_qpos, robot0_joint_pos" in msg
-    with pytest.raises(DataError, match=r"sample 2: data/demo_2/obs/agentview_image is missing; keys there: "
-                                        r"robot0_gripper_qpos, robot0_joint_pos; at demo level \(data/demo_2\): actions$"):
+    with pytest.raises(
+        DataError,
+        match=r"sample 2: data/demo_2/obs/agentview_image is missing; keys there: "
+        r"robot0_gripper_qpos, robot0_joint_pos; at demo level \(data/demo_2\): actions$",
+    ):
         import_robomimic(path, 20, joints=["robot0_joint_pos"], images="agentview_image")
     with pytest.raises(DataError, match=r"no joint keys given .*data/demo_0/obs has: agentview_image, "):
         import_robomimic(path, 20, joints=[])
@@ -162,7 +175,10 @@ def test_robomimic_missing_keys_name_the_file_the_demo_and_the_keys_there(tmp_pa
         (frames_of(25).astype(np.float32), r"frames must be uint8, got float32"),
         (frames_of(25)[..., 0], r"frames must be \(T_i, H, W, 3\), got rank 3"),
         (frames_of(24), r"24 frames for 25 joint steps"),
-        (np.concatenate([frames_of(25), frames_of(25)[..., :1]], axis=-1), r"frames must have 3 colour channels \(RGB\), got 4"),
+        (
+            np.concatenate([frames_of(25), frames_of(25)[..., :1]], axis=-1),
+            r"frames must have 3 colour channels \(RGB\), got 4",
+        ),
     ],
     ids=["dtype", "rank", "count", "channels"],
 )
@@ -179,8 +195,11 @@ def test_robomimic_joint_keys_of_different_lengths_are_refused(tmp_path):
     demos = robomimic_demos()
     demos["demo_1"]["robot0_gripper_qpos"] = demos["demo_1"]["robot0_gripper_qpos"][:-1]
     write_robomimic(tmp_path / "d.hdf5", demos)
-    with pytest.raises(DataError, match=r"sample 1: data/demo_1/obs/robot0_gripper_qpos has 44 steps, "
-                                        r"robot0_joint_pos has 45"):
+    with pytest.raises(
+        DataError,
+        match=r"sample 1: data/demo_1/obs/robot0_gripper_qpos has 44 steps, "
+        r"robot0_joint_pos has 45",
+    ):
         import_robomimic(tmp_path / "d.hdf5", 20, joints=["robot0_joint_pos", "robot0_gripper_qpos"])
 
 
@@ -198,8 +217,14 @@ def test_npz_stacked_frames_and_joints_key(tmp_path):
 
 
 def test_npz_per_demo_frames_of_different_sizes_and_lengths(tmp_path):
-    arrays = {"joints_0": joints_of(12, 2, 0), "joints_1": joints_of(30, 2, 1), "joints_2": joints_of(7, 2, 2),
-              "images_0": frames_of(12, 24, 32), "images_1": frames_of(30, 60, 80), "images_2": frames_of(7)}
+    arrays = {
+        "joints_0": joints_of(12, 2, 0),
+        "joints_1": joints_of(30, 2, 1),
+        "joints_2": joints_of(7, 2, 2),
+        "images_0": frames_of(12, 24, 32),
+        "images_1": frames_of(30, 60, 80),
+        "images_2": frames_of(7),
+    }
     np.savez(tmp_path / "p.npz", **arrays)
     ds = import_npz(tmp_path / "p.npz", 11)
     assert ds.images.shape == (3, 11, 48, 64, 3)
@@ -211,8 +236,12 @@ def test_npz_per_demo_frames_of_different_sizes_and_lengths(tmp_path):
 
 def test_npz_frames_with_lengths_and_without_frames_unchanged(tmp_path):
     seqs = [joints_of(t, 2, i) for i, t in enumerate((9, 14))]
-    np.savez(tmp_path / "l.npz", motor=np.concatenate(seqs), lengths=[9, 14],
-             images=np.concatenate([frames_of(9), frames_of(14)]))
+    np.savez(
+        tmp_path / "l.npz",
+        motor=np.concatenate(seqs),
+        lengths=[9, 14],
+        images=np.concatenate([frames_of(9), frames_of(14)]),
+    )
     ds = import_npz(tmp_path / "l.npz", 5)
     assert [source_index(f, 14) for f in ds.images[1]] == frame_steps(14, 5).tolist()
     np.savez(tmp_path / "j.npz", motor=np.stack(seqs[:1] * 2))
@@ -223,19 +252,41 @@ def test_npz_frames_with_lengths_and_without_frames_unchanged(tmp_path):
 @pytest.mark.parametrize(
     "arrays, match",
     [
-        (dict(joints_0=np.zeros((5, 2)), joints_1=np.zeros((6, 2)), images_0=frames_of(5),
-              images_1=frames_of(6).astype(np.int16)), r"field 'images_1', sample 1: frames must be uint8, got int16"),
-        (dict(joints_0=np.zeros((5, 2)), joints_1=np.zeros((6, 2)), images_0=frames_of(5), images_1=frames_of(5)),
-         r"field 'images_1', sample 1: 5 frames for 6 joint steps"),
-        (dict(motor=np.zeros((2, 5, 2)), images=frames_of(5)[None]), r"field 'images': holds 1 demonstrations, the joints 2"),
+        (
+            dict(
+                joints_0=np.zeros((5, 2)),
+                joints_1=np.zeros((6, 2)),
+                images_0=frames_of(5),
+                images_1=frames_of(6).astype(np.int16),
+            ),
+            r"field 'images_1', sample 1: frames must be uint8, got int16",
+        ),
+        (
+            dict(joints_0=np.zeros((5, 2)), joints_1=np.zeros((6, 2)), images_0=frames_of(5), images_1=frames_of(5)),
+            r"field 'images_1', sample 1: 5 frames for 6 joint steps",
+        ),
+        (
+            dict(motor=np.zeros((2, 5, 2)), images=frames_of(5)[None]),
+            r"field 'images': holds 1 demonstrations, the joints 2",
+        ),
         (dict(motor=np.zeros((2, 5, 2)), images=frames_of(10)), r"field 'images': must be \(N, T, H, W, 3\)"),
-        (dict(motor=np.zeros((2, 5, 2)), images=np.zeros((2, 5, 4, 4, 1), np.uint8)),
-         r"field 'images', sample 0: frames must have 3 colour channels"),
-        (dict(joints_0=np.zeros((5, 2)), joints_1=np.zeros((5, 2)), images_0=frames_of(5)),
-         r"field 'images_1', sample 1: missing: per-demonstration arrays must be numbered images_0 \.\. images_1"),
+        (
+            dict(motor=np.zeros((2, 5, 2)), images=np.zeros((2, 5, 4, 4, 1), np.uint8)),
+            r"field 'images', sample 0: frames must have 3 colour channels",
+        ),
+        (
+            dict(joints_0=np.zeros((5, 2)), joints_1=np.zeros((5, 2)), images_0=frames_of(5)),
+            r"field 'images_1', sample 1: missing: per-demonstration arrays must be numbered images_0 \.\. images_1",
+        ),
         (dict(joints_0=np.zeros((5, 2)), joints_2=np.zeros((5, 2))), r"field 'joints_1', sample 1: missing"),
-        (dict(motor=np.zeros((2, 5, 2)), joints=np.zeros((2, 5, 2))), r"field 'joints': holds both 'motor' and 'joints'"),
-        (dict(arr_0=np.zeros((5, 2)), motor_0=np.zeros((5, 2))), r"holds per-demonstration arrays named arr_0 and motor_0"),
+        (
+            dict(motor=np.zeros((2, 5, 2)), joints=np.zeros((2, 5, 2))),
+            r"field 'joints': holds both 'motor' and 'joints'",
+        ),
+        (
+            dict(arr_0=np.zeros((5, 2)), motor_0=np.zeros((5, 2))),
+            r"holds per-demonstration arrays named arr_0 and motor_0",
+        ),
     ],
     ids=["dtype", "count", "n", "rank", "channels", "missing-images", "missing-joints", "both", "mixed"],
 )
@@ -252,8 +303,18 @@ def test_npz_bad_frames_name_file_field_and_sample(tmp_path, arrays, match):
 def test_cli_robomimic_import_then_info_reports_frames(run_cli, tmp_path):
     write_robomimic(tmp_path / "lift.hdf5", robomimic_demos())
     out = tmp_path / "data.h5"
-    res = run_cli("import", tmp_path / "lift.hdf5", "--joints", "robot0_joint_pos,robot0_gripper_qpos",
-                  "--images", "agentview_image", "--length", "61", "--out", out)  # robomimic guessed from .hdf5
+    res = run_cli(
+        "import",
+        tmp_path / "lift.hdf5",
+        "--joints",
+        "robot0_joint_pos,robot0_gripper_qpos",
+        "--images",
+        "agentview_image",
+        "--length",
+        "61",
+        "--out",
+        out,
+    )  # robomimic guessed from .hdf5
     assert res.code == 0, res.err
     assert "4 samples x 61 steps x 9 joints, frames 48x64" in res.out
     ds = MotionDataset.load(out)
@@ -275,18 +336,51 @@ def test_cli_import_option_errors_are_one_line(run_cli, tmp_path):
     write_robomimic(tmp_path / "lift.hdf5", robomimic_demos((6, 7)))
     o = tmp_path / "o.h5"
     res = run_cli("import", tmp_path / "lift.hdf5", "--joints", "robot0_joint_pos,nope", "-T", "9", "--out", o)
-    assert_user_error(res, "lift.hdf5", "field 'nope'", "sample 0", "data/demo_0/obs/nope is missing",
-                      "keys there: agentview_image, robot0_gripper_qpos, robot0_joint_pos")
+    assert_user_error(
+        res,
+        "lift.hdf5",
+        "field 'nope'",
+        "sample 0",
+        "data/demo_0/obs/nope is missing",
+        "keys there: agentview_image, robot0_gripper_qpos, robot0_joint_pos",
+    )
     res = run_cli("import", tmp_path / "lift.hdf5", "-T", "9", "--out", o)
     assert_user_error(res, "no joint keys given (--joints", "agentview_image, robot0_gripper_qpos")
-    res = run_cli("import", tmp_path / "lift.hdf5", "--joints", "robot0_joint_pos", "--images", "agentview_image",
-                  "--image-size", "50x64", "-T", "9", "--out", o)
+    res = run_cli(
+        "import",
+        tmp_path / "lift.hdf5",
+        "--joints",
+        "robot0_joint_pos",
+        "--images",
+        "agentview_image",
+        "--image-size",
+        "50x64",
+        "-T",
+        "9",
+        "--out",
+        o,
+    )
     assert_user_error(res, "--image-size 50x64", "multiples of 8")
-    assert_user_error(run_cli("import", tmp_path / "lift.hdf5", "--joints", "robot0_joint_pos", "--image-size", "4:4",
-                              "-T", "9", "--out", o), "no frames to resize")
+    assert_user_error(
+        run_cli(
+            "import",
+            tmp_path / "lift.hdf5",
+            "--joints",
+            "robot0_joint_pos",
+            "--image-size",
+            "4:4",
+            "-T",
+            "9",
+            "--out",
+            o,
+        ),
+        "no frames to resize",
+    )
     np.savez(tmp_path / "f.npz", motor=np.zeros((2, 5, 1)))
-    assert_user_error(run_cli("import", tmp_path / "f.npz", "--joints", "q", "-T", "9", "--out", o),
-                      "--joints applies to --format robomimic or lerobot, not npz")
+    assert_user_error(
+        run_cli("import", tmp_path / "f.npz", "--joints", "q", "-T", "9", "--out", o),
+        "--joints applies to --format robomimic or lerobot, not npz",
+    )
     assert not o.exists()
 
 
@@ -295,8 +389,9 @@ def test_cli_guesses_robomimic_only_from_an_unambiguous_hdf5_file(run_cli, tmp_p
     o = tmp_path / "o.h5"
     res = run_cli("import", tmp_path / "lift.h5", "--joints", "robot0_joint_pos", "-T", "9", "--out", o)
     assert_user_error(res, "cannot tell the format of a .h5 file", "--format robomimic")
-    res = run_cli("import", tmp_path / "lift.h5", "--format", "robomimic", "--joints", "robot0_joint_pos",
-                  "-T", "9", "--out", o)
+    res = run_cli(
+        "import", tmp_path / "lift.h5", "--format", "robomimic", "--joints", "robot0_joint_pos", "-T", "9", "--out", o
+    )
     assert res.code == 0, res.err
     MotionDataset(np.zeros((2, 5, 1))).save(tmp_path / "made.hdf5")  # a primspace data set, named .hdf5
     res = run_cli("import", tmp_path / "made.hdf5", "-T", "9", "--out", tmp_path / "p.h5")

@@ -47,7 +47,15 @@ def test_npz_concatenated_with_lengths_and_fixed_length(tmp_path):
         (dict(arr_0=np.zeros((5, 2)), arr_1=np.zeros((5, 3))), r"field 'motor', sample 1: has 3 joints"),
         (dict(arr_0=np.zeros((5, 2)), arr_1=np.array([[0.0, np.nan]] * 3)), r"field 'motor', sample 1: contains NaN"),
         (dict(arr_0=np.zeros((5, 2)), labels=np.array([0, 1])), r"field 'labels': 2 labels for 1 sequences"),
-        (dict(arr_0=np.zeros((5, 2)), arr_1=np.zeros((5, 2)), labels=np.array([0, 4]), label_names=np.array(["a", "b"])), r"field 'labels', sample 1: label 4 out of range"),
+        (
+            dict(
+                arr_0=np.zeros((5, 2)),
+                arr_1=np.zeros((5, 2)),
+                labels=np.array([0, 4]),
+                label_names=np.array(["a", "b"]),
+            ),
+            r"field 'labels', sample 1: label 4 out of range",
+        ),
         (dict(motor=np.zeros((6, 2)), lengths=[2, 3]), r"field 'lengths': lengths sum to 5"),
         (dict(arr_0=np.zeros((5, 2)).astype(str)), r"field 'motor', sample 0: must be numbers"),
         (dict(motor=np.zeros((5, 2))), r"field 'motor': must be \(N, T, J\)"),
@@ -84,7 +92,9 @@ def test_csv_folder_labels_from_subfolders_and_time_column(tmp_path):
             data = rng.normal(size=(len(t), 2))
             _write_csv(tmp_path / label / f"{k}.csv", ["time", "q1", "q2"], np.column_stack([t, data]))
             expected[(label, k)] = data
-    _write_csv(tmp_path / "loose.csv", ["time", "q1", "q2"], np.column_stack([np.arange(8) * 0.5, rng.normal(size=(8, 2))]))
+    _write_csv(
+        tmp_path / "loose.csv", ["time", "q1", "q2"], np.column_stack([np.arange(8) * 0.5, rng.normal(size=(8, 2))])
+    )
     ds = import_csv_folder(tmp_path, 12)
     assert ds.joint_names == ["q1", "q2"]
     assert ds.label_names == ["grasp", "push"]
@@ -135,17 +145,35 @@ def test_lasa_shapes_labels_and_velocities():
     "arrays, match",
     [
         # a float64 list of sequences: named as too large, at its step and joint, before resampling
-        (dict(arr_0=np.zeros((5, 2)), arr_1=np.array([[0.0, 0.0], [0.0, 1e39], [0.0, 0.0]])),
-         r"field 'motor', sample 1: value 1e\+39 exceeds the float32 range \(magnitude at most 3\.40282e\+38\) \(step 1, joint 1\)"),
-        (dict(motor=np.concatenate([np.zeros((3, 4, 2)), np.full((1, 4, 2), -4e38)])),
-         r"field 'motor', sample 3: value -4e\+38 exceeds the float32 range .*\(step 0, joint 0\)"),
-        (dict(motor=np.r_[np.zeros((4, 2)), [[5e40, 0.0]]], lengths=[2, 3]), r"field 'motor', sample 1: value 5e\+40 exceeds"),
-        (dict(arr_0=np.array([[0.0], [np.longdouble("1e400")]], dtype=np.longdouble)), r"field 'motor', sample 0: value 1e\+400 exceeds the float32 range"),
-        (dict(arr_0=np.zeros((5, 2)), arr_1=np.zeros((5, 2)), params=np.array([[1.0, 0.0], [0.0, 1e39]])),
-         r"field 'params', sample 1: value 1e\+39 exceeds the float32 range .*\(column 1\)"),
-        (dict(arr_0=np.zeros((5, 2)), labels=np.array([2**32], dtype=np.int64)), r"field 'labels', sample 0: label 4294967296 is not a primitive index"),
+        (
+            dict(arr_0=np.zeros((5, 2)), arr_1=np.array([[0.0, 0.0], [0.0, 1e39], [0.0, 0.0]])),
+            r"field 'motor', sample 1: value 1e\+39 exceeds the float32 range \(magnitude at most 3\.40282e\+38\) \(step 1, joint 1\)",
+        ),
+        (
+            dict(motor=np.concatenate([np.zeros((3, 4, 2)), np.full((1, 4, 2), -4e38)])),
+            r"field 'motor', sample 3: value -4e\+38 exceeds the float32 range .*\(step 0, joint 0\)",
+        ),
+        (
+            dict(motor=np.r_[np.zeros((4, 2)), [[5e40, 0.0]]], lengths=[2, 3]),
+            r"field 'motor', sample 1: value 5e\+40 exceeds",
+        ),
+        (
+            dict(arr_0=np.array([[0.0], [np.longdouble("1e400")]], dtype=np.longdouble)),
+            r"field 'motor', sample 0: value 1e\+400 exceeds the float32 range",
+        ),
+        (
+            dict(arr_0=np.zeros((5, 2)), arr_1=np.zeros((5, 2)), params=np.array([[1.0, 0.0], [0.0, 1e39]])),
+            r"field 'params', sample 1: value 1e\+39 exceeds the float32 range .*\(column 1\)",
+        ),
+        (
+            dict(arr_0=np.zeros((5, 2)), labels=np.array([2**32], dtype=np.int64)),
+            r"field 'labels', sample 0: label 4294967296 is not a primitive index",
+        ),
         (dict(arr_0=np.zeros((5, 2)), dt=np.array("fast")), r"field 'dt': must be one positive number"),
-        (dict(arr_0=np.zeros((5, 2)), dt=np.array([0.1, 0.2])), r"field 'dt': must be one positive number, got 2 value"),
+        (
+            dict(arr_0=np.zeros((5, 2)), dt=np.array([0.1, 0.2])),
+            r"field 'dt': must be one positive number, got 2 value",
+        ),
     ],
 )
 def test_npz_values_too_large_for_float32_are_named_not_called_inf(tmp_path, arrays, match):
@@ -175,17 +203,25 @@ def test_csv_value_too_large_names_file_line_and_column(tmp_path):
         "value 1e+39 exceeds the float32 range (magnitude at most 3.40282e+38)"
     )
     (tmp_path / "b.csv").write_text("time,q1,q2\n0,1,2\n1,-1e400,4\n")  # overflows even float64
-    with pytest.raises(DataError, match=r"b\.csv, field 'motor', sample 1: line 3, column 'q1': value -1e400 exceeds the float32 range"):
+    with pytest.raises(
+        DataError, match=r"b\.csv, field 'motor', sample 1: line 3, column 'q1': value -1e400 exceeds the float32 range"
+    ):
         import_csv_folder(tmp_path, 5)
 
 
 @pytest.mark.parametrize(
     "text, match",
     [
-        ("time,q1\n0,1\n0.5,2\n0.5,3\n", r"field 'time', sample 0: line 4: time 0\.5 does not come after 0\.5 on line 3 \(time stamps must strictly increase\)"),
+        (
+            "time,q1\n0,1\n0.5,2\n0.5,3\n",
+            r"field 'time', sample 0: line 4: time 0\.5 does not come after 0\.5 on line 3 \(time stamps must strictly increase\)",
+        ),
         ("t,q1\n0,1\n2,2\n1,3\n", r"field 't', sample 0: line 4: time 1 does not come after 2 on line 3"),
         ("Time,q1\n0,1\nnan,2\n1,3\n", r"field 'Time', sample 0: line 3: time stamp 'nan' is not a finite number"),
-        ("time,q1\n0,1\n1e400,2\n", r"field 'time', sample 0: line 3, column 'time': value 1e400 exceeds the float64 range"),
+        (
+            "time,q1\n0,1\n1e400,2\n",
+            r"field 'time', sample 0: line 3, column 'time': value 1e400 exceeds the float64 range",
+        ),
         ("t,time,q1\n0,0,1\n1,1,2\n", r"field 'header', sample 0: has 2 time columns \(t, time\); keep one"),
         ("q1,q1\n0,1\n1,2\n", r"field 'header', sample 0: column 'q1' appears twice"),
     ],
@@ -205,5 +241,7 @@ def test_csv_time_column_increasing_is_accepted_and_sets_dt(tmp_path):
 def test_resample_names_a_long_double_value_float64_cannot_hold():
     seq = np.zeros((4, 2), dtype=np.longdouble)
     seq[2, 1] = np.longdouble("1e400")
-    with pytest.raises(DataError, match=r"field 'motor', sample 1: value 1e\+400 exceeds the float64 range \(step 2, joint 1\)"):
+    with pytest.raises(
+        DataError, match=r"field 'motor', sample 1: value 1e\+400 exceeds the float64 range \(step 2, joint 1\)"
+    ):
         resample([np.zeros((3, 2)), seq], 5)

@@ -74,9 +74,20 @@ def dataset_node_digest(dset: h5py.Dataset) -> str:
     h = hashlib.sha1()
     plist = dset.id.get_create_plist()
     _update(
-        h, dset.name, dset.dtype.str, dset.shape, dset.maxshape, dset.chunks, dset.compression,
-        dset.compression_opts, dset.shuffle, dset.fletcher32, dset.scaleoffset,
-        np.asarray(dset.fillvalue), plist.get_layout(), _filters(dset),
+        h,
+        dset.name,
+        dset.dtype.str,
+        dset.shape,
+        dset.maxshape,
+        dset.chunks,
+        dset.compression,
+        dset.compression_opts,
+        dset.shuffle,
+        dset.fletcher32,
+        dset.scaleoffset,
+        np.asarray(dset.fillvalue),
+        plist.get_layout(),
+        _filters(dset),
     )
     if dset.chunks is not None:
         for k in range(dset.id.get_num_chunks()):
@@ -139,8 +150,13 @@ def summary_digest(ds: MotionDataset) -> str:
 
 def _writer(path, n, **kw):
     settings = dict(
-        n_samples=n, length=T, joint_names=["shoulder", "elbow", "wrist"], image_size=(H, W),
-        label_names=["reach", "push", "lift"], param_names=["block_x", "block_y"], dt=0.04,
+        n_samples=n,
+        length=T,
+        joint_names=["shoulder", "elbow", "wrist"],
+        image_size=(H, W),
+        label_names=["reach", "push", "lift"],
+        param_names=["block_x", "block_y"],
+        dt=0.04,
         source="merged",
     )
     settings.update(kw)
@@ -190,8 +206,16 @@ def scenarios(tmp_path) -> dict:
     out["load merge"] = memory_digest(MotionDataset.load(tmp_path / "merged.h5"))
 
     # a writer without images, labels given by flag only (fill value -1 never overwritten)
-    with _writer(tmp_path / "flags.h5", 3, image_size=None, label_names=(), param_names=(),
-                 with_labels=True, with_params=False, source="") as w:
+    with _writer(
+        tmp_path / "flags.h5",
+        3,
+        image_size=None,
+        label_names=(),
+        param_names=(),
+        with_labels=True,
+        with_params=False,
+        source="",
+    ) as w:
         w.write(0, motor=np.arange(3 * T * 3, dtype=float).reshape(3, T, 3), labels=[-1, -1, -1])
     out["writer flags"] = file_digest(tmp_path / "flags.h5")
 
@@ -268,7 +292,9 @@ def error_cases(tmp_path) -> list:
         lambda: MotionDataset.load(_raw(tmp_path / "labf.h5", motor=z((2, 3, 1)), labels=np.array([0.0, 1.0]))),
         lambda: MotionDataset.load(_raw(tmp_path / "par.h5", motor=z((2, 3, 1)), params=z((3, 1)))),
         lambda: MotionDataset.load(_raw(tmp_path / "jn.h5", {"joint_names": ["a", "b"]}, motor=z((2, 3, 1)))),
-        lambda: MotionDataset.load(_raw(tmp_path / "pn.h5", {"param_names": ["a", "b"]}, motor=z((2, 3, 1)), params=z((2, 1)))),
+        lambda: MotionDataset.load(
+            _raw(tmp_path / "pn.h5", {"param_names": ["a", "b"]}, motor=z((2, 3, 1)), params=z((2, 1)))
+        ),
         lambda: MotionDataset.load(_raw(tmp_path / "dt.h5", {"dt": -1.0}, motor=z((2, 3, 1)))),
         lambda: MotionDataset.load(_raw(tmp_path / "dts.h5", {"dt": "x"}, motor=z((2, 3, 1)))),
         lambda: MotionDataset.load(_raw(tmp_path / "ver.h5", {"schema_version": 3}, motor=z((2, 3, 1)))),
@@ -290,6 +316,7 @@ def error_cases(tmp_path) -> list:
                     w.write(**block)
                 if copy is not None:
                     w.copy_from(0, copy)
+
         return run
 
     m = small.motor
@@ -306,9 +333,14 @@ def error_cases(tmp_path) -> list:
         writer_case(dict(full_block, images=small.images[:, :, :2])),
         writer_case(dict(full_block, motor=z((0, T, J)))),
         writer_case(full_block, image_size=None),
-        writer_case(dict(start=0, motor=m, images=None, labels=small.labels, params=small.params), image_size=None,
-                    with_labels=False),
-        writer_case(dict(start=0, motor=m[:3], images=small.images[:3], labels=small.labels[:3], params=small.params[:3])),
+        writer_case(
+            dict(start=0, motor=m, images=None, labels=small.labels, params=small.params),
+            image_size=None,
+            with_labels=False,
+        ),
+        writer_case(
+            dict(start=0, motor=m[:3], images=small.images[:3], labels=small.labels[:3], params=small.params[:3])
+        ),
         writer_case(copy=good, joint_names=["a", "b", "c"]),
         writer_case(copy=good, dt=0.5),
         writer_case(copy=good, label_names=["x", "y", "z"]),
@@ -523,6 +555,7 @@ def test_save_equals_the_layout_written_by_hand(tmp_path):
 #: ``primspace.data.indices``: each implementation listed here must give these.
 READ_INDICES = ["primspace.train", "primspace.data.indices"]
 
+
 def index_files(d):
     """Write index files into ``d``; return ``[(name, path, data)]``, data: "file", "memory" or None."""
     cases = []
@@ -579,30 +612,66 @@ def index_files(d):
 PINNED_READ_INDICES = [
     ["ok.txt", "ok", "int64", [3, 1, 0, 2, 4]],
     ["ok-nodata.txt", "ok", "int64", [3, 1, -7, 99]],
-    ["float.txt", "DataError", "<tmp>/float.txt, field 'indices': cannot read sample indices (invalid literal for int() with base 10: '1.5')"],
-    ["word.txt", "DataError", "<tmp>/word.txt, field 'indices': cannot read sample indices (invalid literal for int() with base 10: 'two')"],
+    [
+        "float.txt",
+        "DataError",
+        "<tmp>/float.txt, field 'indices': cannot read sample indices (invalid literal for int() with base 10: '1.5')",
+    ],
+    [
+        "word.txt",
+        "DataError",
+        "<tmp>/word.txt, field 'indices': cannot read sample indices (invalid literal for int() with base 10: 'two')",
+    ],
     ["empty.txt", "DataError", "<tmp>/empty.txt, field 'indices': must be a non-empty list of integers"],
     ["comment.txt", "DataError", "<tmp>/comment.txt, field 'indices': must be a non-empty list of integers"],
     ["dup.txt", "DataError", "<tmp>/dup.txt, field 'indices': lists a sample more than once"],
-    ["range.txt", "DataError", "<tmp>/range.txt, field 'indices': sample 9 is out of range for the 6 samples of <tmp>/data.h5"],
-    ["neg.txt", "DataError", "<tmp>/neg.txt, field 'indices': sample -1 is out of range for the 6 samples of <tmp>/data.h5"],
+    [
+        "range.txt",
+        "DataError",
+        "<tmp>/range.txt, field 'indices': sample 9 is out of range for the 6 samples of <tmp>/data.h5",
+    ],
+    [
+        "neg.txt",
+        "DataError",
+        "<tmp>/neg.txt, field 'indices': sample -1 is out of range for the 6 samples of <tmp>/data.h5",
+    ],
     ["range-mem.txt", "DataError", "<tmp>/range-mem.txt, field 'indices': sample 6 is out of range for the 6 samples"],
     ["UPPER.NPY.txt", "ok", "int64", [1]],
     ["ok.npy", "ok", "int64", [4, 0, 2]],
     ["u8.npy", "ok", "int64", [1, 0]],
-    ["u64.npy", "DataError", "<tmp>/u64.npy, field 'indices': sample 18446744073709551615 is out of range for the 6 samples of <tmp>/data.h5"],
+    [
+        "u64.npy",
+        "DataError",
+        "<tmp>/u64.npy, field 'indices': sample 18446744073709551615 is out of range for the 6 samples of <tmp>/data.h5",
+    ],
     ["2d.npy", "DataError", "<tmp>/2d.npy, field 'indices': must be a non-empty list of integers"],
     ["f.npy", "DataError", "<tmp>/f.npy, field 'indices': must be a non-empty list of integers"],
     ["b.npy", "DataError", "<tmp>/b.npy, field 'indices': must be a non-empty list of integers"],
     ["e.npy", "DataError", "<tmp>/e.npy, field 'indices': must be a non-empty list of integers"],
     ["s.npy", "DataError", "<tmp>/s.npy, field 'indices': must be a non-empty list of integers"],
-    ["obj.npy", "DataError", "<tmp>/obj.npy, field 'indices': cannot read sample indices (Object arrays cannot be loaded when allow_pickle=False)"],
+    [
+        "obj.npy",
+        "DataError",
+        "<tmp>/obj.npy, field 'indices': cannot read sample indices (Object arrays cannot be loaded when allow_pickle=False)",
+    ],
     ["scalar.npy", "DataError", "<tmp>/scalar.npy, field 'indices': must be a non-empty list of integers"],
     ["dup.npy", "DataError", "<tmp>/dup.npy, field 'indices': lists a sample more than once"],
-    ["range.npy", "DataError", "<tmp>/range.npy, field 'indices': sample 6 is out of range for the 6 samples of <tmp>/data.h5"],
+    [
+        "range.npy",
+        "DataError",
+        "<tmp>/range.npy, field 'indices': sample 6 is out of range for the 6 samples of <tmp>/data.h5",
+    ],
     ["UP.NPY", "ok", "int64", [1, 2]],
-    ["bad.npy", "DataError", "<tmp>/bad.npy, field 'indices': cannot read sample indices (This file contains pickled (object) data. If you trust the file you can load it unsafely using the `allow_pickle=` keyword argument or `pickle.load()`.)"],
-    ["latin.txt", "DataError", "<tmp>/latin.txt, field 'indices': cannot read sample indices ('utf-8' codec can't decode byte 0xe9 in position 2: unexpected end of data)"],
+    [
+        "bad.npy",
+        "DataError",
+        "<tmp>/bad.npy, field 'indices': cannot read sample indices (This file contains pickled (object) data. If you trust the file you can load it unsafely using the `allow_pickle=` keyword argument or `pickle.load()`.)",
+    ],
+    [
+        "latin.txt",
+        "DataError",
+        "<tmp>/latin.txt, field 'indices': cannot read sample indices ('utf-8' codec can't decode byte 0xe9 in position 2: unexpected end of data)",
+    ],
     ["missing.txt", "DataError", "<tmp>/missing.txt, field 'indices': no such file"],
     ["dir.txt", "DataError", "<tmp>/dir.txt, field 'indices': no such file"],
 ]
@@ -667,8 +736,13 @@ def test_importers_are_pinned(tmp_path):
         "arr": {f"arr_{i}": s for i, s in enumerate(seqs)},
         "lengths": dict(motor=np.concatenate(seqs), lengths=np.array([5, 8, 11])),
         "full": dict(
-            motor=m(), labels=np.array(["b", "a", "b"]), label_names=np.array(["a", "b", "c"]),
-            joint_names=np.array(["x", "y"]), params=rng.normal(size=(3, 2)), param_names=np.array(["u", "v"]), dt=0.1,
+            motor=m(),
+            labels=np.array(["b", "a", "b"]),
+            label_names=np.array(["a", "b", "c"]),
+            joint_names=np.array(["x", "y"]),
+            params=rng.normal(size=(3, 2)),
+            param_names=np.array(["u", "v"]),
+            dt=0.1,
         ),
         "intlabels": dict(motor=m(), labels=np.array([0, -1, 2])),
         "intlabels_names": dict(motor=m(), labels=np.array([0, -1, 1]), label_names=np.array([10, 20])),

@@ -26,7 +26,9 @@ def test_band_limited_signal_plus_trend_resamples_exactly(t0, t, data):
     def signal(time):
         out = coefs[0] + coefs[1] * time
         for i, h in enumerate(harmonics):
-            out = out + coefs[2 + 2 * i] * np.sin(2 * np.pi * h * time) + coefs[3 + 2 * i] * np.cos(2 * np.pi * h * time)
+            out = (
+                out + coefs[2 + 2 * i] * np.sin(2 * np.pi * h * time) + coefs[3 + 2 * i] * np.cos(2 * np.pi * h * time)
+            )
         return out
 
     x = signal(np.linspace(0, 1, t0))
@@ -41,7 +43,9 @@ def test_periodic_mode_is_the_papers_formula_and_exact_on_band_limited_periods(t
     sig = lambda k, n: a * np.sin(2 * np.pi * h * k / n) + b * np.cos(2 * np.pi * h * k / n)  # noqa: E731
     if 2 * h >= min(t0, t):  # the Nyquist bin of an even grid cannot hold a sine
         return
-    np.testing.assert_allclose(resample(sig(np.arange(t0), t0), t, periodic=True), sig(np.arange(t), t), atol=1e-8 * (1 + abs(a) + abs(b)))
+    np.testing.assert_allclose(
+        resample(sig(np.arange(t0), t0), t, periodic=True), sig(np.arange(t), t), atol=1e-8 * (1 + abs(a) + abs(b))
+    )
 
 
 @settings(max_examples=80, deadline=None)

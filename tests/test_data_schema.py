@@ -23,7 +23,9 @@ def test_docs_table_is_the_schema_table():
 
 
 def test_the_class_holds_the_schema_fields_in_table_order():
-    init = [f.name for f in dataclasses.fields(MotionDataset) if f.name not in ("path", "file_indices")]  # where, not what
+    init = [
+        f.name for f in dataclasses.fields(MotionDataset) if f.name not in ("path", "file_indices")
+    ]  # where, not what
     assert init == [f.name for f in FIELDS if f.in_memory]
     assert [f.name for f in ARRAYS + ATTRIBUTES] == [f.name for f in FIELDS]
 
@@ -32,9 +34,13 @@ def test_a_saved_file_has_what_the_table_says(tmp_path):
     n, t, j, h, w = 3, 4, 2, 5, 6
     rng = np.random.default_rng(0)
     ds = MotionDataset(
-        rng.normal(size=(n, t, j)), images=rng.integers(0, 255, (n, t, h, w, 3), dtype=np.uint8),
-        labels=[0, 1, -1], params=np.ones((n, 2)), lengths=[4, 3, 2],
-        step_labels=[[0, 0, 1, 1], [1, 1, 1, -1], [0, 0, -1, -1]], step_segments=[[0, 0, 1, 1], [0, 0, 0, -1], [0, 0, -1, -1]],
+        rng.normal(size=(n, t, j)),
+        images=rng.integers(0, 255, (n, t, h, w, 3), dtype=np.uint8),
+        labels=[0, 1, -1],
+        params=np.ones((n, 2)),
+        lengths=[4, 3, 2],
+        step_labels=[[0, 0, 1, 1], [1, 1, 1, -1], [0, 0, -1, -1]],
+        step_segments=[[0, 0, 1, 1], [0, 0, 0, -1], [0, 0, -1, -1]],
         source_ids=["a.hdf5:data/demo_0", "a.hdf5:data/demo_1", "b.npz:0"],
     )
     dims = {"N": n, "T": t, "J": j, "H": h, "W": w, "P": 2}
@@ -56,14 +62,29 @@ def test_field_lookup_shapes_and_buffers():
     with pytest.raises(KeyError):
         field("depth")
     assert list(empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3})) == [
-        "motor", "labels", "params", "lengths", "step_labels", "step_segments", "source_ids"]
+        "motor",
+        "labels",
+        "params",
+        "lengths",
+        "step_labels",
+        "step_segments",
+        "source_ids",
+    ]
     buf = empty_arrays({"N": 4, "T": 3, "J": 9, "P": 3}, ["motor", "labels", "params"])
     assert list(buf) == ["motor", "labels", "params"]
     assert buf["motor"].dtype == np.float32 and buf["labels"].shape == (4,) and buf["params"].shape == (4, 3)
     assert dims_of(buf) == {"N": 4, "T": 3, "J": 9, "P": 3}
     shard = dict(buf, ik_error=np.zeros(4), start=0)
-    assert list(arrays_of(shard)) == ["motor", "images", "labels", "params", "lengths", "step_labels", "step_segments",
-                                      "source_ids"]
+    assert list(arrays_of(shard)) == [
+        "motor",
+        "images",
+        "labels",
+        "params",
+        "lengths",
+        "step_labels",
+        "step_segments",
+        "source_ids",
+    ]
     assert arrays_of(shard)["images"] is None
 
 
@@ -102,7 +123,9 @@ def test_check_indices_of_an_argument():
 
 
 def test_check_indices_from_a_file_names_the_file_and_the_data():
-    with pytest.raises(DataError, match=r"^idx\.txt, field 'indices': sample 5 is out of range for the 3 samples of d\.h5$"):
+    with pytest.raises(
+        DataError, match=r"^idx\.txt, field 'indices': sample 5 is out of range for the 3 samples of d\.h5$"
+    ):
         check_indices([0, 5], 3, source="idx.txt", data_path="d.h5")
     with pytest.raises(DataError, match=r"^idx\.txt, field 'indices': lists a sample more than once$"):
         check_indices([1, 1], 3, source="idx.txt")
@@ -114,5 +137,7 @@ def test_read_indices_checks_against_the_data(tmp_path):
     ds = MotionDataset(np.zeros((3, 2, 1)), path=tmp_path / "d.h5")
     np.testing.assert_array_equal(read_indices(tmp_path / "i.txt", ds), [2, 0])
     (tmp_path / "j.txt").write_text("3")
-    with pytest.raises(DataError, match=r"j\.txt, field 'indices': sample 3 is out of range for the 3 samples of .*d\.h5"):
+    with pytest.raises(
+        DataError, match=r"j\.txt, field 'indices': sample 3 is out of range for the 3 samples of .*d\.h5"
+    ):
         read_indices(tmp_path / "j.txt", ds)

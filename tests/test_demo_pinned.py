@@ -38,10 +38,14 @@ PINNED_BY_CPU = json.loads((Path(__file__).with_suffix(".json")).read_text())
 
 def _numbers(intra: dict, clustering: dict, success: dict) -> dict:
     return {
-        "losses": {r["key"]: [r["fit"][-1]["loss"], r["infer"][0]["loss"], r["infer"][-1]["loss"]] for r in intra["runs"]},
+        "losses": {
+            r["key"]: [r["fit"][-1]["loss"], r["infer"][0]["loss"], r["infer"][-1]["loss"]] for r in intra["runs"]
+        },
         "clustering": {f"{r['init']}/{r['codes']}": r["accuracy"] for r in clustering["latent"]},
         "sweep_accuracy": {k: [r["accuracy"] for r in v] for k, v in clustering["latent_sweep"].items()},
-        "trajectory": {k: {m: v["chosen"][m] for m in ("accuracy", "nmi", "rank")} for k, v in clustering["trajectory"].items()},
+        "trajectory": {
+            k: {m: v["chosen"][m] for m in ("accuracy", "nmi", "rank")} for k, v in clustering["trajectory"].items()
+        },
         "success": {i: r["overall"] for i, r in success["generated"].items()},
         "recorded": success["recorded"]["overall"],
     }

@@ -47,8 +47,14 @@ def _free_port() -> int:
 
 def _process(rank: int, port: int, folder: str) -> None:
     """What each of the two processes runs (a launcher's environment, then every check)."""
-    os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), RANK=str(rank), LOCAL_RANK=str(rank),
-                      WORLD_SIZE="2", LOCAL_WORLD_SIZE="2")
+    os.environ.update(
+        MASTER_ADDR="127.0.0.1",
+        MASTER_PORT=str(port),
+        RANK=str(rank),
+        LOCAL_RANK=str(rank),
+        WORLD_SIZE="2",
+        LOCAL_WORLD_SIZE="2",
+    )
     torch.set_num_threads(1)
     from primspace.train.distributed import launched
 
@@ -56,8 +62,13 @@ def _process(rank: int, port: int, folder: str) -> None:
     ds = MotionDataset.load(folder / "data.h5")
     out = {}
     with launched("cpu", timeout_minutes=2):
-        run = fit(ds, folder / "run", model_config=SMALL, train_config=TrainConfig(**IMAGES, stream_frames=True,
-                                                                                   loader_workers=0), progress=False)
+        run = fit(
+            ds,
+            folder / "run",
+            model_config=SMALL,
+            train_config=TrainConfig(**IMAGES, stream_frames=True, loader_workers=0),
+            progress=False,
+        )
         out["fit"], out["fit_history"] = run.state, numbers(run.history)
         motor = fit(ds, model_config=SMALL, train_config=TrainConfig(**MOTOR_ONLY), progress=False)
         out["motor"], out["motor_history"] = motor.state, numbers(motor.history)
@@ -113,7 +124,10 @@ def test_motor_only_training_with_an_unused_image_head(two_processes):
     ds = MotionDataset.load(folder / "data.h5")
     one = fit(ds, model_config=SMALL, train_config=TrainConfig(**MOTOR_ONLY, micro_batches=2), progress=False)
     assert same_state(one.state, ddp["motor"])
-    assert ddp["motor_history"][-1]["vision"] is None and ddp["motor_history"][-1]["loss"] < ddp["motor_history"][0]["loss"]
+    assert (
+        ddp["motor_history"][-1]["vision"] is None
+        and ddp["motor_history"][-1]["loss"] < ddp["motor_history"][0]["loss"]
+    )
 
 
 def test_one_process_at_once_agrees_within_rounding(two_processes):
@@ -162,9 +176,32 @@ def test_parts_split_a_batch_without_padding():
 def test_torchrun_launches_the_command(two_processes, tmp_path):
     _, folder = two_processes
     torchrun = os.path.join(os.path.dirname(sys.executable), "torchrun")
-    args = [torchrun, "--nproc-per-node", "2", "--master-port", str(_free_port()), "-m", "primspace", "train",
-            str(folder / "data.h5"), "--out", str(tmp_path / "run"), "--device", "cpu", "--no-images",
-            "--layers", "12,6", "--latent-dim", "3", "--batch-size", "4", "--epochs", "2", "--threads", "1"]
+    args = [
+        torchrun,
+        "--nproc-per-node",
+        "2",
+        "--master-port",
+        str(_free_port()),
+        "-m",
+        "primspace",
+        "train",
+        str(folder / "data.h5"),
+        "--out",
+        str(tmp_path / "run"),
+        "--device",
+        "cpu",
+        "--no-images",
+        "--layers",
+        "12,6",
+        "--latent-dim",
+        "3",
+        "--batch-size",
+        "4",
+        "--epochs",
+        "2",
+        "--threads",
+        "1",
+    ]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     done = subprocess.run(args, capture_output=True, text=True, timeout=DEADLINE, env=env)
     assert done.returncode == 0, done.stderr[-3000:]

@@ -21,7 +21,9 @@ def test_a_stale_block_is_found_and_rewritten(tmp_path):
         (tmp_path / target).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / target).write_text((ROOT / target).read_text(encoding="utf-8"), encoding="utf-8")
     readme = tmp_path / "README.md"
-    readme.write_text(readme.read_text().replace("<!-- generated: glance -->\n", "<!-- generated: glance -->\nhand-typed 0.99\n"))
+    readme.write_text(
+        readme.read_text().replace("<!-- generated: glance -->\n", "<!-- generated: glance -->\nhand-typed 0.99\n")
+    )
     (tmp_path / "docs" / "results").mkdir()
     for summary in (ROOT / "docs" / "results").glob("*.json"):
         (tmp_path / "docs" / "results" / summary.name).write_text(summary.read_text())
@@ -50,17 +52,30 @@ def test_numbers_are_printed_with_their_spread():
 
 
 def _summary(name, motor, psnr):
-    runs = [{"init": init, "latent_dim": 40, "seed": s, "fit": [{"epoch": 0, "loss": 1.0}], "infer": [{"epoch": 0, "loss": 1.0}],
-             "final": {"fit": {}, "infer": {"motor": m, "psnr": p}}}
-            for init, ms in motor.items() for s, (m, p) in enumerate(zip(ms, psnr[init]))]
+    runs = [
+        {
+            "init": init,
+            "latent_dim": 40,
+            "seed": s,
+            "fit": [{"epoch": 0, "loss": 1.0}],
+            "infer": [{"epoch": 0, "loss": 1.0}],
+            "final": {"fit": {}, "infer": {"motor": m, "psnr": p}},
+        }
+        for init, ms in motor.items()
+        for s, (m, p) in enumerate(zip(ms, psnr[init]))
+    ]
     return {"name": name, "results": {"intra": {"runs": runs}}}
 
 
 def test_two_summaries_are_compared_side_by_side_on_per_element_errors():
     from primspace.report.markdown import render_comparison
 
-    a = _summary("mean", {"projection": [1e-4, 3e-4], "zero": [1e-3, 1e-3]}, {"projection": [28.0, 30.0], "zero": [27.0, 27.0]})
-    b = _summary("sum", {"projection": [2e-3, 2e-3], "zero": [4e-3, 6e-3]}, {"projection": [29.0, 29.0], "zero": [28.0, 28.0]})
+    a = _summary(
+        "mean", {"projection": [1e-4, 3e-4], "zero": [1e-3, 1e-3]}, {"projection": [28.0, 30.0], "zero": [27.0, 27.0]}
+    )
+    b = _summary(
+        "sum", {"projection": [2e-3, 2e-3], "zero": [4e-3, 6e-3]}, {"projection": [29.0, 29.0], "zero": [28.0, 28.0]}
+    )
     text = render_comparison(a, b, "two losses")
     assert text.startswith("#### mean against sum: two losses")
     assert "| projection | 2.0e-4 ± 1e-4 | 0.002 ± 0 | 29 ± 1 | 29 ± 0 |" in text
@@ -126,7 +141,7 @@ def test_a_tune_run_on_copied_runs_shows_only_its_tuning_table():
     del plain["results"]["tune"]
     plain["name"] = name
     text = blocks({name: plain, TUNED_IN[name]: tuned})["results"]
-    section = text[text.index(f"#### {TUNED_IN[name]}"):]
+    section = text[text.index(f"#### {TUNED_IN[name]}") :]
     assert "Fair baselines" in section
     assert "Losses (mean" not in section and "The paper's sentences" not in section
     alone = blocks({TUNED_IN[name]: tuned})["results"]

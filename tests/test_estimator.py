@@ -125,8 +125,13 @@ def test_functions_accept_what_each_other_return(data, new, tmp_path):
     assert motor.shape == new.motor.shape
     child = fit(data, weights_from=run, train_config=TC, progress=False)
     assert child.model_config == run.model_config
-    on_disk = infer(fit(data, tmp_path / "fit", model_config=SMALL, train_config=TC, progress=False),
-                    new, tmp_path / "infer", epochs=1, progress=False)
+    on_disk = infer(
+        fit(data, tmp_path / "fit", model_config=SMALL, train_config=TC, progress=False),
+        new,
+        tmp_path / "infer",
+        epochs=1,
+        progress=False,
+    )
     assert load_run(tmp_path / "infer").parent == str((tmp_path / "fit").resolve()) == on_disk.parent
 
 

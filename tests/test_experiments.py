@@ -84,7 +84,9 @@ def test_intra_grid_results_and_figures(finished):
     for name in ("latent_pca2d", "latent_pca3d"):  # 3 panels of 2 dots coloured by block position (~90 px)
         assert_figure(exp.figure(name), width=(900, 2500), min_ink=0.035, min_coloured=40)
     # the generated joint curves (tab:orange, dashed, ~4300 px) over the black ground truth
-    assert_figure(exp.figure("reconstruction_grasp"), width=(900, 2500), colours=("tab:orange", "black"), min_colour_pixels=1500)
+    assert_figure(
+        exp.figure("reconstruction_grasp"), width=(900, 2500), colours=("tab:orange", "black"), min_colour_pixels=1500
+    )
     ok, text = qualitative_check(intra)
     assert ok is None and "not enough runs" in text  # no random init in this grid
     assert json.loads((exp.path / "experiment.json").read_text())["timings"]["intra"] > 0
@@ -164,9 +166,16 @@ def test_clustering_and_success_results(finished):
 def test_report_embeds_every_section(finished):
     exp = finished[0]
     html = build_report(exp.path).read_text()
-    for heading in ("Summary", "Data", "Intra-primitive generalisation", "Subspace clustering",
-                    "Success rates of generated motions", "Latent space and reconstructions",
-                    "Appendix A", "Configuration, versions, timings"):
+    for heading in (
+        "Summary",
+        "Data",
+        "Intra-primitive generalisation",
+        "Subspace clustering",
+        "Success rates of generated motions",
+        "Latent space and reconstructions",
+        "Appendix A",
+        "Configuration, versions, timings",
+    ):
         assert f">{heading}" in html, heading
     assert html.count("<img") >= 10 and "data:image/png;base64," in html
     assert "trains on joint angles only" in html  # the preset's lack of a vision loss is said
@@ -185,9 +194,18 @@ def test_figures_are_drawn_from_the_results_alone(finished, tmp_path):
     shutil.copytree(exp.path / "results", copy / "results")
     drawn = figures.draw_intra(copy) + figures.draw_latent_accuracy(copy)
     names = sorted(p.name for p in drawn)
-    assert names == sorted(["intra_loss_fit.png", "intra_loss_infer.png", "latent_pca2d.png", "latent_pca3d.png",
-                            "reconstruction_grasp.png", "reconstruction_push.png", "reconstruction_circle_cw.png",
-                            "latent_accuracy_vs_r2.png"])
+    assert names == sorted(
+        [
+            "intra_loss_fit.png",
+            "intra_loss_infer.png",
+            "latent_pca2d.png",
+            "latent_pca3d.png",
+            "reconstruction_grasp.png",
+            "reconstruction_push.png",
+            "reconstruction_circle_cw.png",
+            "latent_accuracy_vs_r2.png",
+        ]
+    )
     for path in drawn:
         assert np.array_equal(read_png(path), read_png(exp.figure(path.stem))), path.name
 
@@ -318,20 +336,52 @@ def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_pa
 def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, monkeypatch):
     monkeypatch.setitem(experiment_presets.PRESETS, "tiny", TINY)
     out = tmp_path / "exp"
-    bad = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero,projektion")
+    bad = run_cli(
+        "experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero,projektion"
+    )
     assert_user_error(bad, "unknown initialisation(s) projektion")
     assert not out.exists()
-    ok = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero",
-                 "--epochs", "2,1", "--workers", "1", "--no-report")
+    ok = run_cli(
+        "experiment",
+        "intra",
+        "--preset",
+        "tiny",
+        "--data",
+        tiny_data,
+        "--out",
+        out,
+        "--inits",
+        "zero",
+        "--epochs",
+        "2,1",
+        "--workers",
+        "1",
+        "--no-report",
+    )
     assert ok.code == 0, ok.err
     meta = json.loads((out / "experiment.json").read_text())
     assert meta["preset_config"]["inits"] == ["zero"] and meta["preset_config"]["fit_epochs"] == 2
     assert not (out / "report.html").exists()
-    again = run_cli("experiment", "intra", "--preset", "tiny", "--data", tiny_data, "--out", out, "--inits", "zero", "--epochs", "3,1")
+    again = run_cli(
+        "experiment",
+        "intra",
+        "--preset",
+        "tiny",
+        "--data",
+        tiny_data,
+        "--out",
+        out,
+        "--inits",
+        "zero",
+        "--epochs",
+        "3,1",
+    )
     assert_user_error(again, "made with other settings", "fit_epochs=2")
     # the command that made the runs is kept, and a summary names it without being told
-    command = (f"primspace experiment intra --preset tiny --data {tiny_data} --out {out} --inits zero --epochs 2,1 "
-               "--workers 1 --no-report")
+    command = (
+        f"primspace experiment intra --preset tiny --data {tiny_data} --out {out} --inits zero --epochs 2,1 "
+        "--workers 1 --no-report"
+    )
     assert [i["command"] for i in json.loads((out / "experiment.json").read_text())["invocations"]] == [command]
     summary = tmp_path / "summary.json"
     made = run_cli("summarize", out, "--name", "tiny", "--out", summary)
@@ -394,7 +444,10 @@ def test_a_summary_holds_what_the_claims_and_docs_read(finished):
     assert set(summary["results"]) >= {"intra", "success", "clustering", "probe"}
     assert check_claims(summary["results"]) == check_claims(exp.path)
     last = {r["key"].split("/")[1]: r["infer"][-1]["loss"] for r in intra["runs"]}
-    kept = {f"{r['init']}-q{r['latent_dim']}-s{r['seed']}": r["infer"][-1]["loss"] for r in summary["results"]["intra"]["runs"]}
+    kept = {
+        f"{r['init']}-q{r['latent_dim']}-s{r['seed']}": r["infer"][-1]["loss"]
+        for r in summary["results"]["intra"]["runs"]
+    }
     assert kept.keys() == last.keys()
     assert all(kept[k] == pytest.approx(last[k], rel=1e-4) for k in last)  # 5 significant digits kept
     assert summary["results"]["success"]["generated"]["zero"]["by_tolerance"]  # the judge's sweep is kept
@@ -420,7 +473,9 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
 
     with pytest.raises(UserError, match="one sample per primitive, so none is left to validate on"):
         run_tune(finished[0])  # two motions per primitive, half fitted: nothing to validate on
-    config = GenerationConfig(block_x=(0.42, 0.47, 0.52, 0.57), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
+    config = GenerationConfig(
+        block_x=(0.42, 0.47, 0.52, 0.57), block_y=(0.0,), block_size=(0.05,), length=31, images=False
+    )
     generate_dataset(config, seed=0, out=tmp_path / "four.h5", progress=False)
     exp = ExperimentDir(tmp_path / "tune", TINY, data=tmp_path / "four.h5", workers=1, progress=False)
     data = exp.dataset()
@@ -429,7 +484,9 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
     assert set(fit_idx) | set(val_idx) == set(train) and not set(fit_idx) & set(val_idx)
     assert not set(val_idx) & set(evaluation)
     settings = settings_of(TINY)
-    assert len(settings) == len(TUNING_GRID["taus"]) * len(TUNING_GRID["latent_lr_factor"])  # the preset's is in the grid
+    assert len(settings) == len(TUNING_GRID["taus"]) * len(
+        TUNING_GRID["latent_lr_factor"]
+    )  # the preset's is in the grid
     tune = run_tune(exp)
     assert tune["failures"] == {}
     for init in ("zero", "projection"):  # the same grid for both, scored on the validation part
@@ -450,8 +507,15 @@ def test_a_summary_names_every_version_that_ran_into_the_directory():
     that made it (0.8's summaries named only the first)."""
     from primspace.experiments.summary import recorded_versions
 
-    meta = {"primspace": "0.5.0", "invocations": [{"command": "a", "primspace": "0.6.1"}, {"command": "b", "primspace": "0.5.0"},
-                                                   {"command": "c", "primspace": "0.8.0"}, {"command": "d", "primspace": "0.8.0"}]}
+    meta = {
+        "primspace": "0.5.0",
+        "invocations": [
+            {"command": "a", "primspace": "0.6.1"},
+            {"command": "b", "primspace": "0.5.0"},
+            {"command": "c", "primspace": "0.8.0"},
+            {"command": "d", "primspace": "0.8.0"},
+        ],
+    }
     assert recorded_versions(meta) == "0.5.0, 0.6.1, 0.8.0"
     assert recorded_versions({"primspace": "0.4.0"}) == "0.4.0" and recorded_versions({}) is None
 
@@ -466,11 +530,26 @@ def test_tuning_table_names_the_tuned_q_on_rows_of_another_q():
         return {"init": init, "latent_dim": q, "seed": seed, "infer": [{"loss": 1.0}, {"loss": loss}]}
 
     chosen = {"taus": [4.0, 16.0], "latent_lr": 0.01, "validation_loss": 0.5}
-    shared = [run("zero", 8, 0, 0.4), run("zero", 40, 0, 0.3), run("zero", 40, 1, 0.3),
-              run("projection", 40, 0, 0.1), run("projection", 40, 1, 0.1)]
-    tuned = [run("zero", 8, 0, 0.2), run("zero", 40, 0, 0.05), run("zero", 40, 1, 0.2),
-             run("projection", 40, 0, 0.1), run("projection", 40, 1, 0.1)]
-    tune = {"latent_dim": 40, "chosen": {"zero": chosen, "projection": chosen}, "tuned": {"runs": tuned}, "shared": {"runs": shared}}
+    shared = [
+        run("zero", 8, 0, 0.4),
+        run("zero", 40, 0, 0.3),
+        run("zero", 40, 1, 0.3),
+        run("projection", 40, 0, 0.1),
+        run("projection", 40, 1, 0.1),
+    ]
+    tuned = [
+        run("zero", 8, 0, 0.2),
+        run("zero", 40, 0, 0.05),
+        run("zero", 40, 1, 0.2),
+        run("projection", 40, 0, 0.1),
+        run("projection", 40, 1, 0.1),
+    ]
+    tune = {
+        "latent_dim": 40,
+        "chosen": {"zero": chosen, "projection": chosen},
+        "tuned": {"runs": tuned},
+        "shared": {"runs": shared},
+    }
     _, rows = tuning_table(tune)
     assert rows[0][:4] == [8, "zero", "q = 40's choice", "—"] and rows[0][-1] == "0 of 0 → 0 of 0"
     assert rows[2][:4] == [40, "zero", "τ 4, 16; latent lr 0.01", "0.5"]
@@ -492,9 +571,13 @@ def test_tiny_experiment_numbers_are_pinned(finished):
     for key, values in pinned.items():
         np.testing.assert_allclose(losses[key], values, rtol=1e-5, err_msg=key)
     accuracy = {(r["init"], r["codes"]): r["accuracy"] for r in clustering["latent"]}
-    assert accuracy == pytest.approx({
-        ("zero", "learned"): 5 / 14, ("projection", "learned"): 12 / 14, ("projection", "initial (P m, untrained)"): 12 / 14,
-    })
+    assert accuracy == pytest.approx(
+        {
+            ("zero", "learned"): 5 / 14,
+            ("projection", "learned"): 12 / 14,
+            ("projection", "initial (P m, untrained)"): 12 / 14,
+        }
+    )
     assert {i: g["overall"] for i, g in success["generated"].items()} == {"zero": 0.0, "projection": 0.0}
     assert success["recorded"]["overall"] == 1.0
 
@@ -504,7 +587,9 @@ def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path)
     (offline), fits 2 of each shape's 7 demonstrations and infers the other 5."""
     from primspace.experiments.presets import PRESETS
 
-    preset = PRESETS["lasa"].with_overrides(latent_dims=(4,), seeds=(0,), fit_epochs=2, infer_epochs=2, inits=("zero", "projection"))
+    preset = PRESETS["lasa"].with_overrides(
+        latent_dims=(4,), seeds=(0,), fit_epochs=2, infer_epochs=2, inits=("zero", "projection")
+    )
     preset = replace(preset, cluster_latent_dim=4)
     exp = ExperimentDir(tmp_path / "lasa", preset, workers=1, progress=False)
     results = run_intra(exp)
@@ -555,7 +640,9 @@ def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tm
     fitted = load_run(fit_dir)
     inferred = load_run(intra_run_dir(exp.path, "calibrated", 4, 0) / "infer")
     data = exp.dataset()
-    start = fitted.calibration.transform(fitted.initializer.transform(fitted.scaler.transform(data.subset(inferred.indices).motor)))
+    start = fitted.calibration.transform(
+        fitted.initializer.transform(fitted.scaler.transform(data.subset(inferred.indices).motor))
+    )
     np.testing.assert_allclose(inferred.initial_latents, start, rtol=1e-5, atol=1e-6)
     columns, rows = calibration_table(intra)
     assert rows[0][0] == 4 and "start calibrated" in columns
@@ -608,8 +695,14 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     exp = finished[0]
     results = run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)
     table = results["table"]
-    assert set(table) == {"zero", "mixture", "mixture (posterior mean)", "mixture (no continuity)",
-                          "mixture (labels; diagnostic)", *PEERS}
+    assert set(table) == {
+        "zero",
+        "mixture",
+        "mixture (posterior mean)",
+        "mixture (no continuity)",
+        "mixture (labels; diagnostic)",
+        *PEERS,
+    }
     for method, cells in table.items():
         assert set(cells) >= {"0.25", "0.5"}, method
         assert all(np.isfinite(cells[k]["mse"][0]) and cells[k]["mse"][2] == 1 for k in ("0.25", "0.5"))

@@ -26,15 +26,27 @@ def _dataset(n=6, t=5, size=(6, 8), seed=0, **kwargs) -> MotionDataset:
     base = np.linspace(0, 200, size[0] * size[1] * 3).reshape(size + (3,))
     images = (base + rng.integers(0, 30, (n, t, *size, 3))).astype(np.uint8)
     return MotionDataset(
-        motor=rng.normal(size=(n, t, 2)), images=images, labels=rng.integers(0, 3, n), params=rng.normal(size=(n, 2)),
-        joint_names=["a", "b"], label_names=["x", "y", "z"], param_names=["p", "q"], dt=0.5, **kwargs,
+        motor=rng.normal(size=(n, t, 2)),
+        images=images,
+        labels=rng.integers(0, 3, n),
+        params=rng.normal(size=(n, 2)),
+        joint_names=["a", "b"],
+        label_names=["x", "y", "z"],
+        param_names=["p", "q"],
+        dt=0.5,
+        **kwargs,
     )
 
 
 def _writer(path, n, like: MotionDataset, **kwargs) -> DatasetWriter:
     settings = dict(
-        n_samples=n, length=like.length, joint_names=like.joint_names, image_size=like.image_size,
-        label_names=like.label_names, param_names=like.param_names, dt=like.dt,
+        n_samples=n,
+        length=like.length,
+        joint_names=like.joint_names,
+        image_size=like.image_size,
+        label_names=like.label_names,
+        param_names=like.param_names,
+        dt=like.dt,
     )
     return DatasetWriter(path, **{**settings, **kwargs})
 
@@ -111,8 +123,15 @@ def test_copy_from_a_file_without_chunks_or_compression(tmp_path):
 def test_copy_from_refuses_a_file_that_does_not_match(tmp_path, change, start, fragments):
     whole = _dataset(n=2)
     src = tmp_path / "shard.h5"
-    MotionDataset(**{**{f: getattr(whole, f) for f in (
-        "motor", "images", "labels", "params", "joint_names", "label_names", "param_names", "dt")}, **change}).save(src)
+    MotionDataset(
+        **{
+            **{
+                f: getattr(whole, f)
+                for f in ("motor", "images", "labels", "params", "joint_names", "label_names", "param_names", "dt")
+            },
+            **change,
+        }
+    ).save(src)
     out = tmp_path / "merged.h5"
     with pytest.raises(DataError) as info:
         with _writer(out, 3, whole) as writer:
@@ -191,8 +210,13 @@ def test_a_failed_shard_stops_no_other_and_a_rerun_makes_only_the_missing(tmp_pa
         generate_dataset(TINY, seed=5, workers=1, out=out, progress=False)
     message = str(info.value)
     assert "\n" not in message
-    for fragment in (str(out), "field 'motor', sample 5: inverse kinematics misses", "sample 12",
-                     "2 of 4 shards failed", f"the other 2 are kept in {shard_dir(out)}"):
+    for fragment in (
+        str(out),
+        "field 'motor', sample 5: inverse kinematics misses",
+        "sample 12",
+        "2 of 4 shards failed",
+        f"the other 2 are kept in {shard_dir(out)}",
+    ):
         assert fragment in message, fragment
     assert made == [0, 1, 2, 3, 4, 5, 8, 9, 10, 11, 12]  # shard (8, 12) ran after (4, 8) failed
     assert not out.exists()
@@ -279,8 +303,9 @@ def test_cli_reports_failed_samples_in_one_line_and_resumes(run_cli, tmp_path, m
     out = tmp_path / "d.h5"
     args = ("generate", "--config", settings, "--out", out, "--workers", 1)
     _fail_at(monkeypatch, {6})
-    assert_user_error(run_cli(*args), str(out), "sample 6: inverse kinematics misses", "1 of 4 shards failed",
-                      "the other 3 are kept")
+    assert_user_error(
+        run_cli(*args), str(out), "sample 6: inverse kinematics misses", "1 of 4 shards failed", "the other 3 are kept"
+    )
     monkeypatch.undo()
     res = run_cli(*args)
     assert res.code == 0, res.err

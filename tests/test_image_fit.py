@@ -70,5 +70,7 @@ def test_import_image_fit_on_the_command_line(run_cli, tmp_path, fit, edge):
 def test_image_fit_without_frames_is_refused(run_cli, tmp_path):
     (tmp_path / "c").mkdir()
     (tmp_path / "c" / "a.csv").write_text("x\n0\n1\n")
-    assert_user_error(run_cli("import", tmp_path / "c", "-T", "4", "--image-fit", "pad", "--out", tmp_path / "o.h5"),
-                      "--image-fit pad: there are no frames")
+    assert_user_error(
+        run_cli("import", tmp_path / "c", "-T", "4", "--image-fit", "pad", "--out", tmp_path / "o.h5"),
+        "--image-fit pad: there are no frames",
+    )

@@ -53,7 +53,8 @@ def _npz(root, compressed=False):
     seqs = {f"motor_{i}": joints_of(t, 2, float(i)) for i, t in enumerate((5, 7, 6))}
     frames = {f"images_{i}": frames_of(t, 8, 8) for i, t in enumerate((5, 7, 6))}
     (np.savez_compressed if compressed else np.savez)(
-        path, **seqs, **frames, labels=np.array(["a", "b", "a"]), joint_names=np.array(["x", "y"]), dt=0.05)
+        path, **seqs, **frames, labels=np.array(["a", "b", "a"]), joint_names=np.array(["x", "y"]), dt=0.05
+    )
     return path, [path], ("--image-size", "8x8")
 
 
@@ -73,8 +74,11 @@ def _robomimic(root):
     for obs in demos.values():
         obs["agentview_image"] = obs["agentview_image"][:, :8, :8]
     write_robomimic(path, demos)
-    return path, [path], ("--joints", "robot0_joint_pos,robot0_gripper_qpos", "--images", "agentview_image",
-                          "--image-size", "8x8")
+    return (
+        path,
+        [path],
+        ("--joints", "robot0_joint_pos,robot0_gripper_qpos", "--images", "agentview_image", "--image-size", "8x8"),
+    )
 
 
 def _lerobot(root, what):
@@ -89,16 +93,20 @@ def _lerobot(root, what):
         return folder, meta + sorted((folder / "meta" / "episodes").rglob("*.parquet")), ()
     if what == "parquet":
         return folder, sorted((folder / "data").rglob("*.parquet")), ()
-    return folder, sorted((folder / "videos").rglob("*.mp4")), ("--images", "observation.images.top",
-                                                                 "--image-size", "8x8")
+    return (
+        folder,
+        sorted((folder / "videos").rglob("*.mp4")),
+        ("--images", "observation.images.top", "--image-size", "8x8"),
+    )
 
 
 def _npy(root):
     """An EIPL-style folder: padded joints (N, Tmax, J), frames, lengths of two of three, labels."""
     folder = root / "lab"
     folder.mkdir()
-    joints = np.stack([np.pad(joints_of(t, 2, float(i)), ((0, 7 - t), (0, 0)), mode="edge")
-                       for i, t in enumerate((5, 7, 6))])
+    joints = np.stack(
+        [np.pad(joints_of(t, 2, float(i)), ((0, 7 - t), (0, 0)), mode="edge") for i, t in enumerate((5, 7, 6))]
+    )
     np.save(folder / "joints.npy", joints)
     np.save(folder / "images.npy", np.stack([frames_of(7, 8, 8) for _ in range(3)]))
     np.save(folder / "labels.npy", np.array(["a", "b", "a"]))

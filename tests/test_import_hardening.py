@@ -100,19 +100,22 @@ def test_lerobot_templates_inside_the_folder_still_import(run_cli, lerobot):
     assert MotionDataset.load(out).images.shape == (2, 9, 8, 8, 3)
 
 
-@pytest.mark.parametrize("template, fragment", [
-    ("data/{file_index.__class__}.parquet", "{file_index.__class__}"),  # used to expand
-    ("data/{file_index.foo}.parquet", "{file_index.foo}"),  # used to be a traceback
-    ("data/{file_index[0]}.parquet", "{file_index[0]}"),  # used to be a traceback
-    ("data/{file_index!r}.parquet", "{file_index!r}"),  # used to be accepted
-    ("data/{file_index:>8}.parquet", "{file_index:>8}"),
-    ("data/{file_index:0999999999d}.parquet", "{file_index:0999999999d}"),  # a 1 GB file name
-    ("data/{0}.parquet", "{0}"),
-    ("data/{}.parquet", "{}"),
-    ("data/{video_key}/e.parquet", "{video_key}"),  # not a field of data_path
-    ("data/{episode_index:06d}.parquet", "{episode_index:06d}; a v3 template may use only {chunk_index}"),  # v2's
-    ("data/{file_index:03d", "data/{file_index:03d"),  # unbalanced
-])
+@pytest.mark.parametrize(
+    "template, fragment",
+    [
+        ("data/{file_index.__class__}.parquet", "{file_index.__class__}"),  # used to expand
+        ("data/{file_index.foo}.parquet", "{file_index.foo}"),  # used to be a traceback
+        ("data/{file_index[0]}.parquet", "{file_index[0]}"),  # used to be a traceback
+        ("data/{file_index!r}.parquet", "{file_index!r}"),  # used to be accepted
+        ("data/{file_index:>8}.parquet", "{file_index:>8}"),
+        ("data/{file_index:0999999999d}.parquet", "{file_index:0999999999d}"),  # a 1 GB file name
+        ("data/{0}.parquet", "{0}"),
+        ("data/{}.parquet", "{}"),
+        ("data/{video_key}/e.parquet", "{video_key}"),  # not a field of data_path
+        ("data/{episode_index:06d}.parquet", "{episode_index:06d}; a v3 template may use only {chunk_index}"),  # v2's
+        ("data/{file_index:03d", "data/{file_index:03d"),  # unbalanced
+    ],
+)
 def test_lerobot_template_fields_are_plain_integers(run_cli, lerobot, template, fragment):
     _edit_info(lerobot, data_path=template)
     _refused(*_import(run_cli, lerobot), "meta/info.json", "field 'data_path'", fragment)
@@ -120,8 +123,12 @@ def test_lerobot_template_fields_are_plain_integers(run_cli, lerobot, template, 
 
 def test_lerobot_v2_template_fields_are_its_own(run_cli, lerobot_v2):
     _edit_info(lerobot_v2, data_path=DATA_TEMPLATE)
-    _refused(*_import(run_cli, lerobot_v2), "meta/info.json", "field 'data_path'",
-             "{chunk_index:03d}; a v2 template may use only {episode_chunk}, {episode_index}")
+    _refused(
+        *_import(run_cli, lerobot_v2),
+        "meta/info.json",
+        "field 'data_path'",
+        "{chunk_index:03d}; a v2 template may use only {episode_chunk}, {episode_index}",
+    )
     _edit_info(lerobot_v2, data_path="../" + "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet")
     _refused(*_import(run_cli, lerobot_v2), "meta/info.json", "field 'data_path'", "outside")
 
@@ -145,8 +152,12 @@ def test_lerobot_duplicate_episode_index_is_refused(run_cli, lerobot, lerobot_v2
     _episodes(lerobot_v2, 0, 1, 0)
     _refused(*_import(run_cli, lerobot_v2), "episodes.jsonl", "line 3", "episode_index 0", "line 1")
     edit_episodes(lerobot, "episode_index", {1: 0})
-    _refused(*_import(run_cli, lerobot), "meta/episodes/chunk-000/file-000.parquet", "field 'episode_index'",
-             "episode_index 0 is listed twice (also in this file)")
+    _refused(
+        *_import(run_cli, lerobot),
+        "meta/episodes/chunk-000/file-000.parquet",
+        "field 'episode_index'",
+        "episode_index 0 is listed twice (also in this file)",
+    )
 
 
 @pytest.mark.parametrize("value", [1.7, "1", True, -1, None])
@@ -155,18 +166,25 @@ def test_lerobot_episode_index_must_be_an_integer(run_cli, lerobot_v2, value):
     _refused(*_import(run_cli, lerobot_v2), "episodes.jsonl", "line 2", "episode_index", json.dumps(value))
 
 
-@pytest.mark.parametrize("column, value, fragment", [
-    ("episode_index", 1.5, "row 0: episode_index 0.0 is not a whole number >= 0"),  # the column becomes floats
-    ("episode_index", -1, "row 1: episode_index -1 is not a whole number >= 0"),
-    ("data/file_index", None, "row 1: data/file_index null is not a whole number >= 0"),
-    ("dataset_to_index", 8, "row 1: dataset_to_index 8 does not come after dataset_from_index 8"),
-    (f"videos/{CAMERA}/from_timestamp", float("nan"), "from_timestamp NaN is not a time in seconds >= 0"),
-    (f"videos/{CAMERA}/to_timestamp", 0.8, "to_timestamp 0.8 does not come after"),
-])
+@pytest.mark.parametrize(
+    "column, value, fragment",
+    [
+        ("episode_index", 1.5, "row 0: episode_index 0.0 is not a whole number >= 0"),  # the column becomes floats
+        ("episode_index", -1, "row 1: episode_index -1 is not a whole number >= 0"),
+        ("data/file_index", None, "row 1: data/file_index null is not a whole number >= 0"),
+        ("dataset_to_index", 8, "row 1: dataset_to_index 8 does not come after dataset_from_index 8"),
+        (f"videos/{CAMERA}/from_timestamp", float("nan"), "from_timestamp NaN is not a time in seconds >= 0"),
+        (f"videos/{CAMERA}/to_timestamp", 0.8, "to_timestamp 0.8 does not come after"),
+    ],
+)
 def test_lerobot_v3_episode_rows_are_checked(run_cli, lerobot, column, value, fragment):
     edit_episodes(lerobot, column, {1: value})
-    _refused(*_import(run_cli, lerobot, "--images", CAMERA), "meta/episodes/chunk-000/file-000.parquet",
-             f"field '{column}'", fragment)
+    _refused(
+        *_import(run_cli, lerobot, "--images", CAMERA),
+        "meta/episodes/chunk-000/file-000.parquet",
+        f"field '{column}'",
+        fragment,
+    )
 
 
 @pytest.mark.parametrize("fps", ["fast", 0, float("nan"), float("inf"), -10, True, [10], 1e-320, 1e12])
@@ -212,8 +230,9 @@ def _replace(path, name, link):
 
 def test_robomimic_external_link_to_a_dataset_is_refused(run_cli, lift, tmp_path):
     _replace(lift, "data/demo_1/obs/robot0_joint_pos", h5py.ExternalLink(str(tmp_path / "other.h5"), "/secret"))
-    _refused(*_import(run_cli, lift, *_JOINTS), "lift.hdf5", "data/demo_1/obs/robot0_joint_pos", "external link",
-             "other.h5")
+    _refused(
+        *_import(run_cli, lift, *_JOINTS), "lift.hdf5", "data/demo_1/obs/robot0_joint_pos", "external link", "other.h5"
+    )
 
 
 def test_robomimic_external_link_to_a_demo_group_is_refused(run_cli, lift, tmp_path):
@@ -223,8 +242,12 @@ def test_robomimic_external_link_to_a_demo_group_is_refused(run_cli, lift, tmp_p
 
 def test_robomimic_external_link_to_frames_is_refused(run_cli, lift, tmp_path):
     _replace(lift, "data/demo_1/obs/agentview_image", h5py.ExternalLink(str(tmp_path / "other.h5"), "/images"))
-    _refused(*_import(run_cli, lift, *_JOINTS, "--images", "agentview_image"), "lift.hdf5",
-             "data/demo_1/obs/agentview_image", "external link")
+    _refused(
+        *_import(run_cli, lift, *_JOINTS, "--images", "agentview_image"),
+        "lift.hdf5",
+        "data/demo_1/obs/agentview_image",
+        "external link",
+    )
 
 
 def test_robomimic_dataset_stored_in_another_file_is_refused(run_cli, lift, tmp_path):
@@ -253,8 +276,13 @@ def test_robomimic_soft_link_out_of_the_demo_is_refused_one_inside_is_read(run_c
     assert res.code == 0, res.err
     out.unlink()
     _replace(lift, "data/demo_1/obs/robot0_joint_pos", h5py.SoftLink("/data/demo_0/obs/robot0_joint_pos"))
-    _refused(*_import(run_cli, lift, *_JOINTS), "lift.hdf5", "data/demo_1/obs/robot0_joint_pos", "soft link",
-             "/data/demo_0/obs/robot0_joint_pos")
+    _refused(
+        *_import(run_cli, lift, *_JOINTS),
+        "lift.hdf5",
+        "data/demo_1/obs/robot0_joint_pos",
+        "soft link",
+        "/data/demo_0/obs/robot0_joint_pos",
+    )
 
 
 def test_robomimic_demo_names_with_the_same_number_are_refused(run_cli, tmp_path):
@@ -392,8 +420,14 @@ def test_robomimic_dataset_declaring_more_than_memory_is_refused(run_cli, tmp_pa
     path = tmp_path / "big.hdf5"
     with h5py.File(path, "w") as f:
         f.create_dataset("data/demo_0/obs/q", shape=(10**12, 7), chunks=(1000, 7), dtype="f8")
-    _refused(*_import(run_cli, path, "--joints", "q"), "big.hdf5", "field 'q'", "sample 0", "GiB",
-             "more than half this machine's memory")
+    _refused(
+        *_import(run_cli, path, "--joints", "q"),
+        "big.hdf5",
+        "field 'q'",
+        "sample 0",
+        "GiB",
+        "more than half this machine's memory",
+    )
 
 
 def test_npz_header_declaring_more_than_memory_is_refused(run_cli, tmp_path):
@@ -419,7 +453,7 @@ def test_npz_damaged_member_names_the_member(run_cli, tmp_path, method):
     data = bytearray((tmp_path / "f.npz").read_bytes())
     if method == "ZIP_DEFLATED":
         start = data.index(b"motor.npy") + len("motor.npy")
-        data[start + 40:start + 60] = bytes(20)  # inside the compressed stream
+        data[start + 40 : start + 60] = bytes(20)  # inside the compressed stream
     else:
         data[8] = 99  # the local header's compression method
         central = data.rindex(b"PK\x01\x02")
@@ -447,7 +481,7 @@ def test_lerobot_damaged_column_name_is_one_line(run_cli, lerobot):
     file = lerobot / "data" / "chunk-000" / "file-000.parquet"
     data = file.read_bytes()
     at = data.index(b"observation.state")  # the column chunk's path in the schema
-    file.write_bytes(data[:at] + b"\xd5" + data[at + 1:])
+    file.write_bytes(data[:at] + b"\xd5" + data[at + 1 :])
     _refused(*_import(run_cli, lerobot), "file-000.parquet", "sample 0")
 
 

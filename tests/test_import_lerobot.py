@@ -43,14 +43,14 @@ def coded_frames(episode: int, n: int, h: int = H, w: int = W) -> np.ndarray:
     frames = np.empty((n, h, w, 3), dtype=np.uint8)
     for row in range(n):
         left, right = _levels(episode, row)
-        frames[row, :, : w // 2], frames[row, :, w // 2:] = left, right
+        frames[row, :, : w // 2], frames[row, :, w // 2 :] = left, right
     return frames
 
 
 def identify(frame: np.ndarray, tol: float = 3.0) -> tuple[int, int]:
     """``(episode, row)`` that a stored frame shows (the means of its outer quarters)."""
     w = frame.shape[1]
-    left, right = float(frame[:, : w // 4].mean()), float(frame[:, w - w // 4:].mean())
+    left, right = float(frame[:, : w // 4].mean()), float(frame[:, w - w // 4 :].mean())
     episode = min(range(5), key=lambda e: abs(_levels(e, 0)[0] - left))
     row = min(range(24), key=lambda r: abs(_levels(0, r)[1] - right))
     assert abs(_levels(episode, row)[0] - left) <= tol and abs(_levels(episode, row)[1] - right) <= tol, (left, right)
@@ -93,8 +93,12 @@ def _features(names=("shoulder", "elbow", "wrist")) -> dict:
     return {
         "observation.state": {"dtype": "float32", "shape": [3], "names": list(names)},
         "action": {"dtype": "float32", "shape": [3], "names": None},
-        CAMERA: {"dtype": "video", "shape": [H, W, 3], "names": ["height", "width", "channels"],
-                 "info": {"video.fps": FPS, "video.codec": "av1", "video.pix_fmt": "yuv420p"}},
+        CAMERA: {
+            "dtype": "video",
+            "shape": [H, W, 3],
+            "names": ["height", "width", "channels"],
+            "info": {"video.fps": FPS, "video.codec": "av1", "video.pix_fmt": "yuv420p"},
+        },
         "timestamp": {"dtype": "float32", "shape": [1], "names": None},
         "frame_index": {"dtype": "int64", "shape": [1], "names": None},
         "episode_index": {"dtype": "int64", "shape": [1], "names": None},
@@ -111,8 +115,10 @@ def _rows(episode: int, n: int, first: int, task: int, times=None) -> dict:
     return {
         "observation.state": pa.array(list(state), type=pa.list_(pa.float32())),
         "action": pa.array(list(-state), type=pa.list_(pa.float32())),
-        "timestamp": pa.array(times), "frame_index": pa.array(np.arange(n)),
-        "episode_index": pa.array(np.full(n, episode)), "index": pa.array(np.arange(first, first + n)),
+        "timestamp": pa.array(times),
+        "frame_index": pa.array(np.arange(n)),
+        "episode_index": pa.array(np.full(n, episode)),
+        "index": pa.array(np.arange(first, first + n)),
         "task_index": pa.array(np.full(n, task)),
     }
 
@@ -126,19 +132,44 @@ def write_tasks(path, names) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    pandas = {"index_columns": ["__index_level_0__"], "column_indexes": [], "creator": {"library": "pyarrow"},
-              "pandas_version": "2.2.3", "columns": [
-                  {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64",
-                   "metadata": None},
-                  {"name": None, "field_name": "__index_level_0__", "pandas_type": "unicode", "numpy_type": "object",
-                   "metadata": None}]}
+    pandas = {
+        "index_columns": ["__index_level_0__"],
+        "column_indexes": [],
+        "creator": {"library": "pyarrow"},
+        "pandas_version": "2.2.3",
+        "columns": [
+            {
+                "name": "task_index",
+                "field_name": "task_index",
+                "pandas_type": "int64",
+                "numpy_type": "int64",
+                "metadata": None,
+            },
+            {
+                "name": None,
+                "field_name": "__index_level_0__",
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": None,
+            },
+        ],
+    }
     table = pa.table({"task_index": pa.array(range(len(names)), pa.int64()), "__index_level_0__": list(names)})
     pq.write_table(table.replace_schema_metadata({b"pandas": json.dumps(pandas).encode()}), path)
 
 
-def write_v3(root, lengths=(6, 9, 5, 7), tasks=("push", "lift", "push", "lift"),
-             data_files=((0, 0), (0, 0), (0, 1), (1, 0)), video_files=((0, 0), (0, 0), (0, 0), (0, 1)),
-             codec="mpeg4", times=None, video_extra=0, gop=None, meta_split=2) -> list[np.ndarray]:
+def write_v3(
+    root,
+    lengths=(6, 9, 5, 7),
+    tasks=("push", "lift", "push", "lift"),
+    data_files=((0, 0), (0, 0), (0, 1), (1, 0)),
+    video_files=((0, 0), (0, 0), (0, 0), (0, 1)),
+    codec="mpeg4",
+    times=None,
+    video_extra=0,
+    gop=None,
+    meta_split=2,
+) -> list[np.ndarray]:
     """A LeRobot v3.0 directory: episode ``e`` in data file ``data_files[e]`` and video file
     ``video_files[e]`` (``(chunk, file)``); ``times[e]`` replaces its timestamps; each video
     file gets ``video_extra`` frames more at its end; meta/episodes split into two files
@@ -147,10 +178,20 @@ def write_v3(root, lengths=(6, 9, 5, 7), tasks=("push", "lift", "push", "lift"),
     import pyarrow.parquet as pq
 
     names = sorted(set(tasks))
-    info = {"codebase_version": "v3.0", "robot_type": "so100", "fps": FPS, "chunks_size": 1000,
-            "data_files_size_in_mb": 100, "video_files_size_in_mb": 200, "total_episodes": len(lengths),
-            "total_frames": int(sum(lengths)), "total_tasks": len(names), "data_path": V3_DATA,
-            "video_path": V3_VIDEO, "features": _features()}
+    info = {
+        "codebase_version": "v3.0",
+        "robot_type": "so100",
+        "fps": FPS,
+        "chunks_size": 1000,
+        "data_files_size_in_mb": 100,
+        "video_files_size_in_mb": 200,
+        "total_episodes": len(lengths),
+        "total_frames": int(sum(lengths)),
+        "total_tasks": len(names),
+        "data_path": V3_DATA,
+        "video_path": V3_VIDEO,
+        "features": _features(),
+    }
     (root / "meta").mkdir(parents=True)
     (root / "meta" / "info.json").write_text(json.dumps(info))
     write_tasks(root / "meta" / "tasks.parquet", names)
@@ -161,14 +202,22 @@ def write_v3(root, lengths=(6, 9, 5, 7), tasks=("push", "lift", "push", "lift"),
         done = videos.setdefault(video_files[e], [])
         start = sum(len(f) for f in done) / FPS
         done.append(coded_frames(e, n))
-        records.append({
-            "episode_index": e, "tasks": [tasks[e]], "length": n,
-            "data/chunk_index": data_files[e][0], "data/file_index": data_files[e][1],
-            "dataset_from_index": first, "dataset_to_index": first + n,
-            f"videos/{CAMERA}/chunk_index": video_files[e][0], f"videos/{CAMERA}/file_index": video_files[e][1],
-            f"videos/{CAMERA}/from_timestamp": start, f"videos/{CAMERA}/to_timestamp": start + n / FPS,
-            "stats/observation.state/mean": [0.0, 0.0, 0.0],
-        })
+        records.append(
+            {
+                "episode_index": e,
+                "tasks": [tasks[e]],
+                "length": n,
+                "data/chunk_index": data_files[e][0],
+                "data/file_index": data_files[e][1],
+                "dataset_from_index": first,
+                "dataset_to_index": first + n,
+                f"videos/{CAMERA}/chunk_index": video_files[e][0],
+                f"videos/{CAMERA}/file_index": video_files[e][1],
+                f"videos/{CAMERA}/from_timestamp": start,
+                f"videos/{CAMERA}/to_timestamp": start + n / FPS,
+                "stats/observation.state/mean": [0.0, 0.0, 0.0],
+            }
+        )
         first += n
     for (chunk, file), parts in tables.items():
         path = root / V3_DATA.format(chunk_index=chunk, file_index=file)
@@ -204,27 +253,55 @@ def edit_episodes(root, column: str, values: dict) -> None:
 # ---------------------------------------------------------------------- v2.x writer
 
 
-def write_v2(root, lengths=(12, 20, 9), tasks=("push", "lift", "push"), video_lengths=None, codec="mpeg4",
-             names=("shoulder", "elbow", "wrist")) -> list[np.ndarray]:
+def write_v2(
+    root,
+    lengths=(12, 20, 9),
+    tasks=("push", "lift", "push"),
+    video_lengths=None,
+    codec="mpeg4",
+    names=("shoulder", "elbow", "wrist"),
+) -> list[np.ndarray]:
     """A LeRobot v2.1 directory (one table and one video per episode, with the meta files LeRobot's
     v2.1 -> v3.0 converter reads: tasks.jsonl, episodes_stats.jsonl); returns each episode's state."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     task_names = sorted(set(tasks))
-    info = {"codebase_version": "v2.1", "fps": FPS, "chunks_size": 2, "total_episodes": len(lengths),
-            "total_chunks": (len(lengths) + 1) // 2, "total_videos": len(lengths), "total_frames": int(sum(lengths)),
-            "total_tasks": len(task_names), "data_path": V2_DATA, "video_path": V2_VIDEO,
-            "features": _features(names)}
+    info = {
+        "codebase_version": "v2.1",
+        "fps": FPS,
+        "chunks_size": 2,
+        "total_episodes": len(lengths),
+        "total_chunks": (len(lengths) + 1) // 2,
+        "total_videos": len(lengths),
+        "total_frames": int(sum(lengths)),
+        "total_tasks": len(task_names),
+        "data_path": V2_DATA,
+        "video_path": V2_VIDEO,
+        "features": _features(names),
+    }
     (root / "meta").mkdir(parents=True)
     (root / "meta" / "info.json").write_text(json.dumps(info))
     lines = [json.dumps({"episode_index": e, "tasks": [tasks[e]], "length": t}) for e, t in enumerate(lengths)]
     (root / "meta" / "episodes.jsonl").write_text("\n".join(lines) + "\n")
-    (root / "meta" / "tasks.jsonl").write_text("".join(
-        json.dumps({"task_index": i, "task": t}) + "\n" for i, t in enumerate(task_names)))
-    stats = [{"episode_index": e, "stats": {"observation.state": {
-        "min": s.min(0).tolist(), "max": s.max(0).tolist(), "mean": s.mean(0).tolist(), "std": s.std(0).tolist(),
-        "count": [len(s)]}}} for e, s in enumerate(state_of(e, n) for e, n in enumerate(lengths))]
+    (root / "meta" / "tasks.jsonl").write_text(
+        "".join(json.dumps({"task_index": i, "task": t}) + "\n" for i, t in enumerate(task_names))
+    )
+    stats = [
+        {
+            "episode_index": e,
+            "stats": {
+                "observation.state": {
+                    "min": s.min(0).tolist(),
+                    "max": s.max(0).tolist(),
+                    "mean": s.mean(0).tolist(),
+                    "std": s.std(0).tolist(),
+                    "count": [len(s)],
+                }
+            },
+        }
+        for e, s in enumerate(state_of(e, n) for e, n in enumerate(lengths))
+    ]
     (root / "meta" / "episodes_stats.jsonl").write_text("".join(json.dumps(x) + "\n" for x in stats))
     first = 0
     for e, n in enumerate(lengths):
@@ -243,8 +320,7 @@ def check_import(ds, states, length, episodes=None, size=(24, 32)) -> None:
     assert ds.motor.shape == (len(episodes), length, 3)
     assert ds.images.shape == (len(episodes), length, *size, 3)
     for i, e in enumerate(episodes):
-        np.testing.assert_allclose(ds.motor[i], resample(states[e].astype(np.float64), length), rtol=1e-5,
-                                   atol=1e-5)
+        np.testing.assert_allclose(ds.motor[i], resample(states[e].astype(np.float64), length), rtol=1e-5, atol=1e-5)
         assert [identify(f) for f in ds.images[i]] == [(e, int(r)) for r in frame_steps(len(states[e]), length)]
 
 
@@ -296,7 +372,8 @@ def test_v3_row_range_that_the_data_file_lacks_is_refused(tmp_path):
     assert str(err.value) == (
         f"{tmp_path / 'ds' / 'data/chunk-000/file-000.parquet'}, field 'index', sample 1: episode 1: its rows, "
         "index 6 to 15 (dataset_from_index, dataset_to_index in meta/episodes/chunk-000/file-000.parquet), are "
-        "not each once in the file: 9 rows there have an index in that range")
+        "not each once in the file: 9 rows there have an index in that range"
+    )
 
 
 def test_v3_timestamps_jittering_within_half_a_period_import(tmp_path):
@@ -315,15 +392,19 @@ def test_v3_timestamps_drifting_beyond_half_a_period_are_refused(tmp_path):
     assert str(err.value) == (
         f"{video}, field '{CAMERA}', sample 1: episode 1: row 8: the frame at from_timestamp 0.6 s + timestamp "
         "0.88 s = 1.48 s is wanted; the nearest frame of the episode is at 1.4 s, 0.08 s away, more than half a "
-        "frame period (0.05 s at 10 fps)")
+        "frame period (0.05 s at 10 fps)"
+    )
 
 
 def test_v3_frames_outside_the_episode_span_are_not_taken(tmp_path):
     """to_timestamp one frame early: the last row's frame would be the next episode's first."""
     write_v3(tmp_path / "ds")
     edit_episodes(tmp_path / "ds", f"videos/{CAMERA}/to_timestamp", {0: 0.5})
-    with pytest.raises(DataError, match=r"sample 0: episode 0: row 5: the frame at timestamp 0.5 s is wanted; the "
-                                        r"nearest frame of the episode is at 0.4 s"):
+    with pytest.raises(
+        DataError,
+        match=r"sample 0: episode 0: row 5: the frame at timestamp 0.5 s is wanted; the "
+        r"nearest frame of the episode is at 0.4 s",
+    ):
         import_lerobot(tmp_path / "ds", 9, images=CAMERA)
 
 
@@ -378,7 +459,8 @@ def test_v2_video_that_ends_a_frame_early_is_refused(tmp_path):
     video = tmp_path / "ds" / V2_VIDEO.format(episode_chunk=0, video_key=CAMERA, episode_index=1)
     assert str(err.value) == (
         f"{video}, field '{CAMERA}', sample 1: episode 1: row 19: the frame at timestamp 1.9 s is wanted; the "
-        "nearest frame of the episode is at 1.8 s, 0.1 s away, more than half a frame period (0.05 s at 10 fps)")
+        "nearest frame of the episode is at 1.8 s, 0.1 s away, more than half a frame period (0.05 s at 10 fps)"
+    )
 
 
 def test_v2_rows_without_timestamps_use_frame_index(tmp_path):
@@ -409,8 +491,7 @@ def test_v2_image_feature_stored_in_the_table(tmp_path):
             Image.fromarray(frame).save(buffer, format="PNG")
             pngs.append({"bytes": buffer.getvalue(), "path": None})
         pq.write_table(pq.read_table(file).append_column("observation.images.wrist", pa.array(pngs)), file)
-    check_import(import_lerobot(tmp_path / "ds", 9, images="observation.images.wrist", image_size=(24, 32)),
-                 states, 9)
+    check_import(import_lerobot(tmp_path / "ds", 9, images="observation.images.wrist", image_size=(24, 32)), states, 9)
 
 
 # ------------------------------------------------------------------ episode selection
@@ -419,9 +500,16 @@ def test_v2_image_feature_stored_in_the_table(tmp_path):
 def test_parse_episodes():
     assert parse_episodes("0,3,10-12") == [0, 3, 10, 11, 12]
     assert parse_episodes(" 5 , 1-2, 2 ") == [1, 2, 5]
-    for text, fragment in [("", "'' is not an episode index"), ("1,,2", "'' is not"), ("a-3", "'a-3' is not"),
-                           ("-1", "'-1' is not"), ("1.5", "'1.5' is not"), ("20-10", "runs backwards"),
-                           ("0-99999999", "more than 1,000,000 episodes"), ("²", "is not")]:
+    for text, fragment in [
+        ("", "'' is not an episode index"),
+        ("1,,2", "'' is not"),
+        ("a-3", "'a-3' is not"),
+        ("-1", "'-1' is not"),
+        ("1.5", "'1.5' is not"),
+        ("20-10", "runs backwards"),
+        ("0-99999999", "more than 1,000,000 episodes"),
+        ("²", "is not"),
+    ]:
         with pytest.raises(UserError, match=fragment):
             parse_episodes(text)
 
@@ -433,8 +521,10 @@ def test_episodes_selects_in_the_data_sets_order_each_once(tmp_path, version):
     check_import(ds, states, 7, episodes=[0, 2])
     assert list(ds.source_ids) == ["lerobot:ds:episode 0", "lerobot:ds:episode 2"]
     assert "episodes=0,2" in ds.source
-    assert list(import_lerobot(tmp_path / "ds", 7, episodes="1-2").source_ids) == ["lerobot:ds:episode 1",
-                                                                                  "lerobot:ds:episode 2"]
+    assert list(import_lerobot(tmp_path / "ds", 7, episodes="1-2").source_ids) == [
+        "lerobot:ds:episode 1",
+        "lerobot:ds:episode 2",
+    ]
     with pytest.raises(DataError, match=r"ds, field 'episodes': episode 7 is not in the data set; its episodes: 0-"):
         import_lerobot(tmp_path / "ds", 7, episodes=[1, 7])
     with pytest.raises(UserError, match="none selected"):
@@ -473,15 +563,24 @@ def test_v3_video_template_escaping_the_folder_is_refused(run_cli, tmp_path):
 
 def test_errors_name_the_file_and_the_feature(tmp_path):
     write_v3(tmp_path / "ds", lengths=(5, 6), tasks=("a", "b"), data_files=((0, 0),) * 2, video_files=((0, 0),) * 2)
-    with pytest.raises(DataError, match=r"no feature 'observation.images.wrist'; features: observation.state, action, "
-                                        r"observation.images.top, timestamp"):
+    with pytest.raises(
+        DataError,
+        match=r"no feature 'observation.images.wrist'; features: observation.state, action, "
+        r"observation.images.top, timestamp",
+    ):
         import_lerobot(tmp_path / "ds", 6, images="observation.images.wrist")
-    with pytest.raises(DataError, match=r"field 'action': is a float32 feature, not camera frames; camera features: "
-                                        r"observation.images.top"):
+    with pytest.raises(
+        DataError,
+        match=r"field 'action': is a float32 feature, not camera frames; camera features: "
+        r"observation.images.top",
+    ):
         import_lerobot(tmp_path / "ds", 6, images="action")
     edit_episodes(tmp_path / "ds", f"videos/{CAMERA}/from_timestamp", {None: None})
-    with pytest.raises(DataError, match=rf"file-000.parquet, field 'videos/{CAMERA}/from_timestamp': no column "
-                                        rf"'videos/{CAMERA}/from_timestamp'; columns: episode_index, "):
+    with pytest.raises(
+        DataError,
+        match=rf"file-000.parquet, field 'videos/{CAMERA}/from_timestamp': no column "
+        rf"'videos/{CAMERA}/from_timestamp'; columns: episode_index, ",
+    ):
         import_lerobot(tmp_path / "ds", 6, images=CAMERA)
     info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())
     (tmp_path / "ds" / "meta" / "info.json").write_text(json.dumps(dict(info, codebase_version="v4.0")))

@@ -45,8 +45,9 @@ def _direct(tmp_path, length, arrays=None):
     """The real episodes imported as they are (one array per demonstration): the reference."""
     joints, frames = arrays or _episodes()
     path = tmp_path / "direct.npz"
-    np.savez(path, **{f"joints_{i}": a for i, a in enumerate(joints)},
-             **{f"images_{i}": f for i, f in enumerate(frames)})
+    np.savez(
+        path, **{f"joints_{i}": a for i, a in enumerate(joints)}, **{f"images_{i}": f for i, f in enumerate(frames)}
+    )
     return import_npz(path, length, image_size=(16, 16))
 
 
@@ -107,7 +108,7 @@ def test_lengths_file_is_used_even_where_the_rule_would_trim_more(tmp_path):
     (root / "lengths.npy").unlink()
     by_rule = import_npy_folder(root, 31, image_size=(16, 16))
     trimmed = [j[:18] if i == 1 else j for i, j in enumerate(joints)]  # the hold's first step (17) kept
-    cut = [f[:len(j)] for f, j in zip(frames, trimmed)]
+    cut = [f[: len(j)] for f, j in zip(frames, trimmed)]
     _assert_same(by_rule, _direct(tmp_path, 31, (trimmed, cut)))
 
 
@@ -147,10 +148,16 @@ def _refusal(root, **call):
         ("joints", np.zeros((4, 23)), "joints.npy, field 'joints': must be (N, Tmax, J) numbers, got float64 (4, 23)"),
         ("joints", np.zeros((4, 23, 2)).astype(str), "field 'joints': must be (N, Tmax, J) numbers, got <U32"),
         ("joints", np.array([np.zeros(3), np.zeros(4)], dtype=object), "field 'joints': holds Python objects"),
-        ("images", np.zeros((3, 23, 16, 16, 3), np.uint8),
-         "images.npy, field 'images', sample 3: holds the frames of 3 samples, joints.npy 4 samples"),
-        ("images", np.zeros((4, 22, 16, 16, 3), np.uint8),
-         "images.npy, field 'images': holds 22 frames per sample for 23 joint steps"),
+        (
+            "images",
+            np.zeros((3, 23, 16, 16, 3), np.uint8),
+            "images.npy, field 'images', sample 3: holds the frames of 3 samples, joints.npy 4 samples",
+        ),
+        (
+            "images",
+            np.zeros((4, 22, 16, 16, 3), np.uint8),
+            "images.npy, field 'images': holds 22 frames per sample for 23 joint steps",
+        ),
         ("images", np.zeros((4, 23, 16, 16, 3), np.float32), "field 'images': frames must be uint8, got float32"),
         ("images", np.zeros((4, 23, 16, 16), np.uint8), "field 'images': must be (N, Tmax, H, W, 3) RGB frames"),
         ("lengths", np.array([15, 23, 24, 20]), "lengths.npy, field 'lengths', sample 2: length 24 is outside 2 .. 23"),
@@ -160,9 +167,21 @@ def _refusal(root, **call):
         ("labels", np.array([0, 1, 2]), "labels.npy, field 'labels': 3 labels for 4 sequences"),
         ("labels", np.array([0, 1, -2, 0]), "labels.npy, field 'labels', sample 2:"),
     ],
-    ids=["joints-rank", "joints-strings", "joints-objects", "images-count", "images-steps", "images-dtype",
-         "images-rank", "lengths-long", "lengths-short", "lengths-float", "lengths-count", "labels-count",
-         "labels-range"],
+    ids=[
+        "joints-rank",
+        "joints-strings",
+        "joints-objects",
+        "images-count",
+        "images-steps",
+        "images-dtype",
+        "images-rank",
+        "lengths-long",
+        "lengths-short",
+        "lengths-float",
+        "lengths-count",
+        "labels-count",
+        "labels-range",
+    ],
 )
 def test_bad_arrays_name_file_field_and_sample(tmp_path, name, value, expected):
     root = _folder(tmp_path / "d", lengths=True)

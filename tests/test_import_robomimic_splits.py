@@ -43,8 +43,9 @@ def test_filter_key_reads_the_demos_of_the_mask_in_numeric_order(tmp_path):
     assert _numbers(train) == [0, 2, 7, 10]
     assert list(train.source_ids) == [f"robomimic:lift.hdf5:data/demo_{k}" for k in (0, 2, 7, 10)]
     for i, k in enumerate((0, 2, 7, 10)):
-        np.testing.assert_allclose(train.motor[i], resample(demos[f"demo_{k}"]["robot0_joint_pos"], 9),
-                                   rtol=1e-5, atol=1e-4)
+        np.testing.assert_allclose(
+            train.motor[i], resample(demos[f"demo_{k}"]["robot0_joint_pos"], 9), rtol=1e-5, atol=1e-4
+        )
     assert train.source.endswith("filter_key=train")
     valid = import_robomimic(path, 9, joints=["robot0_joint_pos"], filter_key="valid")
     assert _numbers(valid) == [1, 5]
@@ -66,19 +67,26 @@ def test_missing_filter_key_names_the_file_and_the_keys_there(tmp_path):
     _write(path, {"train": ["demo_0"], "20_percent": ["demo_1"]})
     with pytest.raises(DataError) as info:
         import_robomimic(path, 9, joints=["robot0_joint_pos"], filter_key="valid")
-    assert str(info.value) == (f"{path}, field 'mask/valid': no filter key 'valid'; "
-                               "filter keys there: 20_percent, train")
+    assert str(info.value) == (
+        f"{path}, field 'mask/valid': no filter key 'valid'; filter keys there: 20_percent, train"
+    )
     _write(tmp_path / "plain.hdf5")
-    with pytest.raises(DataError, match=r"plain\.hdf5, field 'mask/train': no filter key 'train': the file has "
-                                        r"no 'mask' group"):
+    with pytest.raises(
+        DataError,
+        match=r"plain\.hdf5, field 'mask/train': no filter key 'train': the file has "
+        r"no 'mask' group",
+    ):
         import_robomimic(tmp_path / "plain.hdf5", 9, joints=["robot0_joint_pos"], filter_key="train")
 
 
 @pytest.mark.parametrize(
     "names, match",
     [
-        (["demo_0", "demo_40"], r"mask/train names demo_40, which is not among data's 12 demo_N groups "
-                                r"\(demo_0 \.\. demo_11\)"),
+        (
+            ["demo_0", "demo_40"],
+            r"mask/train names demo_40, which is not among data's 12 demo_N groups "
+            r"\(demo_0 \.\. demo_11\)",
+        ),
         (["demo_1", "demo_01"], r"mask/train names demo_01, which is not among"),
         (["demo_3", "demo_3"], r"mask/train names demo_3 twice"),
         ([], r"mask/train names no demonstrations"),
@@ -101,10 +109,12 @@ def test_mask_that_is_not_a_list_of_names_or_a_bad_filter_key_is_refused(tmp_pat
     with h5py.File(path, "a") as f:
         f["mask/train"] = np.arange(3)
         f.create_group("mask/valid")
-    for key, match in (("train", r"must be a 1-D array of demo names .* got int64 \(3,\)"),
-                       ("valid", r"must be a 1-D array of demo names .* got a group"),
-                       ("../data", r"a filter key is one name under mask/"),
-                       ("", r"a filter key is one name under mask/")):
+    for key, match in (
+        ("train", r"must be a 1-D array of demo names .* got int64 \(3,\)"),
+        ("valid", r"must be a 1-D array of demo names .* got a group"),
+        ("../data", r"a filter key is one name under mask/"),
+        ("", r"a filter key is one name under mask/"),
+    ):
         with pytest.raises(DataError, match=match):
             import_robomimic(path, 9, joints=["robot0_joint_pos"], filter_key=key)
 
@@ -118,8 +128,11 @@ def test_mask_held_to_the_containment_rules(tmp_path):
         f["mask/train"] = h5py.ExternalLink(str(tmp_path / "other.h5"), "/names")
         f["mask/inner"] = np.array(["demo_4"], dtype="S")
         f["mask/linked"] = h5py.SoftLink("/mask/inner")  # inside this file: read
-    with pytest.raises(DataError, match=r"field 'mask/train': mask/train is an external link to .*other\.h5:/names; "
-                                        r"only this file's own data are read"):
+    with pytest.raises(
+        DataError,
+        match=r"field 'mask/train': mask/train is an external link to .*other\.h5:/names; "
+        r"only this file's own data are read",
+    ):
         import_robomimic(path, 9, joints=["robot0_joint_pos"], filter_key="train")
     assert _numbers(import_robomimic(path, 9, joints=["robot0_joint_pos"], filter_key="linked")) == [4]
     with h5py.File(path, "a") as f:
@@ -133,12 +146,22 @@ def test_actions_and_states_are_read_at_demo_level_and_mix_with_obs_keys(tmp_pat
     path = tmp_path / "lift.hdf5"
     demos = _write(path, lengths=(12, 14, 10))
     ds = import_robomimic(path, 9, joints=["robot0_gripper_qpos", "actions", "states", "rewards"])
-    assert ds.joint_names == (["robot0_gripper_qpos_0", "robot0_gripper_qpos_1"] + [f"actions_{j}" for j in range(7)]
-                              + ["states_0", "states_1", "states_2", "rewards"])
+    assert ds.joint_names == (
+        ["robot0_gripper_qpos_0", "robot0_gripper_qpos_1"]
+        + [f"actions_{j}" for j in range(7)]
+        + ["states_0", "states_1", "states_2", "rewards"]
+    )
     for k, obs in enumerate(demos.values()):
         t = len(obs["robot0_joint_pos"])
-        want = np.concatenate([obs["robot0_gripper_qpos"], joints_of(t, 7, 1000.0 + k), joints_of(t, 3, 2000.0 + k),
-                               np.arange(t, dtype=float)[:, None]], axis=1)
+        want = np.concatenate(
+            [
+                obs["robot0_gripper_qpos"],
+                joints_of(t, 7, 1000.0 + k),
+                joints_of(t, 3, 2000.0 + k),
+                np.arange(t, dtype=float)[:, None],
+            ],
+            axis=1,
+        )
         np.testing.assert_allclose(ds.motor[k], resample(want, 9), rtol=1e-5, atol=1e-3)
     assert list(ds.source_ids) == [f"robomimic:lift.hdf5:data/demo_{k}" for k in range(3)]
 
@@ -158,8 +181,9 @@ def test_obs_wins_over_demo_level_and_paths_choose(tmp_path):
     np.testing.assert_allclose(demo_level.motor[1], resample(joints_of(14, 7, 1001.0), 9), rtol=1e-5, atol=1e-3)
     assert demo_level.joint_names[0] == "actions_0" and as_obs.joint_names[0] == "obs/actions_0"
     nxt = import_robomimic(path, 9, joints=["next_obs/robot0_joint_pos"])
-    np.testing.assert_allclose(nxt.motor[0], resample(demos["demo_0"]["robot0_joint_pos"] + 1.0, 9), rtol=1e-5,
-                               atol=1e-4)
+    np.testing.assert_allclose(
+        nxt.motor[0], resample(demos["demo_0"]["robot0_joint_pos"] + 1.0, 9), rtol=1e-5, atol=1e-4
+    )
 
 
 @pytest.mark.parametrize("key", ["../demo_1/actions", "obs/../actions", "/data/demo_0/actions", "obs//x", "..", "obs/"])
@@ -177,9 +201,13 @@ def test_missing_key_names_obs_and_demo_level_keys(tmp_path):
         import_robomimic(path, 9, joints=["robot0_eef_pos"])
     assert str(info.value) == (
         f"{path}, field 'robot0_eef_pos', sample 0: data/demo_0/obs/robot0_eef_pos is missing; keys there: "
-        "agentview_image, robot0_gripper_qpos, robot0_joint_pos; at demo level (data/demo_0): actions, rewards, states")
-    with pytest.raises(DataError, match=r"sample 0: data/demo_0/next_obs is missing; data/demo_0 has: actions, obs, "
-                                        r"rewards, states$"):
+        "agentview_image, robot0_gripper_qpos, robot0_joint_pos; at demo level (data/demo_0): actions, rewards, states"
+    )
+    with pytest.raises(
+        DataError,
+        match=r"sample 0: data/demo_0/next_obs is missing; data/demo_0 has: actions, obs, "
+        r"rewards, states$",
+    ):
         import_robomimic(path, 9, joints=["next_obs/robot0_joint_pos"])
 
 
@@ -190,8 +218,11 @@ def test_demo_level_key_with_other_steps_or_columns_is_refused(tmp_path):
         del f["data/demo_1/states"]
         f["data/demo_1/states"] = np.zeros((14, 5))
         f["data/demo_0/dones"] = np.zeros(11)
-    with pytest.raises(DataError, match=r"field 'states', sample 1: states has 5 columns in data/demo_1, 3 in "
-                                        r"data/demo_0"):
+    with pytest.raises(
+        DataError,
+        match=r"field 'states', sample 1: states has 5 columns in data/demo_1, 3 in "
+        r"data/demo_0",
+    ):
         import_robomimic(path, 9, joints=["actions", "states"])
     with pytest.raises(DataError, match=r"field 'dones', sample 0: data/demo_0/dones has 11 steps, actions has 12"):
         import_robomimic(path, 9, joints=["actions", "dones"])
@@ -203,8 +234,11 @@ def test_demo_level_soft_link_out_of_the_demo_is_refused(tmp_path):
     with h5py.File(path, "a") as f:
         del f["data/demo_1/actions"]
         f["data/demo_1/actions"] = h5py.SoftLink("/data/demo_0/actions")
-    with pytest.raises(DataError, match=r"sample 1: data/demo_1/actions is a soft link to /data/demo_0/actions, "
-                                        r"outside data/demo_1"):
+    with pytest.raises(
+        DataError,
+        match=r"sample 1: data/demo_1/actions is a soft link to /data/demo_0/actions, "
+        r"outside data/demo_1",
+    ):
         import_robomimic(path, 9, joints=["actions"])
 
 
@@ -219,5 +253,7 @@ def test_cli_filter_key_when_wired(run_cli, tmp_path):
     assert res.code == 0, res.err
     from primspace.data import MotionDataset
 
-    assert list(MotionDataset.load(out).source_ids) == ["robomimic:lift.hdf5:data/demo_3",
-                                                        "robomimic:lift.hdf5:data/demo_11"]
+    assert list(MotionDataset.load(out).source_ids) == [
+        "robomimic:lift.hdf5:data/demo_3",
+        "robomimic:lift.hdf5:data/demo_11",
+    ]

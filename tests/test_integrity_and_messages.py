@@ -64,8 +64,11 @@ def test_flipped_bytes_are_refused_naming_file_and_field(tmp_path, name, run_cli
 
 def test_step_fields_carry_the_checksum_too(tmp_path):
     ds = MotionDataset(
-        np.zeros((2, 4, 1)), labels=[0, 1], lengths=[4, 3],
-        step_labels=[[0, 0, 1, 1], [1, 1, 1, -1]], step_segments=[[0, 0, 1, 1], [0, 0, 0, -1]],
+        np.zeros((2, 4, 1)),
+        labels=[0, 1],
+        lengths=[4, 3],
+        step_labels=[[0, 0, 1, 1], [1, 1, 1, -1]],
+        step_segments=[[0, 0, 1, 1], [0, 0, 0, -1]],
     )
     with h5py.File(ds.save(tmp_path / "s.h5")) as f:
         assert f.attrs["schema_version"] == 2
@@ -153,8 +156,9 @@ def test_option_parser_errors_are_one_line(run_cli, data_file, tmp_path, args, f
 @pytest.mark.parametrize("args", [["train", "x.h5", "--epochs", "abc", "--out", "run"], ["no-such-command"]])
 def test_the_real_entry_point_prints_one_line(tmp_path, args):
     env = dict(os.environ, COLUMNS="80")
-    proc = subprocess.run([sys.executable, "-m", "primspace", *args], capture_output=True, text=True, cwd=tmp_path,
-                          env=env, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "primspace", *args], capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300
+    )
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert lines[0].startswith("primspace: error: ")
@@ -312,6 +316,11 @@ def test_fit_with_nothing_to_learn_is_refused_from_python_too(tmp_path):
     from primspace.train import TrainConfig, fit
 
     with pytest.raises(UserError, match="motor_weight is 0 and no vision loss"):
-        fit(primitives(2, seed=0), tmp_path / "run", model_config=SMALL, train_config=TrainConfig(epochs=1, motor_weight=0),
-            progress=False)
+        fit(
+            primitives(2, seed=0),
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=TrainConfig(epochs=1, motor_weight=0),
+            progress=False,
+        )
     assert not (tmp_path / "run").exists()

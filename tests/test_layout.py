@@ -39,10 +39,33 @@ MAX_FUNCTION_LINES = 60
 
 # package (or module) -> what it may never import
 FORBIDDEN = {
-    "data": ("sim", "latent", "model", "model_config", "train", "predict", "cluster", "plots", "experiments", "report",
-             "demo", "cli"),
-    "sim": ("latent", "model", "model_config", "train", "predict", "cluster", "plots", "experiments", "report", "demo",
-            "cli"),
+    "data": (
+        "sim",
+        "latent",
+        "model",
+        "model_config",
+        "train",
+        "predict",
+        "cluster",
+        "plots",
+        "experiments",
+        "report",
+        "demo",
+        "cli",
+    ),
+    "sim": (
+        "latent",
+        "model",
+        "model_config",
+        "train",
+        "predict",
+        "cluster",
+        "plots",
+        "experiments",
+        "report",
+        "demo",
+        "cli",
+    ),
     "cluster": ("sim", "latent", "model", "train", "predict", "experiments", "report", "demo", "cli"),
     "probe": ("sim", "latent", "model", "train", "predict", "experiments", "report", "demo", "cli"),
     # the segmentation package: the windows method, scores, results, peers (ruptures, hmmlearn) and
@@ -52,8 +75,19 @@ FORBIDDEN = {
     "segmentation.synthesis": ("sim", "experiments", "report", "demo", "cli"),
     "segmentation.surprise": ("sim", "experiments", "report", "demo", "cli"),
     "segmentation.inferred": ("sim", "experiments", "report", "demo", "cli"),
-    "model_config": ("model", "latent", "train", "predict", "sim", "cluster", "plots", "experiments", "report", "demo",
-                     "cli"),
+    "model_config": (
+        "model",
+        "latent",
+        "train",
+        "predict",
+        "sim",
+        "cluster",
+        "plots",
+        "experiments",
+        "report",
+        "demo",
+        "cli",
+    ),
     "model": ("latent", "train", "predict", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "latent": ("model", "train", "predict", "sim", "cluster", "plots", "experiments", "report", "demo", "cli"),
     "train": ("sim", "cluster", "predict", "plots", "experiments", "report", "demo", "cli"),
@@ -66,8 +100,23 @@ FORBIDDEN = {
     "report": ("demo", "cli"),
     "demo": ("cli",),
     # small statistics helpers: the standard library only
-    "stats": ("data", "sim", "cluster", "probe", "segmentation", "model_config", "model", "latent", "train", "predict",
-              "plots", "experiments", "report", "demo", "cli"),
+    "stats": (
+        "data",
+        "sim",
+        "cluster",
+        "probe",
+        "segmentation",
+        "model_config",
+        "model",
+        "latent",
+        "train",
+        "predict",
+        "plots",
+        "experiments",
+        "report",
+        "demo",
+        "cli",
+    ),
 }
 
 
@@ -133,7 +182,8 @@ def _nodes(node: ast.AST, eager: bool = True):
         if isinstance(child, (ast.Import, ast.ImportFrom)):
             yield child, eager
         deferred = isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)) or (
-            isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test))
+            isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test)
+        )
         yield from _nodes(child, eager and not deferred)
 
 
@@ -255,20 +305,27 @@ def test_no_import_cycles():
     report = []
     for component in _cycles(edges):
         inside = set(component)
-        report.append("cycle:\n" + "\n".join(f"  {i.module}:{i.line} -> {t}" for m in component
-                                            for t, i in edges[m].items() if t in inside))
+        report.append(
+            "cycle:\n"
+            + "\n".join(f"  {i.module}:{i.line} -> {t}" for m in component for t, i in edges[m].items() if t in inside)
+        )
     assert not report, f"{len(report)} import cycle(s):\n" + "\n".join(report)
 
 
 def test_no_private_name_is_imported_from_another_module():
     """A name with a leading underscore is its module's own: shared helpers get public names."""
-    private = [f"{i.module}:{i.line} from {i.named} import {i.name}" for imports in IMPORTS.values() for i in imports
-               if i.name and i.name.startswith("_") and not i.name.endswith("__") and _target(i) != i.module]
+    private = [
+        f"{i.module}:{i.line} from {i.named} import {i.name}"
+        for imports in IMPORTS.values()
+        for i in imports
+        if i.name and i.name.startswith("_") and not i.name.endswith("__") and _target(i) != i.module
+    ]
     assert not private, "private names imported from another module:\n" + "\n".join(private)
 
 
 def test_the_import_graph_sees_every_form():
     """The reader resolves relative imports, ``import primspace.x`` and a package's forwarded names."""
+
     def target(module: str, source: str) -> str | None:
         return _target(_imports_in(module, ast.parse(source))[0])
 
@@ -280,7 +337,8 @@ def test_the_import_graph_sees_every_form():
     assert target("primspace.cli.app", "from primspace import __version__") == "primspace"
     assert target("primspace.cli.app", "from primspace.nowhere import x") is None
     assert {"primspace.data.storage", "primspace.files"} <= set(_edges()["primspace.data.dataset"]) | set(
-        _edges()["primspace.data.storage"])
+        _edges()["primspace.data.storage"]
+    )
     assert _cycles({"a": {"b": 0}, "b": {"c": 0}, "c": {"a": 0}, "d": {"a": 0}}) == [["a", "b", "c"]]
 
 

@@ -28,11 +28,23 @@ if importlib.util.find_spec("lerobot") is not None:  # before huggingface_hub re
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 pytest.importorskip("lerobot")
-LeRobotDataset = pytest.importorskip("lerobot.datasets.lerobot_dataset",
-                                     reason="LeRobot >= 0.4 (v3.0 data sets)").LeRobotDataset
+LeRobotDataset = pytest.importorskip(
+    "lerobot.datasets.lerobot_dataset", reason="LeRobot >= 0.4 (v3.0 data sets)"
+).LeRobotDataset
 
-from test_import_lerobot import CAMERA, FPS, H, W, can_encode, check_import, coded_frames, identify, state_of, \
-    write_v2, write_v3  # noqa: E402
+from test_import_lerobot import (
+    CAMERA,
+    FPS,
+    H,
+    W,
+    can_encode,
+    check_import,
+    coded_frames,
+    identify,
+    state_of,
+    write_v2,
+    write_v3,
+)  # noqa: E402
 
 from primspace.data import import_lerobot  # noqa: E402
 
@@ -82,8 +94,10 @@ def test_v3_written_here_is_read_alike_by_lerobot(tmp_path, codec, backend):
 def test_data_set_recorded_by_lerobot_imports(tmp_path):
     """LeRobot's own writer (create, add_frame, save_episode: AV1 video), read by both."""
     lengths, tasks = (6, 9, 5), ("push", "lift", "push")
-    features = {"observation.state": {"dtype": "float32", "shape": (3,), "names": ["shoulder", "elbow", "wrist"]},
-                CAMERA: {"dtype": "video", "shape": (H, W, 3), "names": ["height", "width", "channels"]}}
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (3,), "names": ["shoulder", "elbow", "wrist"]},
+        CAMERA: {"dtype": "video", "shape": (H, W, 3), "names": ["height", "width", "channels"]},
+    }
     recorder = LeRobotDataset.create("local/primspace-test", fps=FPS, root=tmp_path / "rec", features=features)
     for e, n in enumerate(lengths):
         for state, frame in zip(state_of(e, n), coded_frames(e, n)):

@@ -24,8 +24,9 @@ from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loop import DataTensors, batch_loss
 from test_train import SMALL, primitives
 
-IMAGE_MODEL = ModelConfig(latent_dim=5, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=16, motor_hidden=16,
-                          image_channels=(8, 4))
+IMAGE_MODEL = ModelConfig(
+    latent_dim=5, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=16, motor_hidden=16, image_channels=(8, 4)
+)
 CPU = torch.device("cpu")
 NO_AUTOCAST = torch.no_grad()
 
@@ -146,8 +147,10 @@ def test_drawn_frames_scaled_by_t_over_k(image_set, lengths):
     assert _loss(model, z, idx, tensors, tc, every)[0] == pytest.approx(exact, rel=1e-6)
 
     for k in (1, 2):
-        draws = [_loss(model, z, idx, tensors, tc, torch.tensor(c).expand(6, k))[0]
-                 for c in itertools.combinations(range(6), k)]
+        draws = [
+            _loss(model, z, idx, tensors, tc, torch.tensor(c).expand(6, k))[0]
+            for c in itertools.combinations(range(6), k)
+        ]
         assert np.std(draws) > 0
         assert np.mean(draws) == pytest.approx(exact, rel=1e-6)
         c = (0, 3)[:k]  # one draw by hand: T / K times the sum over its valid drawn frames
@@ -185,8 +188,10 @@ def test_training_under_the_sum_is_stable_with_the_default_learning_rates(motor_
     """Default lr / latent_lr: finite, decreasing. Motor only, the sum is T·J times the
     mean, and Adam (eps aside) ignores a constant factor: the same path as under "mean"."""
     tc = TrainConfig(epochs=40, batch_size=4, threads=1)
-    runs = {r: fit(motor_set, model_config=SMALL, train_config=replace(tc, loss_reduction=r), progress=False)
-            for r in ("mean", "sum")}
+    runs = {
+        r: fit(motor_set, model_config=SMALL, train_config=replace(tc, loss_reduction=r), progress=False)
+        for r in ("mean", "sum")
+    }
     history = runs["sum"].history
     losses = [h["loss"] for h in history]
     assert all(math.isfinite(v) for v in losses)
@@ -200,8 +205,12 @@ def test_training_under_the_sum_is_stable_with_the_default_learning_rates(motor_
     assert ev["motor"] == pytest.approx(evaluate(runs["mean"], motor_set)["motor"], rel=0.05)
 
     # with frames, on 2 of 6 drawn frames: finite and decreasing too (to half at a constant rate)
-    run = fit(image_set, model_config=IMAGE_MODEL, progress=False,
-              train_config=replace(tc, loss_reduction="sum", vision_frames=2, final_lr_fraction=1.0))
+    run = fit(
+        image_set,
+        model_config=IMAGE_MODEL,
+        progress=False,
+        train_config=replace(tc, loss_reduction="sum", vision_frames=2, final_lr_fraction=1.0),
+    )
     losses = [h["loss"] for h in run.history]
     assert all(math.isfinite(v) for v in losses) and losses[-1] < losses[0] / 2
     ev = evaluate(run, image_set)
@@ -213,8 +222,14 @@ def test_a_run_does_not_resume_under_another_reduction(motor_set, tmp_path):
     fit(motor_set, tmp_path / "run", model_config=SMALL, train_config=tc, progress=False)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["train"]["loss_reduction"] == "sum"
     with pytest.raises(UserError, match="cannot resume: train loss_reduction differs"):
-        fit(motor_set, tmp_path / "run", model_config=SMALL, train_config=replace(tc, epochs=3, loss_reduction="mean"),
-            resume=True, progress=False)
+        fit(
+            motor_set,
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=replace(tc, epochs=3, loss_reduction="mean"),
+            resume=True,
+            progress=False,
+        )
 
 
 def test_a_run_saved_before_the_field_resumes(motor_set, tmp_path):
@@ -225,8 +240,9 @@ def test_a_run_saved_before_the_field_resumes(motor_set, tmp_path):
     ckpt = torch.load(tmp_path / "run" / CHECKPOINT_NAME, weights_only=False)
     del ckpt["config"]["train"]["loss_reduction"]  # as written before loss_reduction existed
     torch.save(ckpt, tmp_path / "run" / CHECKPOINT_NAME)
-    run = fit(motor_set, tmp_path / "run", model_config=SMALL, train_config=replace(tc, epochs=2), resume=True,
-              progress=False)
+    run = fit(
+        motor_set, tmp_path / "run", model_config=SMALL, train_config=replace(tc, epochs=2), resume=True, progress=False
+    )
     assert run.epoch == 2
 
 
@@ -249,8 +265,9 @@ def test_cli_flag_reaches_the_config(run_cli, motor_set, tmp_path):
     res = run_cli("infer", run, data, "--out", tmp_path / "inf", "--epochs", "1", "--threads", "1")
     assert res.code == 0, res.err  # the run's reduction by default
     assert json.loads((tmp_path / "inf" / "config.json").read_text())["train"]["loss_reduction"] == "sum"
-    res = run_cli("infer", run, data, "--out", tmp_path / "inf2", "--epochs", "1", "--threads", "1",
-                  "--loss-reduction", "mean")
+    res = run_cli(
+        "infer", run, data, "--out", tmp_path / "inf2", "--epochs", "1", "--threads", "1", "--loss-reduction", "mean"
+    )
     assert res.code == 0, res.err
     assert json.loads((tmp_path / "inf2" / "config.json").read_text())["train"]["loss_reduction"] == "mean"
 
@@ -268,8 +285,16 @@ def test_preset_override_goes_into_the_train_config():
 
 
 TINY = experiment_presets.ExperimentPreset(
-    name="tiny-sum", data_preset="demo", train_fraction=0.5, inits=("zero",), latent_dims=(3,), fit_epochs=2,
-    infer_epochs=1, train=replace(default_train(), batch_size=8), images=False, model=replace(SMALL, latent_dim=3),
+    name="tiny-sum",
+    data_preset="demo",
+    train_fraction=0.5,
+    inits=("zero",),
+    latent_dims=(3,),
+    fit_epochs=2,
+    infer_epochs=1,
+    train=replace(default_train(), batch_size=8),
+    images=False,
+    model=replace(SMALL, latent_dim=3),
 )
 
 
@@ -277,7 +302,19 @@ def test_experiment_flag_and_a_changed_reduction_refused(run_cli, motor_set, tmp
     monkeypatch.setitem(experiment_presets.PRESETS, "tiny-sum", TINY)
     data, out = tmp_path / "d.h5", tmp_path / "exp"
     motor_set.save(data)
-    args = ("experiment", "intra", "--preset", "tiny-sum", "--data", data, "--out", out, "--workers", "1", "--no-report")
+    args = (
+        "experiment",
+        "intra",
+        "--preset",
+        "tiny-sum",
+        "--data",
+        data,
+        "--out",
+        out,
+        "--workers",
+        "1",
+        "--no-report",
+    )
     res = run_cli(*args, "--loss-reduction", "sum")
     assert res.code == 0, res.err
     meta = json.loads((out / "experiment.json").read_text())

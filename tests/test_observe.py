@@ -29,8 +29,9 @@ def eval_set():
 
 @pytest.fixture(scope="module")
 def trained(train_set):
-    return fit(train_set, model_config=SMALL, train_config=TrainConfig(epochs=30, **FAST), init="projection",
-               progress=False)
+    return fit(
+        train_set, model_config=SMALL, train_config=TrainConfig(epochs=30, **FAST), init="projection", progress=False
+    )
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +96,9 @@ def test_refusals_of_infer(trained, train_set, eval_set, image_set):
         _infer(trained, eval_set, init="nearest", fitted_data=eval_set)
     with pytest.raises(UserError, match="unknown latent init 'nearest'"):
         fit(train_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), init="nearest", progress=False)
-    no_head = fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False)
+    no_head = fit(
+        image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False
+    )
     with pytest.raises(UserError, match="no image head"):
         _infer(no_head, image_set, observe="none", observe_frames="first")
     with pytest.raises(UserError, match="does not use frames"):
@@ -178,7 +181,7 @@ def test_calibrated_for_the_fraction_is_kept_by_the_predictor_and_starts_lower(t
     predictor = fit_predictor(GradientPredictor(trained, "calibrated", epochs=0), trained, train_set)
     rule = Observation.build(0.25)
     start = predictor.start_codes(eval_set, trained.scaler.transform(eval_set.motor), rule)
-    (key, cached), = predictor.cache_.items()
+    ((key, cached),) = predictor.cache_.items()
     assert key == (0.25, 0.25)
     np.testing.assert_allclose(start, cal.initial_latents, rtol=1e-5, atol=1e-6)  # the same start as infer's
     predictor.start_codes(eval_set, trained.scaler.transform(eval_set.motor), rule)
@@ -273,8 +276,16 @@ def test_the_frames_start_recovers_codes_linear_in_the_first_frame(linear_scene)
     changed[:, 1:] = 255 - changed[:, 1:]  # frames after the first are not observed
     again = _frames_start(run, MotionDataset(test.motor, images=changed), rule, train)
     np.testing.assert_array_equal(again, start)
-    inferred = infer(run, test, epochs=0, observe="none", observe_frames="first", init="calibrated",
-                     fitted_data=train, progress=False)  # infer's own start is this one
+    inferred = infer(
+        run,
+        test,
+        epochs=0,
+        observe="none",
+        observe_frames="first",
+        init="calibrated",
+        fitted_data=train,
+        progress=False,
+    )  # infer's own start is this one
     np.testing.assert_allclose(inferred.initial_latents, start, rtol=1e-5, atol=1e-6)
     cache = {}
     _frames_start(run, test, rule, train, cache)
@@ -321,7 +332,9 @@ def test_the_frames_start_refuses_in_one_line(linear_scene, image_set):
         _frames_start(run, test.without_images(), rule, train)
     with pytest.raises(UserError, match="the fitted data has no frames"):
         _frames_start(run, test, rule, train.without_images())
-    no_head = fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False)
+    no_head = fit(
+        image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False
+    )
     with pytest.raises(UserError, match="needs a run with an image head"):
         _frames_start(no_head, image_set, rule, image_set)
     with pytest.raises(UserError, match="start by 'calibrated' \\(from the frames\\)"):

@@ -27,8 +27,13 @@ def one_thread():
 
 @pytest.fixture(scope="module")
 def trained(one_thread):
-    return fit(primitives(12, seed=0), model_config=MODEL, train_config=TrainConfig(epochs=100, **FAST),
-               init="projection", progress=False)
+    return fit(
+        primitives(12, seed=0),
+        model_config=MODEL,
+        train_config=TrainConfig(epochs=100, **FAST),
+        init="projection",
+        progress=False,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +83,9 @@ def test_all_observed_reconstructs_about_as_well_as_infer(trained, eval_set):
     result = infer_online(trained, eval_set, iterations=10)
     assert result.steps.tolist() == list(range(1, 31)) and result.codes.shape == (9, 30, MODEL.latent_dim)
     assert np.isnan(result.errors[:, -1]).all()  # nothing left to forecast after the last step
-    offline = infer(trained, eval_set, epochs=300, initial_latents=result.start_codes, batch_size=len(eval_set),
-                    progress=False)  # the same start, every step observed from the first epoch
+    offline = infer(
+        trained, eval_set, epochs=300, initial_latents=result.start_codes, batch_size=len(eval_set), progress=False
+    )  # the same start, every step observed from the first epoch
     online_mse = _scaled_mse(trained, result.prediction, eval_set)
     offline_mse = _scaled_mse(trained, reconstruct(trained, offline.latents)[0], eval_set)
     start_mse = _scaled_mse(trained, reconstruct(trained, result.start_codes)[0], eval_set)
@@ -187,28 +193,38 @@ def test_frames_count_up_to_the_step_observed():
 # ------------------------------------------------------------------------- bad input
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    (dict(iterations=-1), "iterations must be a whole number >= 0, got -1"),
-    (dict(iterations=1.5), "iterations must be a whole number >= 0, got 1.5"),
-    (dict(iterations=True), "iterations must be a whole number >= 0, got True"),
-    (dict(iterations="3"), "iterations must be a whole number >= 0, got '3'"),
-    (dict(iterations=1, init="bogus"), "unknown latent init 'bogus'"),
-    (dict(iterations=1, start_step=0), "start_step must be a whole number >= 1, got 0"),
-    (dict(iterations=1, start_step=31), "start_step must be in 1..T=30, got 31"),
-    (dict(iterations=1, latent_lr=0.0), "latent_lr must be a finite number > 0, got 0.0"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(iterations=-1), "iterations must be a whole number >= 0, got -1"),
+        (dict(iterations=1.5), "iterations must be a whole number >= 0, got 1.5"),
+        (dict(iterations=True), "iterations must be a whole number >= 0, got True"),
+        (dict(iterations="3"), "iterations must be a whole number >= 0, got '3'"),
+        (dict(iterations=1, init="bogus"), "unknown latent init 'bogus'"),
+        (dict(iterations=1, start_step=0), "start_step must be a whole number >= 1, got 0"),
+        (dict(iterations=1, start_step=31), "start_step must be in 1..T=30, got 31"),
+        (dict(iterations=1, latent_lr=0.0), "latent_lr must be a finite number > 0, got 0.0"),
+    ],
+)
 def test_bad_arguments_are_refused_in_one_line(trained, eval_set, kwargs, message):
     with pytest.raises(UserError) as info:
         infer_online(trained, eval_set, **kwargs)
     assert message in str(info.value) and "\n" not in str(info.value)
 
 
-@pytest.mark.parametrize("shape, message", [((9, 20, 4), "T=20 steps x J=4 joints, the model expects T=30 x J=4"),
-                                            ((9, 30, 3), "T=30 steps x J=3 joints, the model expects T=30 x J=4")])
+@pytest.mark.parametrize(
+    "shape, message",
+    [
+        ((9, 20, 4), "T=20 steps x J=4 joints, the model expects T=30 x J=4"),
+        ((9, 30, 3), "T=30 steps x J=3 joints, the model expects T=30 x J=4"),
+    ],
+)
 def test_data_of_another_shape_is_refused(trained, shape, message):
     data = MotionDataset(np.zeros(shape, dtype=np.float32))
-    for call in (lambda: infer_online(trained, data, iterations=1),
-                 lambda: offline_errors(trained, data, [2], epochs=1)):
+    for call in (
+        lambda: infer_online(trained, data, iterations=1),
+        lambda: offline_errors(trained, data, [2], epochs=1),
+    ):
         with pytest.raises(UserError) as info:
             call()
         assert message in str(info.value) and "\n" not in str(info.value)

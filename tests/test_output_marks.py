@@ -111,8 +111,13 @@ def test_two_import_processes_into_one_output_one_wins(npz_pair, tmp_path):
     out = tmp_path / "o" / "c.h5"
     env = dict(os.environ, MUJOCO_GL="egl")
     procs = [
-        subprocess.Popen([sys.executable, "-m", "primspace", "import", str(src), "-T", "30", "--out", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        subprocess.Popen(
+            [sys.executable, "-m", "primspace", "import", str(src), "-T", "30", "--out", str(out)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
         for src in (a, b)
     ]
     results = [(p.wait(timeout=120), p.stdout.read(), p.stderr.read()) for p in procs]
@@ -227,18 +232,35 @@ def _no_link(src, dst, **kwargs):
 # ----------------------------------------------------- 2. experiment into a foreign folder
 
 
-@pytest.mark.parametrize("user_files", [
-    {"report.html": b"<p>mine</p>", "figures/composite_loss_fit.png": b"\x89PNG mine"},
-    {"results/data.json": b'{"mine": true}'},
-])
+@pytest.mark.parametrize(
+    "user_files",
+    [
+        {"report.html": b"<p>mine</p>", "figures/composite_loss_fit.png": b"\x89PNG mine"},
+        {"results/data.json": b'{"mine": true}'},
+    ],
+)
 def test_experiment_refuses_a_folder_that_is_not_an_experiment_before_writing(run_cli, data_file, tmp_path, user_files):
     out = tmp_path / "u"
     for name, content in user_files.items():
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         (out / name).write_bytes(content)
     before = _snapshot(out)
-    res = run_cli("experiment", "intra", "--data", data_file, "--out", out, "--epochs", "1,1", "--latent-dims", "2",
-                  "--inits", "zero", "--seeds", "0")
+    res = run_cli(
+        "experiment",
+        "intra",
+        "--data",
+        data_file,
+        "--out",
+        out,
+        "--epochs",
+        "1,1",
+        "--latent-dims",
+        "2",
+        "--inits",
+        "zero",
+        "--seeds",
+        "0",
+    )
     assert_user_error(res, str(out), "not an experiment directory", "experiment.json")
     assert _snapshot(out) == before
 
@@ -246,8 +268,9 @@ def test_experiment_refuses_a_folder_that_is_not_an_experiment_before_writing(ru
 # ------------------------------------------------------ 3. --overwrite: only our own output
 
 
-def test_overwrite_refuses_a_data_set_another_runs_checkpoint_and_a_python_file(run_cli, fit_run, data_file,
-                                                                                 npz_pair, tmp_path):
+def test_overwrite_refuses_a_data_set_another_runs_checkpoint_and_a_python_file(
+    run_cli, fit_run, data_file, npz_pair, tmp_path
+):
     a, _ = npz_pair
     victim = tmp_path / "victim.h5"
     assert run_cli("import", a, "-T", "20", "--out", victim).code == 0
@@ -293,8 +316,12 @@ def test_overwrite_replaces_an_earlier_output_of_the_same_command_only(run_cli, 
         assert run_cli(*args, "--out", out, "--overwrite").code == 0, writer
     # a PNG of another command is not replaced
     before = shown.read_bytes()
-    assert_user_error(run_cli("reconstruct", fit_run, "--sample", 1, "--out", shown, "--overwrite"),
-                      str(shown), "PNG", "primspace show")
+    assert_user_error(
+        run_cli("reconstruct", fit_run, "--sample", 1, "--out", shown, "--overwrite"),
+        str(shown),
+        "PNG",
+        "primspace show",
+    )
     assert shown.read_bytes() == before
 
 
@@ -376,11 +403,28 @@ def test_a_read_only_empty_output_folder_is_refused_not_swapped(points, data_fil
     args = {
         "cluster": ["cluster", str(points), "--k", "3"],
         "train": ["train", str(data_file), "--epochs", "1", *TRAIN],
-        "experiment": ["experiment", "intra", "--data", str(data_file), "--epochs", "1,1", "--latent-dims", "2",
-                       "--inits", "zero", "--seeds", "0"],
+        "experiment": [
+            "experiment",
+            "intra",
+            "--data",
+            str(data_file),
+            "--epochs",
+            "1,1",
+            "--latent-dims",
+            "2",
+            "--inits",
+            "zero",
+            "--seeds",
+            "0",
+        ],
     }[command]
-    proc = subprocess.run([*_without_dac_override(), sys.executable, "-m", "primspace", *args, "--out", str(out)],
-                          capture_output=True, text=True, env=dict(os.environ, MUJOCO_GL="egl"), timeout=300)
+    proc = subprocess.run(
+        [*_without_dac_override(), sys.executable, "-m", "primspace", *args, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, MUJOCO_GL="egl"),
+        timeout=300,
+    )
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and str(out) in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr

@@ -88,7 +88,9 @@ def test_infer_refuses_to_write_into_the_trained_run(run_cli, fit_run, data_file
         assert_user_error(res, "input")
     link = tmp_path / "alias"
     link.symlink_to(fit_run, target_is_directory=True)
-    assert_user_error(run_cli("infer", fit_run, data_file, "--epochs", "1", "--out", link, "--overwrite"), "is the input")
+    assert_user_error(
+        run_cli("infer", fit_run, data_file, "--epochs", "1", "--out", link, "--overwrite"), "is the input"
+    )
     assert _snapshot(fit_run) == before
     assert json.loads((fit_run / "config.json").read_text())["parent"] is None
 
@@ -97,7 +99,9 @@ def test_train_refuses_its_data_file_or_weights_as_output(run_cli, fit_run, data
     before = data_file.read_bytes()
     assert_user_error(run_cli("train", data_file, "--epochs", "1", "--out", data_file, "--overwrite", *TRAIN), "input")
     assert_user_error(
-        run_cli("train", data_file, "--epochs", "1", "--weights-from", fit_run, "--out", fit_run, "--overwrite", *TRAIN),
+        run_cli(
+            "train", data_file, "--epochs", "1", "--weights-from", fit_run, "--out", fit_run, "--overwrite", *TRAIN
+        ),
         "is the input",
     )
     assert data_file.read_bytes() == before
@@ -109,7 +113,9 @@ def test_train_refuses_its_data_file_or_weights_as_output(run_cli, fit_run, data
 def test_overwrite_of_a_run_keeps_files_it_did_not_write(run_cli, fit_run, data_file):
     (fit_run / "notes.txt").write_text("my notes")
     nested = fit_run / "eval"
-    assert run_cli("infer", fit_run, data_file, "--epochs", "1", "--out", nested, "--threads", "1").code == 2  # inside input
+    assert (
+        run_cli("infer", fit_run, data_file, "--epochs", "1", "--out", nested, "--threads", "1").code == 2
+    )  # inside input
     res = run_cli("train", data_file, "--epochs", "1", "--seed", "3", "--out", fit_run, "--overwrite", *TRAIN)
     assert res.code == 0, res.err
     assert (fit_run / "notes.txt").read_text() == "my notes"
@@ -120,7 +126,9 @@ def test_train_does_not_replace_an_infer_run(run_cli, fit_run, data_file, tmp_pa
     ev = tmp_path / "ev"
     assert run_cli("infer", fit_run, data_file, "--epochs", "1", "--out", ev, "--threads", "1").code == 0
     before = _snapshot(ev)
-    assert_user_error(run_cli("train", data_file, "--epochs", "1", "--out", ev, "--overwrite", *TRAIN), "is an infer run")
+    assert_user_error(
+        run_cli("train", data_file, "--epochs", "1", "--out", ev, "--overwrite", *TRAIN), "is an infer run"
+    )
     assert _snapshot(ev) == before
 
 
@@ -137,7 +145,9 @@ def test_a_run_that_fails_on_its_data_leaves_the_old_run_and_no_new_directory(ru
         fh.seek(info.byte_offset)
         fh.write(b"\x00garbage" * max(1, info.size // 8))
     out = tmp_path / "new-run"
-    res = run_cli("train", bad, "--epochs", "1", "--out", out, "--layers", "8,4", "--image-channels", "4,4,4", "--threads", "1")
+    res = run_cli(
+        "train", bad, "--epochs", "1", "--out", out, "--layers", "8,4", "--image-channels", "4,4,4", "--threads", "1"
+    )
     assert_user_error(res, str(bad), "images", "sample")
     assert not out.exists()
 
@@ -148,9 +158,12 @@ def test_a_run_that_fails_on_its_data_leaves_the_old_run_and_no_new_directory(ru
 def test_resume_with_overwrite_or_fewer_epochs_is_refused_more_extends(run_cli, fit_run, data_file):
     before = _snapshot(fit_run)
     assert_user_error(
-        run_cli("train", data_file, "--epochs", "3", "--out", fit_run, "--resume", "--overwrite", *TRAIN), "give one of them"
+        run_cli("train", data_file, "--epochs", "3", "--out", fit_run, "--resume", "--overwrite", *TRAIN),
+        "give one of them",
     )
-    assert_user_error(run_cli("train", data_file, "--epochs", "1", "--out", fit_run, "--resume", *TRAIN), "--epochs 2 or more")
+    assert_user_error(
+        run_cli("train", data_file, "--epochs", "1", "--out", fit_run, "--resume", *TRAIN), "--epochs 2 or more"
+    )
     assert _snapshot(fit_run) == before
     res = run_cli("train", data_file, "--epochs", "4", "--out", fit_run, "--resume", *TRAIN)
     assert res.code == 0 and "epoch 4" in res.out, res.err
@@ -197,8 +210,12 @@ def test_reconstruct_checks_the_data_is_the_runs_and_frames(run_cli, fit_run, da
     )
     short = tmp_path / "short.h5"
     MotionDataset(ds.motor[:, :6], dt=ds.dt).save(short)
-    assert_user_error(run_cli("reconstruct", fit_run, "--sample", 0, "--data", short, "--out", tmp_path / "r.png"), "T=6")
-    assert_user_error(run_cli("reconstruct", fit_run, "--sample", 0, "--frames", 0, "--out", tmp_path / "r.png"), "--frames 0")
+    assert_user_error(
+        run_cli("reconstruct", fit_run, "--sample", 0, "--data", short, "--out", tmp_path / "r.png"), "T=6"
+    )
+    assert_user_error(
+        run_cli("reconstruct", fit_run, "--sample", 0, "--frames", 0, "--out", tmp_path / "r.png"), "--frames 0"
+    )
     assert not (tmp_path / "r.png").exists()
     assert run_cli("reconstruct", fit_run, "--sample", 0, "--data", data_file, "--out", tmp_path / "r.png").code == 0
 
@@ -288,8 +305,20 @@ def test_success_on_data_not_from_the_simulator_fails_before_training(run_cli, d
     assert_user_error(res, str(data_file), "label")
     assert not (out / "runs").exists()
     # `all` runs what these data allow: the success step is left out, with a note
-    res = run_cli("experiment", "all", "--data", data_file, "--out", tmp_path / "exp2", "--epochs", "2,1",
-                  "--latent-dims", "2", "--inits", "zero")
+    res = run_cli(
+        "experiment",
+        "all",
+        "--data",
+        data_file,
+        "--out",
+        tmp_path / "exp2",
+        "--epochs",
+        "2,1",
+        "--latent-dims",
+        "2",
+        "--inits",
+        "zero",
+    )
     assert res.code == 0, res.err
     assert f"success: skipped, the simulator cannot judge these data ({data_file}" in res.out
     assert (tmp_path / "exp2" / "results" / "intra.json").exists()
@@ -338,8 +367,11 @@ def test_an_output_path_through_a_file_is_one_line_for_every_writer(run_cli, npz
 
 def test_cluster_labels_from_an_npz_archive_is_one_line(run_cli, tmp_path, npz_file):
     np.save(tmp_path / "z.npy", np.random.default_rng(0).normal(size=(6, 3)))
-    assert_user_error(run_cli("cluster", tmp_path / "z.npy", "--k", 2, "--labels", npz_file, "--out", tmp_path / "c"),
-                      "a.npz", ".npz archive")
+    assert_user_error(
+        run_cli("cluster", tmp_path / "z.npy", "--k", 2, "--labels", npz_file, "--out", tmp_path / "c"),
+        "a.npz",
+        ".npz archive",
+    )
 
 
 def test_experiment_with_zero_epochs_is_refused(run_cli, tmp_path):
@@ -349,7 +381,9 @@ def test_experiment_with_zero_epochs_is_refused(run_cli, tmp_path):
 
 def test_indices_out_of_range_name_the_index_file_and_the_data(run_cli, data_file, tmp_path):
     (tmp_path / "idx.txt").write_text("0 99\n")
-    res = run_cli("train", data_file, "--epochs", "1", "--indices", tmp_path / "idx.txt", "--out", tmp_path / "r", *TRAIN)
+    res = run_cli(
+        "train", data_file, "--epochs", "1", "--indices", tmp_path / "idx.txt", "--out", tmp_path / "r", *TRAIN
+    )
     assert_user_error(res, "idx.txt", "sample 99", "d.h5")
     assert not (tmp_path / "r").exists()
 

@@ -238,8 +238,9 @@ def test_peers_never_read_the_unobserved_steps():
     hidden[~observed] = np.nan
     for peer in (ProMPPeer(n_basis=8), NearestPeer(), MeanMotionPeer()):
         peer.fit(motor, labels)
-        assert np.array_equal(peer.predict(query, observed, labels=[0, 1]),
-                              peer.predict(hidden, observed, labels=[0, 1]))
+        assert np.array_equal(
+            peer.predict(query, observed, labels=[0, 1]), peer.predict(hidden, observed, labels=[0, 1])
+        )
 
 
 def test_best_noise_picks_the_lowest_score_on_the_answer():

@@ -87,8 +87,7 @@ def test_the_noise_choice_may_take_the_conditioning_and_predict_follows_it():
     fitted = _lines(codes)
     observed = np.zeros(fitted.shape[:2], bool)
     observed[:, :5] = True
-    choice = mixture.choose_noise(fitted, observed, np.ones_like(observed), grid=(1e-3, 1e-1),
-                                  conditions=(None, 1e-4))
+    choice = mixture.choose_noise(fitted, observed, np.ones_like(observed), grid=(1e-3, 1e-1), conditions=(None, 1e-4))
     assert set(choice["loo"]) == {"0.001/none", "0.001/0.0001", "0.1/none", "0.1/0.0001"}
     assert choice["condition"] == 1e-4  # lines are a linear family: conditioning predicts them best
     truth = _lines(np.array([[0.1, -0.35]]))
@@ -165,17 +164,22 @@ def test_frames_are_predicted_and_scored_on_the_unobserved_frames(image_run, ima
     p = predict(image_run, image_set, observe=0.5, observe_frames="first", init="zero", epochs=2)
     assert p.frames.shape == image_set.images.shape and p.frames.dtype == np.uint8
     assert p.frames_observed.sum(axis=1).tolist() == [1] * len(image_set)
-    assert (p.errors["vision_mse"] > 0).all() and np.allclose(p.errors["psnr"], 10 * np.log10(1 / p.errors["vision_mse"]))
+    assert (p.errors["vision_mse"] > 0).all() and np.allclose(
+        p.errors["psnr"], 10 * np.log10(1 / p.errors["vision_mse"])
+    )
 
 
-@pytest.mark.parametrize("kw, match", [
-    (dict(observe=0), "at least 1 step"),
-    (dict(observe=1.5), r"\(0, 1\]"),
-    (dict(observe=None), "nothing to predict"),
-    (dict(observe=0.5, init="oracle"), "unknown start"),
-    (dict(observe=0.5, observe_frames="first"), "has no frames"),
-    (dict(observe="none", observe_frames=None), "nothing to infer"),
-])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(observe=0), "at least 1 step"),
+        (dict(observe=1.5), r"\(0, 1\]"),
+        (dict(observe=None), "nothing to predict"),
+        (dict(observe=0.5, init="oracle"), "unknown start"),
+        (dict(observe=0.5, observe_frames="first"), "has no frames"),
+        (dict(observe="none", observe_frames=None), "nothing to infer"),
+    ],
+)
 def test_bad_requests_are_refused_in_one_line(trained, eval_set, kw, match):
     with pytest.raises(UserError, match=match):
         predict(trained, eval_set, epochs=1, **kw)
@@ -187,8 +191,13 @@ def test_bad_requests_are_refused_in_one_line(trained, eval_set, kw, match):
 def test_predict_command_writes_data_result_and_figure(run_cli, train_set, eval_set, tmp_path):
     run_dir, data = tmp_path / "run", tmp_path / "data.h5"
     train_set.save(tmp_path / "train.h5")
-    fit(MotionDataset.load(tmp_path / "train.h5"), run_dir, model_config=SMALL,
-        train_config=TrainConfig(epochs=5, **FAST), progress=False)
+    fit(
+        MotionDataset.load(tmp_path / "train.h5"),
+        run_dir,
+        model_config=SMALL,
+        train_config=TrainConfig(epochs=5, **FAST),
+        progress=False,
+    )
     eval_set.save(data)
     out = tmp_path / "pred"
     args = ["predict", run_dir, data, "--observe", "0.25", "--init", "mixture", "--out", out]
@@ -204,12 +213,15 @@ def test_predict_command_writes_data_result_and_figure(run_cli, train_set, eval_
     assert run_cli(*args, "--overwrite").code == 0
 
 
-@pytest.mark.parametrize("flags, match", [
-    (["--observe", "0"], "at least 1 step"),
-    (["--observe", "1.5"], "(0, 1]"),
-    (["--observe", "half"], "--observe 'half'"),
-    (["--observe", "0.5", "--observe-frames", "first"], "has no frames"),
-])
+@pytest.mark.parametrize(
+    "flags, match",
+    [
+        (["--observe", "0"], "at least 1 step"),
+        (["--observe", "1.5"], "(0, 1]"),
+        (["--observe", "half"], "--observe 'half'"),
+        (["--observe", "0.5", "--observe-frames", "first"], "has no frames"),
+    ],
+)
 def test_predict_command_refuses_bad_input_with_exit_2(run_cli, eval_set, tmp_path, flags, match):
     run_dir, data = tmp_path / "run", tmp_path / "data.h5"
     fit(eval_set, run_dir, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), progress=False)
@@ -221,8 +233,9 @@ def test_predict_command_refuses_bad_input_with_exit_2(run_cli, eval_set, tmp_pa
 def test_the_estimator_predicts_in_physical_units(train_set, eval_set):
     from primspace import AutoDecoder
 
-    model = AutoDecoder(model_config=SMALL, train_config=TrainConfig(epochs=10, **FAST), init="projection",
-                        progress=False).fit(train_set)
+    model = AutoDecoder(
+        model_config=SMALL, train_config=TrainConfig(epochs=10, **FAST), init="projection", progress=False
+    ).fit(train_set)
     motor, frames = model.predict(eval_set, observe=0.5)
     assert motor.shape == eval_set.motor.shape and frames is None
     assert model.prediction_.init == MIXTURE and np.isfinite(model.prediction_.errors["motor_mse"]).all()
@@ -247,14 +260,32 @@ def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
         folder.mkdir(parents=True, exist_ok=True)
         rows = "\n".join(",".join(f"{v:.6f}" for v in step) for step in motion)
         (folder / f"demo{i}.csv").write_text("j0,j1,j2\n" + rows + "\n")
-    assert run_cli("import", tmp_path / "csv", "--format", "csv", "--length", "20", "--out", tmp_path / "d.h5").code == 0
-    assert run_cli("train", tmp_path / "d.h5", "--epochs", "3", "--latent-dim", "4", "--out", tmp_path / "run").code == 0
-    res = run_cli("predict", tmp_path / "run", tmp_path / "d.h5", "--observe", "5", "--init", "nearest", "--epochs", "2",
-                  "--out", tmp_path / "pred")
+    assert (
+        run_cli("import", tmp_path / "csv", "--format", "csv", "--length", "20", "--out", tmp_path / "d.h5").code == 0
+    )
+    assert (
+        run_cli("train", tmp_path / "d.h5", "--epochs", "3", "--latent-dim", "4", "--out", tmp_path / "run").code == 0
+    )
+    res = run_cli(
+        "predict",
+        tmp_path / "run",
+        tmp_path / "d.h5",
+        "--observe",
+        "5",
+        "--init",
+        "nearest",
+        "--epochs",
+        "2",
+        "--out",
+        tmp_path / "pred",
+    )
     assert res.code == 0, res.err
     result = json.loads((tmp_path / "pred" / "result.json").read_text())
     assert result["observe"] == {"motor": 5, "frames": 5} and result["mean"]["motor_mse"] > 0
-    assert MotionDataset.load(tmp_path / "pred" / "predicted.h5").label_names == MotionDataset.load(tmp_path / "d.h5").label_names
+    assert (
+        MotionDataset.load(tmp_path / "pred" / "predicted.h5").label_names
+        == MotionDataset.load(tmp_path / "d.h5").label_names
+    )
     # every number traces to a recording: the csv file of each predicted sample, and of each fitted one
     ids = [str(v) for v in MotionDataset.load(tmp_path / "d.h5").source_ids]
     assert ids[0] == "csv:csv/prim" + ids[0].split("/prim", 1)[1] and ids[0].endswith(".csv")
@@ -307,7 +338,13 @@ def test_one_leave_one_out_search_per_rule(trained, train_set, eval_set, monkeyp
 def test_predict_overwrite_never_replaces_what_it_did_not_write(run_cli, eval_set, tmp_path):
     run_dir, data = tmp_path / "run", tmp_path / "data.h5"
     eval_set.save(data)
-    fit(MotionDataset.load(data), run_dir, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), progress=False)
+    fit(
+        MotionDataset.load(data),
+        run_dir,
+        model_config=SMALL,
+        train_config=TrainConfig(epochs=1, **FAST),
+        progress=False,
+    )
     foreign = tmp_path / "notes"
     foreign.mkdir()
     (foreign / "result.json").write_text('{"mine": 1}')
@@ -342,8 +379,16 @@ def test_the_online_mixture_is_the_offline_mixture_after_every_step(trained, tra
     result = predictor.predict_online(scaled, eval_set.lengths, start_step=4, prediction_after=9)
     assert result.steps.tolist() == list(range(4, 31)) and result.iterations == 0 and (result.latency > 0).all()
     for t in (4, 9, 20):
-        offline = predict(trained, eval_set, observe=t, init=MIXTURE, fitted_data=train_set, frames=False,
-                          condition=False, continuity=True)
+        offline = predict(
+            trained,
+            eval_set,
+            observe=t,
+            init=MIXTURE,
+            fitted_data=train_set,
+            frames=False,
+            condition=False,
+            continuity=True,
+        )
         np.testing.assert_allclose(result.errors[:, result.column(t)], offline.errors["motor_mse"], rtol=1e-6)
         if t == 9:
             np.testing.assert_allclose(result.prediction, offline.motor, rtol=1e-5, atol=1e-6)
@@ -353,10 +398,19 @@ def test_the_online_mixture_is_the_offline_mixture_after_every_step(trained, tra
 
 
 def test_predict_online_with_the_mixture_keeps_the_prediction_after_the_observed_steps(trained, train_set, eval_set):
-    online = predict(trained, eval_set, observe=12, init=MIXTURE, online=0, fitted_data=train_set, frames=False,
-                     continuity=True)
-    offline = predict(trained, eval_set, observe=12, init=MIXTURE, fitted_data=train_set, frames=False,
-                      condition=False, continuity=True)
+    online = predict(
+        trained, eval_set, observe=12, init=MIXTURE, online=0, fitted_data=train_set, frames=False, continuity=True
+    )
+    offline = predict(
+        trained,
+        eval_set,
+        observe=12,
+        init=MIXTURE,
+        fitted_data=train_set,
+        frames=False,
+        condition=False,
+        continuity=True,
+    )
     np.testing.assert_allclose(online.errors["motor_mse"], offline.errors["motor_mse"], rtol=1e-5)
     curve = online.details["online"]["remaining_error"]
     assert len(curve) == eval_set.length and online.details["online"]["latency_ms_mean"] > 0

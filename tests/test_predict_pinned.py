@@ -25,8 +25,13 @@ def case():
     from primspace.train import TrainConfig, fit
 
     train, test = primitives(8, seed=0), primitives(4, seed=100)
-    run = fit(train, model_config=SMALL, init="projection", progress=False,
-              train_config=TrainConfig(epochs=30, batch_size=12, threads=1, final_lr_fraction=1.0))
+    run = fit(
+        train,
+        model_config=SMALL,
+        init="projection",
+        progress=False,
+        train_config=TrainConfig(epochs=30, batch_size=12, threads=1, final_lr_fraction=1.0),
+    )
     return run, train, test
 
 

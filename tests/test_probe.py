@@ -93,7 +93,9 @@ def test_the_intra_experiment_probes_every_run_and_reports_it(tmp_path):
     from primspace.report import build_report
     from primspace.sim.generate import GenerationConfig, generate_dataset
 
-    config = GenerationConfig(block_x=(0.45, 0.5, 0.55), block_y=(-0.05, 0.05), block_size=(0.05,), length=31, images=False)
+    config = GenerationConfig(
+        block_x=(0.45, 0.5, 0.55), block_y=(-0.05, 0.05), block_size=(0.05,), length=31, images=False
+    )
     data_path = tmp_path / "data.h5"
     generate_dataset(config, seed=0, out=data_path, progress=False)
     exp = ExperimentDir(tmp_path / "exp", TINY, data=data_path, workers=1, progress=False)

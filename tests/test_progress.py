@@ -60,8 +60,20 @@ def test_train_with_stderr_not_a_terminal_logs_its_epochs(run_cli, tmp_path, log
     rng = np.random.default_rng(0)
     data = tmp_path / "d.h5"
     MotionDataset(motor=rng.standard_normal((6, 10, 2)).astype(np.float32)).save(data)
-    res = run_cli("train", data, "--out", tmp_path / "run", "--epochs", "10", "--layers", "6,4", "--latent-dim", "2",
-                  "--batch-size", "3")
+    res = run_cli(
+        "train",
+        data,
+        "--out",
+        tmp_path / "run",
+        "--epochs",
+        "10",
+        "--layers",
+        "6,4",
+        "--latent-dim",
+        "2",
+        "--batch-size",
+        "3",
+    )
     assert res.code == 0, res.err
     lines = [line for line in res.err.splitlines() if line.strip()]
     assert any(re.match(_STAMP + r"fit run: running", line) for line in lines), lines

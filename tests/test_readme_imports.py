@@ -45,9 +45,14 @@ def _inputs(root: Path) -> None:
     np.save(root / "lab" / "images.npy", np.stack([frames_of(14, 24, 32) for _ in real]))
     write_robomimic_with_masks(root / "lift.hdf5", masks={"train": TRAIN, "valid": ["demo_1"]})
     n = 21
-    write_v3(root / "pick", lengths=(5,) * n, tasks=("push", "lift", "place") * 7,
-             data_files=tuple((0, int(e >= 11)) for e in range(n)), video_files=tuple((0, int(e >= 11)) for e in range(n)),
-             meta_split=11)
+    write_v3(
+        root / "pick",
+        lengths=(5,) * n,
+        tasks=("push", "lift", "place") * 7,
+        data_files=tuple((0, int(e >= 11)) for e in range(n)),
+        video_files=tuple((0, int(e >= 11)) for e in range(n)),
+        meta_split=11,
+    )
 
 
 def test_every_readme_import_line_runs_as_written(run_cli, tmp_path, monkeypatch):

@@ -62,7 +62,16 @@ def test_readme_walkthrough_runs_as_written(run_cli, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     _robomimic(tmp_path / "lift.hdf5", 14, seed=0)
     commands = _commands()
-    assert [c[0] for c in commands] == ["import", "info", "train", "predict", "infer", "reconstruct", "cluster", "cluster"]
+    assert [c[0] for c in commands] == [
+        "import",
+        "info",
+        "train",
+        "predict",
+        "infer",
+        "reconstruct",
+        "cluster",
+        "cluster",
+    ]
     for line in _lines():
         if not line.startswith("primspace"):  # the split: index files written by the shell
             subprocess.run(line, shell=True, check=True, cwd=tmp_path)

@@ -22,8 +22,13 @@ import primspace
 SRC = Path(primspace.__file__).resolve().parent
 
 # the modules of primspace.experiments that read results and import no experiment
-READERS = {"primspace.experiments.results", "primspace.experiments.claims", "primspace.experiments.claim_rules_v1",
-           "primspace.experiments.summary", "primspace.experiments.composite.results"}
+READERS = {
+    "primspace.experiments.results",
+    "primspace.experiments.claims",
+    "primspace.experiments.claim_rules_v1",
+    "primspace.experiments.summary",
+    "primspace.experiments.composite.results",
+}
 
 
 def _modules(package: str) -> list[str]:
@@ -91,16 +96,33 @@ def test_readers_and_figures_import_no_experiment():
 
 def test_figures_never_run_a_model():
     for module in _modules("primspace.plots"):
-        bad = {m for m in _imports(module) if any(_within(m, p) for p in (
-            "primspace.train", "primspace.model", "primspace.experiments", "primspace.report", "primspace.demo"))}
+        bad = {
+            m
+            for m in _imports(module)
+            if any(
+                _within(m, p)
+                for p in (
+                    "primspace.train",
+                    "primspace.model",
+                    "primspace.experiments",
+                    "primspace.report",
+                    "primspace.demo",
+                )
+            )
+        }
         assert not bad, (module, bad)
 
 
 def test_importing_the_report_loads_no_experiment():
-    code = "import sys, primspace.report; print(sorted(m for m in sys.modules if m.startswith('primspace.experiments')))"
+    code = (
+        "import sys, primspace.report; print(sorted(m for m in sys.modules if m.startswith('primspace.experiments')))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     # the packages themselves: their __init__ imports nothing
-    assert set(json.loads(out.replace("'", '"'))) <= READERS | {"primspace.experiments", "primspace.experiments.composite"}
+    assert set(json.loads(out.replace("'", '"'))) <= READERS | {
+        "primspace.experiments",
+        "primspace.experiments.composite",
+    }
 
 
 # ------------------------------------------------- an experiment directory of an older version
@@ -110,25 +132,57 @@ def _old_experiment_dir(path: Path) -> Path:
     """experiment.json with the flat preset of older versions, and intra results; no
     data summary, no Appendix A results, no figures."""
     flat = {
-        "name": "demo", "data_preset": "demo", "train_fraction": 0.2, "inits": ["zero", "random", "projection"],
-        "latent_dims": [8], "seeds": [0], "fit_epochs": 400, "infer_epochs": 250, "batch_size": 16,
-        "infer_batch_size": 256, "lr": 0.003, "latent_lr": 0.03, "final_lr_fraction": 0.1, "images": False,
-        "vision_weight": 1.0, "layer_sizes": [32, 12], "taus": [2.0, 8.0], "cluster_latent_dim": 40,
-        "cluster_r2": 0.9999, "trajectory_r2": 0.9, "lasa_length": 100, "inter_latent_dim": 20,
-        "inter_inits": ["zero", "projection"], "inter_epochs": [100, 100], "inter_replay": 0.1, "extra": {},
+        "name": "demo",
+        "data_preset": "demo",
+        "train_fraction": 0.2,
+        "inits": ["zero", "random", "projection"],
+        "latent_dims": [8],
+        "seeds": [0],
+        "fit_epochs": 400,
+        "infer_epochs": 250,
+        "batch_size": 16,
+        "infer_batch_size": 256,
+        "lr": 0.003,
+        "latent_lr": 0.03,
+        "final_lr_fraction": 0.1,
+        "images": False,
+        "vision_weight": 1.0,
+        "layer_sizes": [32, 12],
+        "taus": [2.0, 8.0],
+        "cluster_latent_dim": 40,
+        "cluster_r2": 0.9999,
+        "trajectory_r2": 0.9,
+        "lasa_length": 100,
+        "inter_latent_dim": 20,
+        "inter_inits": ["zero", "projection"],
+        "inter_epochs": [100, 100],
+        "inter_replay": 0.1,
+        "extra": {},
     }
     meta = {"preset": "demo", "preset_config": flat, "data": str(path / "gone.h5"), "timings": {"intra": 1.0}}
     (path / "results").mkdir(parents=True)
     (path / "experiment.json").write_text(json.dumps(meta))
 
     def run(init, fit, infer):
-        return {"init": init, "latent_dim": 8, "seed": 0, "key": f"intra/{init}-q8-s0",
-                "fit": [{"epoch": e, "loss": v} for e, v in enumerate(fit)],
-                "infer": [{"epoch": e, "loss": v} for e, v in enumerate(infer)]}
+        return {
+            "init": init,
+            "latent_dim": 8,
+            "seed": 0,
+            "key": f"intra/{init}-q8-s0",
+            "fit": [{"epoch": e, "loss": v} for e, v in enumerate(fit)],
+            "infer": [{"epoch": e, "loss": v} for e, v in enumerate(infer)],
+        }
 
-    intra = {"runs": [run("zero", [1.0, 0.1], [0.5, 0.2]), run("random", [1.0, 0.3], [0.6, 0.3]),
-                      run("projection", [1.0, 0.05], [0.1, 0.01])],
-             "failures": {}, "splits": {"0": {"n_train": 28, "n_eval": 98}}, "label_names": ["touch", "grasp"]}
+    intra = {
+        "runs": [
+            run("zero", [1.0, 0.1], [0.5, 0.2]),
+            run("random", [1.0, 0.3], [0.6, 0.3]),
+            run("projection", [1.0, 0.05], [0.1, 0.01]),
+        ],
+        "failures": {},
+        "splits": {"0": {"n_train": 28, "n_eval": 98}},
+        "label_names": ["touch", "grasp"],
+    }
     (path / "results" / "intra.json").write_text(json.dumps(intra))
     return path
 
@@ -141,13 +195,24 @@ def test_the_report_reads_an_old_directory_and_computes_nothing(tmp_path, monkey
     def forbidden(*args, **kwargs):
         raise AssertionError("the report computed something")
 
-    for module, name in ((primspace.latent, "appendix_a_check"), (primspace.train, "reconstruct"),
-                         (primspace.train, "load_run"), (primspace.train, "fit"), (primspace.train, "infer")):
+    for module, name in (
+        (primspace.latent, "appendix_a_check"),
+        (primspace.train, "reconstruct"),
+        (primspace.train, "load_run"),
+        (primspace.train, "fit"),
+        (primspace.train, "infer"),
+    ):
         monkeypatch.setattr(module, name, forbidden)
     out = _old_experiment_dir(tmp_path / "old")
     html = build_report(out).read_text()
-    for heading in ("Summary", "claims, checked", "Data", "Intra-primitive generalisation", "Appendix A",
-                    "Configuration, versions, timings"):
+    for heading in (
+        "Summary",
+        "claims, checked",
+        "Data",
+        "Intra-primitive generalisation",
+        "Appendix A",
+        "Configuration, versions, timings",
+    ):
         assert f">{heading}" in html or heading in html, heading
     assert "No data summary here" in html and "appendix_a.json" in html and "Not computed here" in html
     assert "figure missing: intra_loss_fit" in html  # said, not drawn
@@ -171,8 +236,17 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
     # what the old code built by hand, field by field, for one run
     mc, tc = train_configs(old, 40, 3, 400)
     assert mc == ModelConfig(latent_dim=40, layer_sizes=(32, 12), taus=(2.0, 8.0))
-    assert tc == TrainConfig(epochs=400, batch_size=16, lr=3e-3, latent_lr=3e-2, final_lr_fraction=0.1,
-                             vision_weight=1.0, seed=3, checkpoint_every=40, threads=1)
+    assert tc == TrainConfig(
+        epochs=400,
+        batch_size=16,
+        lr=3e-3,
+        latent_lr=3e-2,
+        final_lr_fraction=0.1,
+        vision_weight=1.0,
+        seed=3,
+        checkpoint_every=40,
+        threads=1,
+    )
     assert replace(PRESETS["paper"].train, epochs=1) == TrainConfig(epochs=1, final_lr_fraction=0.1, threads=1)
     with pytest.raises(Exception, match="both flat and inside"):
         ExperimentPreset.from_dict({**PRESETS["demo"].to_dict(), "lr": 0.1})

@@ -47,8 +47,9 @@ def test_a_run_fitted_on_a_subset_records_the_files_indices_and_finds_its_data(f
     check_run_data(run, data)  # before: "its joint values differ ... not its data"
     np.testing.assert_array_equal(load_fitted_data(run).motor, data.subset(PICKED).motor)
     # the subset it was fitted on, in any order, holds them too
-    np.testing.assert_array_equal(load_fitted_data(run, data.subset(PICKED[::-1] + [0])).motor,
-                                  data.subset(PICKED).motor)
+    np.testing.assert_array_equal(
+        load_fitted_data(run, data.subset(PICKED[::-1] + [0])).motor, data.subset(PICKED).motor
+    )
     # a start that reads the fitted samples finds them in the recorded file
     new = primitives(1, seed=50)
     inferred = infer(run, new, epochs=0, init="nearest", progress=False)
@@ -84,8 +85,9 @@ def test_a_moved_data_file_is_named_as_the_runs_with_how_to_give_it(fitted, tmp_
     from primspace.cli.app import as_flags  # the command line (predict) names its flag instead
 
     assert as_flags(message).endswith("give its new place as --fitted-data PATH")
-    np.testing.assert_array_equal(load_fitted_data(run, MotionDataset.load(moved)).motor,
-                                  MotionDataset.load(moved).subset(PICKED).motor)
+    np.testing.assert_array_equal(
+        load_fitted_data(run, MotionDataset.load(moved)).motor, MotionDataset.load(moved).subset(PICKED).motor
+    )
 
 
 def test_a_run_fitted_in_memory_without_a_file_asks_for_fitted_data():

@@ -22,10 +22,20 @@ def _split(where):
     (where / "fit.txt").write_text("\n".join(map(str, FIT)))
     (where / "test.txt").write_text("\n".join(map(str, TEST)))
     common = ["--epochs", "2", "--threads", "1"]
-    for args in (["train", where / "demos.h5", "--indices", where / "fit.txt", "--latent-dim", "4", "--out",
-                  where / "fit", *common],
-                 ["infer", where / "fit", where / "demos.h5", "--indices", where / "test.txt", "--out", where / "new",
-                  *common]):
+    for args in (
+        [
+            "train",
+            where / "demos.h5",
+            "--indices",
+            where / "fit.txt",
+            "--latent-dim",
+            "4",
+            "--out",
+            where / "fit",
+            *common,
+        ],
+        ["infer", where / "fit", where / "demos.h5", "--indices", where / "test.txt", "--out", where / "new", *common],
+    ):
         try:
             main([str(a) for a in args])
         except SystemExit as exc:
@@ -78,14 +88,24 @@ def test_cluster_of_a_plain_npy_keeps_rows_and_a_run_without_its_file_clusters_u
 def test_reconstruct_speaks_of_the_data_files_numbers(split, run_cli, tmp_path):
     where, _ = split
     assert run_cli("reconstruct", where / "new", "--sample", TEST[3], "--out", tmp_path / "s.png").code == 0
-    assert_user_error(run_cli("reconstruct", where / "new", "--sample", 3, "--out", tmp_path / "t.png"),
-                      "sample 3 is not one of the run's 12 samples (18, 19, 20", "numbered by its index in the data file",
-                      "demos.h5")
+    assert_user_error(
+        run_cli("reconstruct", where / "new", "--sample", 3, "--out", tmp_path / "t.png"),
+        "sample 3 is not one of the run's 12 samples (18, 19, 20",
+        "numbered by its index in the data file",
+        "demos.h5",
+    )
 
 
 def test_reconstruct_names_a_moved_data_file_as_the_runs(moved, run_cli, tmp_path):
     where, _ = moved
-    assert_user_error(run_cli("reconstruct", where / "new", "--sample", TEST[0], "--out", tmp_path / "s.png"),
-                      "demos.h5: no such file: it is the data file run", "--data NEW_PATH")
-    assert run_cli("reconstruct", where / "new", "--sample", TEST[0], "--data", where / "moved.h5",
-                   "--out", tmp_path / "s.png").code == 0
+    assert_user_error(
+        run_cli("reconstruct", where / "new", "--sample", TEST[0], "--out", tmp_path / "s.png"),
+        "demos.h5: no such file: it is the data file run",
+        "--data NEW_PATH",
+    )
+    assert (
+        run_cli(
+            "reconstruct", where / "new", "--sample", TEST[0], "--data", where / "moved.h5", "--out", tmp_path / "s.png"
+        ).code
+        == 0
+    )

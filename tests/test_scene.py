@@ -83,8 +83,9 @@ def test_bad_scene_requests_are_refused_in_one_line(image_run, image_set, cluste
         predict_scene(image_run, image_set, -1, clusters=clusters, epochs=1)
     with pytest.raises(UserError, match="the data set has no frames"):
         predict_scene(image_run, image_set.without_images(), 0, clusters=clusters, epochs=1)
-    no_head = fit(image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False,
-                  progress=False)
+    no_head = fit(
+        image_set, model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False, progress=False
+    )
     with pytest.raises(UserError, match="needs a run with an image head"):
         predict_scene(no_head, image_set, 0, n_clusters=3, epochs=1)
     with pytest.raises(UserError, match="give the number of clusters"):
@@ -118,16 +119,32 @@ def scene_files(image_set, tmp_path_factory):
     image_set.save(root / "data.h5")
     data = MotionDataset.load(root / "data.h5")
     fit(data, root / "run", model_config=SMALL, train_config=TrainConfig(epochs=2, **FAST), progress=False)
-    fit(data, root / "motor_run", model_config=SMALL, train_config=TrainConfig(epochs=1, **FAST), images=False,
-        progress=False)
+    fit(
+        data,
+        root / "motor_run",
+        model_config=SMALL,
+        train_config=TrainConfig(epochs=1, **FAST),
+        images=False,
+        progress=False,
+    )
     image_set.without_images().save(root / "no_frames.h5")
     return root
 
 
 def test_predict_scene_command_writes_the_three_files(run_cli, scene_files, tmp_path):
     out = tmp_path / "scene"
-    res = run_cli("predict", scene_files / "run", scene_files / "data.h5", "--scene", "--primitive", "1",
-                  "--epochs", "3", "--out", out)
+    res = run_cli(
+        "predict",
+        scene_files / "run",
+        scene_files / "data.h5",
+        "--scene",
+        "--primitive",
+        "1",
+        "--epochs",
+        "3",
+        "--out",
+        out,
+    )
     assert res.code == 0, res.err
     assert "primitive 1" in res.out and "subspace rank" in res.out
     result = json.loads((out / "result.json").read_text())
@@ -138,18 +155,22 @@ def test_predict_scene_command_writes_the_three_files(run_cli, scene_files, tmp_
     assert (out / "prediction.png").stat().st_size > 1000
 
 
-@pytest.mark.parametrize("run_name, data_name, flags, match", [
-    ("run", "data.h5", ["--primitive", "3"], "choose 0..2"),
-    ("run", "no_frames.h5", ["--primitive", "0"], "has no frames"),
-    ("motor_run", "data.h5", ["--primitive", "0"], "image head"),
-    ("run", "data.h5", ["--primitive", "0", "--observe", "0.5"], "do not give --observe"),
-    ("run", "data.h5", ["--primitive", "0", "--init", "zero"], "do not give --init"),
-    ("run", "data.h5", [], "--scene needs --primitive"),
-])
+@pytest.mark.parametrize(
+    "run_name, data_name, flags, match",
+    [
+        ("run", "data.h5", ["--primitive", "3"], "choose 0..2"),
+        ("run", "no_frames.h5", ["--primitive", "0"], "has no frames"),
+        ("motor_run", "data.h5", ["--primitive", "0"], "image head"),
+        ("run", "data.h5", ["--primitive", "0", "--observe", "0.5"], "do not give --observe"),
+        ("run", "data.h5", ["--primitive", "0", "--init", "zero"], "do not give --init"),
+        ("run", "data.h5", [], "--scene needs --primitive"),
+    ],
+)
 def test_predict_scene_command_refuses_with_exit_2(run_cli, scene_files, tmp_path, run_name, data_name, flags, match):
     out = tmp_path / "o"
-    res = run_cli("predict", scene_files / run_name, scene_files / data_name, "--scene", "--epochs", "1", *flags,
-                  "--out", out)
+    res = run_cli(
+        "predict", scene_files / run_name, scene_files / data_name, "--scene", "--epochs", "1", *flags, "--out", out
+    )
     assert_user_error(res, match)
     assert not out.exists()
 
@@ -187,6 +208,7 @@ def test_the_scene_predictor_is_the_scene_mode_with_the_predictor_interface(imag
     direct = predict_scene(image_run, image_set, k, clusters=clusters, rank=1, epochs=3, frames=False)
     np.testing.assert_allclose(forecast.codes, direct.codes, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(forecast.motor, image_run.scaler.transform(direct.motor), rtol=1e-4, atol=1e-5)
-    by_name = predictor.forecast(scaled, None, [clusters.names[k]] * len(image_set), image_set.lengths,
-                                 image_set.images)
+    by_name = predictor.forecast(
+        scaled, None, [clusters.names[k]] * len(image_set), image_set.lengths, image_set.images
+    )
     np.testing.assert_array_equal(by_name.codes, forecast.codes)

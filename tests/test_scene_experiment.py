@@ -15,8 +15,15 @@ from primspace.experiments.scene_only import SCENE_METHODS, run_scene
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
 
-TINY_SCENE = replace(TINY, name="tiny-scene", inits=("projection",), fit_epochs=2, infer_epochs=2, images=True,
-                     train=replace(TINY.train, vision_frames=3))
+TINY_SCENE = replace(
+    TINY,
+    name="tiny-scene",
+    inits=("projection",),
+    fit_epochs=2,
+    infer_epochs=2,
+    images=True,
+    train=replace(TINY.train, vision_frames=3),
+)
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,13 @@ from primspace.experiments.claims import check_claims
 
 
 def _run(init, seed, fit, start, end, q=10):
-    return {"init": init, "latent_dim": q, "seed": seed,
-            "fit": [{"epoch": 0, "loss": 1.0}, {"epoch": 1, "loss": fit}],
-            "infer": [{"epoch": 0, "loss": start}, {"epoch": 1, "loss": end}]}
+    return {
+        "init": init,
+        "latent_dim": q,
+        "seed": seed,
+        "fit": [{"epoch": 0, "loss": 1.0}, {"epoch": 1, "loss": fit}],
+        "infer": [{"epoch": 0, "loss": start}, {"epoch": 1, "loss": end}],
+    }
 
 
 def _write(tmp_path, runs):
@@ -23,8 +27,12 @@ def test_a_claim_holding_in_one_seed_of_two_says_which(tmp_path):
     # "did not converge at all" (rule v2): random's own eval loss falls < 2x (holds); it falls but
     # ends >= 10x projection's (partly); else does not hold. Seed 0: 30x drop, 100x projection's
     # (partly); seed 1: 1.5x drop (holds literally).
-    runs = [_run("projection", 0, 1e-4, 1e-2, 1e-4), _run("random", 0, 1e-3, 0.3, 1e-2),
-            _run("projection", 1, 1e-4, 1e-2, 1e-4), _run("random", 1, 1e-3, 0.3, 0.2)]
+    runs = [
+        _run("projection", 0, 1e-4, 1e-2, 1e-4),
+        _run("random", 0, 1e-3, 0.3, 1e-2),
+        _run("projection", 1, 1e-4, 1e-2, 1e-4),
+        _run("random", 1, 1e-3, 0.3, 0.2),
+    ]
     rows = _write(tmp_path, runs)
     assert rows["infer_random"]["verdict"] == "holds in 1 of 2 seeds, partly in 1 (seed 0)"
     assert rows["infer_random"]["per_seed"] == {"0": "partly", "1": "holds"}
@@ -32,16 +40,24 @@ def test_a_claim_holding_in_one_seed_of_two_says_which(tmp_path):
     assert rows["infer_random"]["version"] == 2
     # the version-1 rule (random >= 10x projection at the end) stays readable beside it
     assert rows["infer_random"]["previous"] == [
-        {"version": 1, "test": "final eval loss (θ frozen) of random at least 10x projection's at every q",
-         "verdict": "holds in every seed (2 of 2)"}]
+        {
+            "version": 1,
+            "test": "final eval loss (θ frozen) of random at least 10x projection's at every q",
+            "verdict": "holds in every seed (2 of 2)",
+        }
+    ]
     assert rows["fit_random"]["verdict"] == "holds in every seed (2 of 2)"  # 10x in both
     assert rows["fit_random"]["previous"] == []  # an unchanged rule has no earlier version
     assert rows["fit_zero"]["verdict"] == "cannot be checked"  # no zero runs
 
 
 def test_a_seed_where_a_claim_fails_is_named(tmp_path):
-    runs = [_run("projection", 0, 1e-4, 1e-2, 1e-4), _run("random", 0, 1e-3, 0.3, 1e-2),
-            _run("projection", 1, 1e-4, 1e-2, 1e-4), _run("random", 1, 1e-3, 0.3, 5e-4)]
+    runs = [
+        _run("projection", 0, 1e-4, 1e-2, 1e-4),
+        _run("random", 0, 1e-3, 0.3, 1e-2),
+        _run("projection", 1, 1e-4, 1e-2, 1e-4),
+        _run("random", 1, 1e-3, 0.3, 5e-4),
+    ]
     rows = _write(tmp_path, runs)  # seed 1: random falls 600x to 5x projection's: does not hold
     assert rows["infer_random"]["verdict"] == "partly in 1 of 2 seeds (seed 0), not in seed 1"
     runs[1] = _run("random", 0, 1e-3, 0.3, 0.25)
@@ -62,7 +78,9 @@ def test_random_fit_claim_needs_a_low_dimensional_latent_size(tmp_path):
 
 
 def test_no_seed_holding_is_said(tmp_path):
-    runs = [_run("projection", s, 1e-4, 1e-2, 1e-4) for s in (0, 1)] + [_run("random", s, 2e-4, 0.3, 2e-4) for s in (0, 1)]
+    runs = [_run("projection", s, 1e-4, 1e-2, 1e-4) for s in (0, 1)] + [
+        _run("random", s, 2e-4, 0.3, 2e-4) for s in (0, 1)
+    ]
     assert _write(tmp_path, runs)["infer_random"]["verdict"] == "does not hold in any seed (0 of 2)"
 
 
@@ -71,14 +89,29 @@ def test_spread_table_is_mean_and_std_over_seeds():
 
     from primspace.experiments.results import spread_table
 
-    runs = [_run("projection", s, fit, 1e-2, end) for s, fit, end in ((0, 1e-4, 2e-4), (1, 3e-4, 4e-4), (2, 2e-4, 9e-4))]
-    probe = {"runs": [{"init": "projection", "latent_dim": 10, "seed": s, "inferred": {"mean_r2": v}}
-                      for s, v in ((0, 0.9), (1, 0.8), (2, None))]}
+    runs = [
+        _run("projection", s, fit, 1e-2, end) for s, fit, end in ((0, 1e-4, 2e-4), (1, 3e-4, 4e-4), (2, 2e-4, 9e-4))
+    ]
+    probe = {
+        "runs": [
+            {"init": "projection", "latent_dim": 10, "seed": s, "inferred": {"mean_r2": v}}
+            for s, v in ((0, 0.9), (1, 0.8), (2, None))
+        ]
+    }
     columns, rows = spread_table({"runs": runs}, probe)
     assert columns[-1] == "probe R² (inferred codes)"
     fit, end = np.array([1e-4, 3e-4, 2e-4]), np.array([2e-4, 4e-4, 9e-4])
-    assert rows == [["projection", 10, 3, f"{fit.mean():.3g} ± {fit.std():.2g}", "0.01 ± 0",
-                     f"{end.mean():.3g} ± {end.std():.2g}", "0.85 ± 0.05"]]
+    assert rows == [
+        [
+            "projection",
+            10,
+            3,
+            f"{fit.mean():.3g} ± {fit.std():.2g}",
+            "0.01 ± 0",
+            f"{end.mean():.3g} ± {end.std():.2g}",
+            "0.85 ± 0.05",
+        ]
+    ]
     assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
 
 
@@ -116,11 +149,19 @@ def test_clustering_and_success_over_seeds(tmp_path):
 
 def _rates(zero, projection, n=100, by_tolerance=None):
     """Success results of zero and projection: {primitive: rate} each, ``n`` judged per primitive."""
+
     def one(rates, sweep):
-        res = {"rates": rates, "counts": {p: n for p in rates}, "successes": {p: round(r * n) for p, r in rates.items()}}
+        res = {
+            "rates": rates,
+            "counts": {p: n for p in rates},
+            "successes": {p: round(r * n) for p, r in rates.items()},
+        }
         if sweep is not None:
-            res["by_tolerance"] = {t: {"rates": r, "successes": {p: round(v * n) for p, v in r.items()}} for t, r in sweep.items()}
+            res["by_tolerance"] = {
+                t: {"rates": r, "successes": {p: round(v * n) for p, v in r.items()}} for t, r in sweep.items()
+            }
         return res
+
     by_tolerance = by_tolerance or {}
     return {"zero": one(zero, by_tolerance.get("zero")), "projection": one(projection, by_tolerance.get("projection"))}
 
@@ -131,21 +172,43 @@ def _sensitive(pull, push, grasp):
 
 def test_success_and_clustering_claims_are_checked_in_every_seed(tmp_path):
     def latent(zero, projection):
-        return [{"init": "zero", "codes": "learned", "accuracy": zero}, {"init": "projection", "codes": "learned", "accuracy": projection}]
+        return [
+            {"init": "zero", "codes": "learned", "accuracy": zero},
+            {"init": "projection", "codes": "learned", "accuracy": projection},
+        ]
 
     higher = _rates(_sensitive(0.5, 0.5, 0.2), _sensitive(0.95, 0.95, 0.9))  # every gap beyond the intervals
     (tmp_path / "results").mkdir()
-    (tmp_path / "results" / "success.json").write_text(json.dumps(
-        {"seed": 0, "generated": higher,
-         "by_seed": {"1": _rates(_sensitive(1, 1, 0.95), _sensitive(1, 1, 0.9)),  # ties and a small loss
-                     "2": _rates(_sensitive(1, 1, 0.3), _sensitive(1, 1, 1.0))}}))  # ties, grasp higher
+    (tmp_path / "results" / "success.json").write_text(
+        json.dumps(
+            {
+                "seed": 0,
+                "generated": higher,
+                "by_seed": {
+                    "1": _rates(_sensitive(1, 1, 0.95), _sensitive(1, 1, 0.9)),  # ties and a small loss
+                    "2": _rates(_sensitive(1, 1, 0.3), _sensitive(1, 1, 1.0)),
+                },
+            }
+        )
+    )  # ties, grasp higher
     trajectory = {"data": {"k": 7}}  # chance 1/7; "organised" from 0.57
-    (tmp_path / "results" / "clustering.json").write_text(json.dumps(
-        {"seed": 0, "latent_dim": 40, "trajectory": trajectory, "latent": latent(0.5, 0.9),
-         "by_seed": {"1": latent(0.8, 0.85), "2": latent(0.3, 0.35)}}))
+    (tmp_path / "results" / "clustering.json").write_text(
+        json.dumps(
+            {
+                "seed": 0,
+                "latent_dim": 40,
+                "trajectory": trajectory,
+                "latent": latent(0.5, 0.9),
+                "by_seed": {"1": latent(0.8, 0.85), "2": latent(0.3, 0.35)},
+            }
+        )
+    )
     rows = {r["key"]: r for r in check_claims(tmp_path)}
     assert rows["success"]["verdict"] == "holds in 1 of 3 seeds, partly in 1 (seed 2), not in seed 1"
-    assert "seed 1: zero / projection success: pull 1.00 / 1.00, push 1.00 / 1.00, grasp 0.95 / 0.90" in rows["success"]["ours"]
+    assert (
+        "seed 1: zero / projection success: pull 1.00 / 1.00, push 1.00 / 1.00, grasp 0.95 / 0.90"
+        in rows["success"]["ours"]
+    )
     assert "seed 0: zero / projection success: pull 0.50 / 0.95 (higher)" in rows["success"]["ours"]
     # version 1 counted ties as holding: seed 1's equal pull and push, but its grasp fell
     assert rows["success"]["previous"][0]["verdict"] == "holds in 2 of 3 seeds (not in seed 1)"
@@ -168,8 +231,10 @@ def test_a_tie_never_counts_and_a_small_gap_is_within_the_spread(tmp_path):
 
 
 def test_the_success_verdict_is_given_at_every_judge_tolerance(tmp_path):
-    sweep = {"zero": {"0.004": _sensitive(0.86, 0.95, 0.25), "0.01": _sensitive(1.0, 1.0, 0.25)},
-             "projection": {"0.004": _sensitive(0.82, 0.85, 0.99), "0.01": _sensitive(1.0, 1.0, 0.99)}}
+    sweep = {
+        "zero": {"0.004": _sensitive(0.86, 0.95, 0.25), "0.01": _sensitive(1.0, 1.0, 0.25)},
+        "projection": {"0.004": _sensitive(0.82, 0.85, 0.99), "0.01": _sensitive(1.0, 1.0, 0.99)},
+    }
     gen = _rates(_sensitive(1.0, 1.0, 0.25), _sensitive(1.0, 1.0, 0.99), n=196, by_tolerance=sweep)
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / "success.json").write_text(json.dumps({"seed": 0, "generated": gen}))

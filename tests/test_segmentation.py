@@ -47,10 +47,10 @@ def _planted(n_seq=30, q=12, n_prim=3, dim=2, n_windows=30, noise=0.05, seed=0, 
         lengths[i] = L = int(steps.sum())
         step_code, t = np.zeros((L, q)), 0
         for s, (p, m) in enumerate(zip(prims, steps)):
-            step_code[t:t + m] = centres[p] + bases[p] @ rng.normal(size=dim)
-            labels[i, t:t + m], segments[i, t:t + m], t = p, s, t + m
+            step_code[t : t + m] = centres[p] + bases[p] @ rng.normal(size=dim)
+            labels[i, t : t + m], segments[i, t : t + m], t = p, s, t + m
         for k in range(-(-L // W)):
-            codes[i, k] = step_code[k * W:(k + 1) * W].mean(axis=0) + noise * rng.normal(size=q)
+            codes[i, k] = step_code[k * W : (k + 1) * W].mean(axis=0) + noise * rng.normal(size=q)
     return codes, lengths, labels, segments
 
 
@@ -133,7 +133,7 @@ def _brute_force(Z, beta, min_size, transitions):
             for j, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
                 sse = np.sum((Z[a:b] - Z[a:b].mean(axis=0)) ** 2)
                 if transitions and j > 0 and b - a > 1:
-                    sse = min(sse, np.sum((Z[a + 1:b] - Z[a + 1:b].mean(axis=0)) ** 2))
+                    sse = min(sse, np.sum((Z[a + 1 : b] - Z[a + 1 : b].mean(axis=0)) ** 2))
                 cost += sse
             best = min(best, cost)
     return best
@@ -151,7 +151,7 @@ def test_the_partition_is_the_exact_optimum(min_size, transitions):
         for j, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
             sse = np.sum((Z[a:b] - Z[a:b].mean(axis=0)) ** 2)
             if transitions and j > 0 and b - a > 1:
-                sse = min(sse, np.sum((Z[a + 1:b] - Z[a + 1:b].mean(axis=0)) ** 2))
+                sse = min(sse, np.sum((Z[a + 1 : b] - Z[a + 1 : b].mean(axis=0)) ** 2))
             cost += sse
         assert cost == pytest.approx(_brute_force(Z, beta, min_size, transitions))
 
@@ -212,23 +212,26 @@ def test_too_few_segments_are_not_clustered_and_say_so():
     assert res.segment_labels.tolist() == [0, 1] and "only 2 segment(s) for 3 primitive(s)" in res.note
 
 
-@pytest.mark.parametrize("call,message", [
-    (lambda z: segment_sequences(z, 0, [50, 50], 2), "window must be an integer >= 1"),
-    (lambda z: segment_sequences(z, W, [50, 50, 50], 2), "lengths must be 2 integers"),
-    (lambda z: segment_sequences(z, W, [50, 81], 2), "sequence 1: length 81 needs 9 windows"),
-    (lambda z: segment_sequences(z, W, [50, 0], 2), "every length must be >= 1"),
-    (lambda z: segment_sequences(z, W, [50, 50], 0), "n_primitives must be an integer >= 1"),
-    (lambda z: segment_sequences(z[0], W, [50], 2), r"code sequences must be \(N, K, q\)"),
-    (lambda z: segment_sequences(z, W, [50, 50], 2, penalty="bic"), "penalty must be 'auto' or"),
-    (lambda z: change_points(z[0], penalty=-1.0), "penalty must be 'auto' or"),
-    (lambda z: change_points(z[0], n_valid=9), "n_valid=9 is more than the 8 windows"),
-    (lambda z: change_points(z[0], min_size=0), "min_size must be an integer >= 1"),
-    (lambda z: boundary_f1([[1]], [[1]], -1), "tolerance must be a finite number >= 0"),
-    (lambda z: boundary_f1([[1]], [[1], [2]], 1), "1 sequences of true boundaries but 2 found"),
-    (lambda z: step_labelling_accuracy([np.array([0, 1])], [np.array([0, 1, 1])]), "beyond padding"),
-    (lambda z: step_labelling_accuracy([np.array([-1, -1])], [np.array([0, 1])]), "no valid steps"),
-    (lambda z: boundaries_from_segments(np.zeros((2, 5), int), [5]), "lengths must be 2 integers"),
-])
+@pytest.mark.parametrize(
+    "call,message",
+    [
+        (lambda z: segment_sequences(z, 0, [50, 50], 2), "window must be an integer >= 1"),
+        (lambda z: segment_sequences(z, W, [50, 50, 50], 2), "lengths must be 2 integers"),
+        (lambda z: segment_sequences(z, W, [50, 81], 2), "sequence 1: length 81 needs 9 windows"),
+        (lambda z: segment_sequences(z, W, [50, 0], 2), "every length must be >= 1"),
+        (lambda z: segment_sequences(z, W, [50, 50], 0), "n_primitives must be an integer >= 1"),
+        (lambda z: segment_sequences(z[0], W, [50], 2), r"code sequences must be \(N, K, q\)"),
+        (lambda z: segment_sequences(z, W, [50, 50], 2, penalty="bic"), "penalty must be 'auto' or"),
+        (lambda z: change_points(z[0], penalty=-1.0), "penalty must be 'auto' or"),
+        (lambda z: change_points(z[0], n_valid=9), "n_valid=9 is more than the 8 windows"),
+        (lambda z: change_points(z[0], min_size=0), "min_size must be an integer >= 1"),
+        (lambda z: boundary_f1([[1]], [[1]], -1), "tolerance must be a finite number >= 0"),
+        (lambda z: boundary_f1([[1]], [[1], [2]], 1), "1 sequences of true boundaries but 2 found"),
+        (lambda z: step_labelling_accuracy([np.array([0, 1])], [np.array([0, 1, 1])]), "beyond padding"),
+        (lambda z: step_labelling_accuracy([np.array([-1, -1])], [np.array([0, 1])]), "no valid steps"),
+        (lambda z: boundaries_from_segments(np.zeros((2, 5), int), [5]), "lengths must be 2 integers"),
+    ],
+)
 def test_bad_arguments_raise_user_error(call, message):
     z = np.random.default_rng(0).normal(size=(2, 8, 3))
     with pytest.raises(UserError, match=message):
@@ -269,7 +272,13 @@ def test_the_composite_data_records_its_transition_steps(tmp_path):
     from primspace.data import MotionDataset
     from primspace.sim.composite import CompositeConfig, generate_composite, transition_steps
 
-    data = generate_composite(CompositeConfig(n_sequences=2, max_primitives=2, duration=(31, 32), transition_steps=5),
-                              seed=0, out=tmp_path / "long.h5", progress=False)
-    assert transition_steps(MotionDataset.load(data)) == 5 and transition_steps(MotionDataset.load(data).subset([1])) == 5
+    data = generate_composite(
+        CompositeConfig(n_sequences=2, max_primitives=2, duration=(31, 32), transition_steps=5),
+        seed=0,
+        out=tmp_path / "long.h5",
+        progress=False,
+    )
+    assert (
+        transition_steps(MotionDataset.load(data)) == 5 and transition_steps(MotionDataset.load(data).subset([1])) == 5
+    )
     assert transition_steps(MotionDataset(np.zeros((1, 4, 2)))) == 0  # not made by the generator

@@ -10,7 +10,13 @@ import numpy as np
 
 from primspace.data import resample
 from primspace.segmentation import boundary_f1
-from primspace.segmentation.surprise import HORIZON, follow, hypotheses, segment_by_surprise_templates, surprise_threshold
+from primspace.segmentation.surprise import (
+    HORIZON,
+    follow,
+    hypotheses,
+    segment_by_surprise_templates,
+    surprise_threshold,
+)
 from primspace.segmentation.synthesis import SynthesisSettings
 from test_segmentation_synthesis import _chains, _faded, _templates, padded_chains
 
@@ -71,10 +77,28 @@ def test_segment_by_surprise_on_the_command_line(run_cli, tmp_path):
     for i in range(3):
         motor[i, :30], motor[i, 30:] = pieces.motor[i], pieces.motor[i + 1]
         segments[i] = np.repeat([0, 1], 30)
-    MotionDataset(motor, lengths=[60] * 3, step_labels=np.repeat(segments, 1, axis=0), step_segments=segments,
-                  label_names=["a", "b"]).save(tmp_path / "long.h5")
-    res = run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--method", "surprise", "--min-steps", "18",
-                  "--max-steps", "32", "--infer-epochs", "3", "--out", tmp_path / "seg")
+    MotionDataset(
+        motor,
+        lengths=[60] * 3,
+        step_labels=np.repeat(segments, 1, axis=0),
+        step_segments=segments,
+        label_names=["a", "b"],
+    ).save(tmp_path / "long.h5")
+    res = run_cli(
+        "segment",
+        tmp_path / "run",
+        tmp_path / "long.h5",
+        "--method",
+        "surprise",
+        "--min-steps",
+        "18",
+        "--max-steps",
+        "32",
+        "--infer-epochs",
+        "3",
+        "--out",
+        tmp_path / "seg",
+    )
     assert res.code == 0, res.err
     result = json.loads((tmp_path / "seg" / "result.json").read_text())
     assert result["method"] == "surprise" and len(result["boundaries"]) == 3 and result["scores"]["segments_true"] == 6
@@ -93,15 +117,21 @@ def test_segment_codes_inferred_with_the_weights_frozen(tmp_path):
     from test_train import primitives
 
     single = primitives(6, seed=0, T=30, J=3)
-    run = fit(single, model_config=ModelConfig(n_joints=3, length=30, latent_dim=4, layer_sizes=(16, 6)),
-              train_config=TrainConfig(epochs=10, seed=0), progress=False)
+    run = fit(
+        single,
+        model_config=ModelConfig(n_joints=3, length=30, latent_dim=4, layer_sizes=(16, 6)),
+        train_config=TrainConfig(epochs=10, seed=0),
+        progress=False,
+    )
     motor = np.concatenate([single.motor[:3], single.motor[-3:]], axis=1)  # 3 demonstrations of 2 primitives
     segments = np.repeat([[0, 1]], 3, axis=0).repeat(30, axis=1)
     data = MotionDataset(motor, lengths=[60] * 3, step_segments=segments, step_labels=segments, label_names=["a", "b"])
     plain = segment_by_synthesis(run, data, 2, min_steps=20, max_steps=40, offset="fade")
     inferred = segment_by_synthesis(run, data, 2, min_steps=20, max_steps=40, offset="fade", infer_epochs=5)
     assert [b.tolist() for b in inferred.boundaries] == [b.tolist() for b in plain.boundaries]
-    assert inferred.chosen["codes"] == "inferred, 5 epochs" and inferred.segment_codes.shape == plain.segment_codes.shape
+    assert (
+        inferred.chosen["codes"] == "inferred, 5 epochs" and inferred.segment_codes.shape == plain.segment_codes.shape
+    )
     assert len(np.unique(inferred.segment_codes.round(9), axis=0)) == len(inferred.segment_codes)  # one code each
     assert not np.allclose(inferred.segment_codes, plain.segment_codes)
     # a template itself, started elsewhere, is moved back onto the template's start
@@ -111,6 +141,15 @@ def test_segment_codes_inferred_with_the_weights_frozen(tmp_path):
     x = templates[2] + 0.5
     from primspace.segmentation.result import SegmentationResult
 
-    one = SegmentationResult([np.array([])], [np.zeros(30, int)], np.zeros((1, 4)), np.array([0]), np.array([0]),
-                             np.array([30]), np.array([0]))
-    np.testing.assert_allclose(in_model_frame([x], one, templates, np.array([2]), float("inf")), templates[2:3], atol=1e-9)
+    one = SegmentationResult(
+        [np.array([])],
+        [np.zeros(30, int)],
+        np.zeros((1, 4)),
+        np.array([0]),
+        np.array([0]),
+        np.array([30]),
+        np.array([0]),
+    )
+    np.testing.assert_allclose(
+        in_model_frame([x], one, templates, np.array([2]), float("inf")), templates[2:3], atol=1e-9
+    )

@@ -13,7 +13,11 @@ from conftest import assert_user_error
 from primspace.data import MotionDataset, resample
 from primspace.segmentation import boundary_f1
 from primspace.segmentation.synthesis import (
-    SynthesisSettings, best_partition, candidate_costs, candidate_segments, segment_by_templates,
+    SynthesisSettings,
+    best_partition,
+    candidate_costs,
+    candidate_segments,
+    segment_by_templates,
 )
 from test_train import primitives
 
@@ -27,14 +31,14 @@ def _templates(t1=30, per=6, seed=0):
         for _ in range(per):
             a = rng.uniform(0.8, 1.2)
             if k == 0:
-                y = np.c_[a * t, 0.3 * a * t ** 2]
+                y = np.c_[a * t, 0.3 * a * t**2]
             elif k == 1:
                 y = 0.5 * a * np.c_[np.cos(2 * np.pi * t) - 1, np.sin(2 * np.pi * t)]
             else:
                 y = np.c_[0.6 * a * np.abs(np.sin(3 * np.pi * t)), -0.8 * a * t]
             shapes.append(y)
             code = np.zeros(6)
-            code[2 * k: 2 * k + 2] = [1.0, a - 1.0]  # one 2-D affine subspace per primitive
+            code[2 * k : 2 * k + 2] = [1.0, a - 1.0]  # one 2-D affine subspace per primitive
             codes.append(code + rng.normal(0, 1e-3, 6))
     return np.stack(shapes), np.stack(codes), np.repeat(np.arange(3), per)
 
@@ -124,8 +128,21 @@ def test_planted_chains_are_segmented_and_labelled():
 def single_primitive_run(run_cli, tmp_path):
     """A run of single primitives trained by the command line (``tmp_path/run``), and 4 other primitives."""
     primitives(6, seed=0, T=30, J=3).save(tmp_path / "single.h5")
-    assert run_cli("train", tmp_path / "single.h5", "--epochs", "10", "--latent-dim", "4", "--layers", "16,6", "--out",
-                   tmp_path / "run").code == 0
+    assert (
+        run_cli(
+            "train",
+            tmp_path / "single.h5",
+            "--epochs",
+            "10",
+            "--latent-dim",
+            "4",
+            "--layers",
+            "16,6",
+            "--out",
+            tmp_path / "run",
+        ).code
+        == 0
+    )
     return primitives(4, seed=1, T=30, J=3)
 
 
@@ -141,20 +158,38 @@ def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
         segments[i, :n] = np.repeat(np.arange(3), [len(p) for p in parts])
         step_labels[i, :n] = np.repeat(pieces.labels[chosen], [len(p) for p in parts])
         lengths.append(n)
-    MotionDataset(motor, lengths=lengths, step_labels=step_labels, step_segments=segments,
-                  label_names=["a", "b", "c"]).save(tmp_path / "long.h5")
-    res = run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--method", "synthesis", "--min-steps", "18",
-                  "--max-steps", "32", "--out", tmp_path / "seg")
+    MotionDataset(
+        motor, lengths=lengths, step_labels=step_labels, step_segments=segments, label_names=["a", "b", "c"]
+    ).save(tmp_path / "long.h5")
+    res = run_cli(
+        "segment",
+        tmp_path / "run",
+        tmp_path / "long.h5",
+        "--method",
+        "synthesis",
+        "--min-steps",
+        "18",
+        "--max-steps",
+        "32",
+        "--out",
+        tmp_path / "seg",
+    )
     assert res.code == 0, res.err
     result = json.loads((tmp_path / "seg" / "result.json").read_text())
     assert result["method"] == "synthesis" and result["n_primitives"] == 3 and len(result["boundaries"]) == 4
     assert 0 <= result["scores"]["boundary"]["f1"] <= 1 and result["scores"]["segments_true"] == 12
     assert np.load(tmp_path / "seg" / "step_labels.npy").shape == (4, 90)
     windows = ("--method", "windows")  # a single-primitive run is segmented by synthesis unless told otherwise
-    assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", *windows, "--min-steps", "5", "--out",
-                              tmp_path / "s2"), "--min-steps, --max-steps, --offset and --infer-epochs apply")
-    assert_user_error(run_cli("segment", tmp_path / "run", tmp_path / "long.h5", *windows, "--out", tmp_path / "s3"),
-                      "--method windows needs a run trained with --code-window")
+    assert_user_error(
+        run_cli(
+            "segment", tmp_path / "run", tmp_path / "long.h5", *windows, "--min-steps", "5", "--out", tmp_path / "s2"
+        ),
+        "--min-steps, --max-steps, --offset and --infer-epochs apply",
+    )
+    assert_user_error(
+        run_cli("segment", tmp_path / "run", tmp_path / "long.h5", *windows, "--out", tmp_path / "s3"),
+        "--method windows needs a run trained with --code-window",
+    )
 
 
 def test_a_demonstration_that_no_tiling_fits_is_one_segment_of_its_nearest_template():
@@ -186,7 +221,9 @@ def test_the_offset_model_is_chosen_by_how_well_it_explains_the_data():
     def run(chains, offset):
         padded, lengths = padded_chains(chains)
         settings = lambda fade: SynthesisSettings(18, 36, grid=1, fade=fade)  # noqa: E731
-        return by_offset(lambda fade: segment_by_templates(padded, lengths, templates, codes, 3, settings(fade)), offset)
+        return by_offset(
+            lambda fade: segment_by_templates(padded, lengths, templates, codes, 3, settings(fade)), offset
+        )
 
     faded, translated = run(seqs, "auto"), run(shifted, "auto")
     assert faded.chosen["offset"] == "fade" and translated.chosen["offset"] == "translate"

@@ -23,8 +23,12 @@ def _long_demos(n=10, t=24, j=3, seed=0):
     """Sine sequences of different lengths, padded with the last valid value."""
     rng = np.random.default_rng(seed)
     steps = np.linspace(0, 1, t)
-    motor = np.stack([np.column_stack([np.sin(2 * np.pi * (a * steps + b)) for a, b in rng.uniform(0.5, 2, (j, 2))])
-                      for _ in range(n)])
+    motor = np.stack(
+        [
+            np.column_stack([np.sin(2 * np.pi * (a * steps + b)) for a, b in rng.uniform(0.5, 2, (j, 2))])
+            for _ in range(n)
+        ]
+    )
     lengths = rng.integers(t // 2, t + 1, n)
     for i, length in enumerate(lengths):
         motor[i, length:] = motor[i, length - 1]
@@ -126,7 +130,9 @@ def test_padding_never_enters_the_loss(tmp_path):
         moved[i, length:] = 0.7  # other padding values (still inside the scaler's range)
     other = MotionDataset(moved, lengths=data.lengths, step_labels=data.step_labels, step_segments=data.step_segments)
     assert evaluate(run, data) == evaluate(run, other)
-    assert evaluate(run, MotionDataset(data.motor))["loss"] != evaluate(run, data)["loss"]  # without lengths every step counts
+    assert (
+        evaluate(run, MotionDataset(data.motor))["loss"] != evaluate(run, data)["loss"]
+    )  # without lengths every step counts
 
 
 def test_a_code_steps_on_its_own_sample_whatever_the_batch():
@@ -145,8 +151,9 @@ def test_fit_and_infer_with_code_windows_resume_exactly(tmp_path):
     constant = {"final_lr_fraction": 1.0}  # extended on resume: a decay would be stretched (fit's docstring)
     straight = fit(data, tmp_path / "straight", model_config=mc, train_config=_tc(epochs=4, **constant), progress=False)
     fit(data, tmp_path / "split", model_config=mc, train_config=_tc(epochs=2, **constant), progress=False)
-    resumed = fit(data, tmp_path / "split", model_config=mc, train_config=_tc(epochs=4, **constant), resume=True,
-                  progress=False)
+    resumed = fit(
+        data, tmp_path / "split", model_config=mc, train_config=_tc(epochs=4, **constant), resume=True, progress=False
+    )
     np.testing.assert_array_equal(straight.latents, resumed.latents)
     assert straight.latents.shape == (10, 12)  # K = 24 / 6 = 4 codes of 3
     a = infer(tmp_path / "straight", data, tmp_path / "a", epochs=3, progress=False)
@@ -177,6 +184,9 @@ def test_code_smoothness_makes_codes_change_less(tmp_path):
     rates = {"latent_lr": 0.05, "final_lr_fraction": 1.0}  # the 0.8 below was measured at a constant rate
     plain = fit(data, model_config=mc, train_config=_tc(epochs=10, **rates), progress=False)
     smooth = fit(data, model_config=mc, train_config=_tc(epochs=10, code_smoothness=5.0, **rates), progress=False)
-    tv = [code_variation(torch.from_numpy(r.latents), r.model_config.fitted_to(data), None).item() for r in (plain, smooth)]
+    tv = [
+        code_variation(torch.from_numpy(r.latents), r.model_config.fitted_to(data), None).item()
+        for r in (plain, smooth)
+    ]
     assert tv[1] < 0.8 * tv[0]
     assert smooth.history[-1]["loss"] > smooth.history[-1]["motor"]  # the logged loss includes the penalty

@@ -16,8 +16,15 @@ def _long():
     rng = np.random.default_rng(0)
     step_labels = [[0] * 5 + [1] * 4 + [-1] * 3, [1] * 12]
     step_segments_ = [[0] * 5 + [1] * 4 + [-1] * 3, [0] * 12]
-    return MotionDataset(rng.normal(size=(2, 12, 3)), labels=[-1, 1], label_names=["push", "pull"], lengths=[9, 12],
-                         step_labels=step_labels, step_segments=step_segments_, dt=0.1)
+    return MotionDataset(
+        rng.normal(size=(2, 12, 3)),
+        labels=[-1, 1],
+        label_names=["push", "pull"],
+        lengths=[9, 12],
+        step_labels=step_labels,
+        step_segments=step_segments_,
+        dt=0.1,
+    )
 
 
 def _bands(ax):

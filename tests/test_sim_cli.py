@@ -23,8 +23,9 @@ def tiny_preset(monkeypatch):
 
 def test_generate_writes_a_data_set(run_cli, tiny_preset, tmp_path):
     out = tmp_path / "sim.h5"
-    res = run_cli("generate", "--preset", tiny_preset, "--out", out, "--workers", 1, "--seed", 2,
-                  "--height", 24, "--width", 32)
+    res = run_cli(
+        "generate", "--preset", tiny_preset, "--out", out, "--workers", 1, "--seed", 2, "--height", 24, "--width", 32
+    )
     assert res.code == 0, res.err
     assert f"wrote {out}: 14 motions x 31 steps x 9 joints, images 24x32" in res.out
     ds = MotionDataset.load(out)

@@ -23,10 +23,19 @@ from primspace.sim.success import JUDGE_VERSION, evaluate
 from conftest import pinned_for_this_cpu
 
 #: 7 primitives x 2 x positions x 2 sizes = 28 motions, jittered by seed 0, with 24 x 32 frames.
-WITH_IMAGES = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.04, 0.06), length=31, height=24, width=32)
+WITH_IMAGES = GenerationConfig(
+    block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.04, 0.06), length=31, height=24, width=32
+)
 #: Joints only, another grid, T = 41, exact grid positions, a subset of primitives.
-NO_IMAGES = GenerationConfig(block_x=(0.50,), block_y=(-0.08, 0.08), block_size=(0.05,), length=41, images=False,
-                             jitter=0.0, primitives=("pull", "touch_right", "circle_ccw"))
+NO_IMAGES = GenerationConfig(
+    block_x=(0.50,),
+    block_y=(-0.08, 0.08),
+    block_size=(0.05,),
+    length=41,
+    images=False,
+    jitter=0.0,
+    primitives=("pull", "touch_right", "circle_ccw"),
+)
 
 PINNED = {
     "with_images": {
@@ -50,8 +59,10 @@ PINNED_SCRIPTS = "a94d98a4d3d7f27197bac8de95875eb56e67099a"
 #: of 0.3.1, which gives these same values on that CPU.
 BY_CPU = {
     "avx512": (PINNED, PINNED_SCRIPTS),
-    "avx2": ({**PINNED, "with_images": {**PINNED["with_images"], "motor": "147f38d6e8cf0777bbdbd195746a3ef5a726fa4f"}},
-             "6230d7842643fbaceb64b236196700cc96f05701"),
+    "avx2": (
+        {**PINNED, "with_images": {**PINNED["with_images"], "motor": "147f38d6e8cf0777bbdbd195746a3ef5a726fa4f"}},
+        "6230d7842643fbaceb64b236196700cc96f05701",
+    ),
 }
 #: (pass/fail per verdict, SHA-1 of every verdict with its criteria and measures)
 PINNED_VERDICTS = {
@@ -111,7 +122,9 @@ def script_digest() -> str:
         for x, y, size in ((0.42, -0.15, 0.035), (0.60, 0.15, 0.065), (0.51, 0.03, 0.05)):
             s = script_motion(scene, name, x, y, size, 61)
             h.update(np.ascontiguousarray(s.tcp).tobytes() + np.ascontiguousarray(s.fingers).tobytes())
-            h.update(repr((s.primitive, s.block_xy.tolist(), s.size, s.contact_start, s.push_axis, s.push_sign)).encode())
+            h.update(
+                repr((s.primitive, s.block_xy.tolist(), s.size, s.contact_start, s.push_axis, s.push_sign)).encode()
+            )
     return h.hexdigest()
 
 

@@ -66,7 +66,7 @@ def _table_rows(text: str, header: str) -> list[list[str]]:
     lines = text.splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith(header))
     rows = []
-    for line in lines[start + 2:]:
+    for line in lines[start + 2 :]:
         if not line.startswith("|"):
             break
         rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
@@ -75,16 +75,24 @@ def _table_rows(text: str, header: str) -> list[list[str]]:
 
 def test_docs_primitive_table_lists_exactly_the_registry():
     rows = _table_rows(DOCS.read_text(encoding="utf-8"), "| label | primitive | description |")
-    assert [(row[0], row[1], row[2]) for row in rows] == [(str(p.label), f"`{p.name}`", p.description) for p in REGISTRY]
+    assert [(row[0], row[1], row[2]) for row in rows] == [
+        (str(p.label), f"`{p.name}`", p.description) for p in REGISTRY
+    ]
 
 
 def _criteria_names(p: Primitive) -> list[str]:
     """The names of the criteria ``p`` checks (judged on a made-up replay: only the names count)."""
     t = 21
     fake = Rollout(
-        tcp=np.zeros((t, 3)), rotation=np.zeros((t, 3, 3)), fingers=np.zeros((t, 2)), block=np.zeros((t, 3)),
-        size=0.05, finger_distance=np.full((t, 2), 0.05), finger_side=np.zeros((t, 2)),
-        arm_distance=np.full(t, 0.05), table_distance=np.full(t, 0.05),
+        tcp=np.zeros((t, 3)),
+        rotation=np.zeros((t, 3, 3)),
+        fingers=np.zeros((t, 2)),
+        block=np.zeros((t, 3)),
+        size=0.05,
+        finger_distance=np.full((t, 2), 0.05),
+        finger_side=np.zeros((t, 2)),
+        arm_distance=np.full(t, 0.05),
+        table_distance=np.full(t, 0.05),
     )
     return list(p.judge(fake).criteria)
 

@@ -44,7 +44,9 @@ def test_contact_phase_displaced_by_2cm_fails(scene, primitive):
     script = script_motion(scene, primitive, x, y, size, 61)
     rng = np.random.default_rng(0)
     random_dirs = rng.normal(size=(2, 3))
-    directions = list(np.eye(3)) + list(-np.eye(3)) + list(random_dirs / np.linalg.norm(random_dirs, axis=1, keepdims=True))
+    directions = (
+        list(np.eye(3)) + list(-np.eye(3)) + list(random_dirs / np.linalg.norm(random_dirs, axis=1, keepdims=True))
+    )
     for d in directions:
         for dist in (0.02, 0.03):
             moved = script.displaced(dist * d)
@@ -66,19 +68,22 @@ def test_small_errors_of_a_reconstruction_still_succeed(scene, primitive):
 @pytest.fixture(scope="module")
 def recorded(scene):
     """The ground-truth joints of every primitive at every block (solved once)."""
-    return {
-        block: {p: joints_of(scene, script_motion(scene, p, *block, 61)) for p in PRIMITIVES}
-        for block in BLOCKS
-    }
+    return {block: {p: joints_of(scene, script_motion(scene, p, *block, 61)) for p in PRIMITIVES} for block in BLOCKS}
 
 
 @pytest.mark.parametrize("block", BLOCKS)
 def test_confusion_matrix_is_diagonal(recorded, block):
     # row: the criteria judged; column: the primitive whose recorded motion is judged
-    verdicts = {(judge, shown): evaluate(judge, recorded[block][shown], block) for judge in PRIMITIVES for shown in PRIMITIVES}
+    verdicts = {
+        (judge, shown): evaluate(judge, recorded[block][shown], block) for judge in PRIMITIVES for shown in PRIMITIVES
+    }
     matrix = np.array([[verdicts[judge, shown].success for shown in PRIMITIVES] for judge in PRIMITIVES])
-    wrong = {f"{shown} judged as {judge}": verdicts[judge, shown].reason
-             for judge in PRIMITIVES for shown in PRIMITIVES if matrix[PRIMITIVES.index(judge), PRIMITIVES.index(shown)] != (judge == shown)}
+    wrong = {
+        f"{shown} judged as {judge}": verdicts[judge, shown].reason
+        for judge in PRIMITIVES
+        for shown in PRIMITIVES
+        if matrix[PRIMITIVES.index(judge), PRIMITIVES.index(shown)] != (judge == shown)
+    }
     assert (matrix == np.eye(len(PRIMITIVES), dtype=bool)).all(), wrong
 
 
@@ -152,8 +157,14 @@ def test_primitive_by_index_batch_and_rates(scene):
 def test_evaluate_dataset_with_other_motor(scene):
     x, y, size = BLOCKS[2]
     motor = np.stack([joints_of(scene, script_motion(scene, p, x, y, size, 61)) for p in ("touch", "push")])
-    ds = MotionDataset(motor, labels=[0, 2], params=[[x, y, size]] * 2, joint_names=list(JOINT_NAMES),
-                       label_names=list(PRIMITIVES), param_names=["block_x", "block_y", "block_size"])
+    ds = MotionDataset(
+        motor,
+        labels=[0, 2],
+        params=[[x, y, size]] * 2,
+        joint_names=list(JOINT_NAMES),
+        label_names=list(PRIMITIVES),
+        param_names=["block_x", "block_y", "block_size"],
+    )
     assert [r.success for r in evaluate_dataset(ds)] == [True, True]
     assert [r.success for r in evaluate_dataset(ds, motor=motor[::-1])] == [False, False]
     with pytest.raises(DataError, match="labels and params"):

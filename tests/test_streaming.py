@@ -33,9 +33,14 @@ def one_thread():
 def data_file(tmp_path_factory):
     data = primitives(3, seed=0, T=12, images=True)  # 9 sequences of 12 steps, 8x8 frames
     lengths = np.array([12, 9, 12, 7, 12, 12, 10, 12, 12])  # padding: masks stay in memory
-    data = MotionDataset(data.motor, images=data.images, labels=data.labels, lengths=lengths,
-                         step_labels=np.where(np.arange(12) < lengths[:, None], data.labels[:, None], -1),
-                         step_segments=np.where(np.arange(12) < lengths[:, None], 0, -1))
+    data = MotionDataset(
+        data.motor,
+        images=data.images,
+        labels=data.labels,
+        lengths=lengths,
+        step_labels=np.where(np.arange(12) < lengths[:, None], data.labels[:, None], -1),
+        step_segments=np.where(np.arange(12) < lengths[:, None], 0, -1),
+    )
     path = tmp_path_factory.mktemp("data") / "frames.h5"
     data.save(path)
     return path
@@ -43,12 +48,14 @@ def data_file(tmp_path_factory):
 
 def same_state(a: dict, b: dict) -> bool:
     """Two checkpoint dicts hold the same tensors, bit for bit (RNG states and config aside)."""
+
     def flat(x, key=""):
         if isinstance(x, dict):
             return [kv for k, v in x.items() if k not in ("rng", "config") for kv in flat(v, f"{key}/{k}")]
         if isinstance(x, (list, tuple)):
             return [kv for i, v in enumerate(x) for kv in flat(v, f"{key}/{i}")]
         return [(key, x)]
+
     fa, fb = flat(a), flat(b)
     assert [k for k, _ in fa] == [k for k, _ in fb]
     return all(torch.equal(x, y) if isinstance(x, torch.Tensor) else x == y for (_, x), (_, y) in zip(fa, fb))
@@ -82,8 +89,13 @@ def test_a_run_resumes_streamed_exactly(data_file, tmp_path):
     ds = MotionDataset.load(data_file)
     tc = TrainConfig(epochs=3, batch_size=4, threads=1, seed=0, vision_frames=3, stream_frames=False)
     straight = fit(ds, model_config=SMALL, train_config=tc, progress=False)
-    fit(ds, tmp_path / "run", model_config=SMALL, train_config=TrainConfig(**{**tc.to_dict(), "epochs": 1}),
-        progress=False)
+    fit(
+        ds,
+        tmp_path / "run",
+        model_config=SMALL,
+        train_config=TrainConfig(**{**tc.to_dict(), "epochs": 1}),
+        progress=False,
+    )
     streamed = TrainConfig(**{**tc.to_dict(), "stream_frames": True, "loader_workers": 0})
     resumed = fit(ds, tmp_path / "run", model_config=SMALL, train_config=streamed, resume=True, progress=False)
     np.testing.assert_array_equal(resumed.latents, straight.latents)
@@ -121,17 +133,42 @@ def test_a_worker_reads_the_stored_frames_of_the_part(data_file):
 
 
 def test_the_command_line_streams_on_request(data_file, tmp_path, run_cli):
-    args = ("--layers", "12,6", "--image-channels", "8,4", "--latent-dim", "3", "--threads", "1",
-            "--batch-size", "4", "--epochs", "1")
+    args = (
+        "--layers",
+        "12,6",
+        "--image-channels",
+        "8,4",
+        "--latent-dim",
+        "3",
+        "--threads",
+        "1",
+        "--batch-size",
+        "4",
+        "--epochs",
+        "1",
+    )
     a = run_cli("train", data_file, "--out", tmp_path / "a", *args, "--load-frames")
     b = run_cli("train", data_file, "--out", tmp_path / "b", *args, "--stream-frames", "--loader-workers", "0")
     assert a.code == 0 and b.code == 0, (a.err, b.err)
     np.testing.assert_array_equal(np.load(tmp_path / "a" / "latents.npy"), np.load(tmp_path / "b" / "latents.npy"))
-    c = run_cli("infer", tmp_path / "a", data_file, "--out", tmp_path / "c", "--epochs", "1", "--stream-frames",
-                "--loader-workers", "0", "--threads", "1")
+    c = run_cli(
+        "infer",
+        tmp_path / "a",
+        data_file,
+        "--out",
+        tmp_path / "c",
+        "--epochs",
+        "1",
+        "--stream-frames",
+        "--loader-workers",
+        "0",
+        "--threads",
+        "1",
+    )
     assert c.code == 0, c.err
-    assert_user_error(run_cli("train", data_file, "--out", tmp_path / "d", *args, "--loader-workers", "-1"),
-                      "loader_workers")
+    assert_user_error(
+        run_cli("train", data_file, "--out", tmp_path / "d", *args, "--loader-workers", "-1"), "loader_workers"
+    )
 
 
 def test_a_corrupted_chunk_read_by_a_worker_names_the_sample(data_file, tmp_path):

@@ -52,8 +52,19 @@ def backed_off(scene, primitive: str, block, gap: float = BACK_OFF_GAP) -> np.nd
     def moved(back: float) -> tuple[np.ndarray, float]:
         tcp = script.tcp.copy()
         tcp[:, 0] -= script.push_sign * back * ramp
-        joints = joints_of(scene, Script(script.primitive, tcp, script.fingers.copy(), script.block_xy.copy(),
-                                         script.size, script.contact_start, script.push_axis, script.push_sign))
+        joints = joints_of(
+            scene,
+            Script(
+                script.primitive,
+                tcp,
+                script.fingers.copy(),
+                script.block_xy.copy(),
+                script.size,
+                script.contact_start,
+                script.push_axis,
+                script.push_sign,
+            ),
+        )
         return joints, evaluate(primitive, joints, block).measures["held"]
 
     _, held = moved(0.0)  # the script's own gap, < 1 mm
@@ -73,9 +84,14 @@ def motions(scene):  # noqa: F811 (the imported fixture)
     motor += [backed_off(scene, "push", block), backed_off(scene, "pull", block)]
     motor.append(joints_of(scene, script_motion(scene, "push", *block, 61).displaced((0.0, 0.02, 0.0))))
     motor.append(motor[PRIMITIVES.index("pull")][::-1])
-    return MotionDataset(np.stack(motor), labels=[PRIMITIVES.index(n) for n in names], params=[block] * len(names),
-                         joint_names=list(JOINT_NAMES), label_names=list(PRIMITIVES),
-                         param_names=["block_x", "block_y", "block_size"])
+    return MotionDataset(
+        np.stack(motor),
+        labels=[PRIMITIVES.index(n) for n in names],
+        params=[block] * len(names),
+        joint_names=list(JOINT_NAMES),
+        label_names=list(PRIMITIVES),
+        param_names=["block_x", "block_y", "block_size"],
+    )
 
 
 def test_the_sweep_is_declared_and_holds_the_default():
@@ -93,8 +109,13 @@ def test_default_tolerance_verdicts_equal_evaluate_dataset(motions):
     at_default = sweep[TOLERANCES.separation]
     assert len(at_default) == len(today) == len(motions)
     for new, old in zip(at_default, today):
-        assert (new.primitive, new.success, new.reason, new.criteria, new.measures) == \
-               (old.primitive, old.success, old.reason, old.criteria, old.measures)
+        assert (new.primitive, new.success, new.reason, new.criteria, new.measures) == (
+            old.primitive,
+            old.success,
+            old.reason,
+            old.criteria,
+            old.measures,
+        )
     # the set is a mix: ground truth passes, the displaced push and reversed pull fail
     assert [r.success for r in today] == [True] * 9 + [False, False]
 

@@ -56,8 +56,14 @@ def assert_same_as_metrics(folder, history: list[dict]) -> None:
 
 
 def test_fit_writes_every_metric_of_every_epoch(data, tmp_path):
-    run = fit(data, tmp_path / "run", model_config=SMALL, train_config=TC, progress=False,
-              log_to=("tensorboard", tmp_path / "tb"))
+    run = fit(
+        data,
+        tmp_path / "run",
+        model_config=SMALL,
+        train_config=TC,
+        progress=False,
+        log_to=("tensorboard", tmp_path / "tb"),
+    )
     lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [h["epoch"] for h in lines] == [0, 1, 2, 3] and lines == run.history
     assert_same_as_metrics(tmp_path / "tb", lines)
@@ -83,13 +89,18 @@ def test_a_killed_then_resumed_run_shows_each_epoch_once(data, tmp_path, monkeyp
         fit(data, tmp_path / "run", model_config=SMALL, train_config=tc, progress=False, log_to=log_to)
     monkeypatch.undo()
     assert [s for s, _ in read_scalars(tmp_path / "tb")["loss"]] == [0, 1, 2, 3]
-    resumed = fit(data, tmp_path / "run", model_config=SMALL, train_config=tc, resume=True, progress=False,
-                  log_to=log_to)
+    resumed = fit(
+        data, tmp_path / "run", model_config=SMALL, train_config=tc, resume=True, progress=False, log_to=log_to
+    )
     assert [h["epoch"] for h in resumed.history] == [0, 1, 2, 3, 4, 5]
     assert_same_as_metrics(tmp_path / "tb", resumed.history)
     # the event files do hold epoch 3 twice: the resume's restart marker hides the first
-    raw = [e.step for f in sorted((tmp_path / "tb").iterdir()) for e in EventFileLoader(str(f)).Load()
-           if e.HasField("summary") and e.summary.value[0].tag == "loss"]
+    raw = [
+        e.step
+        for f in sorted((tmp_path / "tb").iterdir())
+        for e in EventFileLoader(str(f)).Load()
+        if e.HasField("summary") and e.summary.value[0].tag == "loss"
+    ]
     assert sorted(raw) == [0, 1, 2, 3, 3, 4, 5]
 
 
@@ -99,8 +110,9 @@ def test_a_finished_resume_and_an_overwrite_log_nothing_twice(data, tmp_path):
     fit(data, tmp_path / "run", model_config=SMALL, train_config=TC, resume=True, progress=False, log_to=log_to)
     assert_same_as_metrics(tmp_path / "tb", run.history)
     other = TrainConfig(epochs=2, batch_size=4, threads=1, seed=7)
-    again = fit(data, tmp_path / "run", model_config=SMALL, train_config=other, overwrite=True, progress=False,
-                log_to=log_to)
+    again = fit(
+        data, tmp_path / "run", model_config=SMALL, train_config=other, overwrite=True, progress=False, log_to=log_to
+    )
     assert_same_as_metrics(tmp_path / "tb", again.history)  # the replaced run's epochs are superseded
 
 
@@ -118,8 +130,14 @@ def test_infer_and_the_estimator_log_their_own_metrics(data, tmp_path):
 
 
 def test_nested_metrics_are_flattened_with_slashes(tmp_path):
-    line = {"epoch": 4, "loss": 0.25, "vision": None, "note": "x", "ok": True,
-            "parts": {"motor": 0.5, "deep": {"a": 2}, "label": "y"}}
+    line = {
+        "epoch": 4,
+        "loss": 0.25,
+        "vision": None,
+        "note": "x",
+        "ok": True,
+        "parts": {"motor": 0.5, "deep": {"a": 2}, "label": "y"},
+    }
     assert scalars(line) == {"loss": 0.25, "parts/motor": 0.5, "parts/deep/a": 2.0}
     logger = TensorBoardLogger(tmp_path / "tb")
     logger.log(line)
@@ -134,42 +152,88 @@ def test_a_malformed_log_to_is_one_user_error(data, tmp_path, log_to):
 
 
 def test_the_cli_logs_train_and_infer(run_cli, data_file, tmp_path):
-    res = run_cli("train", data_file, "--epochs", "2", "--out", tmp_path / "run", "--log-to", "tensorboard",
-                  tmp_path / "tb" / "fit", *CLI_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--epochs",
+        "2",
+        "--out",
+        tmp_path / "run",
+        "--log-to",
+        "tensorboard",
+        tmp_path / "tb" / "fit",
+        *CLI_ARGS,
+    )
     assert res.code == 0, res.err
     lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert_same_as_metrics(tmp_path / "tb" / "fit", lines)
-    res = run_cli("train", data_file, "--epochs", "3", "--out", tmp_path / "run", "--resume", "--log-to",
-                  "tensorboard", tmp_path / "tb" / "fit", *CLI_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--epochs",
+        "3",
+        "--out",
+        tmp_path / "run",
+        "--resume",
+        "--log-to",
+        "tensorboard",
+        tmp_path / "tb" / "fit",
+        *CLI_ARGS,
+    )
     assert res.code == 0, res.err
     lines = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [h["epoch"] for h in lines] == [0, 1, 2, 3]
     assert_same_as_metrics(tmp_path / "tb" / "fit", lines)
-    res = run_cli("infer", tmp_path / "run", data_file, "--epochs", "2", "--out", tmp_path / "inf", "--threads", "1",
-                  "--log-to", "tensorboard", tmp_path / "inf" / "tb")  # inside its own run folder: fine
+    res = run_cli(
+        "infer",
+        tmp_path / "run",
+        data_file,
+        "--epochs",
+        "2",
+        "--out",
+        tmp_path / "inf",
+        "--threads",
+        "1",
+        "--log-to",
+        "tensorboard",
+        tmp_path / "inf" / "tb",
+    )  # inside its own run folder: fine
     assert res.code == 0, res.err
     lines = [json.loads(line) for line in (tmp_path / "inf" / "metrics.jsonl").read_text().splitlines()]
     assert_same_as_metrics(tmp_path / "inf" / "tb", lines)
-    res = run_cli("train", data_file, "--epochs", "1", "--out", tmp_path / "r2", "--log-to", "wandb", tmp_path / "w",
-                  *CLI_ARGS)
+    res = run_cli(
+        "train", data_file, "--epochs", "1", "--out", tmp_path / "r2", "--log-to", "wandb", tmp_path / "w", *CLI_ARGS
+    )
     assert_user_error(res, "--log-to", "wandb")
 
 
 def test_the_cli_refuses_a_file_or_an_input_as_dir(run_cli, data_file, tmp_path):
     (tmp_path / "notes.txt").write_text("mine\n")
-    res = run_cli("train", data_file, "--epochs", "1", "--out", tmp_path / "run", "--log-to", "tensorboard",
-                  tmp_path / "notes.txt", *CLI_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--epochs",
+        "1",
+        "--out",
+        tmp_path / "run",
+        "--log-to",
+        "tensorboard",
+        tmp_path / "notes.txt",
+        *CLI_ARGS,
+    )
     assert_user_error(res, "notes.txt", "--log-to tensorboard DIR is a file")
     assert (tmp_path / "notes.txt").read_text() == "mine\n" and not (tmp_path / "run").exists()
-    res = run_cli("train", data_file, "--epochs", "1", "--out", tmp_path / "run", "--log-to", "tensorboard",
-                  data_file, *CLI_ARGS)
+    res = run_cli(
+        "train", data_file, "--epochs", "1", "--out", tmp_path / "run", "--log-to", "tensorboard", data_file, *CLI_ARGS
+    )
     assert_user_error(res, "is a file")
     run = tmp_path / "parent"
     assert run_cli("train", data_file, "--epochs", "1", "--out", run, *CLI_ARGS).code == 0
     res = run_cli("infer", run, data_file, "--epochs", "1", "--out", tmp_path / "inf", "--log-to", "tensorboard", run)
     assert_user_error(res, "--log-to tensorboard DIR is the input")
-    res = run_cli("infer", run, data_file, "--epochs", "1", "--out", tmp_path / "inf", "--log-to", "tensorboard",
-                  run / "tb")
+    res = run_cli(
+        "infer", run, data_file, "--epochs", "1", "--out", tmp_path / "inf", "--log-to", "tensorboard", run / "tb"
+    )
     assert_user_error(res, "lies inside the input")
     assert not (tmp_path / "inf").exists() and not (run / "tb").exists()
 
@@ -178,10 +242,26 @@ def test_without_the_tensorboard_package_one_line_says_how_to_install(run_cli, d
     monkeypatch.setitem(sys.modules, "tensorboard", None)  # `import tensorboard` now fails
     monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)
     with pytest.raises(UserError, match=r"pip install 'primspace\[tensorboard\]'"):
-        fit(data, tmp_path / "run", model_config=SMALL, train_config=TC, progress=False,
-            log_to=("tensorboard", tmp_path / "tb"))
+        fit(
+            data,
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=TC,
+            progress=False,
+            log_to=("tensorboard", tmp_path / "tb"),
+        )
     assert not (tmp_path / "run").exists() and not (tmp_path / "tb").exists()  # refused before anything is written
-    res = run_cli("train", data_file, "--epochs", "1", "--out", tmp_path / "run", "--log-to", "tensorboard",
-                  tmp_path / "tb", *CLI_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--epochs",
+        "1",
+        "--out",
+        tmp_path / "run",
+        "--log-to",
+        "tensorboard",
+        tmp_path / "tb",
+        *CLI_ARGS,
+    )
     assert_user_error(res, "--log-to tensorboard needs the tensorboard package", "pip install 'primspace[tensorboard]'")
     assert not (tmp_path / "run").exists()

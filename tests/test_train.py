@@ -81,7 +81,9 @@ def _tc(**kw):
 
 
 def test_fit_reaches_a_low_loss(train_set, tmp_path):
-    run = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=60), init="projection", progress=False)
+    run = fit(
+        train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=60), init="projection", progress=False
+    )
     first, last = run.history[0]["loss"], run.history[-1]["loss"]
     assert run.epoch == 60 and len(run.history) == 61  # epoch 0 = before any update
     assert last < 0.01 and last < first / 20
@@ -125,7 +127,9 @@ def test_infer_keeps_theta_frozen_and_only_moves_codes(train_set, eval_set, tmp_
 
 def test_images_are_trained_and_reconstructed(image_set, tmp_path):
     mc = ModelConfig(latent_dim=4, layer_sizes=(12, 6), image_channels=(8, 4, 4), p_hidden=16, motor_hidden=16)
-    run = fit(image_set, tmp_path / "img", model_config=mc, train_config=_tc(epochs=8, lr=3e-3, batch_size=4), progress=False)
+    run = fit(
+        image_set, tmp_path / "img", model_config=mc, train_config=_tc(epochs=8, lr=3e-3, batch_size=4), progress=False
+    )
     assert run.model_config.image_size == (8, 8)
     assert all(h["vision"] is not None for h in run.history)
     assert run.history[-1]["vision"] < run.history[0]["vision"]
@@ -138,11 +142,17 @@ def test_images_are_trained_and_reconstructed(image_set, tmp_path):
     assert again["loss"] > 0 and again["loss"] == pytest.approx(again["motor"] + again["vision"], rel=1e-6)
     # the trained decoder reconstructs even the initial codes far better than epoch 0 (measured 0.27 vs 0.66)
     assert again["loss"] < 0.6 * run.history[0]["loss"], (again, run.history[0])
-    logged = fit(image_set, tmp_path / "img0", model_config=mc, train_config=_tc(epochs=0, batch_size=4), progress=False)
+    logged = fit(
+        image_set, tmp_path / "img0", model_config=mc, train_config=_tc(epochs=0, batch_size=4), progress=False
+    )
     np.testing.assert_allclose(evaluate(logged, image_set)["loss"], logged.history[0]["loss"], rtol=1e-6)
-    np.testing.assert_allclose(evaluate(logged, image_set, run.initial_latents)["loss"], run.history[0]["loss"], rtol=1e-6)
+    np.testing.assert_allclose(
+        evaluate(logged, image_set, run.initial_latents)["loss"], run.history[0]["loss"], rtol=1e-6
+    )
     # motor-only model on a data set with images
-    plain = fit(image_set, tmp_path / "plain", model_config=mc, train_config=_tc(epochs=1), images=False, progress=False)
+    plain = fit(
+        image_set, tmp_path / "plain", model_config=mc, train_config=_tc(epochs=1), images=False, progress=False
+    )
     assert plain.model.image_head is None and plain.history[-1]["vision"] is None
 
 
@@ -192,12 +202,19 @@ def test_resume_drops_metrics_written_after_the_last_checkpoint(train_set, tmp_p
     fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2, **constant), progress=False)
     with open(tmp_path / "run" / "metrics.jsonl", "a") as f:  # as if killed after logging epoch 3
         f.write(json.dumps({"epoch": 3, "loss": 9.0, "motor": 9.0, "vision": None}) + "\n")
-    run = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=3, **constant), resume=True,
-              progress=False)
+    run = fit(
+        train_set,
+        tmp_path / "run",
+        model_config=SMALL,
+        train_config=_tc(epochs=3, **constant),
+        resume=True,
+        progress=False,
+    )
     assert [h["epoch"] for h in run.history] == [0, 1, 2, 3]
     # epoch 3 is the one trained on resuming, as in an uninterrupted run, in memory and on disk
-    straight = fit(train_set, tmp_path / "straight", model_config=SMALL, train_config=_tc(epochs=3, **constant),
-                   progress=False)
+    straight = fit(
+        train_set, tmp_path / "straight", model_config=SMALL, train_config=_tc(epochs=3, **constant), progress=False
+    )
     assert [h["loss"] for h in run.history] == [h["loss"] for h in straight.history]
     logged = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
     assert [(h["epoch"], h["loss"]) for h in logged] == [(h["epoch"], h["loss"]) for h in straight.history]
@@ -207,14 +224,42 @@ def test_resume_with_an_incompatible_config_is_refused(train_set, tmp_path):
     fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=1), progress=False)
     before = (tmp_path / "run" / "checkpoint.pt").read_bytes()
     with pytest.raises(UserError, match="cannot resume: model latent_dim differs"):
-        fit(train_set, tmp_path / "run", model_config=ModelConfig(latent_dim=3, layer_sizes=(16, 8), p_hidden=32, motor_hidden=32),
-            train_config=_tc(epochs=2), resume=True, progress=False)
+        fit(
+            train_set,
+            tmp_path / "run",
+            model_config=ModelConfig(latent_dim=3, layer_sizes=(16, 8), p_hidden=32, motor_hidden=32),
+            train_config=_tc(epochs=2),
+            resume=True,
+            progress=False,
+        )
     with pytest.raises(UserError, match="cannot resume: train lr differs"):
-        fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2, lr=0.1), resume=True, progress=False)
+        fit(
+            train_set,
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=_tc(epochs=2, lr=0.1),
+            resume=True,
+            progress=False,
+        )
     with pytest.raises(UserError, match="cannot resume: init differs"):
-        fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), init="zero", resume=True, progress=False)
+        fit(
+            train_set,
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=_tc(epochs=2),
+            init="zero",
+            resume=True,
+            progress=False,
+        )
     with pytest.raises(UserError, match="cannot resume: data"):
-        fit(primitives(12, seed=5), tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), resume=True, progress=False)
+        fit(
+            primitives(12, seed=5),
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=_tc(epochs=2),
+            resume=True,
+            progress=False,
+        )
     assert (tmp_path / "run" / "checkpoint.pt").read_bytes() == before
 
 
@@ -230,7 +275,9 @@ def test_existing_run_dir_is_refused_and_untouched(train_set, tmp_path):
     with pytest.raises(UserError, match="not a primspace run directory"):
         fit(train_set, other, model_config=SMALL, train_config=_tc(epochs=1), overwrite=True, progress=False)
     assert (other / "x.txt").read_text() == "keep"
-    again = fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), overwrite=True, progress=False)
+    again = fit(
+        train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), overwrite=True, progress=False
+    )
     assert again.epoch == 2
 
 
@@ -267,8 +314,14 @@ def test_weights_from_and_initial_latents(train_set, eval_set, tmp_path):
     first = fit(train_set, tmp_path / "first", model_config=SMALL, train_config=_tc(epochs=2), progress=False)
     given = np.full((len(eval_set), SMALL.latent_dim), np.nan)
     given[:5] = 7.0
-    second = fit(eval_set, tmp_path / "second", train_config=_tc(epochs=0), weights_from=tmp_path / "first",
-                 initial_latents=given, progress=False)
+    second = fit(
+        eval_set,
+        tmp_path / "second",
+        train_config=_tc(epochs=0),
+        weights_from=tmp_path / "first",
+        initial_latents=given,
+        progress=False,
+    )
     assert second.parent == str((tmp_path / "first").resolve())
     for name, tensor in first.model.state_dict().items():
         assert torch.equal(tensor, second.model.state_dict()[name]), name
@@ -356,8 +409,13 @@ def test_resume_after_a_kill_continues_the_schedule_exactly(train_set, tmp_path,
     resumed = fit(train_set, tmp_path / "killed", model_config=SMALL, train_config=tc, resume=True, progress=False)
     assert [h["loss"] for h in resumed.history] == [h["loss"] for h in straight.history]
     np.testing.assert_array_equal(resumed.latents, straight.latents)
-    constant = fit(train_set, tmp_path / "constant", model_config=SMALL,
-                   train_config=_tc(epochs=4, batch_size=5, final_lr_fraction=1.0), progress=False)
+    constant = fit(
+        train_set,
+        tmp_path / "constant",
+        model_config=SMALL,
+        train_config=_tc(epochs=4, batch_size=5, final_lr_fraction=1.0),
+        progress=False,
+    )
     assert constant.history[-1]["loss"] != straight.history[-1]["loss"]  # the schedule does something
 
 
@@ -392,7 +450,22 @@ def test_a_given_scaler_is_used_and_recorded(train_set, tmp_path):
     assert run.config["scaler"] == wide.to_dict()
     other = JointScaler().fit(train_set.motor)
     with pytest.raises(UserError, match="scaler differs"):
-        fit(train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=2), scaler=other, resume=True, progress=False)
+        fit(
+            train_set,
+            tmp_path / "run",
+            model_config=SMALL,
+            train_config=_tc(epochs=2),
+            scaler=other,
+            resume=True,
+            progress=False,
+        )
     with pytest.raises(UserError, match="not both"):
-        fit(train_set, tmp_path / "r2", model_config=SMALL, train_config=_tc(epochs=1), scaler=wide,
-            weights_from=tmp_path / "run", progress=False)
+        fit(
+            train_set,
+            tmp_path / "r2",
+            model_config=SMALL,
+            train_config=_tc(epochs=1),
+            scaler=wide,
+            weights_from=tmp_path / "run",
+            progress=False,
+        )

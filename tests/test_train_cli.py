@@ -32,8 +32,21 @@ def test_train_infer_reconstruct(run_cli, data_file, tmp_path):
     (tmp_path / "train.txt").write_text("0 2 4 6\n")
     np.save(tmp_path / "eval.npy", np.array([1, 3, 5, 7]))
     run, ev = tmp_path / "run", tmp_path / "eval"
-    res = run_cli("train", data_file, "--init", "projection", "--latent-dim", "3", "--epochs", "2",
-                  "--indices", tmp_path / "train.txt", "--out", run, *SMALL_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--init",
+        "projection",
+        "--latent-dim",
+        "3",
+        "--epochs",
+        "2",
+        "--indices",
+        tmp_path / "train.txt",
+        "--out",
+        run,
+        *SMALL_ARGS,
+    )
     assert res.code == 0, res.err
     assert "fit, 4 samples, init projection, q=3, epoch 2" in res.out
     config = json.loads((run / "config.json").read_text())
@@ -41,8 +54,9 @@ def test_train_infer_reconstruct(run_cli, data_file, tmp_path):
     assert config["model"]["layer_sizes"] == [12, 6] and config["train"]["threads"] == 1
     assert np.load(run / "latents.npy").shape == (4, 3)
 
-    res = run_cli("infer", run, data_file, "--epochs", "2", "--indices", tmp_path / "eval.npy", "--out", ev,
-                  "--threads", "1")
+    res = run_cli(
+        "infer", run, data_file, "--epochs", "2", "--indices", tmp_path / "eval.npy", "--out", ev, "--threads", "1"
+    )
     assert res.code == 0, res.err
     assert "infer, 4 samples, init projection" in res.out
     assert np.load(ev / "latents.npy").shape == (4, 3)
@@ -55,22 +69,58 @@ def test_train_infer_reconstruct(run_cli, data_file, tmp_path):
     assert not (tmp_path / "x.png").exists()
 
     # resume to more epochs; an existing run without --resume is refused
-    res = run_cli("train", data_file, "--latent-dim", "3", "--epochs", "3", "--indices", tmp_path / "train.txt",
-                  "--out", run, "--resume", *SMALL_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--latent-dim",
+        "3",
+        "--epochs",
+        "3",
+        "--indices",
+        tmp_path / "train.txt",
+        "--out",
+        run,
+        "--resume",
+        *SMALL_ARGS,
+    )
     assert res.code == 0, res.err
     assert "epoch 3" in res.out
     before = (run / "metrics.jsonl").read_text()
     res = run_cli("train", data_file, "--latent-dim", "3", "--epochs", "3", "--out", run, *SMALL_ARGS)
     assert_user_error(res, str(run), "--resume or --overwrite")
     assert (run / "metrics.jsonl").read_text() == before
-    res = run_cli("train", data_file, "--latent-dim", "5", "--epochs", "4", "--indices", tmp_path / "train.txt",
-                  "--out", run, "--resume", *SMALL_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--latent-dim",
+        "5",
+        "--epochs",
+        "4",
+        "--indices",
+        tmp_path / "train.txt",
+        "--out",
+        run,
+        "--resume",
+        *SMALL_ARGS,
+    )
     assert_user_error(res, "cannot resume", "latent_dim")
 
 
 def test_train_without_images(run_cli, data_file, tmp_path):
-    res = run_cli("train", data_file, "--init", "pca", "-q", "2", "--epochs", "1", "--no-images",
-                  "--out", tmp_path / "run", *SMALL_ARGS)
+    res = run_cli(
+        "train",
+        data_file,
+        "--init",
+        "pca",
+        "-q",
+        "2",
+        "--epochs",
+        "1",
+        "--no-images",
+        "--out",
+        tmp_path / "run",
+        *SMALL_ARGS,
+    )
     assert res.code == 0, res.err
     config = json.loads((tmp_path / "run" / "config.json").read_text())
     assert config["model"]["image_size"] is None and config["data"]["images"] is False
@@ -98,11 +148,27 @@ def test_image_size_the_head_cannot_produce_is_refused(run_cli, tmp_path):
     path = tmp_path / "odd.h5"
     _dataset(size=(12, 20)).save(path)
     res = run_cli("train", path, "--epochs", "1", "--out", tmp_path / "run")
-    assert_user_error(res, "image size 12x20 cannot be produced", "multiples of 8", )
+    assert_user_error(
+        res,
+        "image size 12x20 cannot be produced",
+        "multiples of 8",
+    )
     assert not (tmp_path / "run").exists()
     # it trains once the head fits (2 deconvolutions: multiples of 4) or without images
-    res = run_cli("train", path, "--epochs", "1", "--image-channels", "4,4", "--out", tmp_path / "run",
-                  "--threads", "1", "--layers", "8,4")
+    res = run_cli(
+        "train",
+        path,
+        "--epochs",
+        "1",
+        "--image-channels",
+        "4,4",
+        "--out",
+        tmp_path / "run",
+        "--threads",
+        "1",
+        "--layers",
+        "8,4",
+    )
     assert res.code == 0, res.err
 
 

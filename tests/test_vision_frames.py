@@ -12,8 +12,9 @@ from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loop import DataTensors, batch_loss
 from test_train import primitives
 
-SMALL = ModelConfig(latent_dim=5, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=16, motor_hidden=16,
-                    image_channels=(8, 4))
+SMALL = ModelConfig(
+    latent_dim=5, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=16, motor_hidden=16, image_channels=(8, 4)
+)
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +50,9 @@ def test_k_frame_loss_is_an_unbiased_estimate(data):
         exact = batch_loss(model, z, idx, tensors, tc, torch.no_grad())[1][2].item()
         g = torch.Generator().manual_seed(0)
         draws = [
-            batch_loss(model, z, idx, tensors, tc, torch.no_grad(),
-                       torch.rand(len(data), 12, generator=g).argsort(1)[:, :3])[1][2].item()
+            batch_loss(
+                model, z, idx, tensors, tc, torch.no_grad(), torch.rand(len(data), 12, generator=g).argsort(1)[:, :3]
+            )[1][2].item()
             for _ in range(400)
         ]
     spread = np.std(draws) / np.sqrt(len(draws))
@@ -66,14 +68,16 @@ def test_k_at_least_t_is_the_exact_loss_and_k_changes_the_run(data, tmp_path):
     k4 = fit(data, model_config=SMALL, train_config=TrainConfig(**base, vision_frames=4), progress=False)
     assert not np.array_equal(k4.latents, exact.latents)
     assert [h["epoch"] for h in k4.history] == [0, 1, 2] and k4.history[0] == pytest.approx(
-        {**exact.history[0], "seconds": k4.history[0]["seconds"], "samples_per_s": k4.history[0]["samples_per_s"]})
+        {**exact.history[0], "seconds": k4.history[0]["seconds"], "samples_per_s": k4.history[0]["samples_per_s"]}
+    )
     full = evaluate(k4, data)  # evaluate always uses every frame
     assert full["vision"] is not None and full["vision"] > 0
 
 
 def test_resume_with_k_frames_continues_exactly(data, tmp_path):
-    tc = TrainConfig(epochs=4, batch_size=6, threads=1, seed=0, vision_frames=3, checkpoint_every=1,
-                     final_lr_fraction=1.0)  # extended on resume: a decay would be stretched (fit's docstring)
+    tc = TrainConfig(
+        epochs=4, batch_size=6, threads=1, seed=0, vision_frames=3, checkpoint_every=1, final_lr_fraction=1.0
+    )  # extended on resume: a decay would be stretched (fit's docstring)
     straight = fit(data, tmp_path / "straight", model_config=SMALL, train_config=tc, progress=False)
     half = TrainConfig(**{**tc.to_dict(), "epochs": 2})
     fit(data, tmp_path / "split", model_config=SMALL, train_config=half, progress=False)

@@ -104,8 +104,9 @@ class CodeCalibration:
     True
     """
 
-    def __init__(self, latent_dim: int, alphas=RELATIVE_ALPHAS, n_splits: int = 5, random_state: int = 0,
-                 prior: str = "identity") -> None:
+    def __init__(
+        self, latent_dim: int, alphas=RELATIVE_ALPHAS, n_splits: int = 5, random_state: int = 0, prior: str = "identity"
+    ) -> None:
         self.latent_dim = latent_dim
         self.prior = prior
         self.alphas = alphas
@@ -153,8 +154,11 @@ class CodeCalibration:
     def diagnostics(self) -> dict:
         """The numbers a run reports: movement, R² of the raw start, held-out R² of the map, α, n."""
         return {
-            "movement": self.movement_, "identity_r2": self.identity_r2_, "heldout_r2": self.heldout_r2_,
-            "alpha": self.alpha_, "n_samples": self.n_samples_,
+            "movement": self.movement_,
+            "identity_r2": self.identity_r2_,
+            "heldout_r2": self.heldout_r2_,
+            "alpha": self.alpha_,
+            "n_samples": self.n_samples_,
         }
 
     # ----------------------------------------------------------------------- helpers
@@ -197,9 +201,11 @@ class CodeCalibration:
     def state_dict(self) -> dict:
         """The fitted map and its diagnostics (tensors and numbers: a checkpoint entry)."""
         return {
-            "latent_dim": int(self.latent_dim), "prior": self.prior,
+            "latent_dim": int(self.latent_dim),
+            "prior": self.prior,
             "coef": torch.from_numpy(np.ascontiguousarray(self.coef_)),
-            "intercept": torch.from_numpy(np.ascontiguousarray(self.intercept_)), **self.diagnostics(),
+            "intercept": torch.from_numpy(np.ascontiguousarray(self.intercept_)),
+            **self.diagnostics(),
         }
 
     @classmethod
@@ -217,13 +223,19 @@ class CodeCalibration:
             raise UserError(f"not a CodeCalibration state ({exc})") from None
         q = cal.latent_dim
         if cal.coef_.shape != (q, q) or cal.intercept_.shape != (q,):
-            raise UserError(f"not a CodeCalibration state (coef {cal.coef_.shape}, intercept {cal.intercept_.shape} for q = {q})")
+            raise UserError(
+                f"not a CodeCalibration state (coef {cal.coef_.shape}, intercept {cal.intercept_.shape} for q = {q})"
+            )
         return cal
 
     def same_map(self, other: "CodeCalibration | None") -> bool:
         """Whether ``other`` is this very map (same prior, ``B``, ``c``)."""
-        return (other is not None and other.prior == self.prior and np.array_equal(other.coef_, self.coef_)
-                and np.array_equal(other.intercept_, self.intercept_))
+        return (
+            other is not None
+            and other.prior == self.prior
+            and np.array_equal(other.coef_, self.coef_)
+            and np.array_equal(other.intercept_, self.intercept_)
+        )
 
     def __repr__(self) -> str:
         fitted = "" if not hasattr(self, "coef_") else f", movement={self.movement_:.3g}, heldout_r2={self.heldout_r2_}"

@@ -30,8 +30,14 @@ from primspace.report import build_report
 __all__ = ["run_demo"]
 
 
-def run_demo(out_dir: str | Path, *, workers: int = 2, progress: bool | None = None, device: str | None = None,
-             threads: int | None = None) -> str:
+def run_demo(
+    out_dir: str | Path,
+    *,
+    workers: int = 2,
+    progress: bool | None = None,
+    device: str | None = None,
+    threads: int | None = None,
+) -> str:
     """Run the demo into ``out_dir``; return a text summary (report path, table, verdict).
     ``device``, ``threads``: each run's (None: the demo preset's, auto and 1)."""
     start = time.perf_counter()
@@ -61,13 +67,17 @@ def _summary(exp, intra, clustering, success, report, seconds) -> str:
     acc = {row["init"]: row["accuracy"] for row in latent_rows if row["codes"] == LEARNED_CODES}
     initial = [row for row in latent_rows if row["codes"] != LEARNED_CODES]
     succ = {i: r["overall"] for i, r in success.get("generated", {}).items()}
-    header = f"{'init':<11}" + "".join(f"{'eval loss q=' + str(q):>16}" for q in dims) + f"{'cluster acc':>13}{'success':>9}"
+    header = (
+        f"{'init':<11}" + "".join(f"{'eval loss q=' + str(q):>16}" for q in dims) + f"{'cluster acc':>13}{'success':>9}"
+    )
     lines = [header, "-" * len(header)]
     for init in inits:
         cells = "".join(f"{finals.get((init, q), float('nan')):>16.4g}" for q in dims)
         lines.append(f"{init:<11}{cells}{acc.get(init, float('nan')):>13.3f}{succ.get(init, float('nan')):>9.2f}")
     for row in initial:
-        lines.append(f"  cluster acc of the {row['init']} codes before training ({row['codes']}): {row['accuracy']:.3f}")
+        lines.append(
+            f"  cluster acc of the {row['init']} codes before training ({row['codes']}): {row['accuracy']:.3f}"
+        )
     ok, text = qualitative_check(intra)
     verdict = {True: "HOLDS", False: "DOES NOT HOLD", None: "cannot be checked"}[ok]
     return "\n".join(

@@ -100,13 +100,22 @@ class AutoDecoder(BaseEstimator):
         ``resume`` / ``overwrite`` apply to ``checkpoint_dir`` (as in :func:`~primspace.train.fit`).
         """
         self.run_ = fit(
-            X, self.checkpoint_dir, model_config=self.model_config, train_config=self.train_config,
-            init=self.init, images=self.images, resume=resume, overwrite=overwrite, progress=self.progress,
+            X,
+            self.checkpoint_dir,
+            model_config=self.model_config,
+            train_config=self.train_config,
+            init=self.init,
+            images=self.images,
+            resume=resume,
+            overwrite=overwrite,
+            progress=self.progress,
             log_to=self.log_to,
         )
         self.codes_ = self.run_.latents
         self.history_ = self.run_.history
-        self.fit_data_ = X  # the fitted demonstrations, for the starts that read them (nearest, calibrated under observe)
+        self.fit_data_ = (
+            X  # the fitted demonstrations, for the starts that read them (nearest, calibrated under observe)
+        )
         return self
 
     def fit_transform(self, X: MotionDataset, y=None, **fit_params) -> np.ndarray:
@@ -151,15 +160,32 @@ class AutoDecoder(BaseEstimator):
         """
         run = self._fitted()
         self.inference_ = infer(
-            run, X, checkpoint_dir, epochs=run.train_config.epochs if epochs is None else epochs,
-            init=init, progress=self.progress, observe=observe, observe_frames=observe_frames,
-            fitted_data=getattr(self, "fit_data_", None), log_to=log_to, **overrides,
+            run,
+            X,
+            checkpoint_dir,
+            epochs=run.train_config.epochs if epochs is None else epochs,
+            init=init,
+            progress=self.progress,
+            observe=observe,
+            observe_frames=observe_frames,
+            fitted_data=getattr(self, "fit_data_", None),
+            log_to=log_to,
+            **overrides,
         )
         return self.inference_.latents
 
-    def predict(self, X: MotionDataset, *, observe=0.25, observe_frames=None, init: str = DEFAULT_PREDICTOR,
-                epochs: int | None = None, continuity: bool = True, fitted_data: MotionDataset | None = None,
-                **overrides):
+    def predict(
+        self,
+        X: MotionDataset,
+        *,
+        observe=0.25,
+        observe_frames=None,
+        init: str = DEFAULT_PREDICTOR,
+        epochs: int | None = None,
+        continuity: bool = True,
+        fitted_data: MotionDataset | None = None,
+        **overrides,
+    ):
         """The rest of each motion of ``X`` from its observed beginning (issue 25; docs/predict.md).
 
         The code is found from the observed entries only (``init``: ``"mixture"``, the
@@ -178,9 +204,16 @@ class AutoDecoder(BaseEstimator):
         """
         fitted_data = getattr(self, "fit_data_", None) if fitted_data is None else fitted_data
         self.prediction_ = predict(
-            self._fitted(), X, observe=observe, observe_frames=observe_frames, init=init,
-            epochs=DEFAULT_PREDICT_EPOCHS if epochs is None else epochs, fitted_data=fitted_data,
-            continuity=continuity, progress=self.progress, **overrides,
+            self._fitted(),
+            X,
+            observe=observe,
+            observe_frames=observe_frames,
+            init=init,
+            epochs=DEFAULT_PREDICT_EPOCHS if epochs is None else epochs,
+            fitted_data=fitted_data,
+            continuity=continuity,
+            progress=self.progress,
+            **overrides,
         )
         return self.prediction_.motor, self.prediction_.frames
 
@@ -212,7 +245,10 @@ class AutoDecoder(BaseEstimator):
         """An AutoDecoder fitted from a run directory (written by :meth:`save`, ``fit`` or ``primspace train``)."""
         run = load_run(path)
         model = cls(
-            run.model_config, run.train_config, run.init, images=run.config["data"]["images"],
+            run.model_config,
+            run.train_config,
+            run.init,
+            images=run.config["data"]["images"],
             progress=progress,
         )
         model.run_, model.codes_, model.history_ = run, run.latents, run.history
@@ -233,7 +269,9 @@ def _check_codes(Z, q: int) -> np.ndarray:
     try:
         z = np.asarray(Z)
     except (TypeError, ValueError) as exc:  # ragged nested lists
-        raise UserError(f"Z must be an array of numbers of shape (n, {q}), got {type(Z).__name__} ({first_line(exc)})") from None
+        raise UserError(
+            f"Z must be an array of numbers of shape (n, {q}), got {type(Z).__name__} ({first_line(exc)})"
+        ) from None
     if z.dtype.kind not in "iuf":
         raise UserError(f"Z must hold numbers, got an array of dtype {z.dtype}")
     if z.ndim != 2 or z.shape[1] != q:

@@ -147,7 +147,7 @@ def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
         name = entry.name
         if not name.startswith(head) or not name.endswith((".tmp", ".old")):
             continue
-        owner = name[len(head):].split(".", 1)[0]
+        owner = name[len(head) :].split(".", 1)[0]
         who, _, pid = owner.rpartition("-")
         if who != host or not pid.isdigit() or _pid_alive(int(pid)):
             continue

@@ -39,8 +39,18 @@ import torch
 
 from primspace.errors import UserError
 
-__all__ = ["INIT_METHODS", "CALIBRATED", "CALIBRATABLE", "START_METHODS", "NEAREST", "INFER_STARTS", "LatentInitializer",
-           "LatentTable", "appendix_a_check", "appendix_a_observed"]
+__all__ = [
+    "INIT_METHODS",
+    "CALIBRATED",
+    "CALIBRATABLE",
+    "START_METHODS",
+    "NEAREST",
+    "INFER_STARTS",
+    "LatentInitializer",
+    "LatentTable",
+    "appendix_a_check",
+    "appendix_a_observed",
+]
 
 #: The initialisation strategies, in the order figures show them.
 INIT_METHODS = ("zero", "random", "projection", "pca")
@@ -106,8 +116,9 @@ class LatentInitializer:
     (3, 4)
     """
 
-    def __init__(self, method: str = "projection", latent_dim: int = 20, random_state: int = 0,
-                 window: int | None = None) -> None:
+    def __init__(
+        self, method: str = "projection", latent_dim: int = 20, random_state: int = 0, window: int | None = None
+    ) -> None:
         self.method = method
         self.latent_dim = latent_dim
         self.random_state = random_state
@@ -122,8 +133,12 @@ class LatentInitializer:
             raise UserError(f"code window (window, --code-window) must be at least 1 step, got {self.window}")
 
     def get_params(self, deep: bool = True) -> dict:
-        return {"method": self.method, "latent_dim": self.latent_dim, "random_state": self.random_state,
-                "window": self.window}
+        return {
+            "method": self.method,
+            "latent_dim": self.latent_dim,
+            "random_state": self.random_state,
+            "window": self.window,
+        }
 
     # --------------------------------------------------------------------------- fit
     def fit(self, scaled_motor) -> "LatentInitializer":
@@ -220,7 +235,9 @@ class LatentInitializer:
             "random_state": int(self.random_state),
             "window": None if self.window is None else int(self.window),
             "n_features": int(self.n_features_),
-            "projection": None if self.projection_ is None else torch.from_numpy(np.ascontiguousarray(self.projection_)),
+            "projection": None
+            if self.projection_ is None
+            else torch.from_numpy(np.ascontiguousarray(self.projection_)),
             "mean": torch.from_numpy(np.ascontiguousarray(self.mean_)),
         }
 
@@ -228,8 +245,12 @@ class LatentInitializer:
     def from_state_dict(cls, state: dict) -> "LatentInitializer":
         try:
             window = state.get("window")  # runs saved before code windows have none
-            init = cls(state["method"], int(state["latent_dim"]), int(state["random_state"]),
-                       None if window is None else int(window))
+            init = cls(
+                state["method"],
+                int(state["latent_dim"]),
+                int(state["random_state"]),
+                None if window is None else int(window),
+            )
             init._validate_params()
             init.n_features_ = int(state["n_features"])
             proj = state["projection"]
@@ -282,7 +303,9 @@ class LatentTable:
     betas, eps : Adam's constants.
     """
 
-    def __init__(self, codes: torch.Tensor, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
+    def __init__(
+        self, codes: torch.Tensor, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8
+    ) -> None:
         self.codes = codes.detach().to(torch.float32).clone()
         self.exp_avg = torch.zeros_like(self.codes)
         self.exp_avg_sq = torch.zeros_like(self.codes)
@@ -320,8 +343,13 @@ class LatentTable:
 
     def state_dict(self) -> dict:
         return {
-            "codes": self.codes.cpu(), "exp_avg": self.exp_avg.cpu(), "exp_avg_sq": self.exp_avg_sq.cpu(),
-            "steps": self.steps.cpu(), "lr": self.lr, "betas": list(self.betas), "eps": self.eps,
+            "codes": self.codes.cpu(),
+            "exp_avg": self.exp_avg.cpu(),
+            "exp_avg_sq": self.exp_avg_sq.cpu(),
+            "steps": self.steps.cpu(),
+            "lr": self.lr,
+            "betas": list(self.betas),
+            "eps": self.eps,
         }
 
     @classmethod
@@ -336,9 +364,7 @@ class LatentTable:
 # ----------------------------------------------------------------------- Appendix A
 
 
-def appendix_a_check(
-    a, b, latent_dim: int, *, n_draws: int = 4000, random_state: int = 0, block: int = 250
-) -> dict:
+def appendix_a_check(a, b, latent_dim: int, *, n_draws: int = 4000, random_state: int = 0, block: int = 250) -> dict:
     """Check the paper's Appendix A numerically for one pair of vectors.
 
     Draws ``n_draws`` matrices ``P`` (q x k) with ``P_ij ~ N(0, 1/q)`` and returns the

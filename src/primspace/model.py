@@ -155,7 +155,9 @@ class MTRNNLayer(nn.Module):
         d = d0.unsqueeze(1)  # (B, 1, k)
         out = []
         for _ in range(length):
-            d = self._norm(torch.lerp(d, torch.baddbmm(c, d, M).to(d.dtype), rate))  # autocast: bf16 product, fp32 state
+            d = self._norm(
+                torch.lerp(d, torch.baddbmm(c, d, M).to(d.dtype), rate)
+            )  # autocast: bf16 product, fp32 state
             out.append(d)
         return torch.cat(out, dim=1)
 
@@ -262,7 +264,6 @@ def code_interpolation(length: int, window: int) -> torch.Tensor:
     return phi.float()
 
 
-
 class MTRNNDecoder(nn.Module):
     """The decoder ``d(θ, z) = (m_{1:T}, s_{1:T})`` of the paper (eq. 1a-1d).
 
@@ -286,8 +287,10 @@ class MTRNNDecoder(nn.Module):
         sizes = config.layer_sizes
         inputs = list(sizes[1:]) + [config.u_size]
         self.p = nn.Sequential(
-            nn.Linear(config.latent_dim, config.p_hidden), nn.Tanh(),
-            nn.Linear(config.p_hidden, config.u_size), nn.Tanh(),
+            nn.Linear(config.latent_dim, config.p_hidden),
+            nn.Tanh(),
+            nn.Linear(config.p_hidden, config.u_size),
+            nn.Tanh(),
         )
         self.g = nn.Linear(config.latent_dim, sum(sizes))
         self.layers = nn.ModuleList(MTRNNLayer(k, l_, tau) for k, l_, tau in zip(sizes, inputs, config.taus))
@@ -298,7 +301,9 @@ class MTRNNDecoder(nn.Module):
             ImageDecoder(sizes[0], config.image_size, config.image_channels) if config.has_images else None
         )
         if config.code_window is not None:  # derived from the config: not saved with the weights
-            self.register_buffer("interpolation", code_interpolation(config.length, config.code_window), persistent=False)
+            self.register_buffer(
+                "interpolation", code_interpolation(config.length, config.code_window), persistent=False
+            )
 
     def initial_states(self, z: torch.Tensor) -> list[torch.Tensor]:
         """``d_0 = g(z)``: one state per layer, each layer-normalised."""
@@ -322,7 +327,9 @@ class MTRNNDecoder(nn.Module):
             u = self.layers[i].run(states0[i], u, self.config.length)
         return u
 
-    def forward(self, z: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None) -> DecoderOutput:
+    def forward(
+        self, z: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None
+    ) -> DecoderOutput:
         """Decode codes ``z`` (B, q) into motor (and image) sequences.
 
         Parameters

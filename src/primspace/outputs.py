@@ -45,8 +45,15 @@ _PNG, _GIF, _HDF5 = b"\x89PNG\r\n\x1a\n", (b"GIF87a", b"GIF89a"), b"\x89HDF\r\n\
 #: ``source`` attributes of data sets the simulator writes (``primspace generate``): files
 #: generated before the writer mark (primspace <= 0.5) are recognised by them.
 _GENERATED_SOURCES = ("primspace.sim ", "primspace.sim.composite ")
-_KINDS = {"png": "a PNG image", "gif": "a GIF animation", "hdf5": "an HDF5 file", "json": "a JSON file",
-          "zip": "a zip archive (a PyTorch checkpoint is one)", "npy": "a NumPy array file", "file": "a file"}
+_KINDS = {
+    "png": "a PNG image",
+    "gif": "a GIF animation",
+    "hdf5": "an HDF5 file",
+    "json": "a JSON file",
+    "zip": "a zip archive (a PyTorch checkpoint is one)",
+    "npy": "a NumPy array file",
+    "file": "a file",
+}
 
 
 def png_metadata(writer: str | None) -> dict:
@@ -188,8 +195,10 @@ def check_replaceable(path: str | os.PathLike, writer: str, overwrite: bool, opt
         raise OutputExistsError(path)
     if path.is_symlink() or file_writer(path) != writer:
         what = "a symbolic link" if path.is_symlink() else describe(path)
-        raise UserError(f"{path}: exists and is {what}; --overwrite replaces only an earlier output of {writer}: "
-                        f"choose another {option}")
+        raise UserError(
+            f"{path}: exists and is {what}; --overwrite replaces only an earlier output of {writer}: "
+            f"choose another {option}"
+        )
     return path
 
 

@@ -117,6 +117,7 @@ def _exit_with_parent(parent_pid: int, interval: float = 1.0) -> None:
     dead driver, holding cores and memory. Its unfinished run resumes from its
     checkpoint when the driver is started again.
     """
+
     def watch() -> None:
         while os.getppid() == parent_pid:
             time.sleep(interval)
@@ -180,7 +181,9 @@ def _run_ray(fn: Callable, items: list, address: str | None, workers: int | None
             else:
                 ray.init(num_cpus=workers or default_workers(), **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise UserError(f"cannot start or reach Ray at {address or 'a local instance'}: {first_line(exc)}") from None
+            raise UserError(
+                f"cannot start or reach Ray at {address or 'a local instance'}: {first_line(exc)}"
+            ) from None
     try:
         remote_call = ray.remote(num_cpus=threads, max_retries=0)(_call_with_threads)
         pending = {remote_call.remote(fn, i, args, threads): i for i, args in enumerate(items)}

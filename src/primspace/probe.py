@@ -70,8 +70,11 @@ class ProbeResult:
 
     def to_dict(self) -> dict:
         return {
-            "factor_names": list(self.factor_names), "r2": dict(self.r2), "mean_r2": self.mean_r2,
-            "per_group": {g: dict(v) for g, v in self.per_group.items()}, "n_samples": self.n_samples,
+            "factor_names": list(self.factor_names),
+            "r2": dict(self.r2),
+            "mean_r2": self.mean_r2,
+            "per_group": {g: dict(v) for g, v in self.per_group.items()},
+            "n_samples": self.n_samples,
             "skipped_groups": list(self.skipped_groups),
         }
 
@@ -122,8 +125,12 @@ def linear_probe(
         r2[name] = float(sum(v * w for v, w in vals) / sum(w for _, w in vals)) if vals else None
     have = [v for v in r2.values() if v is not None]
     return ProbeResult(
-        factor_names=names, r2=r2, mean_r2=float(np.mean(have)) if have else None, per_group=per_group,
-        n_samples=int(sum(weights.values())), skipped_groups=skipped,
+        factor_names=names,
+        r2=r2,
+        mean_r2=float(np.mean(have)) if have else None,
+        per_group=per_group,
+        n_samples=int(sum(weights.values())),
+        skipped_groups=skipped,
     )
 
 

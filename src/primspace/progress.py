@@ -97,8 +97,11 @@ class _LogLines:
             if self.shown or time.monotonic() - self.started >= LOG_AFTER:
                 state = self._state()
                 end = "done" if ok else "stopped"
-                _write(f"{self.description}: {end}" + (f" ({state})" if state else "")
-                       + f" in {time.monotonic() - self.started:.1f} s")
+                _write(
+                    f"{self.description}: {end}"
+                    + (f" ({state})" if state else "")
+                    + f" in {time.monotonic() - self.started:.1f} s"
+                )
 
 
 @contextlib.contextmanager

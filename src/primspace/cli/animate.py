@@ -24,8 +24,12 @@ def animate_command(
     sample: int = typer.Option(..., "--sample", help="Sample index in the data file (one the run used)."),
     out: str = typer.Option(..., "--out", "-o", help="The GIF to write."),
     data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
-    frames: int = typer.Option(_MAX_FRAMES, "--frames", help="Most frames in the GIF (time is subsampled evenly; at least 2)."),
-    no_replay: bool = typer.Option(False, "--no-replay", help="Leave out the simulator replaying the generated joints."),
+    frames: int = typer.Option(
+        _MAX_FRAMES, "--frames", help="Most frames in the GIF (time is subsampled evenly; at least 2)."
+    ),
+    no_replay: bool = typer.Option(
+        False, "--no-replay", help="Leave out the simulator replaying the generated joints."
+    ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier animate output."),
     device: str = device_option("cpu"),
     threads: Optional[int] = threads_option(),
@@ -40,8 +44,16 @@ def animate_command(
     configure_threads(threads, device)
     out, trained, ds, _ = run_sample(run, sample, out, data, frames, overwrite, min_frames=2, writer=_ANIMATE_MARK)
     arrays, info = sample_motion(trained, ds, sample, replay=not no_replay, device=device)
-    draw_animation(out, **arrays, joint_names=info["joint_names"], dt=info["dt"], title=info["title"], max_frames=frames,
-                   writer=_ANIMATE_MARK, overwrite=overwrite)
+    draw_animation(
+        out,
+        **arrays,
+        joint_names=info["joint_names"],
+        dt=info["dt"],
+        title=info["title"],
+        max_frames=frames,
+        writer=_ANIMATE_MARK,
+        overwrite=overwrite,
+    )
     panels = ", ".join(info["panels"]) or "no camera frames"
     note = f"; {info['note']}" if info["note"] else ""
     typer.echo(f"wrote {out} ({out.stat().st_size // 1024} kB; panels: {panels}, joint trace{note})")

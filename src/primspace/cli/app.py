@@ -45,7 +45,9 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _main_options(
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
 ) -> None:
     """Latent spaces of robot motion primitives (Nikulin & Tani): data, simulator, MTRNN
     decoder, subspace clustering, experiments."""

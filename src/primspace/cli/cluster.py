@@ -37,11 +37,14 @@ class ClusterSpectral(str, Enum):
 @app.command("cluster")
 def cluster_command(
     src: Path = typer.Argument(
-        ..., metavar="DATA", help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened), an (N, q) .npy of "
-        "latents, or a run directory (its codes, scored with the labels of its samples in its data file)."
+        ...,
+        metavar="DATA",
+        help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened), an (N, q) .npy of "
+        "latents, or a run directory (its codes, scored with the labels of its samples in its data file).",
     ),
-    k: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives K: the clusters to find "
-                                    "(required)."),
+    k: Optional[int] = typer.Option(
+        None, "--primitives", "-k", help="Number of primitives K: the clusters to find (required)."
+    ),
     k_deprecated: Optional[int] = typer.Option(None, "--k", hidden=True, help="Deprecated name of --primitives."),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (labels.csv, result.json, clustering.png)."),
     tau: Optional[float] = typer.Option(None, "--tau", help="The paper's tau, absolute (> 0)."),
@@ -49,21 +52,29 @@ def cluster_command(
         None, "--tau-relative", help="Scale-free tau: tau = R / sigma_1^2 (keeps sigma_k / sigma_1 > 1/sqrt(R))."
     ),
     r2: Optional[str] = typer.Option(
-        None, "--r2", metavar="TARGET|auto", help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1) (default 0.99); "
-        "'auto': the target of the R^2 grid that --auto-criterion prefers, without labels."
+        None,
+        "--r2",
+        metavar="TARGET|auto",
+        help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1) (default 0.99); "
+        "'auto': the target of the R^2 grid that --auto-criterion prefers, without labels.",
     ),
     auto_criterion: ClusterAutoCriterion = typer.Option(
-        ClusterAutoCriterion.relative_eigengap, "--auto-criterion",
+        ClusterAutoCriterion.relative_eigengap,
+        "--auto-criterion",
         help="With --r2 auto: eigengap of the normalised affinity at k relative to 1 - lambda_{k+1} (default), "
         "the plain eigengap, or label stability across subsamples.",
     ),
     linear: bool = typer.Option(False, "--linear", help="Linear subspaces (no ones row) instead of affine."),
     affinity: ClusterAffinity = typer.Option(ClusterAffinity.squared, help="W = Q*^2 (scales) or |Q*| (dense only)."),
     ones_weight: float = typer.Option(1.0, help="Value of the appended ones row (affine)."),
-    spectral: ClusterSpectral = typer.Option(ClusterSpectral.auto, help="Spectral step: dense n x n, implicit, or auto by n."),
+    spectral: ClusterSpectral = typer.Option(
+        ClusterSpectral.auto, help="Spectral step: dense n x n, implicit, or auto by n."
+    ),
     n_init: int = typer.Option(20, help="k-means restarts."),
     seed: int = typer.Option(0, help="Random seed (k-means; same seed, same labels)."),
-    labels: Optional[Path] = typer.Option(None, "--labels", help="(N,) integer .npy of true labels (-1 = unknown) for scoring."),
+    labels: Optional[Path] = typer.Option(
+        None, "--labels", help="(N,) integer .npy of true labels (-1 = unknown) for scoring."
+    ),
     do_sweep: bool = typer.Option(False, "--sweep", help="Also print and save R^2, rank and scores over a tau grid."),
     sweep_taus: Optional[str] = typer.Option(
         None, "--sweep-taus", help="Comma-separated absolute taus for --sweep (default: R^2 targets 0.5 ... 0.9999)."
@@ -84,9 +95,18 @@ def cluster_command(
     points = _points(src, labels)
     if k > points.X.shape[0]:
         raise UserError(f"{k_flag} {k} exceeds the {points.X.shape[0]} samples in {src}")
-    options = {"affine": not linear, "tau": tau, "tau_relative": tau_relative, "r2_target": r2_target,
-               "auto_criterion": auto_criterion.value, "affinity": affinity.value, "ones_weight": ones_weight,
-               "spectral": spectral.value, "n_init": n_init, "random_state": seed}
+    options = {
+        "affine": not linear,
+        "tau": tau,
+        "tau_relative": tau_relative,
+        "r2_target": r2_target,
+        "auto_criterion": auto_criterion.value,
+        "affinity": affinity.value,
+        "ones_weight": ones_weight,
+        "spectral": spectral.value,
+        "n_init": n_init,
+        "random_state": seed,
+    }
     result = _cluster(src, points, k, options, do_sweep, grid)
     record = {"input": str(src), "points": points.description, **result.to_dict()}
     _write_outputs(out, overwrite, src, result, record, points.samples)
@@ -123,11 +143,15 @@ def _points(src: Path, labels: Optional[Path]):
         if fitted.labels is not None:
             true, names, whence = fitted.labels.astype("int64"), list(fitted.label_names), f", labels of {fitted.path}"
     else:
-        typer.echo(f"note: run {run_dir} has no data file to read labels from ({trained.data_path or 'none recorded'}): "
-                   "clustered without scores (give --labels)", err=True)
+        typer.echo(
+            f"note: run {run_dir} has no data file to read labels from ({trained.data_path or 'none recorded'}): "
+            "clustered without scores (give --labels)",
+            err=True,
+        )
     description = f"codes of run {run_dir}: {X.shape[0]} x {X.shape[1]}, numbered by the data file's index{whence}"
-    return ClusterPoints(X=X, labels=true, label_names=names, path=src, description=description,
-                         samples=trained.indices)
+    return ClusterPoints(
+        X=X, labels=true, label_names=names, path=src, description=description, samples=trained.indices
+    )
 
 
 def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
@@ -137,8 +161,12 @@ def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
     sweep_param = "tau" if grid is not None else "r2_target" if do_sweep else None
     try:
         return cluster_points(
-            points.X, LowRankSubspaceClustering(k, **options), labels_true=points.labels, label_names=points.label_names,
-            sweep_param=sweep_param, sweep_values=grid,
+            points.X,
+            LowRankSubspaceClustering(k, **options),
+            labels_true=points.labels,
+            label_names=points.label_names,
+            sweep_param=sweep_param,
+            sweep_values=grid,
         )
     except ValueError as exc:  # parameter / data problems the estimator found
         raise UserError(f"{src}: {first_line(exc)}") from None
@@ -148,7 +176,13 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
     """``labels.csv`` (``samples``: each point's index in the data file; default the row),
     ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
     from primspace.cluster import clustering_figure, sweep_figure
-    from primspace.cluster.outputs import CLUSTER_OUTPUT, atomic_directory, write_json, write_labels_csv, write_sweep_csv
+    from primspace.cluster.outputs import (
+        CLUSTER_OUTPUT,
+        atomic_directory,
+        write_json,
+        write_labels_csv,
+        write_sweep_csv,
+    )
     from primspace.plots import save_figure
 
     n, scores = result.n_samples, result.scores
@@ -164,7 +198,9 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
         if result.sweep is not None:
             write_sweep_csv(tmp / "sweep.csv", result.sweep)
             write_json(tmp / "sweep.json", record["sweep"])
-            save_figure(sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png", writer=CLUSTER_OUTPUT.command)
+            save_figure(
+                sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png", writer=CLUSTER_OUTPUT.command
+            )
 
 
 def _print_summary(out: Path, result) -> None:
@@ -177,7 +213,9 @@ def _print_summary(out: Path, result) -> None:
     )
     if result.auto is not None:
         auto = result.auto
-        scores = ", ".join(f"{g:g}: " + ("-" if v is None else f"{v:.4g}") for g, v in zip(auto["grid"], auto["scores"]))
+        scores = ", ".join(
+            f"{g:g}: " + ("-" if v is None else f"{v:.4g}") for g, v in zip(auto["grid"], auto["scores"])
+        )
         typer.echo(f"tau chosen without labels by {auto['criterion']}: R^2 target {auto['r2_target']:g} ({scores})")
     scores = result.scores
     if scores is not None:
@@ -188,7 +226,10 @@ def _print_summary(out: Path, result) -> None:
                 f"accuracy {scores['accuracy']:.4f}  NMI {scores['nmi']:.4f}  ARI {scores['ari']:.4f}  "
                 f"({scores['n_scored']} scored, {scores['n_ignored']} with unknown label)"
             )
-    typer.echo(f"wrote {out}/: labels.csv, result.json, clustering.png" + (", sweep.csv, sweep.json, sweep.png" if result.sweep else ""))
+    typer.echo(
+        f"wrote {out}/: labels.csv, result.json, clustering.png"
+        + (", sweep.csv, sweep.json, sweep.png" if result.sweep else "")
+    )
 
 
 def _primitives_option(k: Optional[int], deprecated: Optional[int]) -> tuple[int, str]:
@@ -273,31 +314,56 @@ class SegmentMethod(str, Enum):
     windows = "windows"
 
 
-_SEGMENT_RUN = typer.Argument(..., help="synthesis, surprise: a run of single primitives (one code per "
-                              "demonstration); windows: a run trained with --code-window on DATA (fit or infer).")
+_SEGMENT_RUN = typer.Argument(
+    ...,
+    help="synthesis, surprise: a run of single primitives (one code per "
+    "demonstration); windows: a run trained with --code-window on DATA (fit or infer).",
+)
 _SEGMENT_METHOD = typer.Option(
-    None, "--method", show_default=False, help="synthesis (default): the partition into segments that the "
+    None,
+    "--method",
+    show_default=False,
+    help="synthesis (default): the partition into segments that the "
     "single-primitive run generates best; surprise: where its prediction of the next steps fails; windows (the default "
-    "for a run trained with --code-window): change points of the run's window codes (docs/sequences.md).")
+    "for a run trained with --code-window): change points of the run's window codes (docs/sequences.md).",
+)
 _STEPS = "surprise, synthesis: the {} steps of a primitive in DATA (default {} x the run's T)."
 
 
 @app.command("segment")
 def segment_command(
     run: Path = _SEGMENT_RUN,
-    data: Path = typer.Argument(..., metavar="DATA", help="Long demonstrations (with lengths; windows: the run's data file)."),
-    out: Path = typer.Option(..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."),
+    data: Path = typer.Argument(
+        ..., metavar="DATA", help="Long demonstrations (with lengths; windows: the run's data file)."
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."
+    ),
     method: Optional[SegmentMethod] = _SEGMENT_METHOD,
-    primitives: Optional[int] = typer.Option(None, "--primitives", "-k", help="Number of primitives K (default: the data's label names)."),
-    tolerance: Optional[int] = typer.Option(None, "--tolerance", help="Steps within which a found boundary matches a true one (default: the code window; surprise, synthesis: 8)."),
+    primitives: Optional[int] = typer.Option(
+        None, "--primitives", "-k", help="Number of primitives K (default: the data's label names)."
+    ),
+    tolerance: Optional[int] = typer.Option(
+        None,
+        "--tolerance",
+        help="Steps within which a found boundary matches a true one (default: the code window; surprise, synthesis: 8).",
+    ),
     min_steps: Optional[int] = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
     max_steps: Optional[int] = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
-    infer_epochs: int = typer.Option(0, "--infer-epochs", help="surprise, synthesis: infer each segment's code with "
-                                     "θ frozen for this many epochs and label by those codes (0: its nearest "
-                                     "template's code; docs/sequences.md measures both)."),
-    offset: SegmentOffset = typer.Option(SegmentOffset.auto, "--offset", help="surprise, synthesis: how a primitive "
-                                         "begun where the last ended meets the model's: fade (the start offset fades "
-                                         "out), translate (kept throughout), auto (the one that explains DATA better)."),
+    infer_epochs: int = typer.Option(
+        0,
+        "--infer-epochs",
+        help="surprise, synthesis: infer each segment's code with "
+        "θ frozen for this many epochs and label by those codes (0: its nearest "
+        "template's code; docs/sequences.md measures both).",
+    ),
+    offset: SegmentOffset = typer.Option(
+        SegmentOffset.auto,
+        "--offset",
+        help="surprise, synthesis: how a primitive "
+        "begun where the last ended meets the model's: fade (the start offset fades "
+        "out), translate (kept throughout), auto (the one that explains DATA better).",
+    ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
     threads: Optional[int] = threads_option(),
 ) -> None:
@@ -320,11 +386,20 @@ def segment_command(
     _check_segment_options(method, min_steps, max_steps, offset, infer_epochs, tolerance)
     ds = MotionDataset.load(data)
     segment = _segment_windows if method is SegmentMethod.windows else _segment_by_primitives
-    samples, held, result, scores, window, k = segment(trained, ds, run, data, primitives, tolerance,
-                                                       (min_steps, max_steps, offset.value, infer_epochs), method.value)
-    record = {"run": str(run), "data": str(data), "method": method.value, "window": window, "n_primitives": k,
-              "samples": samples.tolist(), "boundaries": [b.tolist() for b in result.boundaries],
-              "scores": scores, "note": result.note}
+    samples, held, result, scores, window, k = segment(
+        trained, ds, run, data, primitives, tolerance, (min_steps, max_steps, offset.value, infer_epochs), method.value
+    )
+    record = {
+        "run": str(run),
+        "data": str(data),
+        "method": method.value,
+        "window": window,
+        "n_primitives": k,
+        "samples": samples.tolist(),
+        "boundaries": [b.tolist() for b in result.boundaries],
+        "scores": scores,
+        "note": result.note,
+    }
     record |= {k: result.chosen[k] for k in ("offset", "threshold", "codes") if k in result.chosen}
     with atomic_directory(out, overwrite, kind) as tmp:
         _write_segments(tmp / "segments.csv", samples, result)
@@ -346,9 +421,12 @@ def segment_method(method: Optional[SegmentMethod], trained) -> SegmentMethod:
 
 
 def _check_segment_options(method: SegmentMethod, min_steps, max_steps, offset, infer_epochs: int, tolerance) -> None:
-    if method is SegmentMethod.windows and (min_steps is not None or max_steps is not None
-                                            or offset is not SegmentOffset.auto or infer_epochs):
-        raise UserError("--min-steps, --max-steps, --offset and --infer-epochs apply to --method surprise and synthesis")
+    if method is SegmentMethod.windows and (
+        min_steps is not None or max_steps is not None or offset is not SegmentOffset.auto or infer_epochs
+    ):
+        raise UserError(
+            "--min-steps, --max-steps, --offset and --infer-epochs apply to --method surprise and synthesis"
+        )
     if infer_epochs < 0:
         raise UserError(f"--infer-epochs {infer_epochs}: must be at least 0")
     if tolerance is not None and tolerance < 0:
@@ -370,13 +448,16 @@ def _segment_windows(trained, ds, run: Path, data: Path, primitives, tolerance, 
 
     window = trained.model_config.code_window
     if window is None:
-        raise UserError(f"{run}: the run has one code per sequence; --method windows needs a run trained with "
-                        "--code-window (or use --method surprise or synthesis)")
+        raise UserError(
+            f"{run}: the run has one code per sequence; --method windows needs a run trained with "
+            "--code-window (or use --method surprise or synthesis)"
+        )
     check_run_data(trained, ds)
     held = ds.subset(trained.indices)
     k = _primitives(held, primitives, data)
-    result, scores = segment_codes(trained.latents, held, window, trained.model_config.latent_dim, tolerance=tolerance,
-                                   n_primitives=k)
+    result, scores = segment_codes(
+        trained.latents, held, window, trained.model_config.latent_dim, tolerance=tolerance, n_primitives=k
+    )
     return trained.indices, held, result, scores, window, k
 
 
@@ -430,10 +511,20 @@ def _timeline(path: Path, trained, held, result, window: int, method: str, shown
         what = f"{trained.init}: code sequences (q = {trained.model_config.latent_dim}, W = {window})"
     lengths = held.lengths[:n] if held.lengths is not None else np.full(n, held.length)
     truth = held.step_labels[:n] if held.step_labels is not None else np.full((n, held.length), -1)
-    true_bounds = boundaries_from_segments(held.step_segments[:n], lengths) if held.step_segments is not None else [[]] * n
-    fig = plot_code_timeline(codes, window, lengths, truth, result.padded_step_labels(held.length)[:n], true_bounds,
-                             result.boundaries[:n], label_names=list(held.label_names),
-                             title=what)
+    true_bounds = (
+        boundaries_from_segments(held.step_segments[:n], lengths) if held.step_segments is not None else [[]] * n
+    )
+    fig = plot_code_timeline(
+        codes,
+        window,
+        lengths,
+        truth,
+        result.padded_step_labels(held.length)[:n],
+        true_bounds,
+        result.boundaries[:n],
+        label_names=list(held.label_names),
+        title=what,
+    )
     save_figure(fig, path, writer="primspace segment")
 
 
@@ -441,9 +532,14 @@ def _segment_summary(scores: dict, n: int) -> str:
     if "boundary" not in scores:
         return f"{n} demonstrations: {scores['segments_found']} segments found"
     b = scores["boundary"]
-    return (f"{n} demonstrations: {scores['segments_found']} segments found, {scores['segments_true']} true; "
-            f"boundary F1 {b['f1']:.3f} (precision {b['precision']:.3f}, recall {b['recall']:.3f}, "
-            f"within {scores['tolerance']} steps"
-            + (f"; {scores['boundary_transition']['f1']:.3f} within them of the transition"
-               if "boundary_transition" in scores else "")
-            + f"); step labelling accuracy {scores['accuracy']:.3f}")
+    return (
+        f"{n} demonstrations: {scores['segments_found']} segments found, {scores['segments_true']} true; "
+        f"boundary F1 {b['f1']:.3f} (precision {b['precision']:.3f}, recall {b['recall']:.3f}, "
+        f"within {scores['tolerance']} steps"
+        + (
+            f"; {scores['boundary_transition']['f1']:.3f} within them of the transition"
+            if "boundary_transition" in scores
+            else ""
+        )
+        + f"); step labelling accuracy {scores['accuracy']:.3f}"
+    )

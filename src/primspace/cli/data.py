@@ -63,8 +63,10 @@ def _format_summary(s: dict) -> str:
     lines.append(_labels_line(s["label_counts"], steps is not None))
     if steps is not None:
         lo, hi = steps["lengths"]
-        lines.append(f"  long     valid steps {lo}..{hi} (padded to T), {steps['segments'][0]}..{steps['segments'][1]} "
-                     f"primitives each, {steps['n_segments']} segments in all")
+        lines.append(
+            f"  long     valid steps {lo}..{hi} (padded to T), {steps['segments'][0]}..{steps['segments'][1]} "
+            f"primitives each, {steps['n_segments']} segments in all"
+        )
         lines.append("  steps    " + ", ".join(f"{k} {v}" for k, v in steps["steps_per_label"].items()))
     lines.append("  joint ranges (physical units):")
     width = max(len(n) for n in s["joint_ranges"])
@@ -82,23 +84,31 @@ def _format_summary(s: dict) -> str:
 def generate_command(
     out: str = typer.Option(..., "--out", "-o", help="The HDF5 data set to write."),
     preset: str = typer.Option(
-        "demo", "--preset", "-p", help="demo (126 motions) or paper (1715 motions, as in the paper); composite-demo "
+        "demo",
+        "--preset",
+        "-p",
+        help="demo (126 motions) or paper (1715 motions, as in the paper); composite-demo "
         "or composite: long demonstrations of 2-4 primitives in a row, with per-step labels (joints only by default).",
     ),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray (identical data)."),
-    address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray instance)."),
+    address: Optional[str] = typer.Option(
+        None, "--address", help="Ray cluster address (default: a local Ray instance)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Moves each block within its grid cell; same seed, same data."),
     height: Optional[int] = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
     width: Optional[int] = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
     no_images: bool = typer.Option(False, "--no-images", help="Joint values only (no rendering)."),
     config_file: Optional[Path] = typer.Option(
-        None, "--config", help="JSON object of generation settings over the preset's (block_x, block_y, "
+        None,
+        "--config",
+        help="JSON object of generation settings over the preset's (block_x, block_y, "
         "block_size, primitives, length, jitter ...; see docs/simulator.md).",
     ),
     overwrite: bool = typer.Option(
-        False, "--overwrite", help="Replace OUT if it is an earlier generate output (and discard shards left by a run "
-        "with other settings)."
+        False,
+        "--overwrite",
+        help="Replace OUT if it is an earlier generate output (and discard shards left by a run with other settings).",
     ),
 ) -> None:
     """Simulate the seven motion primitives on a Panda arm (MuJoCo) into a data set file.
@@ -116,7 +126,9 @@ def generate_command(
 
     out = output_file(out, inputs=(config_file,), overwrite=overwrite, writer=_GENERATE_MARK)
     if preset in COMPOSITE_PRESETS:
-        _generate_composite(out, preset, config_file, (height, width, no_images), workers, backend, address, seed, overwrite)
+        _generate_composite(
+            out, preset, config_file, (height, width, no_images), workers, backend, address, seed, overwrite
+        )
         return
     if preset not in generate.PRESETS:
         raise UserError(f"unknown preset {preset!r}; choose from {', '.join([*generate.PRESETS, *COMPOSITE_PRESETS])}")
@@ -124,8 +136,16 @@ def generate_command(
     check_workers(workers)
     start = time.perf_counter()
     shards = []
-    ds = generate_dataset(config, seed=seed, workers=workers, backend=backend, address=address, out=out,
-                          overwrite=overwrite, on_shard=shards.append)
+    ds = generate_dataset(
+        config,
+        seed=seed,
+        workers=workers,
+        backend=backend,
+        address=address,
+        out=out,
+        overwrite=overwrite,
+        on_shard=shards.append,
+    )
     took = time.perf_counter() - start
     frames = f"images {config.height}x{config.width}" if config.images else "no images"
     reused = sum(shard["reused"] for shard in shards)
@@ -169,7 +189,9 @@ def _settings_file(config_file: Path) -> dict:
         raise UserError(f"{config_file}: cannot read a JSON object of settings ({exc})") from None
 
 
-def _generate_composite(out: Path, preset: str, config_file, frames, workers, backend, address, seed, overwrite) -> None:
+def _generate_composite(
+    out: Path, preset: str, config_file, frames, workers, backend, address, seed, overwrite
+) -> None:
     """``generate`` for a composite preset (:mod:`primspace.sim.composite`): --config takes
     ``CompositeConfig`` fields over the preset's; --height/--width turn frames on."""
     import time
@@ -199,8 +221,10 @@ def _generate_composite(out: Path, preset: str, config_file, frames, workers, ba
     generate_composite(config, seed=seed, out=out, overwrite=overwrite, workers=workers)
     took = time.perf_counter() - start
     frames_text = f"images {config.image_size[0]}x{config.image_size[1]}" if config.image_size else "no images"
-    typer.echo(f"wrote {out}: {config.n_sequences} long demonstrations of {config.min_primitives}-{config.max_primitives} "
-               f"primitives, T = {config.length} steps x 9 joints, {frames_text} ({took:.1f} s)")
+    typer.echo(
+        f"wrote {out}: {config.n_sequences} long demonstrations of {config.min_primitives}-{config.max_primitives} "
+        f"primitives, T = {config.length} steps x 9 joints, {frames_text} ({took:.1f} s)"
+    )
 
 
 @app.command("show")

@@ -40,7 +40,12 @@ def _experiment(preset: str | None, data, out, backend, address, workers, seed, 
     check_workers(workers)
     chosen = resolve_preset(preset or DEFAULT_PRESET).with_overrides(**overrides)
     exp = ExperimentDir(
-        out, chosen, data=data, backend=backend.value, address=address, workers=workers or default_workers(),
+        out,
+        chosen,
+        data=data,
+        backend=backend.value,
+        address=address,
+        workers=workers or default_workers(),
         **({} if seed is None else {"seed": seed}),  # else ExperimentDir's default
     )
     if invocation() is not None:
@@ -92,14 +97,18 @@ def _fit_infer_epochs(text: str) -> tuple[int, int | None]:
 
 #: --device and --threads of the commands that run a grid of runs (the preset's TrainConfig).
 _RUN_DEVICE_HELP = "Where each run trains: auto, cpu, cuda or cuda:N (default: the preset's, auto)."
-_RUN_THREADS_HELP = ("CPU threads of torch and BLAS per run (default: the preset's, 1: the runs go in parallel, "
-                     "--workers of them).")
-_INITS_HELP = "Override the initialisations compared (by inter too, for inter and all), e.g. zero,projection,calibrated."
+_RUN_THREADS_HELP = (
+    "CPU threads of torch and BLAS per run (default: the preset's, 1: the runs go in parallel, --workers of them)."
+)
+_INITS_HELP = (
+    "Override the initialisations compared (by inter too, for inter and all), e.g. zero,projection,calibrated."
+)
 _VISION_FRAMES_HELP = "Vision loss on K drawn frames per sequence and step (default: every frame)."
 
 
-def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str | None,
-                        preset_names: str | None = None) -> None:
+def _experiment_command(
+    name: str, doc: str, steps: tuple[str, ...], table: str | None, preset_names: str | None = None
+) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
     then print ``table`` (a function of :mod:`primspace.experiments.results`) of the first step's results.
     ``preset_names`` names the map in :mod:`primspace.experiments.presets` from the
@@ -109,21 +118,35 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
 
     def command(
         preset: Optional[str] = typer.Option(
-            None, "--preset", help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU); composite takes demo, paper or lasa too.",
+            None,
+            "--preset",
+            help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU); composite takes demo, paper or lasa too.",
         ),
-        data: Optional[Path] = typer.Option(None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."),
+        data: Optional[Path] = typer.Option(
+            None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."
+        ),
         out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
         backend: Backend = typer.Option(Backend.local, "--backend", help="local (process pool) or ray."),
-        address: Optional[str] = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray instance)."),
+        address: Optional[str] = typer.Option(
+            None, "--address", help="Ray cluster address (default: start a local Ray instance)."
+        ),
         workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
-        seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."),
-        latent_dims: Optional[str] = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."),
+        seed: Optional[int] = typer.Option(
+            None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."
+        ),
+        latent_dims: Optional[str] = typer.Option(
+            None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."
+        ),
         inits: Optional[str] = typer.Option(None, "--inits", help=_INITS_HELP),
         seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
         epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
-        images: Optional[bool] = typer.Option(None, "--images/--no-images", help="Override whether the vision loss is trained."),
+        images: Optional[bool] = typer.Option(
+            None, "--images/--no-images", help="Override whether the vision loss is trained."
+        ),
         vision_frames: Optional[int] = typer.Option(None, "--vision-frames", help=_VISION_FRAMES_HELP),
-        loss_reduction: Optional[LossReduction] = typer.Option(None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."),
+        loss_reduction: Optional[LossReduction] = typer.Option(
+            None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."
+        ),
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
         device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
         threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
@@ -139,7 +162,8 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
             "images": images,
             "vision_frames": vision_frames,
             "loss_reduction": None if loss_reduction is None else loss_reduction.value,
-            "device": device, "threads": threads,
+            "device": device,
+            "threads": threads,
         }
         if epochs is not None:
             fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
@@ -165,47 +189,66 @@ def _experiment_command(name: str, doc: str, steps: tuple[str, ...], table: str 
 
 
 _experiment_command(
-    "intra", "Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size.",
-    ("intra:run_intra",), "final_loss_table",
+    "intra",
+    "Intra-primitive generalisation: fit on 20%, infer codes for 80%, per init and latent size.",
+    ("intra:run_intra",),
+    "final_loss_table",
 )
 _experiment_command(
-    "clustering", "Subspace clustering of learned codes (runs intra if needed) and of raw trajectories (data, LASA).",
-    ("clustering:run_clustering",), "latent_table",
+    "clustering",
+    "Subspace clustering of learned codes (runs intra if needed) and of raw trajectories (data, LASA).",
+    ("clustering:run_clustering",),
+    "latent_table",
 )
 _experiment_command(
-    "success", "Success rates of generated eval motions, judged by the simulator (runs intra if needed).",
-    ("success:run_success",), "success_table",
+    "success",
+    "Success rates of generated eval motions, judged by the simulator (runs intra if needed).",
+    ("success:run_success",),
+    "success_table",
 )
 _experiment_command(
-    "inter", "Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay.",
-    ("inter:run_inter",), "inter_table",
+    "inter",
+    "Inter-primitive generalisation: leave one primitive out, then learn it with 10% replay.",
+    ("inter:run_inter",),
+    "inter_table",
 )
 _experiment_command(
-    "composite", "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
+    "composite",
+    "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
     "segmented and labelled without labels (--preset demo or paper; docs/sequences.md).",
-    ("composite.experiment:run_composite",), "composite.results:composite_table", preset_names="COMPOSITE_PRESET_OF",
+    ("composite.experiment:run_composite",),
+    "composite.results:composite_table",
+    preset_names="COMPOSITE_PRESET_OF",
 )
 _experiment_command(
-    "tune", "Fair baselines: tune each init's layer time constants and latent learning rate on a validation split "
+    "tune",
+    "Fair baselines: tune each init's layer time constants and latent learning rate on a validation split "
     "carved from the fitted part (the same grid and epochs for all), then rerun intra with each init's choice "
     "beside the shared setting (runs intra if needed).",
-    ("tuning:run_tune",), "tuning_table",
+    ("tuning:run_tune",),
+    "tuning_table",
 )
 _experiment_command(
-    "predict", "Predict the rest of each motion from its beginning (10, 25, 50 % observed): primspace's starts "
+    "predict",
+    "Predict the rest of each motion from its beginning (10, 25, 50 % observed): primspace's starts "
     "against ProMP conditioning (given the labels), the nearest neighbour and the mean motion, on the intra split "
     "over seeds; judged in the simulator where it can (runs intra if needed; docs/predict.md).",
-    ("prediction:run_predict",), "predict_error_table",
+    ("prediction:run_predict",),
+    "predict_error_table",
 )
 _experiment_command(
-    "scene", "Act from the scene only (see the block, do a push): each evaluation sample's first frame and joints and "
+    "scene",
+    "Act from the scene only (see the block, do a push): each evaluation sample's first frame and joints and "
     "its primitive, named as a cluster of the fitted codes; success per primitive beside the primitive's mean motion "
     "and the reproduction from the whole motion, over seeds (runs intra if needed; needs images; docs/predict.md).",
-    ("scene_only:run_scene",), "scene_table",
+    ("scene_only:run_scene",),
+    "scene_table",
 )
 _experiment_command(
-    "all", "Every experiment in turn (intra, clustering, success, inter), then the report.",
-    ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"), None,
+    "all",
+    "Every experiment in turn (intra, clustering, success, inter), then the report.",
+    ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"),
+    None,
 )
 
 
@@ -214,8 +257,10 @@ def summarize_command(
     directory: Path = typer.Argument(..., help="An experiment directory."),
     name: str = typer.Option(..., "--name", help="The summary's name (its heading in the docs)."),
     command: Optional[str] = typer.Option(
-        None, "--command", help="The command(s) that made DIRECTORY, exactly as run (default: the ones its "
-        "experiment.json recorded)."),
+        None,
+        "--command",
+        help="The command(s) that made DIRECTORY, exactly as run (default: the ones its experiment.json recorded).",
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="The summary file, e.g. docs/results/NAME.json."),
     note: str = typer.Option("", "--note", help="What a reader must know (e.g. other jobs shared the cores)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier summary at OUT (nothing else)."),

@@ -43,37 +43,50 @@ MAX_LENGTH = 100_000
 _IMPORT_MARK = "primspace import"
 
 _SRC = typer.Argument(
-    None, help="A .npz file, a folder of .npy arrays, a folder of CSV files, a robomimic .hdf5 file, a LeRobot "
-    "data set folder (v3.0 or v2.x), or nothing / 'lasa' for --format lasa."
+    None,
+    help="A .npz file, a folder of .npy arrays, a folder of CSV files, a robomimic .hdf5 file, a LeRobot "
+    "data set folder (v3.0 or v2.x), or nothing / 'lasa' for --format lasa.",
 )
 _FORMAT = typer.Option(None, "--format", "-f", help="Input format; guessed from SRC when omitted.")
 _LENGTH = typer.Option(
-    ..., "--length", "-T", metavar="T", help=f"Resample every sequence to T steps, 2 to {MAX_LENGTH:,} (memory grows "
-    "with T: N x T x J x 8 bytes, and N x T x H x W x 3 with frames; 100,000 steps are 100 s at 1 kHz)."
+    ...,
+    "--length",
+    "-T",
+    metavar="T",
+    help=f"Resample every sequence to T steps, 2 to {MAX_LENGTH:,} (memory grows "
+    "with T: N x T x J x 8 bytes, and N x T x H x W x 3 with frames; 100,000 steps are 100 s at 1 kHz).",
 )
 _OUT = typer.Option(..., "--out", "-o", help="The HDF5 data set to write.")
 _JOINTS = typer.Option(
-    None, "--joints", help="robomimic: keys, comma-separated, concatenated in this order (required): obs keys, or "
-    "demo-level ones such as actions or states; lerobot: state features (default observation.state)."
+    None,
+    "--joints",
+    help="robomimic: keys, comma-separated, concatenated in this order (required): obs keys, or "
+    "demo-level ones such as actions or states; lerobot: state features (default observation.state).",
 )
 _IMAGES = typer.Option(
-    None, "--images", help="robomimic: the obs key of the frames (e.g. agentview_image); lerobot: the camera "
-    "feature (e.g. observation.images.top). npz and npy: frames are read from 'images'."
+    None,
+    "--images",
+    help="robomimic: the obs key of the frames (e.g. agentview_image); lerobot: the camera "
+    "feature (e.g. observation.images.top). npz and npy: frames are read from 'images'.",
 )
 _IMAGE_SIZE = typer.Option(
     None, "--image-size", help="HxW of the stored frames (default 48x64): resized with an anti-aliasing filter."
 )
 _IMAGE_FIT = typer.Option(
-    ImageFit.crop, "--image-fit", help="A frame of another aspect ratio: crop (centre crop, keeps the aspect "
-    "ratio), pad (black bars, keeps the whole scene) or stretch (distorts)."
+    ImageFit.crop,
+    "--image-fit",
+    help="A frame of another aspect ratio: crop (centre crop, keeps the aspect "
+    "ratio), pad (black bars, keeps the whole scene) or stretch (distorts).",
 )
 _EPISODES = typer.Option(None, "--episodes", help="lerobot: the episodes to import, e.g. 0,3,10-20 (default all).")
 _FILTER_KEY = typer.Option(
     None, "--filter-key", help="robomimic: import only the demos that mask/<KEY> names (a split such as train)."
 )
 _KEEP_PADDING = typer.Option(
-    False, "--keep-padding", help="npz and npy: keep trailing steps that repeat the last value exactly (by default "
-    "they are taken as padding when no lengths are given)."
+    False,
+    "--keep-padding",
+    help="npz and npy: keep trailing steps that repeat the last value exactly (by default "
+    "they are taken as padding when no lengths are given).",
 )
 _SHAPES = typer.Option(None, help="lasa: comma-separated shape names (default: 26 single-pattern shapes).")
 _VELOCITIES = typer.Option(False, help="lasa: add velocities vx, vy as joints.")
@@ -82,10 +95,19 @@ _OVERWRITE = typer.Option(False, help="Replace OUT if it is an earlier import ou
 
 @app.command("import")
 def import_command(
-    src: Optional[Path] = _SRC, format: Optional[ImportFormat] = _FORMAT, length: str = _LENGTH, out: str = _OUT,
-    joints: Optional[str] = _JOINTS, images: Optional[str] = _IMAGES, image_size: Optional[str] = _IMAGE_SIZE,
-    image_fit: ImageFit = _IMAGE_FIT, episodes: Optional[str] = _EPISODES, filter_key: Optional[str] = _FILTER_KEY,
-    keep_padding: bool = _KEEP_PADDING, shapes: Optional[str] = _SHAPES, velocities: bool = _VELOCITIES,
+    src: Optional[Path] = _SRC,
+    format: Optional[ImportFormat] = _FORMAT,
+    length: str = _LENGTH,
+    out: str = _OUT,
+    joints: Optional[str] = _JOINTS,
+    images: Optional[str] = _IMAGES,
+    image_size: Optional[str] = _IMAGE_SIZE,
+    image_fit: ImageFit = _IMAGE_FIT,
+    episodes: Optional[str] = _EPISODES,
+    filter_key: Optional[str] = _FILTER_KEY,
+    keep_padding: bool = _KEEP_PADDING,
+    shapes: Optional[str] = _SHAPES,
+    velocities: bool = _VELOCITIES,
     overwrite: bool = _OVERWRITE,
 ) -> None:
     """Import demonstrations (npz, npy folder, CSV folder, LASA, robomimic HDF5, LeRobot) into a MotionDataset file.
@@ -98,8 +120,15 @@ def import_command(
     source = None if src is None or str(src).lower() == "lasa" else src
     out = output_file(out, inputs=(source,), overwrite=overwrite, writer=_IMPORT_MARK)
     fmt = format.value if format is not None else _guess_format(src)
-    options = {"joints": joints, "images": images, "image_size": image_size, "episodes": episodes,
-               "filter_key": filter_key, "keep_padding": keep_padding, "image_fit": image_fit.value}
+    options = {
+        "joints": joints,
+        "images": images,
+        "image_size": image_size,
+        "episodes": episodes,
+        "filter_key": filter_key,
+        "keep_padding": keep_padding,
+        "image_fit": image_fit.value,
+    }
     _check_import_options(fmt, options)
     if fmt == "lasa":
         from primspace.data.importers import import_lasa
@@ -129,16 +158,21 @@ def _import_file(fmt: str, src: Path, length: int, options: dict):
         return importers.import_csv_folder(src, length)
     keys = name_list(options["joints"], "--joints") if options["joints"] is not None else None
     if fmt == "robomimic":
-        return importers.import_robomimic(src, length, joints=keys or (), images=options["images"], **frames,
-                                          filter_key=options["filter_key"])
+        return importers.import_robomimic(
+            src, length, joints=keys or (), images=options["images"], **frames, filter_key=options["filter_key"]
+        )
     episodes = None if options["episodes"] is None else importers.parse_episodes(options["episodes"])
-    return importers.import_lerobot(src, length, joints=keys or ("observation.state",), images=options["images"],
-                                    **frames, episodes=episodes)
+    return importers.import_lerobot(
+        src, length, joints=keys or ("observation.state",), images=options["images"], **frames, episodes=episodes
+    )
 
 
 #: The formats each option applies to (``--image-size`` and ``--image-fit`` also need frames).
 _OPTION_FORMATS = {
-    "joints": _FRAME_FORMATS, "images": _FRAME_FORMATS, "episodes": ("lerobot",), "filter_key": ("robomimic",),
+    "joints": _FRAME_FORMATS,
+    "images": _FRAME_FORMATS,
+    "episodes": ("lerobot",),
+    "filter_key": ("robomimic",),
     "keep_padding": _PADDED_FORMATS,
 }
 
@@ -150,11 +184,15 @@ def _check_import_options(fmt: str, options: dict) -> None:
             flag = "--" + name.replace("_", "-")
             raise UserError(f"{flag} applies to --format {' or '.join(formats)}, not {fmt}")
     no_frames = fmt in ("csv", "lasa") or (fmt in _FRAME_FORMATS and not options["images"])
-    for flag, value, default in (("--image-size", options["image_size"], None),
-                                 ("--image-fit", options["image_fit"], "crop")):
+    for flag, value, default in (
+        ("--image-size", options["image_size"], None),
+        ("--image-fit", options["image_fit"], "crop"),
+    ):
         if value != default and no_frames:
-            raise UserError(f"{flag} {value}: there are no frames to resize (--format {fmt}"
-                            f"{' without --images' if fmt in _FRAME_FORMATS else ''})")
+            raise UserError(
+                f"{flag} {value}: there are no frames to resize (--format {fmt}"
+                f"{' without --images' if fmt in _FRAME_FORMATS else ''})"
+            )
 
 
 def _parse_length(text: str) -> int:
@@ -163,9 +201,11 @@ def _parse_length(text: str) -> int:
     if not (value.isascii() and value.isdigit()):  # "1e30", "2.5", "-3", "²": not a count of steps
         raise UserError(f"--length {text}: must be a whole number of steps from 2 to {MAX_LENGTH:,}")
     if len(value) > 9 or int(value) > MAX_LENGTH:
-        raise UserError(f"--length {text}: at most {MAX_LENGTH:,} steps (100 s at 1 kHz); the arrays grow with T "
-                        "(N x T x J x 8 bytes, N x T x H x W x 3 with frames), a longer T is a typo that would "
-                        "run out of memory")
+        raise UserError(
+            f"--length {text}: at most {MAX_LENGTH:,} steps (100 s at 1 kHz); the arrays grow with T "
+            "(N x T x J x 8 bytes, N x T x H x W x 3 with frames), a longer T is a typo that would "
+            "run out of memory"
+        )
     if int(value) < 2:
         raise UserError(f"--length {text}: must be at least 2 steps (a first and a last)")
     return int(value)

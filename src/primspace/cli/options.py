@@ -11,8 +11,10 @@ from primspace.errors import UserError
 from primspace.train.config import TrainConfig
 
 #: ``--threads``'s help, the same wherever torch runs (the default is ``TrainConfig.threads``).
-THREADS_HELP = ("CPU threads of torch and of numpy's BLAS (more than the free cores make them wait on each other: "
-                "13x slower on a busy machine; raise it on a machine of your own).")
+THREADS_HELP = (
+    "CPU threads of torch and of numpy's BLAS (more than the free cores make them wait on each other: "
+    "13x slower on a busy machine; raise it on a machine of your own)."
+)
 DEVICE_HELP = "Where the model runs: auto (CUDA when present), cpu, cuda or cuda:N."
 
 

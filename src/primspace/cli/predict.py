@@ -30,8 +30,9 @@ def parse_amount(text: str, option: str, words: tuple[str, ...]):
         return float(text) if any(c in text for c in ".eE") else int(text)
     except ValueError:
         allowed = " or ".join(repr(w) for w in words)
-        raise UserError(f"{option} {text!r}: give a fraction with a decimal point (0.25), a number of steps (10) "
-                        f"or {allowed}") from None
+        raise UserError(
+            f"{option} {text!r}: give a fraction with a decimal point (0.25), a number of steps (10) or {allowed}"
+        ) from None
 
 
 def _shown_titles(dataset, indices) -> list[str]:
@@ -66,15 +67,28 @@ def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | Non
     data = dataset.subset(prediction.indices)
     predicted.save(tmp / "predicted.h5", writer=PREDICT_MARK)
     shown = list(range(min(_SHOWN, len(data))))
-    fig = plot_predictions(data.motor[shown], prediction.motor[shown], prediction.motor_observed[shown],
-                           titles=_shown_titles(dataset, prediction.indices[shown]), joint_names=data.joint_names,
-                           dt=data.dt)
+    fig = plot_predictions(
+        data.motor[shown],
+        prediction.motor[shown],
+        prediction.motor_observed[shown],
+        titles=_shown_titles(dataset, prediction.indices[shown]),
+        joint_names=data.joint_names,
+        dt=data.dt,
+    )
     save_figure(fig, tmp / "prediction.png", writer=PREDICT_MARK)
-    per_sample = {name: [None if not float(v) == float(v) else float(v) for v in values]
-                  for name, values in prediction.errors.items()}
-    result = {**prediction.summary(), "command": command, "indices": [int(i) for i in prediction.indices],
-              "source_ids": None if data.source_ids is None else [str(v) for v in data.source_ids],
-              "per_sample": per_sample, "success": judged, "writer": PREDICT_MARK}
+    per_sample = {
+        name: [None if not float(v) == float(v) else float(v) for v in values]
+        for name, values in prediction.errors.items()
+    }
+    result = {
+        **prediction.summary(),
+        "command": command,
+        "indices": [int(i) for i in prediction.indices],
+        "source_ids": None if data.source_ids is None else [str(v) for v in data.source_ids],
+        "per_sample": per_sample,
+        "success": judged,
+        "writer": PREDICT_MARK,
+    }
     (tmp / "result.json").write_text(json.dumps(result, indent=2))
     return result
 
@@ -83,38 +97,76 @@ def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | Non
 def predict_command(
     run: Path = typer.Argument(..., help="A fitted run directory (its weights are frozen)."),
     file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file with the motions to predict."),
-    out: Path = typer.Option(..., "--out", "-o", help="The folder to write (predicted.h5, result.json, prediction.png)."),
-    observe: Optional[str] = typer.Option(None, "--observe", help="Observed joints: a fraction of each motion's valid "
-                                          "steps (0.25, the default), a number of steps (10), or none (frames only)."),
-    observe_frames: Optional[str] = typer.Option(None, "--observe-frames", help="Observed frames: a fraction, a "
-                                                 "number of steps, first (the first frame) or none. Default: as --observe."),
-    init: Optional[str] = typer.Option(None, "--init", help="The predictor: mixture (the default and the best: the "
-                                       "posterior over the fitted codes, no gradient), or a start of gradient inference: "
-                                       "zero, random, projection, pca, calibrated, nearest."),
-    continuity: bool = typer.Option(True, "--continuity/--no-continuity", help="Remove the jump at the last observed "
-                                    "step (default on, as in Python)."),
-    epochs: int = typer.Option(100, "--epochs", help="Gradient starts: inference epochs on the observed entries (0: the "
-                               "start as it is)."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="The folder to write (predicted.h5, result.json, prediction.png)."
+    ),
+    observe: Optional[str] = typer.Option(
+        None,
+        "--observe",
+        help="Observed joints: a fraction of each motion's valid "
+        "steps (0.25, the default), a number of steps (10), or none (frames only).",
+    ),
+    observe_frames: Optional[str] = typer.Option(
+        None,
+        "--observe-frames",
+        help="Observed frames: a fraction, a number of steps, first (the first frame) or none. Default: as --observe.",
+    ),
+    init: Optional[str] = typer.Option(
+        None,
+        "--init",
+        help="The predictor: mixture (the default and the best: the "
+        "posterior over the fitted codes, no gradient), or a start of gradient inference: "
+        "zero, random, projection, pca, calibrated, nearest.",
+    ),
+    continuity: bool = typer.Option(
+        True,
+        "--continuity/--no-continuity",
+        help="Remove the jump at the last observed step (default on, as in Python).",
+    ),
+    epochs: int = typer.Option(
+        100, "--epochs", help="Gradient starts: inference epochs on the observed entries (0: the start as it is)."
+    ),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Samples of FILE to predict (.npy or text)."),
-    fitted: Optional[Path] = typer.Option(None, "--fitted-data", help="The data file the run was fitted on "
-                                          "(default: the run's own), read by mixture, nearest and calibrated."),
-    latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Gradient starts: the codes' learning rate "
-                                              "(default: the run's)."),
+    fitted: Optional[Path] = typer.Option(
+        None,
+        "--fitted-data",
+        help="The data file the run was fitted on (default: the run's own), read by mixture, nearest and calibrated.",
+    ),
+    latent_lr: Optional[float] = typer.Option(
+        None, "--latent-lr", help="Gradient starts: the codes' learning rate (default: the run's)."
+    ),
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of a random start (default: the run's)."),
     threads: Optional[int] = threads_option(),
-    online: bool = typer.Option(False, "--online", help="Steps arrive one at a time: --iterations inference steps "
-                                "after each, warm-started (predictive coding); result.json gets the latency per step "
-                                "and the error of the rest after each step."),
+    online: bool = typer.Option(
+        False,
+        "--online",
+        help="Steps arrive one at a time: --iterations inference steps "
+        "after each, warm-started (predictive coding); result.json gets the latency per step "
+        "and the error of the rest after each step.",
+    ),
     iterations: int = typer.Option(5, "--iterations", help="With --online: inference iterations per arriving step."),
-    scene: bool = typer.Option(False, "--scene", help="The scene only: the first frame and the first joints, and the "
-                               "primitive to perform (--primitive), searched in its cluster's affine subspace of the "
-                               "fitted codes. Not with --observe, --observe-frames, --init, --online."),
-    primitive: Optional[str] = typer.Option(None, "--primitive", help="With --scene: the primitive to perform, a label "
-                                            "name of the fitted data (push) or a cluster id (clusters numbered by "
-                                            "their first fitted demonstration; result.json lists their majority labels)."),
-    clusters: Optional[int] = typer.Option(None, "--primitives", "-k", help="With --scene: the number of primitives K, "
-                                           "the clusters of the fitted codes (default: the number of distinct labels of "
-                                           "the fitted data)."),
+    scene: bool = typer.Option(
+        False,
+        "--scene",
+        help="The scene only: the first frame and the first joints, and the "
+        "primitive to perform (--primitive), searched in its cluster's affine subspace of the "
+        "fitted codes. Not with --observe, --observe-frames, --init, --online.",
+    ),
+    primitive: Optional[str] = typer.Option(
+        None,
+        "--primitive",
+        help="With --scene: the primitive to perform, a label "
+        "name of the fitted data (push) or a cluster id (clusters numbered by "
+        "their first fitted demonstration; result.json lists their majority labels).",
+    ),
+    clusters: Optional[int] = typer.Option(
+        None,
+        "--primitives",
+        "-k",
+        help="With --scene: the number of primitives K, "
+        "the clusters of the fitted codes (default: the number of distinct labels of "
+        "the fitted data).",
+    ),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
 ) -> None:
@@ -123,6 +175,7 @@ def predict_command(
     from primspace.cluster.outputs import OutputKind, atomic_directory
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
+
     motor, frames = _amounts(scene, primitive, clusters, observe, observe_frames, init, online)
     check_outside_inputs(out, (file, indices, run, fitted))
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
@@ -131,8 +184,19 @@ def predict_command(
     configure_process(TrainConfig(threads=threads).validate())
     common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
     with atomic_directory(out, overwrite, kind) as tmp:
-        prediction, command = _predict(run, dataset, scene, primitive, clusters, motor, frames, init, continuity,
-                                       iterations if online else None, common)
+        prediction, command = _predict(
+            run,
+            dataset,
+            scene,
+            primitive,
+            clusters,
+            motor,
+            frames,
+            init,
+            continuity,
+            iterations if online else None,
+            common,
+        )
         command = {"run": str(run), "data": str(file), **command, "epochs": epochs}
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)
@@ -150,10 +214,24 @@ def _predict(run, dataset, scene: bool, primitive, clusters, motor, frames, init
         prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
         return prediction, {"scene": True, "primitive": primitive, "clusters": clusters}
     init = init or DEFAULT_PREDICTOR
-    prediction = predict(run, dataset, observe=motor, observe_frames=frames, init=init, continuity=continuity,
-                         online=online, progress=None, **common)
-    return prediction, {"observe": motor, "observe_frames": frames, "init": init, "continuity": continuity,
-                        "online": online}
+    prediction = predict(
+        run,
+        dataset,
+        observe=motor,
+        observe_frames=frames,
+        init=init,
+        continuity=continuity,
+        online=online,
+        progress=None,
+        **common,
+    )
+    return prediction, {
+        "observe": motor,
+        "observe_frames": frames,
+        "init": init,
+        "continuity": continuity,
+        "online": online,
+    }
 
 
 def _inputs(file: Path, indices: Path | None, fitted: Path | None) -> tuple:
@@ -182,8 +260,16 @@ def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames
         if primitive is not None or clusters is not None:
             raise UserError("--primitive and --primitives go with --scene (the scene-only mode)")
         return
-    given = [name for name, value in (("--observe", observe), ("--observe-frames", observe_frames), ("--init", init),
-                                      ("--online", online or None)) if value is not None]
+    given = [
+        name
+        for name, value in (
+            ("--observe", observe),
+            ("--observe-frames", observe_frames),
+            ("--init", init),
+            ("--online", online or None),
+        )
+        if value is not None
+    ]
     if given:
         raise UserError(f"--scene observes the first frame and the first joints only: do not give {', '.join(given)}")
     if primitive is None:
@@ -193,7 +279,9 @@ def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames
 def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
     """What ``primspace predict`` prints when it is done."""
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
-    line = f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
+    line = (
+        f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
+    )
     if "scene" in prediction.details:
         s = prediction.details["scene"]
         name = f" ({s['name']})" if s["name"] else ""

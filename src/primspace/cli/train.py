@@ -41,9 +41,11 @@ class LogTarget(str, Enum):
     tensorboard = "tensorboard"
 
 
-_LOG_TO_HELP = ("Also write each epoch's metrics (those of metrics.jsonl) as TensorBoard event files into the "
-                "folder DIR (new files only: an existing folder is fine; give each run its own). Needs "
-                "pip install 'primspace\\[tensorboard]'.")
+_LOG_TO_HELP = (
+    "Also write each epoch's metrics (those of metrics.jsonl) as TensorBoard event files into the "
+    "folder DIR (new files only: an existing folder is fine; give each run its own). Needs "
+    "pip install 'primspace\\[tensorboard]'."
+)
 
 
 def _log_to(value, inputs: tuple) -> tuple | None:
@@ -64,8 +66,10 @@ def _log_to_option():
 #: The mark ``reconstruct`` writes into its PNG (primspace.outputs).
 _RECONSTRUCT_MARK = "primspace reconstruct"
 
-_LOSS_REDUCTION_HELP = ("mean: per-element mean squared errors (motor and vision weigh alike); sum: the paper's "
-                        "summed squared errors per sample (docs/model.md). Learning rates are not rescaled.")
+_LOSS_REDUCTION_HELP = (
+    "mean: per-element mean squared errors (motor and vision weigh alike); sum: the paper's "
+    "summed squared errors per sample (docs/model.md). Learning rates are not rescaled."
+)
 
 
 def _run_summary(run) -> str:
@@ -81,8 +85,10 @@ def _run_summary(run) -> str:
     if run.kind == "fit" and run.calibration is not None:
         d = run.calibration.diagnostics()
         heldout = "n/a (under 3 samples)" if d["heldout_r2"] is None else f"{d['heldout_r2']:.3f}"
-        line += (f"\ncalibration (for --init calibrated): the fitted codes moved {100 * d['movement']:.1f}% from their "
-                 f"initial codes; R^2 of the initial codes {d['identity_r2']:.3f}, of the map (held out) {heldout}")
+        line += (
+            f"\ncalibration (for --init calibrated): the fitted codes moved {100 * d['movement']:.1f}% from their "
+            f"initial codes; R^2 of the initial codes {d['identity_r2']:.3f}, of the map (held out) {heldout}"
+        )
     return line
 
 
@@ -106,8 +112,9 @@ def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path
     return ds, (read_indices(indices, ds) if indices is not None else None)
 
 
-def _train_inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path], tc: TrainConfig,
-                  no_images: bool):
+def _train_inputs(
+    out: Path, file: Path, indices: Optional[Path], other: Optional[Path], tc: TrainConfig, no_images: bool
+):
     """:func:`_inputs`, refusing a run with no loss left: ``--motor-weight 0`` without the
     vision loss (``--no-images``, or data without images) trains on a loss that is 0."""
     ds, idx = _inputs(out, file, indices, other)
@@ -118,20 +125,34 @@ def _train_inputs(out: Path, file: Path, indices: Optional[Path], other: Optiona
 
 
 #: The train command's arguments that are TrainConfig fields of the same name.
-_TRAIN_FLAGS = ("epochs", "batch_size", "lr", "latent_lr", "final_lr_fraction", "motor_weight", "vision_weight",
-                "vision_frames", "loss_reduction", "code_smoothness", "seed", "device", "amp", "threads",
-                "checkpoint_every", "checkpoint_seconds") + ("stream_frames", "frames_memory_gb", "loader_workers",
-                                                             "micro_batches")
+_TRAIN_FLAGS = (
+    "epochs",
+    "batch_size",
+    "lr",
+    "latent_lr",
+    "final_lr_fraction",
+    "motor_weight",
+    "vision_weight",
+    "vision_frames",
+    "loss_reduction",
+    "code_smoothness",
+    "seed",
+    "device",
+    "amp",
+    "threads",
+    "checkpoint_every",
+    "checkpoint_seconds",
+) + ("stream_frames", "frames_memory_gb", "loader_workers", "micro_batches")
 
 #: The options of streaming and data-parallel training, shared by train and infer (docs/scale.md).
 _SCALE_HELP = {
     "stream_frames": "Read each batch's frames from the data file while training instead of loading them all "
-                     "first (the same numbers). Default: stream when they would not fit --frames-memory-gb.",
+    "first (the same numbers). Default: stream when they would not fit --frames-memory-gb.",
     "frames_memory_gb": "Memory the loaded frames may take, all processes of a machine together (default: half "
-                        "of the device's memory).",
+    "of the device's memory).",
     "loader_workers": "Processes that read and decode streamed frames (0: the training process).",
     "micro_batches": "Split each batch into this many parts computed one after another (less memory; the numbers "
-                     "of as many torchrun processes).",
+    "of as many torchrun processes).",
 }
 
 
@@ -141,10 +162,12 @@ def _scale_options(defaults: TrainConfig | None):
     return {
         "stream_frames": typer.Option(None, "--stream-frames/--load-frames", help=_SCALE_HELP["stream_frames"]),
         "frames_memory_gb": typer.Option(None, "--frames-memory-gb", help=_SCALE_HELP["frames_memory_gb"]),
-        "loader_workers": typer.Option(None if d is None else d.loader_workers, "--loader-workers",
-                                       help=_SCALE_HELP["loader_workers"]),
-        "micro_batches": typer.Option(None if d is None else d.micro_batches, "--micro-batches",
-                                      help=_SCALE_HELP["micro_batches"]),
+        "loader_workers": typer.Option(
+            None if d is None else d.loader_workers, "--loader-workers", help=_SCALE_HELP["loader_workers"]
+        ),
+        "micro_batches": typer.Option(
+            None if d is None else d.micro_batches, "--micro-batches", help=_SCALE_HELP["micro_batches"]
+        ),
     }
 
 
@@ -169,7 +192,7 @@ _TRAIN_INIT_HELP = "How the latent codes start (calibrated: only with --weights-
 #: The help of train's options that are plain TrainConfig fields.
 _HELP = {
     "seed": "Seeds the weights, the projection P, random codes and the batch order (same seed, same machine: same "
-            "numbers).",
+    "numbers).",
     "batch_size": "Samples per mini-batch (every code is updated once per epoch, the weights once per batch).",
     "motor_weight": "Weight of the joints' loss.",
     "vision_weight": "Weight of the frames' loss (0: no image head is trained).",
@@ -189,42 +212,55 @@ def train_command(
     lr: float = typer.Option(_TC.lr, "--lr", help="Learning rate of the weights."),
     latent_lr: float = typer.Option(_TC.latent_lr, "--latent-lr", help="Learning rate of the latent codes."),
     final_lr_fraction: float = typer.Option(
-        _TC.final_lr_fraction, "--final-lr-fraction",
+        _TC.final_lr_fraction,
+        "--final-lr-fraction",
         help="Cosine decay of both learning rates to this fraction by the last epoch (1: constant).",
     ),
     motor_weight: float = typer.Option(_TC.motor_weight, "--motor-weight", help=_HELP["motor_weight"]),
     vision_weight: float = typer.Option(_TC.vision_weight, "--vision-weight", help=_HELP["vision_weight"]),
     vision_frames: Optional[int] = typer.Option(
-        _TC.vision_frames, "--vision-frames",
+        _TC.vision_frames,
+        "--vision-frames",
         help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
     ),
     loss_reduction: LossReduction = typer.Option(_TC.loss_reduction, "--loss-reduction", help=_LOSS_REDUCTION_HELP),
     code_window: Optional[int] = typer.Option(
-        None, "--code-window",
+        None,
+        "--code-window",
         help="One code per window of W steps (a sequence of codes, for long demonstrations of several primitives).",
     ),
     code_smoothness: float = typer.Option(
-        _TC.code_smoothness, "--code-smoothness",
+        _TC.code_smoothness,
+        "--code-smoothness",
         help="With --code-window: weight of the total variation of consecutive codes (piecewise-constant codes).",
     ),
     layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
     taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
-    image_channels: str = typer.Option(_csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."),
+    image_channels: str = typer.Option(
+        _csv(_MC.image_channels), "--image-channels", help="Channels of the deconvolution stack."
+    ),
     seed: int = typer.Option(_TC.seed, "--seed", help=_HELP["seed"]),
     device: str = device_option(),
     amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
     threads: Optional[int] = threads_option(),
-    checkpoint_every: Optional[int] = typer.Option(_TC.checkpoint_every, "--checkpoint-every", help="Also checkpoint every N epochs."),
-    checkpoint_seconds: float = typer.Option(_TC.checkpoint_seconds, "--checkpoint-seconds", help="Checkpoint at least this often."),
+    checkpoint_every: Optional[int] = typer.Option(
+        _TC.checkpoint_every, "--checkpoint-every", help="Also checkpoint every N epochs."
+    ),
+    checkpoint_seconds: float = typer.Option(
+        _TC.checkpoint_seconds, "--checkpoint-seconds", help="Checkpoint at least this often."
+    ),
     weights_from: Optional[Path] = typer.Option(
-        None, "--weights-from",
+        None,
+        "--weights-from",
         help="Start from this run's weights, scaler and initialiser (its model config: model flags are ignored).",
     ),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
     log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
-    stream_frames: Optional[bool] = _TRAIN_SCALE["stream_frames"], loader_workers: int = _TRAIN_SCALE["loader_workers"],
-    frames_memory_gb: Optional[float] = _TRAIN_SCALE["frames_memory_gb"], micro_batches: int = _TRAIN_SCALE["micro_batches"],
+    stream_frames: Optional[bool] = _TRAIN_SCALE["stream_frames"],
+    loader_workers: int = _TRAIN_SCALE["loader_workers"],
+    frames_memory_gb: Optional[float] = _TRAIN_SCALE["frames_memory_gb"],
+    micro_batches: int = _TRAIN_SCALE["micro_batches"],
 ) -> None:
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly).
 
@@ -235,13 +271,31 @@ def train_command(
 
     given = dict(locals()) | {"loss_reduction": loss_reduction.value}
     log_to = _log_to(log_to, (file, indices, weights_from))
-    mc = replace(_MC, **{k: given[k] for k in ("latent_dim", "code_window")}, layer_sizes=int_list(layers, "--layers"),
-                 taus=float_list(taus, "--taus"), image_channels=int_list(image_channels, "--image-channels"))
+    mc = replace(
+        _MC,
+        **{k: given[k] for k in ("latent_dim", "code_window")},
+        layer_sizes=int_list(layers, "--layers"),
+        taus=float_list(taus, "--taus"),
+        image_channels=int_list(image_channels, "--image-channels"),
+    )
     tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
     ds, idx = _train_inputs(out, file, indices, weights_from, tc, no_images)
-    _launch(tc, lambda: fit(ds, out, model_config=None if weights_from is not None else mc, train_config=tc,
-                            init=init.value, indices=idx, resume=resume, overwrite=overwrite, weights_from=weights_from,
-                            images=False if no_images else None, log_to=log_to))
+    _launch(
+        tc,
+        lambda: fit(
+            ds,
+            out,
+            model_config=None if weights_from is not None else mc,
+            train_config=tc,
+            init=init.value,
+            indices=idx,
+            resume=resume,
+            overwrite=overwrite,
+            weights_from=weights_from,
+            images=False if no_images else None,
+            log_to=log_to,
+        ),
+    )
 
 
 @app.command("infer")
@@ -251,16 +305,18 @@ def infer_command(
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create for the new codes."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs of code optimisation."),
     init: Optional[LatentInit] = typer.Option(
-        None, "--init",
+        None,
+        "--init",
         help="How the codes start (default: the run's). calibrated: the run's projection mapped by its ridge "
-             "calibration onto where its fitted codes ended (runs fitted with projection or pca init).",
+        "calibration onto where its fitted codes ended (runs fitted with projection or pca init).",
     ),
     indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to use (.npy or text)."),
     batch_size: Optional[int] = typer.Option(None, "--batch-size", help="Default: the run's."),
     latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
     loss_reduction: Optional[LossReduction] = typer.Option(
-        None, "--loss-reduction", help="Default: the run's. " + _LOSS_REDUCTION_HELP),
+        None, "--loss-reduction", help="Default: the run's. " + _LOSS_REDUCTION_HELP
+    ),
     device: str = device_option(),
     amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
     threads: Optional[int] = threads_option(),
@@ -279,17 +335,34 @@ def infer_command(
     log_to = _log_to(log_to, (file, indices, run))
     overrides = {"device": device, "amp": amp, "threads": threads}
     reduction = None if loss_reduction is None else loss_reduction.value
-    for name, value in (("batch_size", batch_size), ("latent_lr", latent_lr), ("seed", seed),
-                        ("loss_reduction", reduction), ("stream_frames", stream_frames),
-                        ("frames_memory_gb", frames_memory_gb), ("loader_workers", loader_workers),
-                        ("micro_batches", micro_batches)):
+    for name, value in (
+        ("batch_size", batch_size),
+        ("latent_lr", latent_lr),
+        ("seed", seed),
+        ("loss_reduction", reduction),
+        ("stream_frames", stream_frames),
+        ("frames_memory_gb", frames_memory_gb),
+        ("loader_workers", loader_workers),
+        ("micro_batches", micro_batches),
+    ):
         if value is not None:
             overrides[name] = value
     ds, idx = _inputs(out, file, indices, run)
-    _launch(replace(_TC, device=device, amp=amp, threads=threads).validate(), lambda: infer(
-        run, ds, out, epochs=epochs, init=None if init is None else init.value, indices=idx,
-        resume=resume, overwrite=overwrite, log_to=log_to, **overrides,
-    ))
+    _launch(
+        replace(_TC, device=device, amp=amp, threads=threads).validate(),
+        lambda: infer(
+            run,
+            ds,
+            out,
+            epochs=epochs,
+            init=None if init is None else init.value,
+            indices=idx,
+            resume=resume,
+            overwrite=overwrite,
+            log_to=log_to,
+            **overrides,
+        ),
+    )
 
 
 @app.command("reconstruct")
@@ -316,16 +389,30 @@ def reconstruct_command(
     images = None if truth.images is None else np.asarray(truth.images)[0]
     primitive = None if truth.labels is None or truth.labels[0] < 0 else truth.label_names[truth.labels[0]]
     fig = plot_reconstruction(
-        truth.motor[0], motor[0], images=images, generated_images=None if generated is None else generated[0],
-        joint_names=truth.joint_names, dt=truth.dt, n_frames=frames,
+        truth.motor[0],
+        motor[0],
+        images=images,
+        generated_images=None if generated is None else generated[0],
+        joint_names=truth.joint_names,
+        dt=truth.dt,
+        n_frames=frames,
         title=reconstruction_title(sample, primitive, trained.kind, trained.init, trained.model_config.latent_dim),
     )
     save_figure(fig, out, writer=_RECONSTRUCT_MARK, overwrite=overwrite)
     typer.echo(f"wrote {out}")
 
 
-def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: int, overwrite: bool, min_frames: int = 1,
-               *, writer: str):
+def run_sample(
+    run: Path,
+    sample: int,
+    out: str,
+    data: Optional[Path],
+    frames: int,
+    overwrite: bool,
+    min_frames: int = 1,
+    *,
+    writer: str,
+):
     """What ``reconstruct`` and ``animate`` check and load: the output (``--overwrite``
     replaces only an earlier output marked by ``writer``), ``--frames``, the run, its data
     file (``--data`` or the run's) and that ``sample`` is one the run used.
@@ -348,8 +435,10 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     if path is None:
         raise UserError(f"{run}: the run does not record its data file; pass --data FILE")
     if data is None and not Path(path).is_file():
-        raise UserError(f"{path}: no such file: it is the data file run {run} was fitted on (recorded in its "
-                        "config.json); if it moved, pass --data NEW_PATH")
+        raise UserError(
+            f"{path}: no such file: it is the data file run {run} was fitted on (recorded in its "
+            "config.json); if it moved, pass --data NEW_PATH"
+        )
     # the data file is an input even when it is the run's (not given as --data): never written over
     out = output_file(out, inputs=(run, path), overwrite=overwrite, writer=writer)
     ds = MotionDataset.load(path)
@@ -357,8 +446,10 @@ def run_sample(run: Path, sample: int, out: str, data: Optional[Path], frames: i
     rows = np.flatnonzero(trained.indices == int(sample))
     if rows.size == 0:
         shown = ", ".join(map(str, trained.indices[:5])) + (" ..." if len(trained.indices) > 5 else "")
-        raise UserError(f"sample {sample} is not one of the run's {len(trained.indices)} samples ({shown}; a sample "
-                        f"is numbered by its index in the data file, {path})")
+        raise UserError(
+            f"sample {sample} is not one of the run's {len(trained.indices)} samples ({shown}; a sample "
+            f"is numbered by its index in the data file, {path})"
+        )
     if not 0 <= int(sample) < len(ds):
         raise UserError(f"sample {sample} out of range for {len(ds)} samples")
     return out, trained, ds, int(rows[0])

@@ -118,8 +118,12 @@ class AutoTauChoice:
     def to_dict(self) -> dict:
         """``criterion``, ``r2_target`` (chosen), ``grid`` and ``scores`` (NaN as None)."""
         scores = [None if not np.isfinite(s) else float(s) for s in self.scores]
-        return {"criterion": self.criterion, "r2_target": self.r2_target, "grid": [float(g) for g in self.grid],
-                "scores": scores}
+        return {
+            "criterion": self.criterion,
+            "r2_target": self.r2_target,
+            "grid": [float(g) for g in self.grid],
+            "scores": scores,
+        }
 
 
 def choose_tau(
@@ -168,11 +172,19 @@ def choose_tau(
         if ranks[i] == 0:
             continue
         if criterion != "stability":
-            scores[i] = eigengap_score(svd, tau, n_clusters, affinity=affinity, spectral=spectral, random_state=seed,
-                                       relative=criterion == "relative_eigengap")
+            scores[i] = eigengap_score(
+                svd,
+                tau,
+                n_clusters,
+                affinity=affinity,
+                spectral=spectral,
+                random_state=seed,
+                relative=criterion == "relative_eigengap",
+            )
         else:
-            scores[i] = stability_score(svd, tau, n_clusters, affinity=affinity, spectral=spectral, n_init=n_init,
-                                        random_state=seed)
+            scores[i] = stability_score(
+                svd, tau, n_clusters, affinity=affinity, spectral=spectral, n_init=n_init, random_state=seed
+            )
     if not np.any(np.isfinite(scores)):
         raise UserError("no tau of the auto grid keeps a component of Q*: the data are constant")
     best = np.nanmax(scores)
@@ -181,22 +193,38 @@ def choose_tau(
     return AutoTauChoice(criterion, grid, taus, r2, ranks, scores, index)
 
 
-def top_eigenvalues(svd: SelfRepresentationSVD, tau: float, count: int, *, affinity: str = "squared",
-                    spectral: str = "auto", random_state=None) -> np.ndarray:
+def top_eigenvalues(
+    svd: SelfRepresentationSVD,
+    tau: float,
+    count: int,
+    *,
+    affinity: str = "squared",
+    spectral: str = "auto",
+    random_state=None,
+) -> np.ndarray:
     """The ``count`` largest eigenvalues of ``D^-1/2 W D^-1/2`` at ``tau``, descending; those
     at rounding level (or beyond the number of points) as 0."""
     factor = svd.factor(tau)
     n = factor.shape[0]
     method = choose_spectral_method(n, factor.shape[1], affinity, spectral)
-    values = spectral_embedding(factor, min(count, n), affinity=affinity, method=method,
-                                random_state=random_state).eigenvalues
+    values = spectral_embedding(
+        factor, min(count, n), affinity=affinity, method=method, random_state=random_state
+    ).eigenvalues
     padded = np.zeros(count)
     padded[: min(values.size, count)] = values[:count]
     return padded
 
 
-def eigengap_score(svd: SelfRepresentationSVD, tau: float, n_clusters: int, *, affinity: str = "squared",
-                   spectral: str = "auto", random_state=None, relative: bool = False) -> float:
+def eigengap_score(
+    svd: SelfRepresentationSVD,
+    tau: float,
+    n_clusters: int,
+    *,
+    affinity: str = "squared",
+    spectral: str = "auto",
+    random_state=None,
+    relative: bool = False,
+) -> float:
     """``lambda_k - lambda_{k+1}`` of ``D^-1/2 W D^-1/2`` at ``tau``, or with ``relative``
     that divided by ``1 - lambda_{k+1}`` (0 where ``lambda_{k+1}`` is 1 to rounding)."""
     if n_clusters >= svd.n_samples:
@@ -209,9 +237,18 @@ def eigengap_score(svd: SelfRepresentationSVD, tau: float, n_clusters: int, *, a
     return gap / rest if rest > _FLAT else 0.0
 
 
-def stability_score(svd: SelfRepresentationSVD, tau: float, n_clusters: int, *, affinity: str = "squared",
-                    spectral: str = "auto", n_init: int = 20, random_state=None,
-                    n_subsamples: int = AUTO_SUBSAMPLES, fraction: float = AUTO_SUBSAMPLE_FRACTION) -> float:
+def stability_score(
+    svd: SelfRepresentationSVD,
+    tau: float,
+    n_clusters: int,
+    *,
+    affinity: str = "squared",
+    spectral: str = "auto",
+    n_init: int = 20,
+    random_state=None,
+    n_subsamples: int = AUTO_SUBSAMPLES,
+    fraction: float = AUTO_SUBSAMPLE_FRACTION,
+) -> float:
     """Mean ARI between all points' labels and each subsample's own labels, at ``tau``.
 
     A subsample is clustered on its block of the same ``Q*`` (rows of ``F``), so it tests the

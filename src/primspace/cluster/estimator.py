@@ -220,8 +220,15 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
             del X
             choice = None
             if tau_option[1] == AUTO:
-                choice = choose_tau(svd, self.n_clusters, criterion=self.auto_criterion, affinity=self.affinity,
-                                    spectral=self.spectral, n_init=self.n_init, random_state=self.random_state)
+                choice = choose_tau(
+                    svd,
+                    self.n_clusters,
+                    criterion=self.auto_criterion,
+                    affinity=self.affinity,
+                    spectral=self.spectral,
+                    n_init=self.n_init,
+                    random_state=self.random_state,
+                )
             result = cluster_at_tau(
                 svd,
                 resolve_tau(svd, *tau_option) if choice is None else choice.tau,
@@ -349,7 +356,6 @@ def small_problem_threads(n_samples: int):
             _single_thread.active = False
 
 
-
 #: The ``r2_target`` that chooses tau without labels (:mod:`primspace.cluster.auto`).
 AUTO = "auto"
 
@@ -357,7 +363,9 @@ AUTO = "auto"
 def tau_option_from(tau, tau_relative, r2_target) -> tuple[str, float | str]:
     """The one tau option given, as ``(kind, value)``; ``("r2_target", 0.99)`` if none,
     ``("r2_target", "auto")`` for the label-free choice."""
-    given = [(k, v) for k, v in (("tau", tau), ("tau_relative", tau_relative), ("r2_target", r2_target)) if v is not None]
+    given = [
+        (k, v) for k, v in (("tau", tau), ("tau_relative", tau_relative), ("r2_target", r2_target)) if v is not None
+    ]
     if len(given) > 1:
         raise UserError(f"give at most one of tau, tau_relative, r2_target; got {', '.join(k for k, _ in given)}")
     kind, value = given[0] if given else ("r2_target", DEFAULT_R2_TARGET)

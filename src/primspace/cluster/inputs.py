@@ -100,7 +100,9 @@ def load_points(path: str | os.PathLike, labels: str | os.PathLike | None = None
     elif suffix == ".npy":
         X = _read_npy(path, "latents")
         if X.ndim != 2:
-            raise DataError(f"must be a 2-D (N, q) array of points as rows, got shape {X.shape}", path=path, field="latents")
+            raise DataError(
+                f"must be a 2-D (N, q) array of points as rows, got shape {X.shape}", path=path, field="latents"
+            )
         if X.dtype.kind not in "fiu" or X.dtype == bool:
             raise DataError(f"must hold numbers, got {X.dtype}", path=path, field="latents")
         X = X.astype(np.float64)

@@ -295,7 +295,7 @@ def self_representation_svd(X, affine: bool = True, ones_weight: float = 1.0) ->
     mean = X.mean(axis=0)
     total = 0.0
     for start in range(0, n, _GRAM_SVD_ROW_BLOCK):  # blockwise: no n x d temporary
-        centred = X[start:start + _GRAM_SVD_ROW_BLOCK] - mean
+        centred = X[start : start + _GRAM_SVD_ROW_BLOCK] - mean
         total += float(np.einsum("ij,ij->", centred, centred))
     if n >= 10 * p and n * p >= _GRAM_SVD_MIN_ENTRIES:
         lam, u, v = _svd_by_gram(X, affine, w)

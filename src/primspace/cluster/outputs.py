@@ -107,7 +107,9 @@ def is_cluster_output(path: Path) -> bool:
 
 
 @contextlib.contextmanager
-def atomic_directory(path: str | os.PathLike, overwrite: bool = False, kind: OutputKind = CLUSTER_OUTPUT) -> Iterator[Path]:
+def atomic_directory(
+    path: str | os.PathLike, overwrite: bool = False, kind: OutputKind = CLUSTER_OUTPUT
+) -> Iterator[Path]:
     """Yield a temporary directory beside ``path``; on success its files land in ``path``.
 
     :func:`primspace.files.atomic_directory` with this module's rules

@@ -41,8 +41,14 @@ __all__ = ["ClusteringResult", "cluster_points", "clustering_figure", "sweep_fig
 SINGULAR_VALUES_SHOWN = 100
 
 _ARRAYS = ("labels", "labels_true", "figure_indices", "figure_factor")
-_DTYPES = {"labels": np.int64, "labels_true": np.int64, "figure_indices": np.int64, "figure_factor": np.float64,
-           "eigenvalues": np.float64, "singular_values": np.float64}
+_DTYPES = {
+    "labels": np.int64,
+    "labels_true": np.int64,
+    "figure_indices": np.int64,
+    "figure_factor": np.float64,
+    "eigenvalues": np.float64,
+    "singular_values": np.float64,
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,7 +152,9 @@ class ClusteringResult:
             "seed": self.seed if self.seed is None or isinstance(self.seed, (int, np.integer)) else repr(self.seed),
             "seconds": round(self.seconds, 3),
             "scores": self.scores,
-            "sweep": None if self.sweep is None else [{k: v for k, v in r.items() if k != "labels"} for r in self.sweep],
+            "sweep": None
+            if self.sweep is None
+            else [{k: v for k, v in r.items() if k != "labels"} for r in self.sweep],
         }
         if include_arrays:
             out["label_names"] = self.label_names
@@ -158,7 +166,9 @@ class ClusteringResult:
         (the scores None without true labels); ``auto_criterion`` too when tau was chosen
         without labels."""
         scores = self.scores or {}
-        row = {"tau": self.tau, "r2": self.r2, "rank": self.rank} | {k: scores.get(k) for k in ("accuracy", "nmi", "ari")}
+        row = {"tau": self.tau, "r2": self.r2, "rank": self.rank} | {
+            k: scores.get(k) for k in ("accuracy", "nmi", "ari")
+        }
         return row if self.auto is None else row | {"auto_criterion": self.auto["criterion"]}
 
     def arrays(self) -> dict:

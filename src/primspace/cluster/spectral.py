@@ -141,8 +141,8 @@ def degrees_from_factor(factor) -> np.ndarray:
     gram = f.T @ f
     d = np.empty(f.shape[0])
     for start in range(0, f.shape[0], _OPERATOR_BLOCK_ROWS):
-        fb = f[start:start + _OPERATOR_BLOCK_ROWS]
-        d[start:start + fb.shape[0]] = np.einsum("ij,ij->i", fb @ gram, fb)
+        fb = f[start : start + _OPERATOR_BLOCK_ROWS]
+        d[start : start + fb.shape[0]] = np.einsum("ij,ij->i", fb @ gram, fb)
     return d
 
 
@@ -295,7 +295,7 @@ def _psi_blocks(f: np.ndarray, inv_sqrt_degrees: np.ndarray):
         out = np.empty((m, stop - start))
         offset = 0
         for a in range(r):
-            rows = out[offset:offset + r - a]
+            rows = out[offset : offset + r - a]
             np.multiply(ft[a:], ft[a], out=rows)
             rows[1:] *= root2
             offset += r - a

@@ -83,10 +83,17 @@ def sweep(
         raise UserError(f"give at most one grid; got {', '.join(k for k, _ in grids)}")
     kind, grid = grids[0] if grids else ("r2_target", R2_GRID)
     estimator = LowRankSubspaceClustering(
-        n_clusters, affine=affine, affinity=affinity, ones_weight=ones_weight, spectral=spectral, n_init=n_init,
+        n_clusters,
+        affine=affine,
+        affinity=affinity,
+        ones_weight=ones_weight,
+        spectral=spectral,
+        n_init=n_init,
         random_state=random_state,
     )
-    return tau_sweep(estimator, X, param_name=kind, param_range=grid, labels_true=labels_true, return_labels=return_labels)
+    return tau_sweep(
+        estimator, X, param_name=kind, param_range=grid, labels_true=labels_true, return_labels=return_labels
+    )
 
 
 def tau_sweep(
@@ -164,8 +171,14 @@ def _row(estimator, X, svd, param_name, value, labels_true, return_labels) -> di
     row = {"grid": param_name, "value": value}
     tau = resolve_tau(svd, param_name, value)
     if svd.rank(tau) == 0:  # the estimator refuses Q* = 0; the table records it
-        return {**row, "tau": tau, "tau_relative": tau * svd.top_singular_value**2, "r2": svd.r2(tau), "rank": 0,
-                "note": _EMPTY_NOTE}
+        return {
+            **row,
+            "tau": tau,
+            "tau_relative": tau * svd.top_singular_value**2,
+            "r2": svd.r2(tau),
+            "rank": 0,
+            "note": _EMPTY_NOTE,
+        }
     model = clone(estimator).set_params(**{k: (value if k == param_name else None) for k in TAU_PARAMETERS})
     if isinstance(estimator.random_state, np.random.RandomState):
         model.set_params(random_state=estimator.random_state)  # one stream through the grid, not a copy per fit

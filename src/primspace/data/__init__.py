@@ -12,7 +12,12 @@ Modules: :mod:`~primspace.data.schema` (the fields of a data set, once),
 
 from primspace.data.dataset import DatasetWriter, LazyImages, MotionDataset
 from primspace.data.importers import (
-    import_csv_folder, import_lasa, import_lerobot, import_npy_folder, import_npz, import_robomimic,
+    import_csv_folder,
+    import_lasa,
+    import_lerobot,
+    import_npy_folder,
+    import_npz,
+    import_robomimic,
 )
 from primspace.data.indices import check_indices, read_indices
 from primspace.data.resample import resample

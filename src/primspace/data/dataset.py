@@ -234,7 +234,8 @@ class MotionDataset:
         counts = Counter(int(v) for v in self.step_labels[self.step_labels >= 0])
         return {
             "lengths": [int(self.lengths.min()), int(self.lengths.max())],
-            "segments": [int(segments.min()), int(segments.max())], "n_segments": int(segments.sum()),
+            "segments": [int(segments.min()), int(segments.max())],
+            "n_segments": int(segments.sum()),
             "steps_per_label": {name: counts.get(i, 0) for i, name in enumerate(self.label_names)},
         }
 
@@ -285,6 +286,9 @@ def _file_indices(value, n: int, path) -> np.ndarray:
         return np.arange(n, dtype=np.int64)
     out = np.asarray(value)
     if out.shape != (n,) or (out.size and (out.dtype.kind not in "iu" or out.min() < 0)):
-        raise DataError(f"must be {n} non-negative integers (one per sample), got shape {out.shape}",
-                        path=path, field="file_indices")
+        raise DataError(
+            f"must be {n} non-negative integers (one per sample), got shape {out.shape}",
+            path=path,
+            field="file_indices",
+        )
     return out.astype(np.int64)

@@ -213,6 +213,8 @@ def read_samples(dset: h5py.Dataset, rows, path, field_name: str = "images") -> 
         except OSError as exc:
             raise DataError(
                 f"cannot be read, its stored data is corrupted or truncated ({first_line(exc)})",
-                path=path, field=field_name, index=int(k),
+                path=path,
+                field=field_name,
+                index=int(k),
             ) from None
     raise DataError(f"cannot be read, the file may be corrupted ({cause})", path=path, field=field_name) from None

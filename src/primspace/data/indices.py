@@ -99,7 +99,8 @@ def _check_from_file(arr: np.ndarray, n_samples, source, data_path, unique: bool
             where = f" of {data_path}" if data_path is not None else ""
             raise DataError(
                 f"sample {int(bad[0])} is out of range for the {n_samples} samples{where}",
-                path=source, field="indices",
+                path=source,
+                field="indices",
             )
     return arr.astype(np.int64)
 
@@ -151,7 +152,9 @@ def read_indices(path: str | os.PathLike, dataset=None) -> np.ndarray:
             tokens = [t for line in text.splitlines() for t in line.split("#", 1)[0].replace(",", " ").split()]
             arr = np.array([int(t) for t in tokens], dtype=np.int64)
     except (ValueError, OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"cannot read sample indices ({str(exc).splitlines()[0]})", path=path, field="indices") from None
+        raise DataError(
+            f"cannot read sample indices ({str(exc).splitlines()[0]})", path=path, field="indices"
+        ) from None
     if dataset is None:
         return check_indices(arr, None, source=path)
     return check_indices(arr, len(dataset), source=path, data_path=dataset.path)

@@ -95,9 +95,7 @@ def _resample_list(seqs: Sequence, length: int, periodic: bool) -> np.ndarray:
             n_joints = a.shape[1]
             out = np.empty((len(seqs), length, n_joints))
         elif a.shape[1] != n_joints:
-            raise DataError(
-                f"has {a.shape[1]} joints, the first sequence has {n_joints}", field="motor", index=i
-            )
+            raise DataError(f"has {a.shape[1]} joints, the first sequence has {n_joints}", field="motor", index=i)
         try:
             out[i] = _resample_batch(a[None], length, periodic)[0]
         except DataError as exc:  # the batch of one says sample 0: it is sample i
@@ -121,7 +119,8 @@ def _resample_batch(x: np.ndarray, length: int, periodic: bool) -> np.ndarray:
             value = np.format_float_scientific(x[tuple(bad)], precision=6, trim="-")
             raise DataError(
                 f"value {value} exceeds the float64 range (step {int(bad[1])}, joint {int(bad[2])})",
-                field="motor", index=int(bad[0]),
+                field="motor",
+                index=int(bad[0]),
             )
     x = np.asarray(x, dtype=np.float64)
     n, t0, _ = x.shape

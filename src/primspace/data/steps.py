@@ -13,8 +13,14 @@ import numpy as np
 
 from primspace.errors import DataError
 
-__all__ = ["STEP_FIELDS", "valid_steps", "coerce_steps", "validate_lengths", "validate_step_labels",
-           "validate_step_segments"]
+__all__ = [
+    "STEP_FIELDS",
+    "valid_steps",
+    "coerce_steps",
+    "validate_lengths",
+    "validate_step_labels",
+    "validate_step_segments",
+]
 
 
 def valid_steps(lengths, length: int) -> np.ndarray:
@@ -60,8 +66,12 @@ def _step_shape(ds, name: str) -> np.ndarray:
     if wrong.size:
         i = int(wrong[0])
         step = int(np.flatnonzero((value[i] == -1) == valid[i])[0])
-        raise DataError(f"step {step}: -1 must mark exactly the steps from lengths[{i}] = {int(ds.lengths[i])} on",
-                        path=p, field=name, index=i)
+        raise DataError(
+            f"step {step}: -1 must mark exactly the steps from lengths[{i}] = {int(ds.lengths[i])} on",
+            path=p,
+            field=name,
+            index=i,
+        )
     return valid
 
 
@@ -72,7 +82,9 @@ def validate_step_labels(ds) -> None:
     if bad.size:
         i = int(bad[0])
         value = int(ds.step_labels[i][valid[i] & ((ds.step_labels[i] < 0) | (ds.step_labels[i] >= k))][0])
-        raise DataError(f"label {value} out of range [0, {k - 1}] ({k} label names)", path=ds.path, field="step_labels", index=i)
+        raise DataError(
+            f"label {value} out of range [0, {k - 1}] ({k} label names)", path=ds.path, field="step_labels", index=i
+        )
 
 
 def validate_step_segments(ds) -> None:
@@ -83,5 +95,6 @@ def validate_step_segments(ds) -> None:
     bad = np.flatnonzero((seg[:, 0] != 0) | jumps.any(axis=1))
     if bad.size:
         i = int(bad[0])
-        raise DataError("segment indices must start at 0 and grow by 0 or 1 per step", path=ds.path,
-                        field="step_segments", index=i)
+        raise DataError(
+            "segment indices must start at 0 and grow by 0 or 1 per step", path=ds.path, field="step_segments", index=i
+        )

@@ -22,7 +22,14 @@ import numpy as np
 from primspace.data.checks import checked_fields
 from primspace.data.images import IMAGE_BLOCK, LazyImages, as_view, read_samples
 from primspace.data.schema import (
-    ARRAYS, ATTRIBUTES, SCHEMA_VERSION, WRITER_ATTRIBUTE, Field, arrays_of, dims_of, field,
+    ARRAYS,
+    ATTRIBUTES,
+    SCHEMA_VERSION,
+    WRITER_ATTRIBUTE,
+    Field,
+    arrays_of,
+    dims_of,
+    field,
 )
 from primspace.data.values import as_float32
 from primspace.errors import DataError, first_line
@@ -103,7 +110,8 @@ def _check_version(f: h5py.File, attr: Field, path) -> None:
     if version is not None and int(version) > SCHEMA_VERSION:
         raise DataError(
             f"schema version {int(version)} is newer than this primspace reads ({SCHEMA_VERSION})",
-            path=path, field=attr.name,
+            path=path,
+            field=attr.name,
         )
 
 
@@ -186,8 +194,14 @@ def write_dataset(ds, path: Path, overwrite: bool, compression_level: int, write
     """Write the data set ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`)."""
     settings = {a.writer_option: _option_value(a, getattr(ds, a.name)) for a in ARRAYS if a.writer_option}
     with DatasetWriter(
-        path, n_samples=len(ds), length=ds.length, **{a.name: getattr(ds, a.name) for a in ATTRIBUTES if a.in_memory},
-        **settings, overwrite=overwrite, compression_level=compression_level, writer=writer,
+        path,
+        n_samples=len(ds),
+        length=ds.length,
+        **{a.name: getattr(ds, a.name) for a in ATTRIBUTES if a.in_memory},
+        **settings,
+        overwrite=overwrite,
+        compression_level=compression_level,
+        writer=writer,
     ) as out:
         arrays = arrays_of(ds)
         for a in _LAZY:  # read (and decoded) block by block, never all at once
@@ -294,7 +308,9 @@ class DatasetWriter:
         if self.n_samples < 1 or self.length < 2 or not self.joint_names:
             raise DataError(
                 f"a data set needs N >= 1, T >= 2 and J >= 1, got N={self.n_samples}, T={self.length}, "
-                f"J={len(self.joint_names)}", path=self.path, field="motor",
+                f"J={len(self.joint_names)}",
+                path=self.path,
+                field="motor",
             )
         self._written = np.zeros(self.n_samples, dtype=bool)
         self._stack: contextlib.ExitStack | None = None
@@ -339,12 +355,33 @@ class DatasetWriter:
         return getattr(self, attr.name)
 
     # -- blocks
-    def write(self, start: int, *, motor, images=None, labels=None, params=None, lengths=None, step_labels=None,
-              step_segments=None, source_ids=None) -> None:
+    def write(
+        self,
+        start: int,
+        *,
+        motor,
+        images=None,
+        labels=None,
+        params=None,
+        lengths=None,
+        step_labels=None,
+        step_segments=None,
+        source_ids=None,
+    ) -> None:
         """Validate and store samples ``start .. start + len(motor) - 1``."""
-        block, sl = self._check_block(start, dict(motor=motor, images=images, labels=labels, params=params, lengths=lengths,
-                                                  step_labels=step_labels, step_segments=step_segments,
-                                                  source_ids=source_ids))
+        block, sl = self._check_block(
+            start,
+            dict(
+                motor=motor,
+                images=images,
+                labels=labels,
+                params=params,
+                lengths=lengths,
+                step_labels=step_labels,
+                step_segments=step_segments,
+                source_ids=source_ids,
+            ),
+        )
         for array in _LAZY:
             value = getattr(block, array.name)
             if value is not None:
@@ -386,11 +423,15 @@ class DatasetWriter:
             try:
                 block, sl = self._check_block(start, arrays_of(source))
             except DataError as exc:
-                raise DataError(f"cannot be copied into {self.path}: {exc.reason}", path=path, field=exc.field) from None
+                raise DataError(
+                    f"cannot be copied into {self.path}: {exc.reason}", path=path, field=exc.field
+                ) from None
             for name in self._names_to_match():
                 if getattr(source, name) != getattr(self, name):
                     raise DataError(
-                        f"{getattr(source, name)} does not match the file's {getattr(self, name)}", path=path, field=name
+                        f"{getattr(source, name)} does not match the file's {getattr(self, name)}",
+                        path=path,
+                        field=name,
                     )
             for array in _LAZY:
                 if getattr(source, array.name) is not None:
@@ -439,7 +480,9 @@ class DatasetWriter:
             if given != wanted:
                 raise DataError(
                     "given but the file has none" if given else "missing from a block",
-                    path=self.path, field=array.name, index=start,
+                    path=self.path,
+                    field=array.name,
+                    index=start,
                 )
             if not given:
                 continue
@@ -477,7 +520,9 @@ class DatasetWriter:
                         b = min(a + IMAGE_BLOCK, sl.stop - sl.start)
                         target[sl.start + a : sl.start + b] = read_samples(source, slice(a, b), path, name)
         except (OSError, KeyError) as exc:
-            raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=name) from None
+            raise DataError(
+                f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=name
+            ) from None
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         stack, self._stack, self._file = self._stack, None, None

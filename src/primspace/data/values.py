@@ -13,8 +13,17 @@ import numpy as np
 
 from primspace.errors import DataError
 
-__all__ = ["FLOAT32_MAX", "MAX_SOURCE_ID", "float32_overflow", "too_large", "as_float32", "check_finite",
-           "check_int32_labels", "coerce_source_ids", "validate_source_ids"]
+__all__ = [
+    "FLOAT32_MAX",
+    "MAX_SOURCE_ID",
+    "float32_overflow",
+    "too_large",
+    "as_float32",
+    "check_finite",
+    "check_int32_labels",
+    "coerce_source_ids",
+    "validate_source_ids",
+]
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 #: The longest source id kept (characters): a file name, a demo key and an episode index
@@ -92,7 +101,9 @@ def check_int32_labels(labels: np.ndarray, path) -> None:
         pos = tuple(int(k) for k in bad[0])
         raise DataError(
             f"label {int(labels[pos])} is not a primitive index (it does not fit in int32)",
-            path=path, field="labels", index=pos[0] if labels.ndim == 1 else None,
+            path=path,
+            field="labels",
+            index=pos[0] if labels.ndim == 1 else None,
         )
 
 
@@ -116,6 +127,9 @@ def validate_source_ids(ds) -> None:
         raise DataError(f"must have shape ({n},) to match motor, got {ids.shape}", path=p, field="source_ids")
     for i, v in enumerate(ids):
         if len(v) > MAX_SOURCE_ID or not v.isprintable():
-            why = f"is {len(v):,} characters long (at most {MAX_SOURCE_ID})" if len(v) > MAX_SOURCE_ID else \
-                "holds a control character (a source id is one line of text)"
+            why = (
+                f"is {len(v):,} characters long (at most {MAX_SOURCE_ID})"
+                if len(v) > MAX_SOURCE_ID
+                else "holds a control character (a source id is one line of text)"
+            )
             raise DataError(why, path=p, field="source_ids", index=i)

@@ -96,9 +96,15 @@ def sample_motion(run, data, sample: int, *, replay: bool = True, scene=None, de
         arrays["replay_images"] = replay_frames(motor[0], truth.params[0], label, height, width, scene=scene)
     title = reconstruction_title(sample, primitive, run.kind, run.init, run.model_config.latent_dim)
     info = {
-        "sample": sample, "primitive": primitive, "kind": run.kind, "init": run.init,
-        "latent_dim": run.model_config.latent_dim, "joint_names": list(truth.joint_names), "dt": truth.dt,
-        "note": note, "title": title + (f" ({note})" if note else ""),
+        "sample": sample,
+        "primitive": primitive,
+        "kind": run.kind,
+        "init": run.init,
+        "latent_dim": run.model_config.latent_dim,
+        "joint_names": list(truth.joint_names),
+        "dt": truth.dt,
+        "note": note,
+        "title": title + (f" ({note})" if note else ""),
         "panels": [label for key, label in _PANELS if key in arrays],
     }
     return arrays, info

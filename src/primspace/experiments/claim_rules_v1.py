@@ -65,8 +65,9 @@ def _random_fit_bad(results: dict) -> tuple[bool | None, str]:
         return None, "needs random and projection runs"
     q = min(qs)
     if q > LOW_DIMENSIONAL_Q:
-        return None, (f"needs runs at a low-dimensional latent size (q <= {LOW_DIMENSIONAL_Q}); "
-                      f"the smallest here is q = {q}")
+        return None, (
+            f"needs runs at a low-dimensional latent size (q <= {LOW_DIMENSIONAL_Q}); the smallest here is q = {q}"
+        )
     ratio = fits[q]["random"] / fits[q]["projection"]
     return ratio >= 5, f"q = {q}: random's final fit loss is {ratio:.3g}x projection's"
 
@@ -93,9 +94,13 @@ def _random_infer_fails(results: dict) -> tuple[bool | None, str]:
     ratios = {q: finals[q]["random"] / finals[q]["projection"] for q in qs}
     drops = {q: starts[q]["random"] / finals[q]["random"] for q in qs}
     ok = all(r >= 10 for r in ratios.values())
-    return ok, ("random / projection final eval loss: " + ", ".join(f"q = {q}: {r:.3g}x" for q, r in ratios.items())
-                + "; random's own eval loss still falls " + ", ".join(f"{d:.2g}x" for d in drops.values())
-                + " (it converges, to a poor value)")
+    return ok, (
+        "random / projection final eval loss: "
+        + ", ".join(f"q = {q}: {r:.3g}x" for q, r in ratios.items())
+        + "; random's own eval loss still falls "
+        + ", ".join(f"{d:.2g}x" for d in drops.values())
+        + " (it converges, to a poor value)"
+    )
 
 
 def _projection_good_untrained(results: dict) -> tuple[bool | None, str]:
@@ -131,7 +136,9 @@ def _clustering_similar(results: dict) -> tuple[bool | None, str]:
     if not has_inits(acc, "zero", "projection"):
         return None, "needs zero and projection codes"
     diff = acc["projection"] - acc["zero"]
-    return abs(diff) <= 0.1, f"accuracy zero {acc['zero']:.2f}, projection {acc['projection']:.2f} (q = {results.get('latent_dim')})"
+    return abs(
+        diff
+    ) <= 0.1, f"accuracy zero {acc['zero']:.2f}, projection {acc['projection']:.2f} (q = {results.get('latent_dim')})"
 
 
 def _inter_improved(results: dict) -> tuple[bool | None, str]:
@@ -147,40 +154,79 @@ def _inter_improved(results: dict) -> tuple[bool | None, str]:
         stats[init] = (start.mean(), final.mean(), final.std())
     z, p = stats["zero"], stats["projection"]
     ok = p[0] < z[0] and p[1] < z[1] and p[2] <= z[2]
-    return ok, (f"phase 2, zero vs projection: start {z[0]:.2g} vs {p[0]:.2g}, final {z[1]:.2g} ± {z[2]:.1g} "
-                f"vs {p[1]:.2g} ± {p[2]:.1g}")
+    return ok, (
+        f"phase 2, zero vs projection: start {z[0]:.2g} vs {p[0]:.2g}, final {z[1]:.2g} ± {z[2]:.1g} "
+        f"vs {p[1]:.2g} ± {p[2]:.1g}"
+    )
 
 
 #: The version-1 rules, in the paper's order (quotes as they were: some cut short).
 CLAIMS_V1: tuple[Claim, ...] = (
-    Claim("fit_random", "intra", "Intra-primitive generalisation, Fig. loss_train",
-          "random initialization performs very badly for low-dimensional latent space.",
-          "final fit loss at the smallest q (at most 20): random at least 5x projection's", _random_fit_bad),
-    Claim("fit_zero", "intra", "Intra-primitive generalisation, Fig. loss_train",
-          "Zero initialization, on the other hand, differs very slightly from random linear projection case.",
-          "final fit loss of zero within a factor of 2 of projection's at every q", _zero_within_2x("fit", "fit")),
-    Claim("infer_random", "intra", "Intra-primitive generalisation, Fig. loss_test",
-          "Notice that the case with random initialization did not converge at all.",
-          "final eval loss (θ frozen) of random at least 10x projection's at every q", _random_infer_fails),
-    Claim("infer_projection", "intra", "Intra-primitive generalisation, Fig. loss_test",
-          "initialization with random linear projection yields good results already without any training",
-          "projection's eval loss before any inference step below zero's after the last, at every q",
-          _projection_good_untrained),
-    Claim("infer_similar", "intra", "Intra-primitive generalisation",
-          "It may look like resulting performance of trained models for zero latent initialization and random "
-          "projection latent initialization is very similar",
-          "final eval loss of zero within a factor of 2 of projection's at every q", _zero_within_2x("infer", "eval")),
-    Claim("success", "success", "Intra-primitive generalisation, Table assessment_table",
-          "some primitives from the experimental setup require more precision than others. In particular, "
-          "pushing and pulling the block as well as grasping is easy to fail if the gripper fingers miss just a bit.",
-          "success rate of projection at least zero's for pull, push and grasp (paper: 0.92/0.86, 0.94/0.9, 1.0/0.8)",
-          _success_projection_higher),
-    Claim("clustering", "clustering", "Affine subspace clustering of latent space, Fig. arm_clustering",
-          "They yield similar results,",
-          "clustering accuracy of zero and projection codes (q = 40, R² = 0.9999) within 0.1", _clustering_similar),
-    Claim("inter", "inter", "Inter-primitive generalisation, Fig. loss_inter",
-          "Proposed method shows slightly improved results in terms of convergence speed, final value of the loss "
-          "function and robustness of the learning.",
-          "phase-2 loss over folds: projection's start and final mean below zero's, its final std not above",
-          _inter_improved),
+    Claim(
+        "fit_random",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_train",
+        "random initialization performs very badly for low-dimensional latent space.",
+        "final fit loss at the smallest q (at most 20): random at least 5x projection's",
+        _random_fit_bad,
+    ),
+    Claim(
+        "fit_zero",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_train",
+        "Zero initialization, on the other hand, differs very slightly from random linear projection case.",
+        "final fit loss of zero within a factor of 2 of projection's at every q",
+        _zero_within_2x("fit", "fit"),
+    ),
+    Claim(
+        "infer_random",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_test",
+        "Notice that the case with random initialization did not converge at all.",
+        "final eval loss (θ frozen) of random at least 10x projection's at every q",
+        _random_infer_fails,
+    ),
+    Claim(
+        "infer_projection",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_test",
+        "initialization with random linear projection yields good results already without any training",
+        "projection's eval loss before any inference step below zero's after the last, at every q",
+        _projection_good_untrained,
+    ),
+    Claim(
+        "infer_similar",
+        "intra",
+        "Intra-primitive generalisation",
+        "It may look like resulting performance of trained models for zero latent initialization and random "
+        "projection latent initialization is very similar",
+        "final eval loss of zero within a factor of 2 of projection's at every q",
+        _zero_within_2x("infer", "eval"),
+    ),
+    Claim(
+        "success",
+        "success",
+        "Intra-primitive generalisation, Table assessment_table",
+        "some primitives from the experimental setup require more precision than others. In particular, "
+        "pushing and pulling the block as well as grasping is easy to fail if the gripper fingers miss just a bit.",
+        "success rate of projection at least zero's for pull, push and grasp (paper: 0.92/0.86, 0.94/0.9, 1.0/0.8)",
+        _success_projection_higher,
+    ),
+    Claim(
+        "clustering",
+        "clustering",
+        "Affine subspace clustering of latent space, Fig. arm_clustering",
+        "They yield similar results,",
+        "clustering accuracy of zero and projection codes (q = 40, R² = 0.9999) within 0.1",
+        _clustering_similar,
+    ),
+    Claim(
+        "inter",
+        "inter",
+        "Inter-primitive generalisation, Fig. loss_inter",
+        "Proposed method shows slightly improved results in terms of convergence speed, final value of the loss "
+        "function and robustness of the learning.",
+        "phase-2 loss over folds: projection's start and final mean below zero's, its final std not above",
+        _inter_improved,
+    ),
 )

@@ -105,8 +105,10 @@ def _random_fit_bad(results: dict) -> Outcome:
         return Outcome(None, "needs random and projection runs")
     q = min(qs)
     if q > LOW_DIMENSIONAL_Q:
-        return Outcome(None, f"needs runs at a low-dimensional latent size (q <= {LOW_DIMENSIONAL_Q}); "
-                             f"the smallest here is q = {q}")
+        return Outcome(
+            None,
+            f"needs runs at a low-dimensional latent size (q <= {LOW_DIMENSIONAL_Q}); the smallest here is q = {q}",
+        )
     ratio = fits[q]["random"] / fits[q]["projection"]
     return Outcome(ratio >= VERY_BADLY, f"q = {q}: random's final fit loss is {ratio:.3g}x projection's")
 
@@ -120,7 +122,9 @@ def _zero_within(phase: str, what: str) -> Callable[[dict], Outcome]:
         if not ratios:
             return Outcome(None, "needs zero and projection runs")
         ok = all(1 / SIMILAR_FACTOR <= r <= SIMILAR_FACTOR for r in ratios.values())
-        return Outcome(ok, f"zero / projection final {what} loss: " + ", ".join(f"q = {q}: {r:.3g}" for q, r in ratios.items()))
+        return Outcome(
+            ok, f"zero / projection final {what} loss: " + ", ".join(f"q = {q}: {r:.3g}" for q, r in ratios.items())
+        )
 
     return check
 
@@ -138,8 +142,14 @@ def _random_not_converged(results: dict) -> Outcome:
         ok = PARTLY
     else:
         ok = False
-    return Outcome(ok, "random's own eval loss falls " + ", ".join(f"q = {q}: {d:.2g}x" for q, d in drops.items())
-                   + "; it ends at " + ", ".join(f"{r:.3g}x" for r in ratios.values()) + " projection's")
+    return Outcome(
+        ok,
+        "random's own eval loss falls "
+        + ", ".join(f"q = {q}: {d:.2g}x" for q, d in drops.items())
+        + "; it ends at "
+        + ", ".join(f"{r:.3g}x" for r in ratios.values())
+        + " projection's",
+    )
 
 
 def _projection_good_untrained(results: dict) -> Outcome:
@@ -149,8 +159,11 @@ def _projection_good_untrained(results: dict) -> Outcome:
         return Outcome(None, "needs zero and projection runs")
     cmp = {q: (starts[q]["projection"], finals[q]["zero"]) for q in qs}
     ok = all(a < b for a, b in cmp.values())
-    return Outcome(ok, "projection's eval loss before any inference step vs zero's after the last: " + ", ".join(
-        f"q = {q}: {a:.2g} vs {b:.2g}" for q, (a, b) in cmp.items()))
+    return Outcome(
+        ok,
+        "projection's eval loss before any inference step vs zero's after the last: "
+        + ", ".join(f"q = {q}: {a:.2g} vs {b:.2g}" for q, (a, b) in cmp.items()),
+    )
 
 
 #: The primitives the paper's success table reports ("sensitive primitives").
@@ -254,8 +267,13 @@ def _inter_improved(results: dict) -> Outcome:
         za, pa = {k: v[which] for k, v in z.items()}, {k: v[which] for k, v in p.items()}
         share, n = _paired_lower(za, pa)
         better = np.mean(list(pa.values())) < np.mean(list(za.values())) and share >= PAIRED_SHARE
-        measures.append((better, f"{name}: zero {np.mean(list(za.values())):.2g} vs projection "
-                                 f"{np.mean(list(pa.values())):.2g}, projection lower in {share * n:.0f} of {n} folds"))
+        measures.append(
+            (
+                better,
+                f"{name}: zero {np.mean(list(za.values())):.2g} vs projection "
+                f"{np.mean(list(pa.values())):.2g}, projection lower in {share * n:.0f} of {n} folds",
+            )
+        )
     zs, ps = np.std([v[1] for v in z.values()]), np.std([v[1] for v in p.values()])
     measures.append((ps < zs, f"robustness (std of the final value over folds): zero {zs:.2g} vs projection {ps:.2g}"))
     wins = sum(bool(b) for b, _ in measures)
@@ -267,61 +285,113 @@ def _v1(key: str) -> tuple:
     return tuple(c for c in CLAIMS_V1 if c.key == key)
 
 
-_INFER_SIMILAR = ("It may look like resulting performance of trained models for zero latent initialization and random "
-                  "projection latent initialization is very similar, but some primitives from the experimental setup "
-                  "require more precision than others.")
+_INFER_SIMILAR = (
+    "It may look like resulting performance of trained models for zero latent initialization and random "
+    "projection latent initialization is very similar, but some primitives from the experimental setup "
+    "require more precision than others."
+)
 
 #: The paper's sentences (verbatim, whole) and our rules, in the paper's order.
 CLAIMS: tuple[Claim, ...] = (
-    Claim("fit_random", "intra", "Intra-primitive generalisation, Fig. loss_train",
-          "As you can see, random initialization performs very badly for low-dimensional latent space.",
-          f"final fit loss at the smallest q (at most {LOW_DIMENSIONAL_Q}): random at least {VERY_BADLY:g}x projection's",
-          f">= {VERY_BADLY:g}x", 1, _random_fit_bad),
-    Claim("fit_zero", "intra", "Intra-primitive generalisation, Fig. loss_train",
-          "Zero initialization, on the other hand, differs very slightly from random linear projection case.",
-          f"final fit loss of zero within a factor of {SIMILAR_FACTOR:g} of projection's at every q",
-          f"within {SIMILAR_FACTOR:g}x", 1, _zero_within("fit", "fit")),
-    Claim("infer_random", "intra", "Intra-primitive generalisation, Fig. loss_test",
-          "Notice that the case with random initialization did not converge at all. This means the model trained in "
-          "this way has no generalization capacity and is not capable to represent trajectories it did not see during "
-          "the first training part.",
-          f"random's own eval loss (θ frozen) falls less than {NOT_CONVERGED_DROP:g}x at every q (did not converge); "
-          f"partly: it falls, but ends at least {NO_GENERALISATION:g}x above projection's at every q (no generalisation)",
-          f"drop < {NOT_CONVERGED_DROP:g}x; partly: >= {NO_GENERALISATION:g}x projection", 2, _random_not_converged,
-          _v1("infer_random")),
-    Claim("infer_projection", "intra", "Intra-primitive generalisation, Fig. loss_test",
-          "On the other hand, initialization with random linear projection yields good results already without any "
-          "training, which means the initial distribution of projected points did not change much during the first "
-          "part of the training.",
-          "projection's eval loss before any inference step below zero's after the last, at every q",
-          "strictly below", 1, _projection_good_untrained),
-    Claim("infer_similar", "intra", "Intra-primitive generalisation",
-          _INFER_SIMILAR,
-          f"the first half (\"may look like ... very similar\"): final eval loss of zero within a factor of "
-          f"{SIMILAR_FACTOR:g} of projection's at every q; the second half is the success claim below",
-          f"within {SIMILAR_FACTOR:g}x", 1, _zero_within("infer", "eval")),
-    Claim("success", "success", "Intra-primitive generalisation, Table assessment_table",
-          "In particular, pushing and pulling the block as well as grasping is easy to fail if the gripper fingers "
-          "miss just a bit.",
-          "success rate of projection above zero's for pull, push and grasp (paper: 0.92/0.86, 0.94/0.9, 1.0/0.8), a "
-          "difference counting only when the two Wilson 95 % intervals do not overlap; partly: higher on some, "
-          "lower on none; at every judge tolerance of the sweep",
-          "Wilson 95 % intervals apart", 2, _success_projection_higher, _v1("success")),
-    Claim("clustering", "clustering", "Affine subspace clustering of latent space, Fig. arm_clustering",
-          "They yield similar results, meaning even without presenting motion information for initial values of "
-          "latent variables, they self-organize in a union of close to linear manifolds.",
-          f"clustering accuracy of zero and projection codes (at the clustered q, the paper's 40; R² = 0.9999) within "
-          f"{SIMILAR_ACCURACY:g}, and "
-          f"both at least halfway from chance (1/k) to 1; partly: similar but not both above that",
-          f"within {SIMILAR_ACCURACY:g}; >= chance + {ORGANISED_SHARE:g}(1 - chance)", 2, _clustering_similar,
-          _v1("clustering")),
-    Claim("inter", "inter", "Inter-primitive generalisation, Fig. loss_inter",
-          "Proposed method shows slightly improved results in terms of convergence speed, final value of the loss "
-          "function and robustness of the learning.",
-          f"phase 2 over folds: projection's loss after 1/8 of the epochs and its final loss lower in mean and in at "
-          f"least {PAIRED_SHARE:.0%} of the paired folds, and the std of its final loss over folds lower; holds for "
-          "all three, partly for one or two",
-          f"paired, >= {PAIRED_SHARE:.0%} of folds", 2, _inter_improved, _v1("inter")),
+    Claim(
+        "fit_random",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_train",
+        "As you can see, random initialization performs very badly for low-dimensional latent space.",
+        f"final fit loss at the smallest q (at most {LOW_DIMENSIONAL_Q}): random at least {VERY_BADLY:g}x projection's",
+        f">= {VERY_BADLY:g}x",
+        1,
+        _random_fit_bad,
+    ),
+    Claim(
+        "fit_zero",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_train",
+        "Zero initialization, on the other hand, differs very slightly from random linear projection case.",
+        f"final fit loss of zero within a factor of {SIMILAR_FACTOR:g} of projection's at every q",
+        f"within {SIMILAR_FACTOR:g}x",
+        1,
+        _zero_within("fit", "fit"),
+    ),
+    Claim(
+        "infer_random",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_test",
+        "Notice that the case with random initialization did not converge at all. This means the model trained in "
+        "this way has no generalization capacity and is not capable to represent trajectories it did not see during "
+        "the first training part.",
+        f"random's own eval loss (θ frozen) falls less than {NOT_CONVERGED_DROP:g}x at every q (did not converge); "
+        f"partly: it falls, but ends at least {NO_GENERALISATION:g}x above projection's at every q (no generalisation)",
+        f"drop < {NOT_CONVERGED_DROP:g}x; partly: >= {NO_GENERALISATION:g}x projection",
+        2,
+        _random_not_converged,
+        _v1("infer_random"),
+    ),
+    Claim(
+        "infer_projection",
+        "intra",
+        "Intra-primitive generalisation, Fig. loss_test",
+        "On the other hand, initialization with random linear projection yields good results already without any "
+        "training, which means the initial distribution of projected points did not change much during the first "
+        "part of the training.",
+        "projection's eval loss before any inference step below zero's after the last, at every q",
+        "strictly below",
+        1,
+        _projection_good_untrained,
+    ),
+    Claim(
+        "infer_similar",
+        "intra",
+        "Intra-primitive generalisation",
+        _INFER_SIMILAR,
+        f'the first half ("may look like ... very similar"): final eval loss of zero within a factor of '
+        f"{SIMILAR_FACTOR:g} of projection's at every q; the second half is the success claim below",
+        f"within {SIMILAR_FACTOR:g}x",
+        1,
+        _zero_within("infer", "eval"),
+    ),
+    Claim(
+        "success",
+        "success",
+        "Intra-primitive generalisation, Table assessment_table",
+        "In particular, pushing and pulling the block as well as grasping is easy to fail if the gripper fingers "
+        "miss just a bit.",
+        "success rate of projection above zero's for pull, push and grasp (paper: 0.92/0.86, 0.94/0.9, 1.0/0.8), a "
+        "difference counting only when the two Wilson 95 % intervals do not overlap; partly: higher on some, "
+        "lower on none; at every judge tolerance of the sweep",
+        "Wilson 95 % intervals apart",
+        2,
+        _success_projection_higher,
+        _v1("success"),
+    ),
+    Claim(
+        "clustering",
+        "clustering",
+        "Affine subspace clustering of latent space, Fig. arm_clustering",
+        "They yield similar results, meaning even without presenting motion information for initial values of "
+        "latent variables, they self-organize in a union of close to linear manifolds.",
+        f"clustering accuracy of zero and projection codes (at the clustered q, the paper's 40; R² = 0.9999) within "
+        f"{SIMILAR_ACCURACY:g}, and "
+        f"both at least halfway from chance (1/k) to 1; partly: similar but not both above that",
+        f"within {SIMILAR_ACCURACY:g}; >= chance + {ORGANISED_SHARE:g}(1 - chance)",
+        2,
+        _clustering_similar,
+        _v1("clustering"),
+    ),
+    Claim(
+        "inter",
+        "inter",
+        "Inter-primitive generalisation, Fig. loss_inter",
+        "Proposed method shows slightly improved results in terms of convergence speed, final value of the loss "
+        "function and robustness of the learning.",
+        f"phase 2 over folds: projection's loss after 1/8 of the epochs and its final loss lower in mean and in at "
+        f"least {PAIRED_SHARE:.0%} of the paired folds, and the std of its final loss over folds lower; holds for "
+        "all three, partly for one or two",
+        f"paired, >= {PAIRED_SHARE:.0%} of folds",
+        2,
+        _inter_improved,
+        _v1("inter"),
+    ),
 )
 
 
@@ -344,7 +414,7 @@ def _seed_views(experiment: str, results: dict) -> dict:
 
 
 def _count(per_seed: dict) -> str:
-    """"holds in every seed (3 of 3)", "holds in 1 of 3 seeds (not in seed 0, 2)",
+    """ "holds in every seed (3 of 3)", "holds in 1 of 3 seeds (not in seed 0, 2)",
     "holds in 1 of 3 seeds, partly in 1 (seed 2), not in seed 0", "partly in 1 of 3 seeds (seed 1), not in seed 0, 2"."""
     judged = {s: ok for s, ok in per_seed.items() if ok is not None}
     if not judged:
@@ -389,8 +459,11 @@ def _verdict(check: Callable[[dict], Outcome], experiment: str, results: dict) -
     outcomes = {s: _checked(check, view) for s, view in views.items()}
     per_seed = {s: o.ok for s, o in outcomes.items()}
     verdict = _VERDICTS[next(iter(per_seed.values()))] if len(per_seed) == 1 else _count(per_seed)
-    numbers = next(iter(outcomes.values())).numbers if len(outcomes) == 1 else "; ".join(
-        f"seed {s}: {o.numbers}" for s, o in outcomes.items())
+    numbers = (
+        next(iter(outcomes.values())).numbers
+        if len(outcomes) == 1
+        else "; ".join(f"seed {s}: {o.numbers}" for s, o in outcomes.items())
+    )
     row = {"verdict": verdict, "ours": numbers, "per_seed": {str(s): _VERDICTS[ok] for s, ok in per_seed.items()}}
     sweeps = [o.sweep for o in outcomes.values() if o.sweep]
     if sweeps:
@@ -425,16 +498,27 @@ def check_claims(source: Source) -> list[dict]:
         if claim.experiment not in cache:
             cache[claim.experiment] = read(claim.experiment)
         results = cache[claim.experiment]
-        row = {"key": claim.key, "where": claim.where, "quote": claim.quote, "test": claim.test,
-               "threshold": claim.threshold, "version": claim.version}
+        row = {
+            "key": claim.key,
+            "where": claim.where,
+            "quote": claim.quote,
+            "test": claim.test,
+            "threshold": claim.threshold,
+            "version": claim.version,
+        }
         if results is None:
             rows.append(row | {"verdict": "not run", "ours": "", "per_seed": {}, "previous": []})
             continue
         row |= _verdict(claim.check, claim.experiment, results)
 
         row["previous"] = [
-            {"version": 1, "test": old.test,
-             "verdict": _verdict(lambda view, old=old: Outcome(*old.check(view)), claim.experiment, results)["verdict"]}
+            {
+                "version": 1,
+                "test": old.test,
+                "verdict": _verdict(lambda view, old=old: Outcome(*old.check(view)), claim.experiment, results)[
+                    "verdict"
+                ],
+            }
             for old in claim.previous
         ]
         rows.append(row)
@@ -449,9 +533,11 @@ def claims_table(source: Source) -> tuple[list[str], list[list]]:
     for r in check_claims(source):
         verdict = r["verdict"]
         if r.get("sweep"):
-            verdict += " — by judge tolerance: " + ", ".join(
-                f"{float(t) * 1000:g} mm {v}" for t, v in r["sweep"].items()) + (
-                " (robust)" if r["robust"] else " (NOT robust to the tolerance)")
+            verdict += (
+                " — by judge tolerance: "
+                + ", ".join(f"{float(t) * 1000:g} mm {v}" for t, v in r["sweep"].items())
+                + (" (robust)" if r["robust"] else " (NOT robust to the tolerance)")
+            )
         for old in r["previous"]:
             verdict += f" [rule v{old['version']}: {old['verdict']}]"
         rows.append([f"“{r['quote']}” ({r['where']})", f"v{r['version']}: {r['test']}", verdict, r["ours"]])

@@ -30,6 +30,7 @@ from primspace.experiments.workspace import ExperimentDir
 
 __all__ = ["run_clustering", "LEARNED_CODES", "INITIAL_CODES"]
 
+
 def _clustered(X: np.ndarray, labels: np.ndarray, label_names, r2_target: float):
     """The shared pipeline (:func:`primspace.cluster.cluster_points`, as ``primspace cluster``):
     one fit at ``r2_target`` and the sweep over :data:`primspace.cluster.sweep.R2_GRID`, on one SVD."""
@@ -54,12 +55,24 @@ def _trajectories(exp: ExperimentDir, name: str, motor, labels, label_names, r2_
     from primspace.cluster.inputs import trajectory_matrix
 
     result = _clustered(trajectory_matrix(motor), labels, label_names, r2_target)
-    plots.save_figure(sweep_figure(result, title=f"{name}: τ sweep of raw trajectories"), exp.figure(f"trajectory_sweep_{name}"))
+    plots.save_figure(
+        sweep_figure(result, title=f"{name}: τ sweep of raw trajectories"), exp.figure(f"trajectory_sweep_{name}")
+    )
     chosen = result.summary()
-    _figure(exp, f"trajectory_clustering_{name}", result,
-            f"{name}: raw trajectories, τ = {chosen['tau']:.3g} (R² = {chosen['r2']:.3f})")
-    return {"n": result.n_samples, "dim": result.n_features, "k": int(len(np.unique(labels[labels >= 0]))),
-            "r2_target": r2_target, "chosen": chosen, "sweep": result.to_dict()["sweep"]}
+    _figure(
+        exp,
+        f"trajectory_clustering_{name}",
+        result,
+        f"{name}: raw trajectories, τ = {chosen['tau']:.3g} (R² = {chosen['r2']:.3f})",
+    )
+    return {
+        "n": result.n_samples,
+        "dim": result.n_features,
+        "k": int(len(np.unique(labels[labels >= 0]))),
+        "r2_target": r2_target,
+        "chosen": chosen,
+        "sweep": result.to_dict()["sweep"],
+    }
 
 
 def _other_seeds(exp: ExperimentDir, intra: dict, q: int, focus_seed: int) -> dict:
@@ -77,8 +90,10 @@ def _other_seeds(exp: ExperimentDir, intra: dict, q: int, focus_seed: int) -> di
         rows.append({"init": run["init"], "codes": LEARNED_CODES} | row)
         if run["init"] == "projection":
             z0 = initial_codes(exp, "projection", q, run["seed"])
-            rows.append({"init": "projection", "codes": INITIAL_CODES}
-                        | _clustered(z0, data.labels, data.label_names, r2).summary())
+            rows.append(
+                {"init": "projection", "codes": INITIAL_CODES}
+                | _clustered(z0, data.labels, data.label_names, r2).summary()
+            )
     return out
 
 
@@ -90,7 +105,14 @@ def run_clustering(exp: ExperimentDir) -> dict:
     intra = exp.read_results("intra") or run_intra(exp)
     data = exp.dataset()
     q, seed, inits = focus_runs(exp, intra)
-    results: dict = {"latent_dim": q, "seed": seed, "r2_target": preset.cluster_r2, "latent": [], "trajectory": {}, "latent_sweep": {}}
+    results: dict = {
+        "latent_dim": q,
+        "seed": seed,
+        "r2_target": preset.cluster_r2,
+        "latent": [],
+        "trajectory": {},
+        "latent_sweep": {},
+    }
     with exp.stage("clustering"):
         for init in inits:
             z, _ = load_codes(exp, init, q, seed)
@@ -98,16 +120,24 @@ def run_clustering(exp: ExperimentDir) -> dict:
             row = result.summary()
             results["latent_sweep"][init] = result.to_dict()["sweep"]
             results["latent"].append({"init": init, "codes": LEARNED_CODES} | row)
-            _figure(exp, f"latent_clustering_{init}", result,
-                    f"learned codes, {init} init, q = {q}: τ = {row['tau']:.3g} for R² = {row['r2']:.4f}")
+            _figure(
+                exp,
+                f"latent_clustering_{init}",
+                result,
+                f"learned codes, {init} init, q = {q}: τ = {row['tau']:.3g} for R² = {row['r2']:.4f}",
+            )
         if "projection" in inits:  # the projection before any training: P m for every sample
             z0 = initial_codes(exp, "projection", q, seed)
             result = _clustered(z0, data.labels, data.label_names, preset.cluster_r2)
             row = result.summary()
             results["latent"].append({"init": "projection", "codes": INITIAL_CODES} | row)
             results["latent_sweep"]["projection, initial P m"] = result.to_dict()["sweep"]
-            _figure(exp, "latent_clustering_projection_initial", result,
-                    f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}")
+            _figure(
+                exp,
+                "latent_clustering_projection_initial",
+                result,
+                f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}",
+            )
         results["by_seed"] = _other_seeds(exp, intra, q, seed)
         results["trajectory"]["data"] = _trajectories(
             exp, "data", data.motor, data.labels, data.label_names, preset.trajectory_r2
@@ -119,4 +149,3 @@ def run_clustering(exp: ExperimentDir) -> dict:
     exp.write_results("clustering", results)
     figures.draw_latent_accuracy(exp.path)
     return results
-

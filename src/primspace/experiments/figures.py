@@ -51,16 +51,23 @@ def draw_latent(out_dir: str | Path) -> list[Path]:
         codes = {init: arrays[f"codes_{init}"] for init in meta["inits"]}
         for dims in (2, 3):
             fig = plots.plot_latent_pca(
-                codes, arrays["labels"], arrays["params"], primitive=primitive,
-                primitive_name=meta["label_names"][primitive], n_components=dims,
+                codes,
+                arrays["labels"],
+                arrays["params"],
+                primitive=primitive,
+                primitive_name=meta["label_names"][primitive],
+                n_components=dims,
             )
             drawn.append(plots.save_figure(fig, figure_file(out_dir, f"latent_pca{dims}d")))
     for r in meta["reconstructions"]:
         prefix = f"recon_{r['name']}_"
         fig = plots.plot_reconstruction(
-            arrays[prefix + "motor"], arrays[prefix + "generated_motor"],
-            images=arrays.get(prefix + "images"), generated_images=arrays.get(prefix + "generated_images"),
-            joint_names=r["joint_names"], dt=r["dt"],
+            arrays[prefix + "motor"],
+            arrays[prefix + "generated_motor"],
+            images=arrays.get(prefix + "images"),
+            generated_images=arrays.get(prefix + "generated_images"),
+            joint_names=r["joint_names"],
+            dt=r["dt"],
             title=plots.reconstruction_title(r["sample"], r["primitive"], r["kind"], r["init"], r["latent_dim"]),
         )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, f"reconstruction_{r['name']}")))
@@ -80,19 +87,29 @@ def draw_animations(out_dir: str | Path) -> list[Path]:
     drawn = []
     for k, a in enumerate(meta["animations"]):
         motion = {key: arrays.get(f"{k}_{key}") for key in ("images", "generated_images", "replay_images")}
-        drawn.append(plots.draw_animation(
-            animation_file(out_dir, a["name"]), arrays[f"{k}_motor"], arrays[f"{k}_generated_motor"], **motion,
-            joint_names=a["joint_names"], dt=a["dt"], title=a["title"], max_frames=meta["max_frames"],
-            frame_ms=meta["frame_ms"],
-        ))
+        drawn.append(
+            plots.draw_animation(
+                animation_file(out_dir, a["name"]),
+                arrays[f"{k}_motor"],
+                arrays[f"{k}_generated_motor"],
+                **motion,
+                joint_names=a["joint_names"],
+                dt=a["dt"],
+                title=a["title"],
+                max_frames=meta["max_frames"],
+                frame_ms=meta["frame_ms"],
+            )
+        )
     strips = [
-        (a["name"], arrays[f"{k}_images"], arrays[f"{k}_generated_images"]) for k, a in enumerate(meta["animations"])
+        (a["name"], arrays[f"{k}_images"], arrays[f"{k}_generated_images"])
+        for k, a in enumerate(meta["animations"])
         if f"{k}_images" in arrays and f"{k}_generated_images" in arrays
     ]
     if strips:
         a = meta["animations"][0]
         fig = plots.plot_image_strips(
-            strips, title=f"Generated against recorded frames, one evaluation sample per primitive "
+            strips,
+            title=f"Generated against recorded frames, one evaluation sample per primitive "
             f"({a['kind']} run, init {a['init']}, q={a['latent_dim']})",
         )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, IMAGE_STRIPS)))
@@ -110,7 +127,8 @@ def draw_inter(out_dir: str | Path) -> list[Path]:
     for r in results["runs"]:
         histories.setdefault(r["init"], []).append(r["phase2"])
     fig = plots.plot_loss_curves(
-        histories, title=f"Inter-primitive, phase 2 (new primitive + {results['replay']:.0%} replay), "
+        histories,
+        title=f"Inter-primitive, phase 2 (new primitive + {results['replay']:.0%} replay), "
         f"q = {results['latent_dim']}: mean ± std over folds",
     )
     return [plots.save_figure(fig, figure_file(out_dir, "inter_loss"))]
@@ -150,8 +168,14 @@ def draw_composite(out_dir: str | Path) -> list[Path]:
     for init in meta["inits"]:
         found = [b[b >= 0] for b in arrays[f"bounds_{init}"]]
         fig = plot_code_timeline(
-            arrays[f"codes_{init}"], meta["window"], arrays["lengths"], arrays["step_labels"], arrays[f"found_{init}"],
-            true_bounds, found, label_names=meta["label_names"],
+            arrays[f"codes_{init}"],
+            meta["window"],
+            arrays["lengths"],
+            arrays["step_labels"],
+            arrays[f"found_{init}"],
+            true_bounds,
+            found,
+            label_names=meta["label_names"],
             title=f"{init}: inferred code sequences (q = {meta['latent_dim']}, W = {meta['window']}), held-out demonstrations",
         )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{init}")))
@@ -172,11 +196,17 @@ def _draw_primitive_timelines(out_dir: str | Path, results: dict) -> list[Path]:
     true_bounds = boundaries_from_segments(arrays["step_segments"], arrays["lengths"])
     drawn = []
     for name in (m for m in METHODS if f"found_{m}" in arrays):
-        fig = plot_code_timeline(arrays["joints"], 1, arrays["lengths"], arrays["step_labels"], arrays[f"found_{name}"],
-                                 true_bounds, [b[b >= 0] for b in arrays[f"bounds_{name}"]],
-                                 label_names=results.get("label_names") or (),
-                                 title=f"{name} ({rows[0]['preset']} single primitives, seed {rows[0]['seed']}): "
-                                       "scaled joints of held-out demonstrations")
+        fig = plot_code_timeline(
+            arrays["joints"],
+            1,
+            arrays["lengths"],
+            arrays["step_labels"],
+            arrays[f"found_{name}"],
+            true_bounds,
+            [b[b >= 0] for b in arrays[f"bounds_{name}"]],
+            label_names=results.get("label_names") or (),
+            title=f"{name} ({rows[0]['preset']} single primitives, seed {rows[0]['seed']}): "
+            "scaled joints of held-out demonstrations",
+        )
         drawn.append(plots.save_figure(fig, figure_file(out_dir, f"composite_timeline_{name}")))
     return drawn
-

@@ -43,7 +43,9 @@ def replay_indices(first: np.ndarray, fraction: float, seed: int, fold: int) -> 
     return np.sort(rng.choice(first, size=k, replace=False))
 
 
-def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_dim: int, seed: int, preset: dict) -> dict:
+def run_inter_point(
+    run_dir: Path, data_path: str, fold: int, init: str, latent_dim: int, seed: int, preset: dict
+) -> dict:
     """One fold: phase 1 on six primitives, phase 2 on the held-out one plus replay."""
     from primspace.train import configure_process, fit
 
@@ -55,16 +57,35 @@ def run_inter_point(run_dir: Path, data_path: str, fold: int, init: str, latent_
     model_config, tc1 = train_configs(p, latent_dim, seed, p.inter_epochs[0])
     configure_process(tc1)  # one thread per run (the preset's threads), as every backend
     phase1_dir = fit_point_dir(run_dir, init) / "phase1"
-    phase1 = shared_fit(phase1_dir, dataset=data, model_config=model_config, train_config=tc1, init=fit_init(init),
-                        indices=first, images=use_images, scaler=experiment_scaler(data), progress=False)
+    phase1 = shared_fit(
+        phase1_dir,
+        dataset=data,
+        model_config=model_config,
+        train_config=tc1,
+        init=fit_init(init),
+        indices=first,
+        images=use_images,
+        scaler=experiment_scaler(data),
+        progress=False,
+    )
     replay = replay_indices(first, p.inter_replay, seed, fold)
     second = np.concatenate([new, replay])
     initial = np.full((len(second), latent_dim), np.nan, dtype=np.float32)
     row_of = {int(s): r for r, s in enumerate(phase1.indices)}
-    initial[len(new):] = phase1.latents[[row_of[int(s)] for s in replay]]
+    initial[len(new) :] = phase1.latents[[row_of[int(s)] for s in replay]]
     _, tc2 = train_configs(p, latent_dim, seed, p.inter_epochs[1])
-    phase2 = fit(data, run_dir / "phase2", train_config=tc2, init=init, indices=second, resume=True,
-                 weights_from=phase1_dir, initial_latents=initial, images=use_images, progress=False)
+    phase2 = fit(
+        data,
+        run_dir / "phase2",
+        train_config=tc2,
+        init=init,
+        indices=second,
+        resume=True,
+        weights_from=phase1_dir,
+        initial_latents=initial,
+        images=use_images,
+        progress=False,
+    )
     return {
         "fold": fold,
         "primitive": data.label_names[fold],
@@ -91,8 +112,13 @@ def run_inter(exp: ExperimentDir) -> dict:
     data = exp.dataset()
     folds = sorted(int(v) for v in np.unique(data.labels))
     points = [
-        GridPoint(inter_key(init, fold, seed), (str(exp.data_path), fold, init, preset.inter_latent_dim, seed, preset.to_dict()))
-        for seed in preset.seeds for init in preset.inter_inits for fold in folds
+        GridPoint(
+            inter_key(init, fold, seed),
+            (str(exp.data_path), fold, init, preset.inter_latent_dim, seed, preset.to_dict()),
+        )
+        for seed in preset.seeds
+        for init in preset.inter_inits
+        for fold in folds
     ]
     with exp.stage("inter"):
         grid = exp.grid(run_inter_point, shared_fits_last(points), "inter-primitive folds")

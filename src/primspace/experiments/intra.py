@@ -73,8 +73,9 @@ def run_intra_point(
     preset_obj = ExperimentPreset.from_dict(preset)
     data, use_images = load_run_data(data_path, preset_obj)
     start = time.perf_counter()
-    fitted, inferred, fit_seconds = fit_and_infer(run_dir, data, preset_obj, init, latent_dim, seed, train_idx, eval_idx,
-                                                  use_images)
+    fitted, inferred, fit_seconds = fit_and_infer(
+        run_dir, data, preset_obj, init, latent_dim, seed, train_idx, eval_idx, use_images
+    )
     return {
         "init": init,
         "latent_dim": latent_dim,
@@ -135,7 +136,9 @@ def _complete_final_losses(exp: ExperimentDir, results: dict) -> None:
     data, use_images = load_run_data(str(exp.data_path), exp.preset)
     for key in missing:
         r = results[key]
-        fitted, inferred = (load_run(phase_dir(exp.path, r["init"], r["latent_dim"], r["seed"], p)) for p in ("fit", "infer"))
+        fitted, inferred = (
+            load_run(phase_dir(exp.path, r["init"], r["latent_dim"], r["seed"], p)) for p in ("fit", "infer")
+        )
         final = all_frame_losses(fitted, inferred, data) if use_images else None
         results[key] = complete_result(exp.path, key, {"final": final})
 
@@ -158,9 +161,13 @@ def _write_latent_results(exp: ExperimentDir, results: dict) -> None:
     init = "projection" if "projection" in inits else inits[0]
     recons = _reconstructions(exp, intra_run_dir(exp.path, init, q, seed) / "infer", arrays)
     meta = {
-        "latent_dim": q, "seed": seed, "inits": inits, "label_names": list(data.label_names),
+        "latent_dim": q,
+        "seed": seed,
+        "inits": inits,
+        "label_names": list(data.label_names),
         # the paper's figure shows one primitive's codes: the first label that has samples
-        "primitive": int(min((lab for lab in data.labels if lab >= 0), default=0)), "reconstructions": recons,
+        "primitive": int(min((lab for lab in data.labels if lab >= 0), default=0)),
+        "reconstructions": recons,
     }
     exp.write_results(LATENT_RESULTS, meta)
     exp.write_arrays(LATENT_RESULTS, arrays)
@@ -189,8 +196,16 @@ def _reconstructions(exp: ExperimentDir, infer_dir: Path, arrays: dict) -> list[
             arrays[f"recon_{name}_images"] = np.asarray(truth.images)[0]
             if frames is not None:
                 arrays[f"recon_{name}_generated_images"] = frames[0]
-        out.append({
-            "name": name, "sample": sample, "primitive": name, "kind": run.kind, "init": run.init,
-            "latent_dim": run.model_config.latent_dim, "joint_names": list(truth.joint_names), "dt": truth.dt,
-        })
+        out.append(
+            {
+                "name": name,
+                "sample": sample,
+                "primitive": name,
+                "kind": run.kind,
+                "init": run.init,
+                "latent_dim": run.model_config.latent_dim,
+                "joint_names": list(truth.joint_names),
+                "dt": truth.dt,
+            }
+        )
     return out

@@ -32,8 +32,18 @@ from primspace.experiments.workspace import ExperimentDir
 from primspace.experiments.prediction_table import predict_figure, predict_table
 from primspace.predict.grid import LABELS_DIAGNOSTIC, PEERS
 
-__all__ = ["PREDICT_FRACTIONS", "PREDICT_STARTS_GRID", "PEERS", "PREDICT_MAX_SAMPLES", "run_predict", "run_predict_point",
-           "predicted_subset", "projection_seeds", "epochs_tail", "judgeable"]
+__all__ = [
+    "PREDICT_FRACTIONS",
+    "PREDICT_STARTS_GRID",
+    "PEERS",
+    "PREDICT_MAX_SAMPLES",
+    "run_predict",
+    "run_predict_point",
+    "predicted_subset",
+    "projection_seeds",
+    "epochs_tail",
+    "judgeable",
+]
 
 #: Observed fractions of the error table (1.0 is added for the judge on simulator data).
 PREDICT_FRACTIONS = (0.1, 0.25, 0.5)
@@ -74,8 +84,17 @@ def _judge(test: MotionDataset, motor: np.ndarray) -> dict:
     return {"rates": success_rates(results), "overall": float(np.mean([r.success for r in results]))}
 
 
-def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str, fractions: tuple,
-                      starts: tuple, epochs: int, judge: bool, max_samples: int | None = None) -> dict:
+def run_predict_point(
+    run_dir: Path,
+    data_path: str,
+    fit_dir: str,
+    test_dir: str,
+    fractions: tuple,
+    starts: tuple,
+    epochs: int,
+    judge: bool,
+    max_samples: int | None = None,
+) -> dict:
     """One seed: every row (:func:`~primspace.predict.grid.grid_predictors`) at every fraction; mean
     unobserved MSE (and success) over the run's evaluation samples (at most ``max_samples``:
     :func:`predicted_subset`)."""
@@ -87,8 +106,9 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
     configure_process(TrainConfig(device="cpu", threads=1))
     data = MotionDataset.load(data_path).without_images()
     fit, test_idx = load_run(fit_dir), load_run(test_dir).indices
-    test_idx = predicted_subset(test_idx, None if data.labels is None else data.labels[test_idx], max_samples,
-                                fit.train_config.seed)
+    test_idx = predicted_subset(
+        test_idx, None if data.labels is None else data.labels[test_idx], max_samples, fit.train_config.seed
+    )
     test = data.subset(test_idx)
     truth = fit.scaler.transform(test.motor)
     rows = grid_predictors(fit, data, tuple(starts), epochs)
@@ -106,8 +126,12 @@ def run_predict_point(run_dir: Path, data_path: str, fit_dir: str, test_dir: str
             table.setdefault(name, {})[key] = entry
     if LABELS_DIAGNOSTIC in table:  # a diagnostic: its error only
         table[LABELS_DIAGNOSTIC] = {k: {"mse": v["mse"]} for k, v in table[LABELS_DIAGNOSTIC].items()}
-    return {"methods": table, "n_fitted": int(len(fit.indices)), "n_test": int(len(test_idx)),
-            "n_eval": int(len(load_run(test_dir).indices))}
+    return {
+        "methods": table,
+        "n_fitted": int(len(fit.indices)),
+        "n_test": int(len(test_idx)),
+        "n_eval": int(len(load_run(test_dir).indices)),
+    }
 
 
 def _lengths(data: MotionDataset) -> np.ndarray:
@@ -126,8 +150,13 @@ def epochs_tail(epochs: int, default: int) -> str:
     return "" if int(epochs) == default else f"-e{int(epochs)}"
 
 
-def run_predict(exp: ExperimentDir, fractions=PREDICT_FRACTIONS, starts=PREDICT_STARTS_GRID,
-                epochs: int = PREDICT_EPOCHS, seeds=None) -> dict:
+def run_predict(
+    exp: ExperimentDir,
+    fractions=PREDICT_FRACTIONS,
+    starts=PREDICT_STARTS_GRID,
+    epochs: int = PREDICT_EPOCHS,
+    seeds=None,
+) -> dict:
     """The prediction grid over the intra runs' seeds (runs intra first if needed); ``seeds``:
     only those of them (the results then hold those seeds only)."""
     intra = exp.read_results("intra") or run_intra(exp)
@@ -138,18 +167,35 @@ def run_predict(exp: ExperimentDir, fractions=PREDICT_FRACTIONS, starts=PREDICT_
     data = exp.dataset()
     judge = judgeable(data)
     points = [
-        GridPoint(f"predict{PREDICT_VERSION}/projection-q{q}-s{s}{tail}",
-                  (str(exp.data_path), str(phase_dir(exp.path, "projection", q, s, "fit")),
-                   str(phase_dir(exp.path, "projection", q, s, "infer")), tuple(fractions), tuple(starts), int(epochs),
-                   judge, PREDICT_MAX_SAMPLES))
+        GridPoint(
+            f"predict{PREDICT_VERSION}/projection-q{q}-s{s}{tail}",
+            (
+                str(exp.data_path),
+                str(phase_dir(exp.path, "projection", q, s, "fit")),
+                str(phase_dir(exp.path, "projection", q, s, "infer")),
+                tuple(fractions),
+                tuple(starts),
+                int(epochs),
+                judge,
+                PREDICT_MAX_SAMPLES,
+            ),
+        )
         for s in seeds
     ]
     with exp.stage("predict"):
         grid = exp.grid(run_predict_point, points, "prediction")
     by_seed = {str(s): grid.results[p.key] for s, p in zip(seeds, points) if p.key in grid.results}
-    results = {"latent_dim": q, "fractions": [float(f) for f in fractions], "starts": list(starts), "peers": list(PEERS),
-               "epochs": int(epochs), "judged": judge, "by_seed": by_seed, "failures": grid.failures,
-               "table": predict_table(by_seed)}
+    results = {
+        "latent_dim": q,
+        "fractions": [float(f) for f in fractions],
+        "starts": list(starts),
+        "peers": list(PEERS),
+        "epochs": int(epochs),
+        "judged": judge,
+        "by_seed": by_seed,
+        "failures": grid.failures,
+        "table": predict_table(by_seed),
+    }
     exp.write_results("predict", results)
     predict_figure(exp, results)
     return results

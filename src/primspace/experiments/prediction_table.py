@@ -19,7 +19,10 @@ def predict_table(by_seed: dict) -> dict:
                     cell["mse"].append(entry["mse"])
                 if "success" in entry:
                     cell["success"].append(entry["success"]["overall"])
-    return {m: {k: {name: mean_std_count(v) for name, v in cell.items() if v} for k, cell in fr.items()} for m, fr in table.items()}
+    return {
+        m: {k: {name: mean_std_count(v) for name, v in cell.items() if v} for k, cell in fr.items()}
+        for m, fr in table.items()
+    }
 
 
 def mean_std_count(values: list) -> list:
@@ -39,6 +42,9 @@ def predict_figure(exp, results: dict) -> None:
             means[method] = [cells[k]["mse"][0] for k in keys]
             spreads[method] = [cells[k]["mse"][1] for k in keys]
     if means:
-        save_figure(plot_prediction_errors(results["fractions"], means, spreads,
-                                           title=f"q = {results['latent_dim']}, mean ± std over seeds"),
-                    exp.figure("predict_errors"))
+        save_figure(
+            plot_prediction_errors(
+                results["fractions"], means, spreads, title=f"q = {results['latent_dim']}, mean ± std over seeds"
+            ),
+            exp.figure("predict_errors"),
+        )

@@ -23,7 +23,14 @@ from primspace.model import ModelConfig
 from primspace.train import TrainConfig
 
 __all__ = [
-    "ExperimentPreset", "PRESETS", "DEFAULT_PRESET", "LASA_DATA", "LASA_CHAINS", "COMPOSITE_PRESET_OF", "default_model", "default_train",
+    "ExperimentPreset",
+    "PRESETS",
+    "DEFAULT_PRESET",
+    "LASA_DATA",
+    "LASA_CHAINS",
+    "COMPOSITE_PRESET_OF",
+    "default_model",
+    "default_train",
     "resolve_preset",
 ]
 
@@ -209,11 +216,18 @@ class ExperimentPreset:
         from primspace.latent import START_METHODS
 
         changes = {k: v for k, v in changes.items() if v is not None}
-        for key in ("vision_frames", "loss_reduction", "device", "threads"):  # training settings: they go into the preset's TrainConfig
+        for key in (
+            "vision_frames",
+            "loss_reduction",
+            "device",
+            "threads",
+        ):  # training settings: they go into the preset's TrainConfig
             if key in changes:
                 changes["train"] = replace(changes.get("train", self.train), **{key: changes.pop(key)})
                 changes["train"].validate()
-        unknown = list(dict.fromkeys(i for key in ("inits", "inter_inits") for i in changes.get(key, ()) if i not in START_METHODS))
+        unknown = list(
+            dict.fromkeys(i for key in ("inits", "inter_inits") for i in changes.get(key, ()) if i not in START_METHODS)
+        )
         if unknown:
             raise UserError(f"unknown initialisation(s) {', '.join(unknown)}; choose from {', '.join(START_METHODS)}")
         if any(q < 1 for q in changes.get("latent_dims", ())):
@@ -276,19 +290,40 @@ _DEMO_TRAIN = dict(batch_size=16, lr=3e-3, latent_lr=3e-2)
 # demonstrations inferred with θ frozen and segmented. `experiment composite --preset demo`
 # runs "composite-demo", `--preset paper` runs "composite" (COMPOSITE_PRESET_OF).
 PRESETS["composite-demo"] = ExperimentPreset(
-    name="composite-demo", data_preset="composite-demo", train_fraction=0.3, latent_dims=(8,), images=False,
-    primitives="demo", fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
+    name="composite-demo",
+    data_preset="composite-demo",
+    train_fraction=0.3,
+    latent_dims=(8,),
+    images=False,
+    primitives="demo",
+    fit_epochs=400,
+    infer_epochs=250,
+    model=replace(default_model(), code_window=8),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 PRESETS["composite"] = ExperimentPreset(
-    name="composite", data_preset="composite", train_fraction=0.2, inits=("zero", "random", "projection"),
-    primitives="paper", latent_dims=(8,), images=False, model=replace(default_model(), code_window=10),
+    name="composite",
+    data_preset="composite",
+    train_fraction=0.2,
+    inits=("zero", "random", "projection"),
+    primitives="paper",
+    latent_dims=(8,),
+    images=False,
+    model=replace(default_model(), code_window=10),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 
 PRESETS["composite-lasa"] = ExperimentPreset(
-    name="composite-lasa", data_preset=LASA_CHAINS, train_fraction=0.3, latent_dims=(8,), images=False,
-    primitives="lasa", segment_steps=(30, 66), fit_epochs=400, infer_epochs=250, model=replace(default_model(), code_window=8),
+    name="composite-lasa",
+    data_preset=LASA_CHAINS,
+    train_fraction=0.3,
+    latent_dims=(8,),
+    images=False,
+    primitives="lasa",
+    segment_steps=(30, 66),
+    fit_epochs=400,
+    infer_epochs=250,
+    model=replace(default_model(), code_window=8),
     train=replace(default_train(), **_DEMO_TRAIN),
 )
 

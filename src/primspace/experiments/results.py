@@ -106,8 +106,10 @@ def animation_file(out_dir: str | Path, name: str) -> Path:
 def _read_json(path: Path, what: str) -> Any:
     if path.is_symlink() or (path.exists() and not path.is_file()):
         # an experiment folder's results are its own files: a link could put any readable file into a report
-        raise UserError(f"{path}: not a regular file (a link or something else); {what} are read from the "
-                        "experiment folder's own files only")
+        raise UserError(
+            f"{path}: not a regular file (a link or something else); {what} are read from the "
+            "experiment folder's own files only"
+        )
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -224,8 +226,14 @@ def spread_table(results: dict, probe: dict | None = None) -> tuple[list[str], l
     probes = {(p["latent_dim"], p["init"], p["seed"]): p["inferred"]["mean_r2"] for p in (probe or {}).get("runs", [])}
     rows = []
     for (q, init), runs in sorted(groups.items()):
-        row = [init, q, len(runs), mean_std([final([h["loss"] for h in r["fit"]]) for r in runs]),
-               mean_std([r["infer"][0]["loss"] for r in runs]), mean_std([final([h["loss"] for h in r["infer"]]) for r in runs])]
+        row = [
+            init,
+            q,
+            len(runs),
+            mean_std([final([h["loss"] for h in r["fit"]]) for r in runs]),
+            mean_std([r["infer"][0]["loss"] for r in runs]),
+            mean_std([final([h["loss"] for h in r["infer"]]) for r in runs]),
+        ]
         if probe is not None:
             row.append(mean_std([probes.get((q, init, r["seed"])) for r in runs]))
         rows.append(row)
@@ -254,17 +262,38 @@ def outcome_spread_table(clustering: dict | None, success: dict | None) -> tuple
     rows = []
     for init in list(dict.fromkeys([*rates, *acc])):
         r = rates.get(init, [])
-        rows.append([init, max(len(r), len(acc.get(init, []))), mean_std([x for x, _ in r]),
-                     mean_std([g for _, g in r]), mean_std(acc.get(init, []))])
+        rows.append(
+            [
+                init,
+                max(len(r), len(acc.get(init, []))),
+                mean_std([x for x, _ in r]),
+                mean_std([g for _, g in r]),
+                mean_std(acc.get(init, [])),
+            ]
+        )
     return ["init", "seeds", "success, all primitives", "success, grasp", "latent clustering accuracy"], rows
 
 
 def latent_table(results: dict) -> tuple[list[str], list[list]]:
     """Clustering: one row per set of codes, then one per raw-trajectory data set."""
-    rows = [[r["init"], r["codes"], r["tau"], r["r2"], r["rank"], r["accuracy"], r["nmi"], r["ari"]] for r in results["latent"]]
+    rows = [
+        [r["init"], r["codes"], r["tau"], r["r2"], r["rank"], r["accuracy"], r["nmi"], r["ari"]]
+        for r in results["latent"]
+    ]
     for name, t in results["trajectory"].items():
         c = t["chosen"]
-        rows.append([f"raw trajectories ({name})", f"{t['n']} x {t['dim']}", c["tau"], c["r2"], c["rank"], c["accuracy"], c["nmi"], c["ari"]])
+        rows.append(
+            [
+                f"raw trajectories ({name})",
+                f"{t['n']} x {t['dim']}",
+                c["tau"],
+                c["r2"],
+                c["rank"],
+                c["accuracy"],
+                c["nmi"],
+                c["ari"],
+            ]
+        )
     return ["init / data", "codes", "τ", "R²", "rank", "accuracy", "NMI", "ARI"], rows
 
 
@@ -283,8 +312,10 @@ def success_table(results: dict) -> tuple[list[str], list[list]]:
     judged = [results["recorded"]] + [results["generated"][i] for i in inits]
     rows = [[p] + [_with_interval(res, p) for res in judged] for p in prims + ["all"]]
     for tol in sorted(results["recorded"].get("by_tolerance", {}), key=float):
-        rows.append([f"all, held within {float(tol) * 1000:g} mm"]
-                    + [res.get("by_tolerance", {}).get(tol, {}).get("overall", float("nan")) for res in judged])
+        rows.append(
+            [f"all, held within {float(tol) * 1000:g} mm"]
+            + [res.get("by_tolerance", {}).get(tol, {}).get("overall", float("nan")) for res in judged]
+        )
     return ["primitive", "recorded"] + [f"{i} init" for i in inits], rows
 
 
@@ -307,7 +338,9 @@ def inter_table(results: dict) -> tuple[list[str], list[list]]:
     for init, runs in by.items():
         first = np.array([r["phase2"][0]["loss"] for r in runs])
         last = np.array([r["phase2"][-1]["loss"] for r in runs])
-        rows.append([init, len(runs), f"{first.mean():.4g} ± {first.std():.2g}", f"{last.mean():.4g} ± {last.std():.2g}"])
+        rows.append(
+            [init, len(runs), f"{first.mean():.4g} ± {first.std():.2g}", f"{last.mean():.4g} ± {last.std():.2g}"]
+        )
     return ["init", "folds", "phase-2 loss at start", "phase-2 final loss"], rows
 
 
@@ -340,11 +373,18 @@ def calibration_table(results: dict) -> tuple[list[str], list[list]] | None:
     rows = []
     for q in qs:
         d = diag.get(q, [])
-        row = [q, len(losses[(q, "calibrated")]), mean_std([x["movement"] for x in d]),
-               mean_std([x["identity_r2"] for x in d]), mean_std([x["heldout_r2"] for x in d])]
+        row = [
+            q,
+            len(losses[(q, "calibrated")]),
+            mean_std([x["movement"] for x in d]),
+            mean_std([x["identity_r2"] for x in d]),
+            mean_std([x["heldout_r2"] for x in d]),
+        ]
         for which in (0, 1):
-            row += [mean_std([v[which] for v in losses[(q, init)]]) if (q, init) in losses else "—"
-                    for init in CALIBRATION_COMPARED]
+            row += [
+                mean_std([v[which] for v in losses[(q, init)]]) if (q, init) in losses else "—"
+                for init in CALIBRATION_COMPARED
+            ]
         rows.append(row)
     columns = ["q", "seeds", "movement ‖Z−Pm‖/‖Pm‖", "R² of P m", "held-out R² of the map"]
     columns += [f"start {i}" for i in CALIBRATION_COMPARED] + [f"final {i}" for i in CALIBRATION_COMPARED]
@@ -369,12 +409,16 @@ def calibration_verdict(results: dict) -> tuple[bool | None, str]:
         others = [i for i in ("projection", "zero") if i in d]
         ok = d["calibrated"] <= CALIBRATION_TOLERANCE * min(d[i] for i in others)
         verdicts.append(ok)
-        lines.append(f"q={q}, seed {seed}: calibrated {d['calibrated']:.3g}, "
-                     + ", ".join(f"{i} {d[i]:.3g} ({d[i] / d['calibrated']:.3g}x)" for i in others))
+        lines.append(
+            f"q={q}, seed {seed}: calibrated {d['calibrated']:.3g}, "
+            + ", ".join(f"{i} {d[i]:.3g} ({d[i] / d['calibrated']:.3g}x)" for i in others)
+        )
     if not verdicts:
         return None, "no calibrated runs beside projection ones"
-    return all(verdicts), (f"calibrated within {CALIBRATION_TOLERANCE:g}x of the better of projection and zero in "
-                           f"{sum(verdicts)} of {len(verdicts)} runs: " + "; ".join(lines))
+    return all(verdicts), (
+        f"calibrated within {CALIBRATION_TOLERANCE:g}x of the better of projection and zero in "
+        f"{sum(verdicts)} of {len(verdicts)} runs: " + "; ".join(lines)
+    )
 
 
 def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], list[list]]:
@@ -390,15 +434,25 @@ def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], l
     rows = []
     for q in sorted({r["latent_dim"] for r in results["tuned"]["runs"]}):
         for init, setting in results["chosen"].items():
-            s, t = ([v for (k, i, d, _), v in finals.items() if (k, i, d) == (kind, init, q)] for kind in ("shared", "tuned"))
+            s, t = (
+                [v for (k, i, d, _), v in finals.items() if (k, i, d) == (kind, init, q)]
+                for kind in ("shared", "tuned")
+            )
             choice = f"τ {setting['taus'][0]:g}, {setting['taus'][1]:g}; latent lr {setting['latent_lr']:.3g}"
             validation = f"{setting['validation_loss']:.3g}"
             if q != tuned_at:  # tuned at one q, applied at every q: the choice is q = tuned_at's
                 choice, validation = f"q = {tuned_at}'s choice", "—"
             wins = " → ".join(_projection_below(finals, kind, init, q) for kind in ("shared", "tuned"))
             rows.append([q, init, choice, validation, mean_std(s), mean_std(t), "—" if init == "projection" else wins])
-    return ["q", "init", "chosen on validation", "validation loss", "final eval loss, shared setting",
-            "final eval loss, tuned", "projection lower, seeds (shared → tuned)"], rows
+    return [
+        "q",
+        "init",
+        "chosen on validation",
+        "validation loss",
+        "final eval loss, shared setting",
+        "final eval loss, tuned",
+        "projection lower, seeds (shared → tuned)",
+    ], rows
 
 
 def projection_lead(results: dict, intra: dict | None = None, init: str = "zero") -> dict[str, str]:
@@ -411,15 +465,17 @@ def projection_lead(results: dict, intra: dict | None = None, init: str = "zero"
 def _tuning_finals(results: dict, intra: dict | None) -> dict[tuple, float]:
     """``(shared|tuned, init, q, seed) -> final eval loss`` of the tune results' runs."""
     finals = {}
-    for kind, runs in (("shared", (intra or results.get("shared") or {"runs": []})["runs"]),
-                       ("tuned", results["tuned"]["runs"])):
+    for kind, runs in (
+        ("shared", (intra or results.get("shared") or {"runs": []})["runs"]),
+        ("tuned", results["tuned"]["runs"]),
+    ):
         for r in runs:
             finals[(kind, r["init"], r["latent_dim"], r["seed"])] = final([h["loss"] for h in r["infer"]])
     return finals
 
 
 def _projection_below(finals: dict, kind: str, init: str, q: int) -> str:
-    """"k of n": the seeds where projection's final eval loss is below ``init``'s (paired by seed)."""
+    """ "k of n": the seeds where projection's final eval loss is below ``init``'s (paired by seed)."""
     seeds = [sd for (k, i, d, sd) in finals if (k, i, d) == (kind, init, q) and (kind, "projection", q, sd) in finals]
     return f"{sum(finals[(kind, 'projection', q, sd)] < finals[(kind, init, q, sd)] for sd in seeds)} of {len(seeds)}"
 
@@ -437,7 +493,9 @@ def predict_error_table(results: dict) -> tuple[list[str], list[list]]:
     for method, cells in table.items():
         row = [method] + [_cell_text(cells.get(f, {}).get("mse")) for f in fractions]
         if results.get("judged"):
-            row += [_cell_text(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])]
+            row += [
+                _cell_text(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])
+            ]
         rows.append(row)
     return columns, rows
 
@@ -456,8 +514,11 @@ def scene_table(results: dict) -> tuple[list[str], list[list]]:
         for method in methods:
             cell = table[method].get(name)
             if cell:
-                rows.append([name, method, f"{cell['n'][0]:g}"] + ([_cell_text(cell.get("success"), digits=2)]
-                                                                   if judged else []) + [_cell_text(cell.get("mse"))])
+                rows.append(
+                    [name, method, f"{cell['n'][0]:g}"]
+                    + ([_cell_text(cell.get("success"), digits=2)] if judged else [])
+                    + [_cell_text(cell.get("mse"))]
+                )
     return columns, rows
 
 

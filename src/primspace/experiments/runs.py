@@ -76,7 +76,7 @@ def fit_point_dir(run_dir: Path, init: str) -> Path:
     ``projection-q40-s0``, ``calibrated-fold3-s0`` -> ``projection-fold3-s0``)."""
     if not run_dir.name.startswith(init):
         raise ValueError(f"grid point {run_dir.name} is not one of init {init}")
-    return run_dir.with_name(fit_init(init) + run_dir.name[len(init):])
+    return run_dir.with_name(fit_init(init) + run_dir.name[len(init) :])
 
 
 def shared_fits_last(points: list) -> list:
@@ -206,8 +206,17 @@ def all_frame_losses(fitted, inferred, data: MotionDataset) -> dict | None:
     return out
 
 
-def fit_and_infer(run_dir: Path, data: MotionDataset, preset: ExperimentPreset, init: str, latent_dim: int, seed: int,
-                  train_idx, eval_idx, use_images: bool):
+def fit_and_infer(
+    run_dir: Path,
+    data: MotionDataset,
+    preset: ExperimentPreset,
+    init: str,
+    latent_dim: int,
+    seed: int,
+    train_idx,
+    eval_idx,
+    use_images: bool,
+):
     """One grid point's two phases: fit θ and the codes on ``train_idx``, then infer the
     codes of ``eval_idx`` with θ frozen, into ``run_dir/fit`` and ``run_dir/infer`` (each
     resumes from its checkpoint when the point was interrupted). A calibrated point
@@ -227,13 +236,26 @@ def fit_and_infer(run_dir: Path, data: MotionDataset, preset: ExperimentPreset, 
     configure_process(train_config)  # one thread per run (the preset's threads), as every backend
     fit_dir = fit_point_dir(run_dir, init) / "fit"
     fitted = shared_fit(
-        fit_dir, dataset=data, model_config=model_config, train_config=train_config, init=fit_init(init),
-        indices=np.asarray(train_idx), images=use_images, scaler=experiment_scaler(data), progress=False,
+        fit_dir,
+        dataset=data,
+        model_config=model_config,
+        train_config=train_config,
+        init=fit_init(init),
+        indices=np.asarray(train_idx),
+        images=use_images,
+        scaler=experiment_scaler(data),
+        progress=False,
     )
     fit_seconds = time.perf_counter() - start
     inferred = infer(
-        fit_dir, data, run_dir / "infer", epochs=preset.infer_epochs, init=init,
-        indices=np.asarray(eval_idx), resume=True, progress=False, batch_size=preset.infer_batch_size,
+        fit_dir,
+        data,
+        run_dir / "infer",
+        epochs=preset.infer_epochs,
+        init=init,
+        indices=np.asarray(eval_idx),
+        resume=True,
+        progress=False,
+        batch_size=preset.infer_batch_size,
     )
     return fitted, inferred, fit_seconds
-

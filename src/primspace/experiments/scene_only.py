@@ -31,8 +31,13 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments.intra import run_intra
-from primspace.experiments.prediction import (PREDICT_MAX_SAMPLES, epochs_tail, judgeable, predicted_subset,
-                                              projection_seeds)
+from primspace.experiments.prediction import (
+    PREDICT_MAX_SAMPLES,
+    epochs_tail,
+    judgeable,
+    predicted_subset,
+    projection_seeds,
+)
 from primspace.experiments.prediction_table import mean_std_count
 from primspace.predict.metrics import finite_mean
 from primspace.experiments.runs import focus_runs, phase_dir
@@ -65,8 +70,9 @@ def _first_step(data: MotionDataset) -> np.ndarray:
     return observation_masks(Observation.build(1, FIRST), data)[0]
 
 
-def _per_primitive(test: MotionDataset, scaled: np.ndarray, truth: np.ndarray, acted: np.ndarray,
-                   motor: np.ndarray | None) -> dict:
+def _per_primitive(
+    test: MotionDataset, scaled: np.ndarray, truth: np.ndarray, acted: np.ndarray, motor: np.ndarray | None
+) -> dict:
     """{label name or "all": {"n", "mse", "success" (when ``motor`` is given: judged)}} of the
     ``acted`` samples; ``scaled`` / ``truth`` in scaled units, ``motor`` physical."""
     from primspace.predict.metrics import unobserved_mse
@@ -102,8 +108,15 @@ def _reproduction(infer_dir: str, test_idx: np.ndarray) -> np.ndarray:
     return reconstruct(inferred, codes, images=False)[0]
 
 
-def run_scene_only_point(run_dir: Path, data_path: str, fit_dir: str, infer_dir: str, epochs: int, judge: bool,
-                         max_samples: int | None = PREDICT_MAX_SAMPLES) -> dict:
+def run_scene_only_point(
+    run_dir: Path,
+    data_path: str,
+    fit_dir: str,
+    infer_dir: str,
+    epochs: int,
+    judge: bool,
+    max_samples: int | None = PREDICT_MAX_SAMPLES,
+) -> dict:
     """One seed: the scene-only motions of the run's evaluation samples (at most ``max_samples``),
     the mean motion of each sample's primitive and the reproduction, per primitive."""
     from primspace.predict.peers import MeanMotionPeer
@@ -120,17 +133,31 @@ def run_scene_only_point(run_dir: Path, data_path: str, fit_dir: str, infer_dir:
     test = test.without_images()
     scaler, acted = fit.scaler, scene["cluster"] >= 0
     truth = scaler.transform(test.motor)
-    mean = MeanMotionPeer().fit(scaler.transform(fitted.motor), fitted.labels, fitted.lengths).predict(
-        truth, _first_step(test), test.labels, test.lengths)
+    mean = (
+        MeanMotionPeer()
+        .fit(scaler.transform(fitted.motor), fitted.labels, fitted.lengths)
+        .predict(truth, _first_step(test), test.labels, test.lengths)
+    )
     reproduced = _reproduction(infer_dir, test_idx)
-    predictions = {SCENE: (scene["scaled"], scene["motor"], acted),
-                   MEAN_MOTION: (mean, scaler.inverse_transform(mean).astype(np.float32), np.ones(len(test), bool)),
-                   REPRODUCTION: (scaler.transform(reproduced), reproduced, np.ones(len(test), bool))}
-    methods = {name: _per_primitive(test, scaled, truth, rows, motor if judge else None)
-               for name, (scaled, motor, rows) in predictions.items()}
+    predictions = {
+        SCENE: (scene["scaled"], scene["motor"], acted),
+        MEAN_MOTION: (mean, scaler.inverse_transform(mean).astype(np.float32), np.ones(len(test), bool)),
+        REPRODUCTION: (scaler.transform(reproduced), reproduced, np.ones(len(test), bool)),
+    }
+    methods = {
+        name: _per_primitive(test, scaled, truth, rows, motor if judge else None)
+        for name, (scaled, motor, rows) in predictions.items()
+    }
     clusters = dict(scene["clusters"], ranks={str(k): int(v) for k, v in scene["clusters"]["ranks"].items()})
-    return {"methods": methods, "clusters": clusters, "unassigned": int((~acted).sum()), "epochs": int(epochs),
-            "n_fitted": int(len(fit.indices)), "n_test": int(len(test_idx)), "n_eval": int(len(eval_idx))}
+    return {
+        "methods": methods,
+        "clusters": clusters,
+        "unassigned": int((~acted).sum()),
+        "epochs": int(epochs),
+        "n_fitted": int(len(fit.indices)),
+        "n_test": int(len(test_idx)),
+        "n_eval": int(len(eval_idx)),
+    }
 
 
 def _check_frames(exp: ExperimentDir) -> None:
@@ -155,23 +182,40 @@ def run_scene(exp: ExperimentDir, epochs: int = SCENE_EPOCHS) -> dict:
     q, _, _ = focus_runs(exp, intra)
     seeds = projection_seeds(intra, q)
     if not seeds:
-        raise UserError(f"experiment scene uses the intra projection runs at q = {q}, and there are none "
-                        "(an experiment whose --inits include projection)")
+        raise UserError(
+            f"experiment scene uses the intra projection runs at q = {q}, and there are none "
+            "(an experiment whose --inits include projection)"
+        )
     if not load_run(phase_dir(exp.path, "projection", q, seeds[0], "fit")).model_config.has_images:
         raise UserError(_NO_FRAMES)
     judge = judgeable(exp.dataset())
     tail = epochs_tail(epochs, SCENE_EPOCHS)
     points = [
-        GridPoint(f"scene{SCENE_VERSION}/projection-q{q}-s{s}{tail}",
-                  (str(exp.data_path), str(phase_dir(exp.path, "projection", q, s, "fit")),
-                   str(phase_dir(exp.path, "projection", q, s, "infer")), int(epochs), judge, PREDICT_MAX_SAMPLES))
+        GridPoint(
+            f"scene{SCENE_VERSION}/projection-q{q}-s{s}{tail}",
+            (
+                str(exp.data_path),
+                str(phase_dir(exp.path, "projection", q, s, "fit")),
+                str(phase_dir(exp.path, "projection", q, s, "infer")),
+                int(epochs),
+                judge,
+                PREDICT_MAX_SAMPLES,
+            ),
+        )
         for s in seeds
     ]
     with exp.stage("scene"):
         grid = exp.grid(run_scene_only_point, points, "scene only")
     by_seed = {str(s): grid.results[p.key] for s, p in zip(seeds, points) if p.key in grid.results}
-    results = {"latent_dim": q, "epochs": int(epochs), "judged": judge, "methods": list(SCENE_METHODS),
-               "by_seed": by_seed, "failures": grid.failures, "table": scene_summary(by_seed)}
+    results = {
+        "latent_dim": q,
+        "epochs": int(epochs),
+        "judged": judge,
+        "methods": list(SCENE_METHODS),
+        "by_seed": by_seed,
+        "failures": grid.failures,
+        "table": scene_summary(by_seed),
+    }
     exp.write_results("scene", results)
     return results
 
@@ -186,5 +230,7 @@ def scene_summary(by_seed: dict) -> dict:
                 for key in cell:
                     if entry.get(key) is not None:
                         cell[key].append(entry[key])
-    return {m: {p: {k: mean_std_count(v) for k, v in cell.items() if v} for p, cell in prims.items()}
-            for m, prims in table.items()}
+    return {
+        m: {p: {k: mean_std_count(v) for k, v in cell.items() if v} for p, cell in prims.items()}
+        for m, prims in table.items()
+    }

@@ -128,8 +128,13 @@ def point_by_tolerance(point: dict, default_separation: float = 0.010) -> dict[s
     """
     if "by_tolerance" in point:
         return point["by_tolerance"]
-    return {separation_key(default_separation): {
-        "rates": point["rates"], "successes": point_successes(point), "overall": point["overall"]}}
+    return {
+        separation_key(default_separation): {
+            "rates": point["rates"],
+            "successes": point_successes(point),
+            "overall": point["overall"],
+        }
+    }
 
 
 def point_successes(point: dict) -> dict[str, int]:
@@ -172,14 +177,22 @@ def run_success(exp: ExperimentDir) -> dict:
         "separation_sweep": list(SEPARATION_SWEEP),
         "default_separation": TOLERANCES.separation,
         "recorded": grid.results.get(f"{judge}/recorded"),
-        "generated": {init: grid.results[f"{judge}/{init}-q{q}-s{seed}"] for init in inits if f"{judge}/{init}-q{q}-s{seed}" in grid.results},
+        "generated": {
+            init: grid.results[f"{judge}/{init}-q{q}-s{seed}"]
+            for init in inits
+            if f"{judge}/{init}-q{q}-s{seed}" in grid.results
+        },
         "by_seed": {  # the other seeds' verdicts, for the spread over seeds
-            str(s): {i: grid.results[f"{judge}/{i}-q{q}-s{s}"] for i in exp.preset.inits if f"{judge}/{i}-q{q}-s{s}" in grid.results}
-            for s in seeds if s != seed
+            str(s): {
+                i: grid.results[f"{judge}/{i}-q{q}-s{s}"]
+                for i in exp.preset.inits
+                if f"{judge}/{i}-q{q}-s{s}" in grid.results
+            }
+            for s in seeds
+            if s != seed
         },
         "failures": grid.failures,
         "label_names": list(exp.dataset().label_names),
     }
     exp.write_results("success", results)
     return results
-

@@ -22,8 +22,18 @@ from pathlib import Path
 from primspace.errors import UserError
 from primspace.experiments.results import read_meta, read_results
 
-__all__ = ["SUMMARY_VERSION", "CURVE_EPOCHS", "DIGITS", "summarize", "read_summary", "write_summary", "cpu_class",
-           "kept_epochs", "recorded_commands", "recorded_versions"]
+__all__ = [
+    "SUMMARY_VERSION",
+    "CURVE_EPOCHS",
+    "DIGITS",
+    "summarize",
+    "read_summary",
+    "write_summary",
+    "cpu_class",
+    "kept_epochs",
+    "recorded_commands",
+    "recorded_versions",
+]
 
 #: Bumped when the summary's form changes.
 SUMMARY_VERSION = 1
@@ -77,7 +87,9 @@ def _curve(curve: list[dict], epochs: set[int] | None = None) -> list[dict]:
     if not points:
         return []
     keep = kept_epochs(points[-1]["epoch"]) if epochs is None else epochs | {points[0]["epoch"], points[-1]["epoch"]}
-    parts = ("epoch", "loss", "motor", "vision") if any(h.get("vision") is not None for h in points) else ("epoch", "loss")
+    parts = (
+        ("epoch", "loss", "motor", "vision") if any(h.get("vision") is not None for h in points) else ("epoch", "loss")
+    )
     return [{k: h[k] for k in parts if h.get(k) is not None} for h in points if h["epoch"] in keep]
 
 
@@ -112,30 +124,45 @@ def _clustering(c: dict) -> dict:
         return [{k: r.get(k) for k in _CLUSTER_ROW} for r in rs]
 
     return {
-        "latent_dim": c.get("latent_dim"), "seed": c.get("seed"), "r2_target": c.get("r2_target"),
+        "latent_dim": c.get("latent_dim"),
+        "seed": c.get("seed"),
+        "r2_target": c.get("r2_target"),
         "latent": rows(c.get("latent", [])),
         "by_seed": {s: rows(rs) for s, rs in c.get("by_seed", {}).items()},
-        "trajectory": {name: {k: t.get(k) for k in ("n", "dim", "k", "r2_target", "chosen")}
-                       for name, t in c.get("trajectory", {}).items()},
+        "trajectory": {
+            name: {k: t.get(k) for k in ("n", "dim", "k", "r2_target", "chosen")}
+            for name, t in c.get("trajectory", {}).items()
+        },
     }
 
 
 def _inter(i: dict) -> dict:
     keep = ("fold", "primitive", "init", "latent_dim", "seed", "n_phase1", "n_new", "n_replay", "seconds")
-    return {"latent_dim": i.get("latent_dim"), "replay": i.get("replay"), "failures": i.get("failures", {}),
-            "runs": [{k: r.get(k) for k in keep} | {"phase1": _curve(r["phase1"], set()), "phase2": _curve(r["phase2"])}
-                     for r in i.get("runs", [])]}
+    return {
+        "latent_dim": i.get("latent_dim"),
+        "replay": i.get("replay"),
+        "failures": i.get("failures", {}),
+        "runs": [
+            {k: r.get(k) for k in keep} | {"phase1": _curve(r["phase1"], set()), "phase2": _curve(r["phase2"])}
+            for r in i.get("runs", [])
+        ],
+    }
 
 
 def _probe(p: dict) -> dict:
-    return {"runs": [{k: r.get(k) for k in ("init", "latent_dim", "seed")}
-                     | {codes: {"mean_r2": r.get(codes, {}).get("mean_r2")} for codes in ("fitted", "inferred", "initial")}
-                     for r in p.get("runs", [])]}
+    return {
+        "runs": [
+            {k: r.get(k) for k in ("init", "latent_dim", "seed")}
+            | {codes: {"mean_r2": r.get(codes, {}).get("mean_r2")} for codes in ("fitted", "inferred", "initial")}
+            for r in p.get("runs", [])
+        ]
+    }
 
 
 def _tune(t: dict) -> dict:
     return {k: t.get(k) for k in ("latent_dim", "grid", "settings", "validation", "chosen", "failures")} | {
-        "tuned": {"runs": [_intra(x) for x in t.get("tuned", {}).get("runs", [])]}}
+        "tuned": {"runs": [_intra(x) for x in t.get("tuned", {}).get("runs", [])]}
+    }
 
 
 def _seeds_run(p: dict) -> list[int]:
@@ -144,27 +171,46 @@ def _seeds_run(p: dict) -> list[int]:
 
 
 def _predict(p: dict) -> dict:
-    return {k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table",
-                                  "failures")} | {"seeds": _seeds_run(p)}
+    return {
+        k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table", "failures")
+    } | {"seeds": _seeds_run(p)}
 
 
 def _scene(p: dict) -> dict:
     return {k: p.get(k) for k in ("latent_dim", "epochs", "judged", "methods", "table", "failures")} | {
-        "seeds": _seeds_run(p)}
+        "seeds": _seeds_run(p)
+    }
 
 
 def _composite(c: dict) -> dict:
-    keep = ("init", "latent_dim", "seed", "window", "n_train", "n_eval", "seconds", "segmentation",
-            "segmentation_untrained")
+    keep = (
+        "init",
+        "latent_dim",
+        "seed",
+        "window",
+        "n_train",
+        "n_eval",
+        "seconds",
+        "segmentation",
+        "segmentation_untrained",
+    )
     return {k: c.get(k) for k in ("failures", "splits", "window", "label_names")} | {
-        "runs": [{k: r.get(k) for k in keep} | {"fit": _curve(r["fit"]), "infer": _curve(r["infer"])}
-                 for r in c.get("runs", [])],
-        "peers": c.get("peers", {}), "primitives": c.get("primitives", [])}
+        "runs": [
+            {k: r.get(k) for k in keep} | {"fit": _curve(r["fit"]), "infer": _curve(r["infer"])}
+            for r in c.get("runs", [])
+        ],
+        "peers": c.get("peers", {}),
+        "primitives": c.get("primitives", []),
+    }
 
 
 _REDUCERS = {
-    "intra": lambda r: {"runs": [_intra(x) for x in r.get("runs", [])], "failures": r.get("failures", {}),
-                        "splits": r.get("splits", {}), "label_names": r.get("label_names")},
+    "intra": lambda r: {
+        "runs": [_intra(x) for x in r.get("runs", [])],
+        "failures": r.get("failures", {}),
+        "splits": r.get("splits", {}),
+        "label_names": r.get("label_names"),
+    },
     "success": _success,
     "clustering": _clustering,
     "inter": _inter,
@@ -226,8 +272,10 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
     if command is None:
         command = recorded_commands(meta)
         if not command:
-            raise UserError(f"{out_dir}: its experiment.json recorded no commands (made before 0.6.1): "
-                            "give --command, the command(s) that made it")
+            raise UserError(
+                f"{out_dir}: its experiment.json recorded no commands (made before 0.6.1): "
+                "give --command, the command(s) that made it"
+            )
     results = {}
     for key, reduce in _REDUCERS.items():
         found = read_results(out_dir, key)
@@ -245,7 +293,9 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
         "cpu": cpu_class(),
         "preset": meta.get("preset_config", {}),
         "timings": meta.get("timings", {}),
-        "data": {k: data.get(k) for k in ("n_samples", "length", "n_joints", "label_names", "image_shape") if k in data},
+        "data": {
+            k: data.get(k) for k in ("n_samples", "length", "n_joints", "label_names", "image_shape") if k in data
+        },
         "results": _round(results),
     }
 

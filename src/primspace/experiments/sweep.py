@@ -90,8 +90,13 @@ def run_grid(
             todo.append(point)
     items = [(fn, str(run_dir_of(out_dir, p.key)), p.args) for p in todo]
     for outcome in run_jobs(
-        _run_point, items, backend=backend, workers=workers, address=address,
-        description=description, progress=progress,
+        _run_point,
+        items,
+        backend=backend,
+        workers=workers,
+        address=address,
+        description=description,
+        progress=progress,
     ):
         point = todo[outcome.index]
         run_dir = run_dir_of(out_dir, point.key)

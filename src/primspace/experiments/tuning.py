@@ -60,8 +60,10 @@ def validation_split(labels: np.ndarray, train: np.ndarray, seed: int) -> tuple[
 def settings_of(preset: ExperimentPreset) -> list[dict]:
     """Every setting of the grid as ``{"taus": [..], "latent_lr": x}`` (the preset's own first)."""
     own = {"taus": list(preset.model.taus), "latent_lr": preset.train.latent_lr}
-    grid = [{"taus": list(t), "latent_lr": preset.train.latent_lr * f}
-            for t, f in product(TUNING_GRID["taus"], TUNING_GRID["latent_lr_factor"])]
+    grid = [
+        {"taus": list(t), "latent_lr": preset.train.latent_lr * f}
+        for t, f in product(TUNING_GRID["taus"], TUNING_GRID["latent_lr_factor"])
+    ]
     return [own] + [s for s in grid if not _same(s, own)]
 
 
@@ -70,8 +72,11 @@ def _same(a: dict, b: dict) -> bool:
 
 
 def _with(preset: ExperimentPreset, setting: dict) -> ExperimentPreset:
-    return replace(preset, model=replace(preset.model, taus=tuple(setting["taus"])),
-                   train=replace(preset.train, latent_lr=float(setting["latent_lr"])))
+    return replace(
+        preset,
+        model=replace(preset.model, taus=tuple(setting["taus"])),
+        train=replace(preset.train, latent_lr=float(setting["latent_lr"])),
+    )
 
 
 def _name(setting: dict) -> str:
@@ -110,19 +115,37 @@ def run_tune(exp: ExperimentDir) -> dict:
         train, evaluation = split_indices(data.labels, preset.train_fraction, seed)
         fit_idx, val_idx = validation_split(data.labels, train, seed)
         if not len(val_idx):
-            raise UserError(f"tune: seed {seed}'s fitted part has one sample per primitive, so none is left to "
-                            "validate on; tuning needs at least 2 fitted samples of a primitive (more data or a "
-                            "larger train_fraction)")
+            raise UserError(
+                f"tune: seed {seed}'s fitted part has one sample per primitive, so none is left to "
+                "validate on; tuning needs at least 2 fitted samples of a primitive (more data or a "
+                "larger train_fraction)"
+            )
         for setting, init in product(settings, inits):
             key = f"tune/{init}-q{q}-s{seed}-{_name(setting)}"
-            args = (str(exp.data_path), fit_idx.tolist(), val_idx.tolist(), init, q, seed, _with(preset, setting).to_dict())
+            args = (
+                str(exp.data_path),
+                fit_idx.tolist(),
+                val_idx.tolist(),
+                init,
+                q,
+                seed,
+                _with(preset, setting).to_dict(),
+            )
             points.append(GridPoint(key, args))
             meta[key] = {"init": init, "seed": seed, "latent_dim": q, "setting": setting}
     with exp.stage("tune: validation"):
         grid = exp.grid(run_intra_point, points, "tuning on the validation split")
-    validation = [meta[k] | {"validation_start": r["infer"][0]["loss"], "validation_loss": _final(r),
-                             "n_fit": r["n_train"], "n_validation": r["n_eval"]}
-                  for k, r in grid.results.items() if k in meta]
+    validation = [
+        meta[k]
+        | {
+            "validation_start": r["infer"][0]["loss"],
+            "validation_loss": _final(r),
+            "n_fit": r["n_train"],
+            "n_validation": r["n_eval"],
+        }
+        for k, r in grid.results.items()
+        if k in meta
+    ]
     chosen = _choose(validation, settings)
     shared = {(r["init"], r["latent_dim"], r["seed"]): r for r in intra["runs"]}
     tuned_points, reused = [], []
@@ -132,15 +155,26 @@ def run_tune(exp: ExperimentDir) -> dict:
             if _same(chosen[init], settings[0]) and (init, latent_dim, seed) in shared:
                 reused.append(shared[(init, latent_dim, seed)])  # the preset's own setting: the intra run
                 continue
-            args = (str(exp.data_path), train.tolist(), evaluation.tolist(), init, latent_dim, seed,
-                    _with(preset, chosen[init]).to_dict())
+            args = (
+                str(exp.data_path),
+                train.tolist(),
+                evaluation.tolist(),
+                init,
+                latent_dim,
+                seed,
+                _with(preset, chosen[init]).to_dict(),
+            )
             tuned_points.append(GridPoint(f"tuned/{init}-q{latent_dim}-s{seed}", args))
     with exp.stage("tune: tuned runs"):
         tuned_grid = exp.grid(run_intra_point, tuned_points, "intra runs with the tuned settings")
     results = {
         "latent_dim": q,
-        "grid": {"taus": [list(t) for t in TUNING_GRID["taus"]], "latent_lr_factor": list(TUNING_GRID["latent_lr_factor"]),
-                 "validation_fraction": VALIDATION_FRACTION, "epochs": [preset.fit_epochs, preset.infer_epochs]},
+        "grid": {
+            "taus": [list(t) for t in TUNING_GRID["taus"]],
+            "latent_lr_factor": list(TUNING_GRID["latent_lr_factor"]),
+            "validation_fraction": VALIDATION_FRACTION,
+            "epochs": [preset.fit_epochs, preset.infer_epochs],
+        },
         "settings": settings,
         "validation": validation,
         "chosen": chosen,

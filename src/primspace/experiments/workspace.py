@@ -102,7 +102,9 @@ class ExperimentDir:
             if _check_same_settings(meta_file, preset, self.meta.get("preset_config", {})):
                 self.meta["preset_config"] = preset.to_dict()  # more inits compared: recorded at the next save
             if data is not None and self.meta.get("data") != str(data_path):
-                raise UserError(f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out")
+                raise UserError(
+                    f"{self.path}: made with data {self.meta.get('data')}, not {data_path}; use another --out"
+                )
             if not isinstance(self.meta.get("data"), str):
                 raise UserError(f"{meta_file}: has no data file ('data' field)")
             data_path = Path(self.meta["data"])
@@ -124,9 +126,13 @@ class ExperimentDir:
         """Keep ``primspace ARGS`` in experiment.json's ``invocations`` (with the version and
         the time; written with the next save): :func:`~primspace.experiments.summary.summarize`
         names them when no command is given."""
-        self.meta.setdefault("invocations", []).append({
-            "command": "primspace " + shlex.join(str(a) for a in args), "primspace": __version__,
-            "at": _dt.datetime.now().isoformat(timespec="seconds")})
+        self.meta.setdefault("invocations", []).append(
+            {
+                "command": "primspace " + shlex.join(str(a) for a in args),
+                "primspace": __version__,
+                "at": _dt.datetime.now().isoformat(timespec="seconds"),
+            }
+        )
 
     # ----------------------------------------------------------------------- files
     def save_meta(self) -> None:
@@ -170,7 +176,9 @@ class ExperimentDir:
             self._dataset = MotionDataset.load(self.data_path)
             labelled = self._dataset.labels is not None and not (self._dataset.labels < 0).any()
             if not labelled and self._dataset.step_labels is None:
-                raise UserError(f"{self.data_path}: experiments need a primitive label for every sample (or every step)")
+                raise UserError(
+                    f"{self.data_path}: experiments need a primitive label for every sample (or every step)"
+                )
             if not self.results_file("data").exists():  # what the report's Data section shows
                 self.write_results("data", _plain(self._dataset.summary()))
         return self._dataset
@@ -203,13 +211,17 @@ class ExperimentDir:
 
         if data_preset in COMPOSITE_PRESETS:
             with self.stage(stage or "generate data"):
-                generate_composite(data_preset, seed=self.seed, out=path, progress=self.progress,
-                                   workers=self.workers)
+                generate_composite(data_preset, seed=self.seed, out=path, progress=self.progress, workers=self.workers)
             return
         with self.stage(stage or "generate data"):
             generate_dataset(
-                data_preset, seed=self.seed, workers=self.workers, backend=self.backend,
-                address=self.address, out=path, progress=self.progress,
+                data_preset,
+                seed=self.seed,
+                workers=self.workers,
+                backend=self.backend,
+                address=self.address,
+                out=path,
+                progress=self.progress,
             )
 
     # ---------------------------------------------------------------------- stages
@@ -227,8 +239,14 @@ class ExperimentDir:
     def grid(self, fn: Callable[..., Any], points: Sequence[GridPoint], description: str) -> GridResult:
         """Run grid points with this directory's backend; failures are recorded, not raised."""
         result = run_grid(
-            fn, points, self.path, backend=self.backend, workers=self.workers, address=self.address,
-            description=description, progress=self.progress,
+            fn,
+            points,
+            self.path,
+            backend=self.backend,
+            workers=self.workers,
+            address=self.address,
+            description=description,
+            progress=self.progress,
         )
         failures = self.meta.setdefault("failures", {})
         for key in result.results:
@@ -286,8 +304,11 @@ def _check_same_settings(meta_file: Path, preset: ExperimentPreset, saved: dict)
     now = _jsonable(preset.settings())
     changed = sorted(k for k, v in now.items() if k in before and v != before[k])
     # comparing more initialisations adds grid points and changes none of the others' numbers
-    grown = [k for k in changed if (k in _ADDABLE and set(before[k]) <= set(now[k]))
-             or (k in _NEW_STAGES and before[k] is None)]
+    grown = [
+        k
+        for k in changed
+        if (k in _ADDABLE and set(before[k]) <= set(now[k])) or (k in _NEW_STAGES and before[k] is None)
+    ]
     changed = [k for k in changed if k not in grown]
     if changed:
         raise UserError(

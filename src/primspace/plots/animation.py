@@ -102,8 +102,11 @@ def animation_frames(
     """
     motor = np.asarray(motor, dtype=float)
     steps = frame_steps(len(motor), max_frames)
-    panels = [(label, np.asarray(a)) for label, a in (
-        ("recorded", images), ("generated", generated_images), ("simulator replay", replay_images)) if a is not None]
+    panels = [
+        (label, np.asarray(a))
+        for label, a in (("recorded", images), ("generated", generated_images), ("simulator replay", replay_images))
+        if a is not None
+    ]
     for label, frames in panels:
         if frames.ndim != 4 or len(frames) != len(motor):
             raise ValueError(f"{label} frames must have shape ({len(motor)}, H, W, 3), got {frames.shape}")
@@ -120,8 +123,14 @@ def _figure(motor, generated_motor, panels, joint_names, dt, title, max_size):
     dpi = min(_DPI, max_size[1] / width_in, max_size[0] / _HEIGHT_IN)
     fig = plt.figure(figsize=(width_in, _HEIGHT_IN), dpi=dpi)
     grid = fig.add_gridspec(
-        1, len(panels) + 1, width_ratios=[_PANEL_IN] * len(panels) + [_TRACE_IN - 0.9],
-        left=0.02, right=0.99 - 0.85 / width_in, top=0.80, bottom=0.22, wspace=0.12,
+        1,
+        len(panels) + 1,
+        width_ratios=[_PANEL_IN] * len(panels) + [_TRACE_IN - 0.9],
+        left=0.02,
+        right=0.99 - 0.85 / width_in,
+        top=0.80,
+        bottom=0.22,
+        wspace=0.12,
     )
     artists = []
     for k, (label, frames) in enumerate(panels):
@@ -143,8 +152,15 @@ def _figure(motor, generated_motor, panels, joint_names, dt, title, max_size):
     trace.tick_params(labelsize=6, pad=1)
     trace.set_xlim(time[0], time[-1] if len(time) > 1 else time[0] + 1)
     if n <= 10:
-        trace.legend(fontsize=5.5, loc="upper left", bbox_to_anchor=(1.0, 1.05), frameon=False, handlelength=1.0,
-                     borderaxespad=0.2, labelspacing=0.25)
+        trace.legend(
+            fontsize=5.5,
+            loc="upper left",
+            bbox_to_anchor=(1.0, 1.05),
+            frameon=False,
+            handlelength=1.0,
+            borderaxespad=0.2,
+            labelspacing=0.25,
+        )
     cursor = trace.axvline(time[0], color="black", lw=1.2, animated=True)
     if title:
         fig.suptitle(title, fontsize=7, y=0.97)
@@ -170,8 +186,14 @@ def _blit(fig, artists, panels, cursor, steps, dt) -> np.ndarray:
     return out
 
 
-def save_gif(frames: np.ndarray, path: str | os.PathLike, frame_ms: int = FRAME_MS, *, writer: str | None = None,
-             overwrite: bool = True) -> Path:
+def save_gif(
+    frames: np.ndarray,
+    path: str | os.PathLike,
+    frame_ms: int = FRAME_MS,
+    *,
+    writer: str | None = None,
+    overwrite: bool = True,
+) -> Path:
     """Write RGB frames ``(n, h, w, 3)`` as a looping animated GIF, atomically.
 
     ``writer`` (a command's mark) is stored as the GIF's comment
@@ -207,14 +229,28 @@ def save_gif(frames: np.ndarray, path: str | os.PathLike, frame_ms: int = FRAME_
     path = Path(path)
     with atomic_path(path, overwrite) as tmp:
         images[0].save(
-            tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(frame_ms), loop=0, optimize=True,
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=int(frame_ms),
+            loop=0,
+            optimize=True,
             **gif_comment(writer),
         )
     return path
 
 
-def draw_animation(path: str | os.PathLike, motor: np.ndarray, generated_motor: np.ndarray | None = None, *,
-                   frame_ms: int = FRAME_MS, writer: str | None = None, overwrite: bool = True, **kwargs) -> Path:
+def draw_animation(
+    path: str | os.PathLike,
+    motor: np.ndarray,
+    generated_motor: np.ndarray | None = None,
+    *,
+    frame_ms: int = FRAME_MS,
+    writer: str | None = None,
+    overwrite: bool = True,
+    **kwargs,
+) -> Path:
     """:func:`animation_frames` written by :func:`save_gif` to ``path`` (``writer``,
     ``overwrite`` as there); other keyword arguments as :func:`animation_frames`'s.
     Returns ``path``."""

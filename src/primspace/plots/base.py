@@ -14,8 +14,13 @@ from primspace.outputs import png_metadata
 __all__ = ["save_figure", "INIT_COLORS", "init_color", "label_colors"]
 
 # One palette for the latent initialisations, so every figure colours them alike.
-INIT_COLORS = {"zero": "tab:blue", "random": "tab:red", "projection": "tab:green", "pca": "tab:purple",
-               "calibrated": "tab:orange"}
+INIT_COLORS = {
+    "zero": "tab:blue",
+    "random": "tab:red",
+    "projection": "tab:green",
+    "pca": "tab:purple",
+    "calibrated": "tab:orange",
+}
 
 
 def save_figure(
@@ -40,7 +45,9 @@ def save_figure(
 def init_color(label, colors: dict | None = None):
     """The colour of a curve labelled ``label``: from ``colors``, else :data:`INIT_COLORS`
     when the label starts with an init name, else None (matplotlib's cycle)."""
-    return (colors or {}).get(label) or next((c for name, c in INIT_COLORS.items() if str(label).startswith(name)), None)
+    return (colors or {}).get(label) or next(
+        (c for name, c in INIT_COLORS.items() if str(label).startswith(name)), None
+    )
 
 
 def label_colors(n: int):

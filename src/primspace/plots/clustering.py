@@ -99,12 +99,16 @@ def _draw_affinity(fig: Figure, ax_w, w: np.ndarray, gamma: float, *, ordered_by
     if vmax <= 0:
         vmax = float(w.max()) if w.size and w.max() > 0 else 1.0
     image = ax_w.imshow(w, cmap="magma", norm=PowerNorm(gamma, vmin=0.0, vmax=vmax, clip=True), interpolation="nearest")
-    colorbar = fig.colorbar(image, ax=ax_w, fraction=0.046, pad=0.04, label="affinity (clipped at the 99.5th percentile)")
+    colorbar = fig.colorbar(
+        image, ax=ax_w, fraction=0.046, pad=0.04, label="affinity (clipped at the 99.5th percentile)"
+    )
     colorbar.locator = MaxNLocator(4)
     colorbar.formatter = ScalarFormatter(useMathText=True)
     colorbar.formatter.set_powerlimits((-2, 3))
     colorbar.update_ticks()
-    ax_w.set_title("affinity W (ordered by true label)" if ordered_by_true else "affinity W (ordered by cluster)", fontsize=9)
+    ax_w.set_title(
+        "affinity W (ordered by true label)" if ordered_by_true else "affinity W (ordered by cluster)", fontsize=9
+    )
     ax_w.set_xlabel("sample")
     ax_w.set_ylabel("sample")
 
@@ -125,7 +129,9 @@ def _draw_labels(ax_w, ax_l, shown: np.ndarray, true: np.ndarray | None, label_n
         handles = []
         for name, mask, marker in (("correct", ~wrong & ~unknown, "o"), ("wrong", wrong, "x")):
             if mask.any():
-                ax_l.scatter(x[mask], shown[mask], c=[point_colors[i] for i in np.flatnonzero(mask)], s=10, marker=marker)
+                ax_l.scatter(
+                    x[mask], shown[mask], c=[point_colors[i] for i in np.flatnonzero(mask)], s=10, marker=marker
+                )
                 handles.append(Line2D([], [], marker=marker, ls="", color="0.3", label=name))
         if unknown.any():
             ax_l.scatter(x[unknown], shown[unknown], c="0.6", s=10, marker="o")

@@ -17,8 +17,16 @@ from primspace.plots.base import INIT_COLORS
 __all__ = ["plot_predictions", "plot_prediction_errors"]
 
 
-def plot_predictions(truth: np.ndarray, predicted: np.ndarray, observed: np.ndarray, *, titles: Sequence[str],
-                     joint_names: Sequence[str] | None = None, dt: float = 1.0, max_joints: int = 4) -> Figure:
+def plot_predictions(
+    truth: np.ndarray,
+    predicted: np.ndarray,
+    observed: np.ndarray,
+    *,
+    titles: Sequence[str],
+    joint_names: Sequence[str] | None = None,
+    dt: float = 1.0,
+    max_joints: int = 4,
+) -> Figure:
     """One row per sample, one column per joint (the first ``max_joints``): the recorded
     joint (grey), the prediction (blue), the observed steps shaded.
 
@@ -51,9 +59,14 @@ def plot_predictions(truth: np.ndarray, predicted: np.ndarray, observed: np.ndar
     return fig
 
 
-def plot_prediction_errors(fractions: Sequence[float], errors: Mapping[str, Sequence[float]],
-                           spreads: Mapping[str, Sequence[float]] | None = None, *, ylabel: str = "MSE of the rest",
-                           title: str = "") -> Figure:
+def plot_prediction_errors(
+    fractions: Sequence[float],
+    errors: Mapping[str, Sequence[float]],
+    spreads: Mapping[str, Sequence[float]] | None = None,
+    *,
+    ylabel: str = "MSE of the rest",
+    title: str = "",
+) -> Figure:
     """Error of the unobserved steps against the observed fraction, one line per method
     (mean, with its spread over seeds as error bars when given); log scale."""
     fig, ax = plt.subplots(figsize=(5.2, 3.6))

@@ -13,8 +13,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["plot_motion_sample", "plot_sim_sample", "plot_reconstruction", "plot_image_strips", "reconstruction_title",
-           "step_segments"]
+__all__ = [
+    "plot_motion_sample",
+    "plot_sim_sample",
+    "plot_reconstruction",
+    "plot_image_strips",
+    "reconstruction_title",
+    "step_segments",
+]
 
 
 def plot_motion_sample(
@@ -64,9 +70,11 @@ def plot_motion_sample(
     n_cols = 3 if n_joints > 4 else min(n_joints, 2)
     n_rows_j = int(np.ceil(n_joints / n_cols))
     fig = plt.figure(figsize=(2.0 * max(n_frames, 2 * n_cols), 1.4 * len(strips) + 1.9 * n_rows_j + 0.4))
-    grid = fig.add_gridspec(len(strips) + n_rows_j, max(n_frames, 1), height_ratios=[1.2] * len(strips) + [1.6] * n_rows_j)
+    grid = fig.add_gridspec(
+        len(strips) + n_rows_j, max(n_frames, 1), height_ratios=[1.2] * len(strips) + [1.6] * n_rows_j
+    )
     _frame_strips(fig, grid, strips, np.linspace(0, t_len - 1, n_frames).round().astype(int))
-    sub = grid[len(strips):, :].subgridspec(n_rows_j, n_cols, hspace=0.6, wspace=0.25)
+    sub = grid[len(strips) :, :].subgridspec(n_rows_j, n_cols, hspace=0.6, wspace=0.25)
     axes = _joint_curves(fig, sub, motor, generated_motor, names, n_cols, n_rows_j, dt)
     _step_bands(axes, segments, observed, dt if dt else 1.0)
     if title:
@@ -98,11 +106,25 @@ def _step_bands(axes: list, segments, observed, dt: float) -> None:
         for start, stop, name in segments or ():
             ax.axvspan((start - 0.5) * dt, (stop - 0.5) * dt, color=colors[names.index(name) % 10], alpha=0.18, lw=0)
         if observed is not None and np.any(observed):
-            ax.axvspan(-0.5 * dt, (np.flatnonzero(observed)[-1] + 0.5) * dt, color="0.6", alpha=0.3, lw=0,
-                       label="observed" if ax is axes[0] else None)
+            ax.axvspan(
+                -0.5 * dt,
+                (np.flatnonzero(observed)[-1] + 0.5) * dt,
+                color="0.6",
+                alpha=0.3,
+                lw=0,
+                label="observed" if ax is axes[0] else None,
+            )
     for start, stop, name in segments or ():
-        axes[0].text((start + stop - 1) / 2 * dt, 1.02, name, transform=axes[0].get_xaxis_transform(),
-                     ha="center", va="bottom", fontsize=7, color=colors[names.index(name) % 10])
+        axes[0].text(
+            (start + stop - 1) / 2 * dt,
+            1.02,
+            name,
+            transform=axes[0].get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            fontsize=7,
+            color=colors[names.index(name) % 10],
+        )
     if observed is not None and np.any(observed):
         axes[0].legend(fontsize=7, loc="best")
 
@@ -151,15 +173,22 @@ def plot_sim_sample(dataset, index: int, n_frames: int = 8) -> Figure:
     if dataset.params is not None:
         values = dataset.params[i]
         cm = {"block_x", "block_y", "block_size"}
-        parts.append(", ".join(
-            f"{n} {v * 100:.1f} cm" if n in cm else f"{n} {v:.4g}" for n, v in zip(dataset.param_names, values)
-        ))
+        parts.append(
+            ", ".join(
+                f"{n} {v * 100:.1f} cm" if n in cm else f"{n} {v:.4g}" for n, v in zip(dataset.param_names, values)
+            )
+        )
     valid = dataset.length if dataset.lengths is None else int(dataset.lengths[i])  # the padding is no part of it
     images = None if dataset.images is None else np.asarray(dataset.images[i])[:valid]
     observed = getattr(dataset, "observed", None)  # a prediction's observed steps, where the data set has them
     return plot_motion_sample(
-        dataset.motor[i][:valid], images, joint_names=[n.removeprefix("robot:panda0_") for n in dataset.joint_names],
-        n_frames=n_frames, dt=dataset.dt, title=" | ".join(parts), segments=step_segments(dataset, i),
+        dataset.motor[i][:valid],
+        images,
+        joint_names=[n.removeprefix("robot:panda0_") for n in dataset.joint_names],
+        n_frames=n_frames,
+        dt=dataset.dt,
+        title=" | ".join(parts),
+        segments=step_segments(dataset, i),
         observed=None if observed is None else np.asarray(observed[i], dtype=bool)[:valid],
     )
 
@@ -209,12 +238,20 @@ def plot_reconstruction(
         E.g. :func:`reconstruction_title`.
     """
     return plot_motion_sample(
-        motor, images, joint_names=joint_names, generated_motor=generated_motor,
-        generated_images=None if images is None else generated_images, n_frames=n_frames, dt=dt, title=title,
+        motor,
+        images,
+        joint_names=joint_names,
+        generated_motor=generated_motor,
+        generated_images=None if images is None else generated_images,
+        n_frames=n_frames,
+        dt=dt,
+        title=title,
     )
 
 
-def plot_image_strips(strips: Sequence[tuple[str, np.ndarray, np.ndarray]], n_frames: int = 8, title: str = "") -> Figure:
+def plot_image_strips(
+    strips: Sequence[tuple[str, np.ndarray, np.ndarray]], n_frames: int = 8, title: str = ""
+) -> Figure:
     """Generated against recorded camera frames, one pair of rows per primitive.
 
     Parameters

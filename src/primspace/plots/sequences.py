@@ -55,8 +55,15 @@ def plot_code_timeline(
         ax = fig.add_subplot(grid[3 * i])
         steps = np.repeat(codes[i], window, axis=0)[:length].T  # (q, L)
         limit = float(np.abs(steps).max()) or 1.0
-        ax.imshow(steps, aspect="auto", cmap="RdBu_r", vmin=-limit, vmax=limit, interpolation="nearest",
-                  extent=(0, length, q, 0))
+        ax.imshow(
+            steps,
+            aspect="auto",
+            cmap="RdBu_r",
+            vmin=-limit,
+            vmax=limit,
+            interpolation="nearest",
+            extent=(0, length, q, 0),
+        )
         ax.set_ylabel(f"#{i}\ncode", fontsize=8)
         ax.set_xlim(0, longest)
         ax.set_xticks([])
@@ -67,19 +74,34 @@ def plot_code_timeline(
         for row, labels, name in ((1, true_labels, "true"), (2, found_labels, "found")):
             strip = fig.add_subplot(grid[3 * i + row])
             shown = np.ma.masked_less(np.asarray(labels[i][:length], float)[None], 0)
-            strip.imshow(shown, aspect="auto", cmap=cmap, vmin=0, vmax=cmap.N - 1, interpolation="nearest",
-                         extent=(0, length, 1, 0))
+            strip.imshow(
+                shown,
+                aspect="auto",
+                cmap=cmap,
+                vmin=0,
+                vmax=cmap.N - 1,
+                interpolation="nearest",
+                extent=(0, length, 1, 0),
+            )
             strip.set_xlim(0, longest)
             strip.set_yticks([])
             strip.set_ylabel(name, fontsize=7, rotation=0, ha="right", va="center")
             if not (i == n - 1 and row == 2):
                 strip.set_xticks([])
     fig.axes[-1].set_xlabel("step")
-    handles = [plt.Line2D([], [], color="k", lw=1.5, label="true boundary"),
-               plt.Line2D([], [], color="gold", lw=1.5, ls="--", label="found boundary")]
+    handles = [
+        plt.Line2D([], [], color="k", lw=1.5, label="true boundary"),
+        plt.Line2D([], [], color="gold", lw=1.5, ls="--", label="found boundary"),
+    ]
     handles += [plt.Rectangle((0, 0), 1, 1, color=cmap(k), label=name) for k, name in enumerate(label_names)]
-    fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.9), ncol=min(len(handles), 5), fontsize=7,
-               frameon=False)
+    fig.legend(
+        handles=handles,
+        loc="lower center",
+        bbox_to_anchor=(0.5, 0.9),
+        ncol=min(len(handles), 5),
+        fontsize=7,
+        frameon=False,
+    )
     if title:
         fig.suptitle(title, y=0.97)
     return fig

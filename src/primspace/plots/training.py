@@ -160,8 +160,9 @@ def plot_latent_pca(
         ax.set_ylabel("PC 2", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.set_title(f"({chr(ord('a') + k - 1)}) {init} init", fontsize=9)
-    fig.suptitle(f"Codes of primitive '{primitive_name}' (train and eval), first {n_components} principal components", fontsize=10)
+    fig.suptitle(
+        f"Codes of primitive '{primitive_name}' (train and eval), first {n_components} principal components",
+        fontsize=10,
+    )
     fig.tight_layout()
     return fig
-
-

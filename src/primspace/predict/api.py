@@ -48,8 +48,16 @@ from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import STARTS_FROM_FITTED, fitted_samples
 
-__all__ = ["Prediction", "predict", "make_predictor", "fit_predictor", "DEFAULT_PREDICT_EPOCHS", "MIXTURE",
-           "PREDICT_STARTS", "DEFAULT_PREDICTOR"]
+__all__ = [
+    "Prediction",
+    "predict",
+    "make_predictor",
+    "fit_predictor",
+    "DEFAULT_PREDICT_EPOCHS",
+    "MIXTURE",
+    "PREDICT_STARTS",
+    "DEFAULT_PREDICTOR",
+]
 
 #: What :func:`predict` accepts as ``init``: the gradient starts and the mixture.
 PREDICT_STARTS = INFER_STARTS + (MIXTURE,)
@@ -104,8 +112,15 @@ class Prediction:
             finite = np.asarray(values, dtype=np.float64)
             finite = finite[np.isfinite(finite)]
             means[name] = float(finite.mean()) if finite.size else None
-        return {"n": int(len(self.indices)), "init": self.init, "epochs": int(self.epochs),
-                "continuity": bool(self.continuity), "observe": self.observation, "mean": means, **self.details}
+        return {
+            "n": int(len(self.indices)),
+            "init": self.init,
+            "epochs": int(self.epochs),
+            "continuity": bool(self.continuity),
+            "observe": self.observation,
+            "mean": means,
+            **self.details,
+        }
 
     def to_dataset(self, source: MotionDataset) -> MotionDataset:
         """The prediction as a data set of ``source``'s schema: its labels, lengths, names
@@ -122,12 +137,21 @@ class Prediction:
         source_text = f"{taken.source}; {note}" if taken.source else note
         ids = taken.source_ids  # row k is sample indices[k] of the source: said in every row
         ids = np.array([f"sample {int(i)}" for i in self.indices]) if ids is None else ids
-        return dataclasses.replace(taken.without_images(), motor=motor, images=images, source=source_text, path=None,
-                                   source_ids=ids)
+        return dataclasses.replace(
+            taken.without_images(), motor=motor, images=images, source=source_text, path=None, source_ids=ids
+        )
 
 
-def make_predictor(run, init: str = DEFAULT_PREDICTOR, *, epochs: int = DEFAULT_PREDICT_EPOCHS, continuity: bool = True,
-                   condition: bool = True, progress: bool | None = None, **overrides) -> Predictor:
+def make_predictor(
+    run,
+    init: str = DEFAULT_PREDICTOR,
+    *,
+    epochs: int = DEFAULT_PREDICT_EPOCHS,
+    continuity: bool = True,
+    condition: bool = True,
+    progress: bool | None = None,
+    **overrides,
+) -> Predictor:
     """The predictor named ``init``: ``mixture`` (:class:`~primspace.predict.mixture.MixturePredictor`,
     ``condition``) or a gradient start (:class:`~primspace.predict.gradient.GradientPredictor`,
     ``epochs`` and train-config ``overrides``); both with the continuity correction when ``continuity``."""
@@ -135,8 +159,9 @@ def make_predictor(run, init: str = DEFAULT_PREDICTOR, *, epochs: int = DEFAULT_
         raise UserError(f"unknown start {init!r}: choose one of {', '.join(PREDICT_STARTS)}")
     if init == MIXTURE:
         return MixturePredictor(run, condition=condition, continuity=continuity, progress=progress)
-    return GradientPredictor(run, init, epochs=epochs, continuity=continuity, overrides=overrides or None,
-                             progress=progress)
+    return GradientPredictor(
+        run, init, epochs=epochs, continuity=continuity, overrides=overrides or None, progress=progress
+    )
 
 
 def fit_predictor(predictor: Predictor, run: TrainedRun, fitted_data: MotionDataset | None = None) -> Predictor:
@@ -147,8 +172,9 @@ def fit_predictor(predictor: Predictor, run: TrainedRun, fitted_data: MotionData
         return predictor.fit(None)
     fitted = fitted_samples(run, fitted_data)
     lengths = fitted.lengths if fitted.lengths is not None else np.full(len(fitted), fitted.length)
-    return predictor.fit(run.scaler.transform(fitted.motor), fitted.labels, lengths,
-                         fitted.images if fitted.has_images else None)
+    return predictor.fit(
+        run.scaler.transform(fitted.motor), fitted.labels, lengths, fitted.images if fitted.has_images else None
+    )
 
 
 def predict(
@@ -229,11 +255,20 @@ def predict(
     """
     parent = as_run(run)
     if observe is None and observe_frames is None:
-        raise UserError("predict needs observe= (a fraction in (0, 1], a number of steps or 'none'): "
-                        "with everything observed there is nothing to predict")
+        raise UserError(
+            "predict needs observe= (a fraction in (0, 1], a number of steps or 'none'): "
+            "with everything observed there is nothing to predict"
+        )
     observation = Observation.build(observe, observe_frames)
-    predictor = make_predictor(parent, init or parent.init, epochs=epochs, continuity=continuity, condition=condition,
-                               progress=progress, **overrides)
+    predictor = make_predictor(
+        parent,
+        init or parent.init,
+        epochs=epochs,
+        continuity=continuity,
+        condition=condition,
+        progress=progress,
+        **overrides,
+    )
     data, idx = select(dataset, indices)
     head = parent.model_config.has_images
     observation.check(data, use_images=head and data.has_images, has_image_head=head)  # before any fitting
@@ -252,13 +287,22 @@ def predict(
     lengths = _lengths(data)
     errors = {"motor_mse": unobserved_mse(scaled, parent.scaler.transform(data.motor), motor_observed, lengths)}
     if predicted_frames is not None and data.has_images:
-        errors["vision_mse"], errors["psnr"] = frame_errors(predicted_frames, data.load_images().images,
-                                                            frames_observed, valid_steps(lengths, data.length))
+        errors["vision_mse"], errors["psnr"] = frame_errors(
+            predicted_frames, data.load_images().images, frames_observed, valid_steps(lengths, data.length)
+        )
     epochs_run = epochs if isinstance(predictor, GradientPredictor) and online is None else 0
     return Prediction(
-        codes=codes, motor=parent.scaler.inverse_transform(scaled).astype(np.float32), frames=predicted_frames,
-        motor_observed=motor_observed, frames_observed=frames_observed, indices=idx, errors=errors,
-        observation=observation.to_dict(), init=init_used, epochs=int(epochs_run), continuity=continuity,
+        codes=codes,
+        motor=parent.scaler.inverse_transform(scaled).astype(np.float32),
+        frames=predicted_frames,
+        motor_observed=motor_observed,
+        frames_observed=frames_observed,
+        indices=idx,
+        errors=errors,
+        observation=observation.to_dict(),
+        init=init_used,
+        epochs=int(epochs_run),
+        continuity=continuity,
         details=details,
     )
 
@@ -272,12 +316,21 @@ def run_predictor(predictor: Predictor, run: TrainedRun, data: MotionDataset, ob
     return predictor.forecast(scaled, observation, data.labels, _lengths(data), frames, **extra)
 
 
-def _online(predictor: Predictor, parent: TrainedRun, data: MotionDataset, observation: Observation, iterations: int,
-            fitted_data, progress) -> tuple:
+def _online(
+    predictor: Predictor,
+    parent: TrainedRun,
+    data: MotionDataset,
+    observation: Observation,
+    iterations: int,
+    fitted_data,
+    progress,
+) -> tuple:
     """Codes, scaled motor and details after the observed steps arrived one at a time."""
     if observation.motor == "none" or observation.frames != observation.motor:
-        raise UserError("online prediction observes joints and frames together, a step at a time: give --observe "
-                        "only (not --observe-frames, not 'none')")
+        raise UserError(
+            "online prediction observes joints and frames together, a step at a time: give --observe "
+            "only (not --observe-frames, not 'none')"
+        )
     seen = int(observation.masks(_lengths(data), data.length)[0].sum(axis=1).max())
     predictor = fit_predictor(predictor, parent, fitted_data)
     scaled_truth = parent.scaler.transform(data.motor)
@@ -286,16 +339,23 @@ def _online(predictor: Predictor, parent: TrainedRun, data: MotionDataset, obser
         codes = result.codes[:, result.column(seen)]
         scaled = parent.scaler.transform(result.prediction)
     else:
-        result = predictor.predict_online(scaled_truth, data.lengths, iterations=iterations, data=data,
-                                          progress=progress)
+        result = predictor.predict_online(
+            scaled_truth, data.lengths, iterations=iterations, data=data, progress=progress
+        )
         codes = result.codes[:, result.column(seen)]
         scaled = parent.scaler.transform(reconstruct(parent, codes, images=False)[0])
         if predictor.continuity:
             observed = observation.masks(_lengths(data), data.length)[0]
             scaled = continuity_correction(scaled, scaled_truth, observed, valid_steps(_lengths(data), data.length))
-    details = {"online": {"iterations": int(getattr(result, "iterations", 0)), "steps_observed": seen,
-                          "latency_ms_mean": 1e3 * result.latency_mean, "latency_ms_p95": 1e3 * result.latency_p95,
-                          "remaining_error": [None if not np.isfinite(e) else float(e) for e in result.mean_error]}}
+    details = {
+        "online": {
+            "iterations": int(getattr(result, "iterations", 0)),
+            "steps_observed": seen,
+            "latency_ms_mean": 1e3 * result.latency_mean,
+            "latency_ms_p95": 1e3 * result.latency_p95,
+            "remaining_error": [None if not np.isfinite(e) else float(e) for e in result.mean_error],
+        }
+    }
     return codes.astype(np.float32), scaled, details
 
 

@@ -103,8 +103,10 @@ def observation_rule(observed, lengths, shape: tuple[int, int]) -> Observation:
     if not np.array_equal(mask, prefix):
         raise UserError("observed must be a prefix of each sample's steps")
     if counts.size == 0 or counts.min() != counts.max():
-        raise UserError("observed holds prefixes of different lengths: pass the rule instead of the mask "
-                        "(e.g. Observation.build(0.25) for a quarter of each motion)")
+        raise UserError(
+            "observed holds prefixes of different lengths: pass the rule instead of the mask "
+            "(e.g. Observation.build(0.25) for a quarter of each motion)"
+        )
     if counts[0] < 1:
         raise UserError("observed marks no step: nothing to predict from")
     return Observation.build(int(counts[0]))

@@ -46,8 +46,15 @@ import numpy as np
 
 from primspace.errors import UserError
 
-__all__ = ["CodeMixture", "continuity_correction", "SEGMENT_POINTS", "NOISE_GRID", "CONDITION_GRID", "NEIGHBOURS",
-           "ENSEMBLE"]
+__all__ = [
+    "CodeMixture",
+    "continuity_correction",
+    "SEGMENT_POINTS",
+    "NOISE_GRID",
+    "CONDITION_GRID",
+    "NEIGHBOURS",
+    "ENSEMBLE",
+]
 
 #: Where the candidates sit on the segment from a fitted code to a neighbour (0: the code; 1: the neighbour).
 SEGMENT_POINTS = (-0.25, 0.25, 0.5, 0.75, 1.25)
@@ -153,8 +160,14 @@ class CodeMixture:
             out[i] = mu + a.T @ np.linalg.solve(gram, ao @ (x[i, masks[i]] - mu[masks[i]]))
         return out.reshape(n, t, j)
 
-    def choose_noise(self, fitted_scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray,
-                     grid=NOISE_GRID, conditions=CONDITION_GRID) -> dict:
+    def choose_noise(
+        self,
+        fitted_scaled: np.ndarray,
+        observed: np.ndarray,
+        valid: np.ndarray,
+        grid=NOISE_GRID,
+        conditions=CONDITION_GRID,
+    ) -> dict:
         """The σ² of ``grid`` and the conditioning ``r`` of ``conditions`` (None: the posterior
         mean) whose leave-one-out prediction of the fitted demonstrations is best (each
         predicted from the candidates not built from it, then :func:`continuity_correction`);

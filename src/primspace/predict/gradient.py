@@ -53,8 +53,15 @@ class GradientPredictor(Predictor):
         A progress bar for the inference (default: when stderr is a terminal).
     """
 
-    def __init__(self, run, start: str | None = None, epochs: int = DEFAULT_PREDICT_EPOCHS, continuity: bool = True,
-                 overrides: dict | None = None, progress: bool | None = None):
+    def __init__(
+        self,
+        run,
+        start: str | None = None,
+        epochs: int = DEFAULT_PREDICT_EPOCHS,
+        continuity: bool = True,
+        overrides: dict | None = None,
+        progress: bool | None = None,
+    ):
         self.run = run
         self.start = start
         self.epochs = epochs
@@ -75,8 +82,10 @@ class GradientPredictor(Predictor):
             return self
         motor = check_motor(motor)
         if len(motor) != len(self.run_.latents):
-            raise UserError(f"a gradient predictor is fitted on the run's {len(self.run_.latents)} fitted "
-                            f"demonstrations (one per code), got {len(motor)}")
+            raise UserError(
+                f"a gradient predictor is fitted on the run's {len(self.run_.latents)} fitted "
+                f"demonstrations (one per code), got {len(motor)}"
+            )
         self.fitted_ = FittedDemonstrations(motor, check_lengths(lengths, *motor.shape[:2]), frames)
         return self
 
@@ -101,9 +110,18 @@ class GradientPredictor(Predictor):
         rule = observation_rule(observed, lengths, motor.shape[:2])
         data = self._dataset(motor, lengths, frames) if data is None else data
         start = self.start_codes(data, motor, rule)
-        inferred = infer(self.run_, data, None, epochs=self.epochs, init=self.start_, initial_latents=start,
-                         observe=rule.motor, observe_frames=rule.frames if rule.frames_given else None,
-                         progress=self.progress, **(self.overrides or {}))
+        inferred = infer(
+            self.run_,
+            data,
+            None,
+            epochs=self.epochs,
+            init=self.start_,
+            initial_latents=start,
+            observe=rule.motor,
+            observe_frames=rule.frames if rule.frames_given else None,
+            progress=self.progress,
+            **(self.overrides or {}),
+        )
         codes = inferred.latents.astype(np.float32)
         scaled = self.run_.scaler.transform(reconstruct(inferred, images=False)[0])
         return Forecast(self._corrected(scaled, motor, rule, data), codes, {})
@@ -116,8 +134,16 @@ class GradientPredictor(Predictor):
         observed = rule.masks(lengths, data.length)[0]
         return continuity_correction(scaled, motor, observed, valid_mask(lengths, data.length))
 
-    def predict_online(self, motor, lengths=None, *, iterations: int, frames=None, progress: bool | None = None,
-                       data: MotionDataset | None = None) -> OnlineResult:
+    def predict_online(
+        self,
+        motor,
+        lengths=None,
+        *,
+        iterations: int,
+        frames=None,
+        progress: bool | None = None,
+        data: MotionDataset | None = None,
+    ) -> OnlineResult:
         """The steps arrive one at a time from the first, ``iterations`` Adam steps after each
         (:func:`~primspace.predict.online.infer_online`); the start reads step 1. The continuity
         correction is not applied (the caller applies it to the codes it keeps)."""
@@ -125,5 +151,13 @@ class GradientPredictor(Predictor):
         data = self._dataset(motor, lengths, frames) if data is None else data
         start = self.start_codes(data, motor, Observation.build(1))
         overrides = self.overrides or {}
-        return infer_online(self.run_, data, iterations=iterations, init=self.start_, start_codes=start,
-                            latent_lr=overrides.get("latent_lr"), seed=overrides.get("seed"), progress=progress)
+        return infer_online(
+            self.run_,
+            data,
+            iterations=iterations,
+            init=self.start_,
+            start_codes=start,
+            latent_lr=overrides.get("latent_lr"),
+            seed=overrides.get("seed"),
+            progress=progress,
+        )

@@ -23,8 +23,15 @@ from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import fitted_samples
 
-__all__ = ["grid_predictors", "grid_forecasts", "grid_predictions", "PEERS", "POSTERIOR_MEAN", "LABELS_DIAGNOSTIC",
-           "MIXTURE_ROWS"]
+__all__ = [
+    "grid_predictors",
+    "grid_forecasts",
+    "grid_predictions",
+    "PEERS",
+    "POSTERIOR_MEAN",
+    "LABELS_DIAGNOSTIC",
+    "MIXTURE_ROWS",
+]
 
 #: The peers' rows (labels: the peer is given the test sample's primitive).
 PEERS = ("promp (labels)", "promp (one for all)", "nearest neighbour", "mean motion (labels)")
@@ -33,8 +40,12 @@ POSTERIOR_MEAN = "mixture (posterior mean)"
 #: The mixture given the labels: candidates of the sample's own primitive only (a diagnostic).
 LABELS_DIAGNOSTIC = "mixture (labels; diagnostic)"
 #: The mixture's rows: (name, continuity correction, ensemble conditioning allowed, given the labels).
-MIXTURE_ROWS = ((MIXTURE, True, True, False), (POSTERIOR_MEAN, True, False, False),
-                ("mixture (no continuity)", False, True, False), (LABELS_DIAGNOSTIC, True, False, True))
+MIXTURE_ROWS = (
+    (MIXTURE, True, True, False),
+    (POSTERIOR_MEAN, True, False, False),
+    ("mixture (no continuity)", False, True, False),
+    (LABELS_DIAGNOSTIC, True, False, True),
+)
 
 
 def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int) -> dict[str, Predictor]:
@@ -50,10 +61,17 @@ def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs:
         for name, continuity, condition, per_label in MIXTURE_ROWS:
             if per_label and fitted.labels is None:
                 continue
-            rows[name] = MixturePredictor(run, condition=condition, continuity=continuity, candidates=candidates,
-                                          per_label=per_label)
-    rows.update({"promp (labels)": ProMPPeer(per_label=True), "promp (one for all)": ProMPPeer(per_label=False),
-                 "nearest neighbour": NearestPeer(), "mean motion (labels)": MeanMotionPeer()})
+            rows[name] = MixturePredictor(
+                run, condition=condition, continuity=continuity, candidates=candidates, per_label=per_label
+            )
+    rows.update(
+        {
+            "promp (labels)": ProMPPeer(per_label=True),
+            "promp (one for all)": ProMPPeer(per_label=False),
+            "nearest neighbour": NearestPeer(),
+            "mean motion (labels)": MeanMotionPeer(),
+        }
+    )
     for predictor in rows.values():
         fit_predictor(predictor, run, fitted_data)
     return rows
@@ -76,9 +94,16 @@ def grid_forecasts(rows: dict[str, Predictor], run: TrainedRun, test: MotionData
     return out
 
 
-def grid_predictions(run: TrainedRun, fitted_data: MotionDataset, test: MotionDataset, fractions, *,
-                     starts=("zero", "projection", "calibrated", "nearest", MIXTURE), epochs: int,
-                     online_iterations: int | None = None) -> dict:
+def grid_predictions(
+    run: TrainedRun,
+    fitted_data: MotionDataset,
+    test: MotionDataset,
+    fractions,
+    *,
+    starts=("zero", "projection", "calibrated", "nearest", MIXTURE),
+    epochs: int,
+    online_iterations: int | None = None,
+) -> dict:
     """``{row: {fraction: mean unobserved MSE}}`` of every row (and, with ``online_iterations``,
     the online gradient start ``projection`` and the online mixture) on ``test``."""
     rows = grid_predictors(run, fitted_data, starts, epochs)
@@ -86,13 +111,22 @@ def grid_predictions(run: TrainedRun, fitted_data: MotionDataset, test: MotionDa
     table: dict = {}
     for f in fractions:
         key = f"{f:g}"
-        observed = Observation.build(f).masks(lengths if lengths is not None else np.full(len(test), test.length),
-                                              test.length)[0]
+        observed = Observation.build(f).masks(
+            lengths if lengths is not None else np.full(len(test), test.length), test.length
+        )[0]
         for name, forecast in grid_forecasts(rows, run, test, f).items():
             table.setdefault(name, {})[key] = finite_mean(unobserved_mse(forecast.motor, scaled, observed, lengths))
         if online_iterations is not None:
             for name, init in (("online projection", "projection"), ("online mixture", MIXTURE)):
-                p = predict(run, test, observe=f, init=init, online=online_iterations, fitted_data=fitted_data,
-                            frames=False, progress=False)
+                p = predict(
+                    run,
+                    test,
+                    observe=f,
+                    init=init,
+                    online=online_iterations,
+                    fitted_data=fitted_data,
+                    frames=False,
+                    progress=False,
+                )
                 table.setdefault(name, {})[key] = finite_mean(p.errors["motor_mse"])
     return table

@@ -17,8 +17,17 @@ import numpy as np
 
 from primspace.errors import UserError
 
-__all__ = ["unobserved_mse", "frame_errors", "finite_mean", "observed_prefix", "check_motor", "check_lengths",
-           "check_labels", "check_observed", "valid_mask"]
+__all__ = [
+    "unobserved_mse",
+    "frame_errors",
+    "finite_mean",
+    "observed_prefix",
+    "check_motor",
+    "check_lengths",
+    "check_labels",
+    "check_observed",
+    "valid_mask",
+]
 
 
 def check_motor(motor, name: str = "motor") -> np.ndarray:

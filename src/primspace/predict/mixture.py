@@ -70,8 +70,15 @@ class MixturePredictor(Predictor):
         stage in a log; default: as :func:`primspace.progress.stage`).
     """
 
-    def __init__(self, run, condition: bool = True, continuity: bool = True, candidates: CodeMixture | None = None,
-                 per_label: bool = False, progress: bool | None = False):
+    def __init__(
+        self,
+        run,
+        condition: bool = True,
+        continuity: bool = True,
+        candidates: CodeMixture | None = None,
+        per_label: bool = False,
+        progress: bool | None = False,
+    ):
         self.run = run
         self.condition = condition
         self.continuity = continuity
@@ -90,8 +97,10 @@ class MixturePredictor(Predictor):
         self.run_ = as_run(self.run)
         motor = check_motor(motor)
         if len(motor) != len(self.run_.latents):
-            raise UserError(f"the mixture is fitted on the run's {len(self.run_.latents)} fitted demonstrations "
-                            f"(one per code), got {len(motor)}")
+            raise UserError(
+                f"the mixture is fitted on the run's {len(self.run_.latents)} fitted demonstrations "
+                f"(one per code), got {len(motor)}"
+            )
         self.fitted_, self.valid_ = motor, valid_mask(check_lengths(lengths, *motor.shape[:2]), motor.shape[1])
         self.fitted_lengths_ = check_lengths(lengths, *motor.shape[:2])
         if self.candidates is not None:
@@ -113,10 +122,13 @@ class MixturePredictor(Predictor):
         choices = self.mixture_.choices
         if key not in choices:
             observed = rule.masks(self.fitted_lengths_, self.fitted_.shape[1])[0]
-            with stage(f"mixture: choosing its noise by leave-one-out on {len(self.fitted_)} fitted demonstrations",
-                       enabled=self.progress):
-                choices[key] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_,
-                                                          conditions=CONDITION_GRID if self.condition else (None,))
+            with stage(
+                f"mixture: choosing its noise by leave-one-out on {len(self.fitted_)} fitted demonstrations",
+                enabled=self.progress,
+            ):
+                choices[key] = self.mixture_.choose_noise(
+                    self.fitted_, observed, self.valid_, conditions=CONDITION_GRID if self.condition else (None,)
+                )
         return choices[key]
 
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
@@ -124,8 +136,10 @@ class MixturePredictor(Predictor):
         motor = check_motor(motor)
         rule = observation_rule(observed, lengths, motor.shape[:2])
         if rule.motor == NOTHING:
-            raise UserError("init 'mixture' weighs the fitted codes by the observed joints, and observe='none' "
-                            "observes none: start by 'zero' or 'random'")
+            raise UserError(
+                "init 'mixture' weighs the fitted codes by the observed joints, and observe='none' "
+                "observes none: start by 'zero' or 'random'"
+            )
         mask = observed_mask(observed, lengths, motor.shape[:2])
         choice = self.choice(rule)
         seen = np.where(mask[..., None], motor, 0.0)
@@ -152,11 +166,20 @@ class MixturePredictor(Predictor):
         """``σ²`` of the posterior mean for a prefix of ``t`` steps (leave-one-out, kept)."""
         if t not in self.noises_:
             observed = Observation.build(int(t)).masks(self.fitted_lengths_, self.fitted_.shape[1])[0]
-            self.noises_[t] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_, conditions=(None,))["noise"]
+            self.noises_[t] = self.mixture_.choose_noise(self.fitted_, observed, self.valid_, conditions=(None,))[
+                "noise"
+            ]
         return self.noises_[t]
 
-    def predict_online(self, motor, lengths=None, *, start_step: int = 1, prediction_after: int | None = None,
-                       progress: bool | None = None) -> OnlineResult:
+    def predict_online(
+        self,
+        motor,
+        lengths=None,
+        *,
+        start_step: int = 1,
+        prediction_after: int | None = None,
+        progress: bool | None = None,
+    ) -> OnlineResult:
         """The prediction after each arriving step ``start_step..T`` (module docstring).
 
         Equal, after step ``t``, to ``forecast(motor, Observation.build(t))`` of a predictor
@@ -173,7 +196,11 @@ class MixturePredictor(Predictor):
         """
         truth = check_motor(motor)
         n, length, _ = truth.shape
-        if isinstance(start_step, bool) or not isinstance(start_step, (int, np.integer)) or not 1 <= start_step <= length:
+        if (
+            isinstance(start_step, bool)
+            or not isinstance(start_step, (int, np.integer))
+            or not 1 <= start_step <= length
+        ):
             raise UserError(f"start_step must be a whole number in 1..T={length}, got {start_step!r}")
         steps = np.arange(int(start_step), length + 1)
         keep = length if prediction_after is None else int(prediction_after)
@@ -213,9 +240,17 @@ class MixturePredictor(Predictor):
                 kept = predicted if t == keep else kept
                 errors[:, s] = unobserved_mse(predicted, truth, observed, lengths)
                 advance()
-        return OnlineResult(steps=steps, codes=codes, start_codes=codes[:, 0].copy(), errors=errors, latency=latency,
-                            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32), iterations=0,
-                            init=MIXTURE, latent_lr=float("nan"))
+        return OnlineResult(
+            steps=steps,
+            codes=codes,
+            start_codes=codes[:, 0].copy(),
+            errors=errors,
+            latency=latency,
+            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32),
+            iterations=0,
+            init=MIXTURE,
+            latent_lr=float("nan"),
+        )
 
 
 def code_mixture(run) -> CodeMixture:

@@ -186,10 +186,22 @@ class OnlineInference:
         keeps its calibrations); default: the start of ``init``.
     """
 
-    def __init__(self, run: TrainedRun | str | os.PathLike, data: MotionDataset, *, iterations: int,
-                 init: str | None = None, start_step: int = 1, latent_lr: float | None = None,
-                 fitted_data: MotionDataset | None = None, device: str = "cpu", images: bool | None = None,
-                 seed: int | None = None, carry_moments: bool = False, start_codes: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        run: TrainedRun | str | os.PathLike,
+        data: MotionDataset,
+        *,
+        iterations: int,
+        init: str | None = None,
+        start_step: int = 1,
+        latent_lr: float | None = None,
+        fitted_data: MotionDataset | None = None,
+        device: str = "cpu",
+        images: bool | None = None,
+        seed: int | None = None,
+        carry_moments: bool = False,
+        start_codes: np.ndarray | None = None,
+    ) -> None:
         parent = as_run(run)
         if not isinstance(data, MotionDataset):
             raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
@@ -199,8 +211,12 @@ class OnlineInference:
         check_init(self.init, INFER_STARTS)
         check_calibrated(self.init, parent)
         lr = _check_lr(parent.train_config.latent_lr if latent_lr is None else latent_lr)
-        self.tc = replace(parent.train_config, latent_lr=lr, amp=False,
-                          seed=parent.train_config.seed if seed is None else _check_whole("seed", seed, 0))
+        self.tc = replace(
+            parent.train_config,
+            latent_lr=lr,
+            amp=False,
+            seed=parent.train_config.seed if seed is None else _check_whole("seed", seed, 0),
+        )
         self.use_images = uses_images(parent.model_config, data, self.tc, images)
         self.length, self.n = data.length, len(data)
         self.start_step = _check_whole("start_step", start_step, 1)
@@ -216,8 +232,9 @@ class OnlineInference:
         self.tensors = DataTensors.build(data, parent.scaler, self.use_images, self.device)
         self.truth = self.tensors.motor.cpu().numpy()
         self._full = self.model.config
-        self._valid = torch.ones(self.n, self.length, device=self.device) if self.tensors.mask is None \
-            else self.tensors.mask
+        self._valid = (
+            torch.ones(self.n, self.length, device=self.device) if self.tensors.mask is None else self.tensors.mask
+        )
         self._arange = torch.arange(self.length, device=self.device)
         self._idx = torch.arange(self.n, device=self.device)
         self._autocast = autocast_for(self.tc, self.device)
@@ -268,15 +285,27 @@ class OnlineInference:
             return DataTensors(whole.motor, whole.images, whole.mask, observed, observed)
         self.model.config = replace(self._full, length=t)
         mask = None if whole.mask is None else whole.mask[:, :t]
-        return DataTensors(whole.motor[:, :t], None if whole.images is None else whole.images[:, :t], whole.mask,
-                           mask, mask)
+        return DataTensors(
+            whole.motor[:, :t], None if whole.images is None else whole.images[:, :t], whole.mask, mask, mask
+        )
 
 
-def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, iterations: int,
-                 init: str | None = None, start_step: int = 1, latent_lr: float | None = None,
-                 fitted_data: MotionDataset | None = None, device: str = "cpu", images: bool | None = None,
-                 seed: int | None = None, carry_moments: bool = False, progress: bool | None = None,
-                 start_codes: np.ndarray | None = None) -> OnlineResult:
+def infer_online(
+    run: TrainedRun | str | os.PathLike,
+    data: MotionDataset,
+    *,
+    iterations: int,
+    init: str | None = None,
+    start_step: int = 1,
+    latent_lr: float | None = None,
+    fitted_data: MotionDataset | None = None,
+    device: str = "cpu",
+    images: bool | None = None,
+    seed: int | None = None,
+    carry_moments: bool = False,
+    progress: bool | None = None,
+    start_codes: np.ndarray | None = None,
+) -> OnlineResult:
     """Online inference over a data set: steps ``start_step..T`` arrive one at a time.
 
     After each step, the codes are corrected on the error of the steps seen so far
@@ -296,9 +325,20 @@ def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, it
     -------
     OnlineResult
     """
-    online = OnlineInference(run, data, iterations=iterations, init=init, start_step=start_step,
-                             latent_lr=latent_lr, fitted_data=fitted_data, device=device, images=images, seed=seed,
-                             carry_moments=carry_moments, start_codes=start_codes)
+    online = OnlineInference(
+        run,
+        data,
+        iterations=iterations,
+        init=init,
+        start_step=start_step,
+        latent_lr=latent_lr,
+        fitted_data=fitted_data,
+        device=device,
+        images=images,
+        seed=seed,
+        carry_moments=carry_moments,
+        start_codes=start_codes,
+    )
     steps = np.arange(online.start_step, online.length + 1)
     codes = np.empty((online.n, len(steps), online.start_codes.shape[1]), dtype=np.float32)
     errors = np.empty((online.n, len(steps)))
@@ -313,20 +353,37 @@ def infer_online(run: TrainedRun | str | os.PathLike, data: MotionDataset, *, it
             latency[s] = time.perf_counter() - t0
             predicted = predicted.cpu().numpy()
             codes[:, s] = online.codes
-            errors[:, s] = unobserved_mse(predicted, online.truth, _prefix_mask(online.n, online.length, t),
-                                          online.lengths)
+            errors[:, s] = unobserved_mse(
+                predicted, online.truth, _prefix_mask(online.n, online.length, t), online.lengths
+            )
             advance()
     prediction = online.run.scaler.inverse_transform(predicted).astype(np.float32)
-    return OnlineResult(steps=steps, codes=codes, start_codes=online.start_codes, errors=errors, latency=latency,
-                        prediction=prediction, iterations=online.iterations, init=online.init,
-                        latent_lr=online.tc.latent_lr)
+    return OnlineResult(
+        steps=steps,
+        codes=codes,
+        start_codes=online.start_codes,
+        errors=errors,
+        latency=latency,
+        prediction=prediction,
+        iterations=online.iterations,
+        init=online.init,
+        latent_lr=online.tc.latent_lr,
+    )
 
 
 # ---------------------------------------------------------------- the offline figure
 
 
-def offline_errors(run: TrainedRun | str | os.PathLike, data: MotionDataset, steps, *, epochs: int,
-                   init: str | None = None, fitted_data: MotionDataset | None = None, **overrides) -> dict:
+def offline_errors(
+    run: TrainedRun | str | os.PathLike,
+    data: MotionDataset,
+    steps,
+    *,
+    epochs: int,
+    init: str | None = None,
+    fitted_data: MotionDataset | None = None,
+    **overrides,
+) -> dict:
     """The error of the remaining steps after offline inference from the first ``t`` steps, for a few ``t``.
 
     The reference for the online figures: for each ``t``, ``infer(run, data,
@@ -365,22 +422,35 @@ def offline_errors(run: TrainedRun | str | os.PathLike, data: MotionDataset, ste
     truth = parent.scaler.transform(data.motor)
     errors, codes = [], []
     for t in steps:
-        inferred = infer(parent, data, epochs=epochs, init=init, observe=int(t), fitted_data=fitted_data,
-                         progress=False, **overrides)
+        inferred = infer(
+            parent, data, epochs=epochs, init=init, observe=int(t), fitted_data=fitted_data, progress=False, **overrides
+        )
         with torch.no_grad():
             predicted = parent.model(torch.from_numpy(inferred.latents), images=False).motor.numpy()
         errors.append(unobserved_mse(predicted, truth, _prefix_mask(len(data), data.length, t), data.lengths))
         codes.append(inferred.latents)
     errors = np.stack(errors, axis=1)
-    return {"steps": steps, "errors": errors, "mean_error": _mean_over_samples(errors),
-            "codes": np.stack(codes, axis=1)}
+    return {
+        "steps": steps,
+        "errors": errors,
+        "mean_error": _mean_over_samples(errors),
+        "codes": np.stack(codes, axis=1),
+    }
 
 
 # --------------------------------------------------------------------------- helpers
 
 
-def _start(parent: TrainedRun, init: str, data: MotionDataset, scaled: np.ndarray, start_step: int,
-           fitted_data: MotionDataset | None, seed: int, start_codes: np.ndarray | None) -> np.ndarray:
+def _start(
+    parent: TrainedRun,
+    init: str,
+    data: MotionDataset,
+    scaled: np.ndarray,
+    start_step: int,
+    fitted_data: MotionDataset | None,
+    seed: int,
+    start_codes: np.ndarray | None,
+) -> np.ndarray:
     """The codes before the first step: ``infer(..., observe=start_step)``'s start
     (:func:`~primspace.train.starts.inference_start`), or ``start_codes`` when given."""
     observation = Observation.build(int(start_step))
@@ -400,7 +470,11 @@ def _check_whole(name: str, value, least: int) -> int:
 
 
 def _check_lr(value) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(value) or value <= 0:
+    if (
+        isinstance(value, (bool, np.bool_))
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(value)
+        or value <= 0
+    ):
         raise UserError(f"latent_lr must be a finite number > 0, got {value!r}")
     return float(value)

@@ -141,8 +141,9 @@ class ProMPPeer(_Peer):
         Most EM iterations of ``imitate``.
     """
 
-    def __init__(self, n_basis: int = 15, noise: float = 1e-3, per_label: bool = True, ridge: float = 0.0,
-                 n_iter: int = 1000) -> None:
+    def __init__(
+        self, n_basis: int = 15, noise: float = 1e-3, per_label: bool = True, ridge: float = 0.0, n_iter: int = 1000
+    ) -> None:
         if int(n_basis) < 2:
             raise UserError(f"n_basis must be at least 2, got {n_basis}")
         _check_noise(noise)
@@ -160,8 +161,7 @@ class ProMPPeer(_Peer):
         self.promps_ = {}
         for key, idx in self._groups(labels, len(motor)).items():
             promp = promp_cls(motor.shape[2], self.n_basis)
-            promp.imitate([_phase(lengths[i]) for i in idx], [motor[i, : lengths[i]] for i in idx],
-                          n_iter=self.n_iter)
+            promp.imitate([_phase(lengths[i]) for i in idx], [motor[i, : lengths[i]] for i in idx], n_iter=self.n_iter)
             if self.ridge:
                 promp.weight_cov = promp.weight_cov + self.ridge * np.eye(promp.n_weights)
             self.promps_[key] = promp
@@ -192,7 +192,9 @@ class ProMPPeer(_Peer):
             promp = promp.condition_position(y, y_cov=cov, t=float(t), t_max=1.0)
         return promp
 
-    def predict(self, motor, observed, labels=None, lengths=None, frames=None, noise: float | None = None) -> np.ndarray:
+    def predict(
+        self, motor, observed, labels=None, lengths=None, frames=None, noise: float | None = None
+    ) -> np.ndarray:
         """Conditioned mean motion ``(n, T, J)`` given each sample's observed steps.
 
         Parameters
@@ -217,7 +219,7 @@ class ProMPPeer(_Peer):
             promp = self.conditioned(self._key(labels, i), seen[i, steps], phase[steps], noise)
             mean = promp.mean_trajectory(_phase(lengths[i]))
             out[i, : lengths[i]] = mean
-            out[i, lengths[i]:] = mean[-1]
+            out[i, lengths[i] :] = mean[-1]
         return out
 
 
@@ -316,7 +318,9 @@ class MeanMotionPeer(_Peer):
     def predict(self, motor, observed, labels=None, lengths=None, frames=None) -> np.ndarray:
         """The mean motion of each test sample's label (or of all), ``(n, T, J)``."""
         _, _, labels, _ = self._query(motor, observed, labels, lengths)
-        return np.stack([self.means_[self._key(labels, i)] for i in range(len(labels if labels is not None else motor))])
+        return np.stack(
+            [self.means_[self._key(labels, i)] for i in range(len(labels if labels is not None else motor))]
+        )
 
 
 class NoiseChoice(NamedTuple):
@@ -340,8 +344,9 @@ class NoiseChoice(NamedTuple):
     scores: dict
 
 
-def best_noise(peer: ProMPPeer, motor, observed, labels=None, lengths=None,
-               candidates: Sequence[float] = (1e-4, 1e-3, 1e-2)) -> NoiseChoice:
+def best_noise(
+    peer: ProMPPeer, motor, observed, labels=None, lengths=None, candidates: Sequence[float] = (1e-4, 1e-3, 1e-2)
+) -> NoiseChoice:
     """The ProMP's observation noise chosen as the best of ``candidates`` *on the answer*.
 
     Each candidate predicts the test samples and is scored by the mean

@@ -58,8 +58,18 @@ from primspace.train.loop import DataTensors, code_step
 from primspace.train.observe import FIRST, Observation, observation_masks
 from primspace.train.starts import fitted_samples
 
-__all__ = ["SCENE", "SCENE_VARIANCE", "SceneClusters", "ScenePredictor", "cluster_codes", "scene_clusters", "affine_subspace",
-           "infer_in_subspace", "predict_scene", "run_scene_point"]
+__all__ = [
+    "SCENE",
+    "SCENE_VARIANCE",
+    "SceneClusters",
+    "ScenePredictor",
+    "cluster_codes",
+    "scene_clusters",
+    "affine_subspace",
+    "infer_in_subspace",
+    "predict_scene",
+    "run_scene_point",
+]
 
 #: ``Prediction.init`` and ``result.json``'s ``mode`` of a scene-only prediction.
 SCENE = "scene"
@@ -113,10 +123,14 @@ class SceneClusters:
             if primitive in self.names or not primitive.strip().isdigit():
                 return self.named(primitive)
             primitive = int(primitive)
-        if isinstance(primitive, (bool, np.bool_)) or not isinstance(primitive, (int, np.integer)) \
-                or not 0 <= primitive < k:
-            raise UserError(f"primitive {primitive!r} is out of range: the run's fitted codes form {k} clusters, "
-                            f"choose 0..{k - 1}")
+        if (
+            isinstance(primitive, (bool, np.bool_))
+            or not isinstance(primitive, (int, np.integer))
+            or not 0 <= primitive < k
+        ):
+            raise UserError(
+                f"primitive {primitive!r} is out of range: the run's fitted codes form {k} clusters, choose 0..{k - 1}"
+            )
         return int(primitive)
 
     def named(self, name: str) -> int:
@@ -124,9 +138,14 @@ class SceneClusters:
         hits = [k for k in range(self.n_clusters) if self.names[k] == name]
         if not hits:
             known = sorted({n for n in self.names if n is not None})
-            raise UserError(f"no cluster of the fitted codes is mostly {name!r}: "
-                            + (f"the clusters are mostly {', '.join(map(repr, known))}" if known
-                               else "the fitted data has no label names; give the cluster id"))
+            raise UserError(
+                f"no cluster of the fitted codes is mostly {name!r}: "
+                + (
+                    f"the clusters are mostly {', '.join(map(repr, known))}"
+                    if known
+                    else "the fitted data has no label names; give the cluster id"
+                )
+            )
         return max(hits, key=lambda k: self.sizes[k])
 
     def subspace(self, primitive: int, rank: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -136,20 +155,29 @@ class SceneClusters:
 
     def summary(self) -> dict:
         """What ``result.json`` records of the clusters."""
-        return {"n_clusters": self.n_clusters, "cluster_sizes": self.sizes, "cluster_names": list(self.names),
-                "first_members": [int(np.flatnonzero(self.labels == k)[0]) for k in range(self.n_clusters)],
-                "r2": self.r2}
+        return {
+            "n_clusters": self.n_clusters,
+            "cluster_sizes": self.sizes,
+            "cluster_names": list(self.names),
+            "first_members": [int(np.flatnonzero(self.labels == k)[0]) for k in range(self.n_clusters)],
+            "r2": self.r2,
+        }
 
 
-def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, *, r2_target=None,
-                  random_state: int = 0) -> SceneClusters:
+def cluster_codes(
+    codes, n_clusters: int, labels=None, label_names=None, *, r2_target=None, random_state: int = 0
+) -> SceneClusters:
     """Cluster ``codes`` (N, K·q) with :class:`~primspace.cluster.LowRankSubspaceClustering`
     (affine); ``labels`` / ``label_names`` of the same samples only name the clusters."""
     codes = np.asarray(codes, dtype=np.float64)
-    if isinstance(n_clusters, (bool, np.bool_)) or not isinstance(n_clusters, (int, np.integer)) \
-            or not 1 <= n_clusters <= len(codes):
-        raise UserError(f"the number of clusters must be a whole number in 1..{len(codes)} (the fitted codes), "
-                        f"got {n_clusters!r}")
+    if (
+        isinstance(n_clusters, (bool, np.bool_))
+        or not isinstance(n_clusters, (int, np.integer))
+        or not 1 <= n_clusters <= len(codes)
+    ):
+        raise UserError(
+            f"the number of clusters must be a whole number in 1..{len(codes)} (the fitted codes), got {n_clusters!r}"
+        )
     model = LowRankSubspaceClustering(int(n_clusters), affine=True, r2_target=r2_target, random_state=random_state)
     raw = model.fit(codes).labels_
     order = list(dict.fromkeys(raw.tolist()))  # by first member
@@ -161,13 +189,17 @@ def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, *, r2_t
         own = None if own is None else own[own >= 0]
         top = None if own is None or not own.size else int(np.bincount(own).argmax())
         majority.append(top)
-        names.append(None if top is None else (label_names[top] if label_names is not None and top < len(label_names)
-                                               else str(top)))
+        names.append(
+            None
+            if top is None
+            else (label_names[top] if label_names is not None and top < len(label_names) else str(top))
+        )
     return SceneClusters(ids, codes, majority, names, float(model.r2_))
 
 
-def scene_clusters(run, n_clusters: int | None = None, *, fitted_data: MotionDataset | None = None,
-                   r2_target=None) -> SceneClusters:
+def scene_clusters(
+    run, n_clusters: int | None = None, *, fitted_data: MotionDataset | None = None, r2_target=None
+) -> SceneClusters:
     """The run's fitted codes clustered, ids numbered by first member (module docstring).
 
     ``n_clusters`` defaults to the number of distinct labels of the fitted data (``fitted_data``
@@ -182,15 +214,24 @@ def scene_clusters(run, n_clusters: int | None = None, *, fitted_data: MotionDat
     if n_clusters is None:
         if labels is None:
             why = "has no data file" if fitted is None else "fitted data has no labels"
-            raise UserError(f"the scene mode clusters the fitted codes and the run {why} to count primitives by: "
-                            "give the number of clusters (n_clusters, --primitives K)")
+            raise UserError(
+                f"the scene mode clusters the fitted codes and the run {why} to count primitives by: "
+                "give the number of clusters (n_clusters, --primitives K)"
+            )
         n_clusters = int(np.unique(labels[labels >= 0]).size)
-    return cluster_codes(parent.latents, n_clusters, labels, None if fitted is None else fitted.label_names,
-                         r2_target=r2_target, random_state=int(parent.train_config.seed))
+    return cluster_codes(
+        parent.latents,
+        n_clusters,
+        labels,
+        None if fitted is None else fitted.label_names,
+        r2_target=r2_target,
+        random_state=int(parent.train_config.seed),
+    )
 
 
-def affine_subspace(codes, rank: int | None = None, variance: float = SCENE_VARIANCE, *,
-                    where: str = "the cluster") -> tuple[np.ndarray, np.ndarray]:
+def affine_subspace(
+    codes, rank: int | None = None, variance: float = SCENE_VARIANCE, *, where: str = "the cluster"
+) -> tuple[np.ndarray, np.ndarray]:
     """The mean (d,) and the top ``r`` principal directions (r, d) of ``codes`` (m, d).
 
     ``r``: ``rank`` (0 .. min(m − 1, d)), or the fewest directions that explain at least
@@ -205,24 +246,36 @@ def affine_subspace(codes, rank: int | None = None, variance: float = SCENE_VARI
         share = np.cumsum(s**2) / total if total > 0 else np.ones(0)
         rank = 0 if total <= 0 else int(np.searchsorted(share, variance - 1e-12) + 1)
     elif isinstance(rank, (bool, np.bool_)) or not isinstance(rank, (int, np.integer)) or not 0 <= rank <= most:
-        raise UserError(f"rank {rank!r}: {where} has {len(codes)} codes of size {codes.shape[1]}, "
-                        f"its subspace spans 0..{most} directions")
+        raise UserError(
+            f"rank {rank!r}: {where} has {len(codes)} codes of size {codes.shape[1]}, "
+            f"its subspace spans 0..{most} directions"
+        )
     return mean, vt[: int(rank)]
 
 
-def infer_in_subspace(run, data: MotionDataset, mean: np.ndarray, basis: np.ndarray, *, epochs: int,
-                      progress: bool | None = None, **overrides) -> np.ndarray:
+def infer_in_subspace(
+    run,
+    data: MotionDataset,
+    mean: np.ndarray,
+    basis: np.ndarray,
+    *,
+    epochs: int,
+    progress: bool | None = None,
+    **overrides,
+) -> np.ndarray:
     """Codes (n, K·q) float32 ``mean + a @ basis`` with ``a`` fitted (θ frozen, start ``a = 0``) to
     the scene's observed entries (first joints, first frame) by the masked inference loss."""
     parent = as_run(run)
     try:
-        tc = replace(parent.train_config, epochs=epochs, device="cpu", amp=False, vision_frames=None,
-                     **overrides).validate()
+        tc = replace(
+            parent.train_config, epochs=epochs, device="cpu", amp=False, vision_frames=None, **overrides
+        ).validate()
     except TypeError as exc:
         raise UserError(f"unknown train config override ({exc})") from None
     if not uses_images(parent.model_config, data, tc):
-        raise UserError("the scene mode reads the first camera frame, and this run does not use frames "
-                        "(vision_weight 0)")
+        raise UserError(
+            "the scene mode reads the first camera frame, and this run does not use frames (vision_weight 0)"
+        )
     tensors = DataTensors.build(data, parent.scaler, True, "cpu", _observation())
     model = copy.deepcopy(parent.model).cpu().eval().requires_grad_(False)
     mu = torch.from_numpy(np.asarray(mean, dtype=np.float32))
@@ -237,24 +290,39 @@ def infer_in_subspace(run, data: MotionDataset, mean: np.ndarray, basis: np.ndar
                 idx = torch.arange(start, min(n, start + tc.batch_size))
                 code_step(model, table, idx, tensors, tc, contextlib.nullcontext(), to_code=lambda a: mu + a @ u)
             advance()
-    return (np.asarray(mean, dtype=np.float64) + table.numpy().astype(np.float64) @ np.asarray(basis)).astype(np.float32)
+    return (np.asarray(mean, dtype=np.float64) + table.numpy().astype(np.float64) @ np.asarray(basis)).astype(
+        np.float32
+    )
 
 
 def _check_scene(parent, data: MotionDataset) -> None:
     if not isinstance(data, MotionDataset):
         raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
     if not parent.model_config.has_images:
-        raise UserError("the scene mode reads the first camera frame and needs a run with an image head; "
-                        "this run was fitted on joints only")
+        raise UserError(
+            "the scene mode reads the first camera frame and needs a run with an image head; "
+            "this run was fitted on joints only"
+        )
     if not data.has_images:
         where = str(data.path) if data.path is not None else "the data set"
         raise UserError(f"the scene mode reads the first camera frame, and {where} has no frames")
 
 
-def predict_scene(run, data: MotionDataset, primitive: int | str, *, clusters: SceneClusters | None = None,
-                  n_clusters: int | None = None, rank: int | None = None, epochs: int = DEFAULT_PREDICT_EPOCHS,
-                  indices=None, fitted_data: MotionDataset | None = None, frames: bool = True,
-                  progress: bool | None = None, **overrides) -> Prediction:
+def predict_scene(
+    run,
+    data: MotionDataset,
+    primitive: int | str,
+    *,
+    clusters: SceneClusters | None = None,
+    n_clusters: int | None = None,
+    rank: int | None = None,
+    epochs: int = DEFAULT_PREDICT_EPOCHS,
+    indices=None,
+    fitted_data: MotionDataset | None = None,
+    frames: bool = True,
+    progress: bool | None = None,
+    **overrides,
+) -> Prediction:
     """Predict each sample's whole motion from its first frame and first joints, as primitive ``primitive``.
 
     Parameters
@@ -299,13 +367,26 @@ def predict_scene(run, data: MotionDataset, primitive: int | str, *, clusters: S
     scaled, truth = parent.scaler.transform(motor), parent.scaler.transform(sub.motor)
     errors = {"motor_mse": unobserved_mse(scaled, truth, motor_observed, lengths)}
     if predicted_frames is not None:
-        errors["vision_mse"], errors["psnr"] = frame_errors(predicted_frames, sub.load_images().images,
-                                                            frames_observed, valid_steps(lengths, sub.length))
-    details = {"mode": SCENE, "scene": {"primitive": k, "name": clusters.names[k], "rank": int(basis.shape[0]),
-                                        **clusters.summary()}}
-    return Prediction(codes=codes, motor=motor, frames=predicted_frames, motor_observed=motor_observed,
-                      frames_observed=frames_observed, indices=idx, errors=errors,
-                      observation=_observation().to_dict(), init=SCENE, epochs=int(epochs), details=details)
+        errors["vision_mse"], errors["psnr"] = frame_errors(
+            predicted_frames, sub.load_images().images, frames_observed, valid_steps(lengths, sub.length)
+        )
+    details = {
+        "mode": SCENE,
+        "scene": {"primitive": k, "name": clusters.names[k], "rank": int(basis.shape[0]), **clusters.summary()},
+    }
+    return Prediction(
+        codes=codes,
+        motor=motor,
+        frames=predicted_frames,
+        motor_observed=motor_observed,
+        frames_observed=frames_observed,
+        indices=idx,
+        errors=errors,
+        observation=_observation().to_dict(),
+        init=SCENE,
+        epochs=int(epochs),
+        details=details,
+    )
 
 
 class ScenePredictor(Predictor):
@@ -336,8 +417,16 @@ class ScenePredictor(Predictor):
 
     needs_labels = True
 
-    def __init__(self, run, n_clusters: int | None = None, label_names=None, rank: int | None = None,
-                 epochs: int = DEFAULT_PREDICT_EPOCHS, overrides: dict | None = None, progress: bool | None = False):
+    def __init__(
+        self,
+        run,
+        n_clusters: int | None = None,
+        label_names=None,
+        rank: int | None = None,
+        epochs: int = DEFAULT_PREDICT_EPOCHS,
+        overrides: dict | None = None,
+        progress: bool | None = False,
+    ):
         self.run = run
         self.n_clusters = n_clusters
         self.label_names = label_names
@@ -352,12 +441,15 @@ class ScenePredictor(Predictor):
         n = self.n_clusters
         if n is None:
             if labels is None:
-                raise UserError("the scene mode clusters the fitted codes and needs the number of clusters "
-                                "(n_clusters) or the fitted labels to count them by")
+                raise UserError(
+                    "the scene mode clusters the fitted codes and needs the number of clusters "
+                    "(n_clusters) or the fitted labels to count them by"
+                )
             labels = np.asarray(labels)
             n = int(np.unique(labels[labels >= 0]).size)
-        self.clusters_ = cluster_codes(self.run_.latents, n, labels, self.label_names,
-                                       random_state=int(self.run_.train_config.seed))
+        self.clusters_ = cluster_codes(
+            self.run_.latents, n, labels, self.label_names, random_state=int(self.run_.train_config.seed)
+        )
         return self
 
     def forecast(self, motor, observed=None, labels=None, lengths=None, frames=None) -> Forecast:
@@ -372,8 +464,15 @@ class ScenePredictor(Predictor):
         for k in sorted(set(wanted)):
             rows = np.flatnonzero(np.asarray(wanted) == k)
             mean, basis = self.clusters_.subspace(k, self.rank)
-            codes[rows] = infer_in_subspace(self.run_, data.subset(rows), mean, basis, epochs=self.epochs,
-                                            progress=self.progress, **(self.overrides or {}))
+            codes[rows] = infer_in_subspace(
+                self.run_,
+                data.subset(rows),
+                mean,
+                basis,
+                epochs=self.epochs,
+                progress=self.progress,
+                **(self.overrides or {}),
+            )
         scaled = self.run_.scaler.transform(reconstruct(self.run_, codes, images=False)[0])
         return Forecast(scaled, codes, {"mode": SCENE, "primitives": [int(k) for k in wanted]})
 
@@ -410,10 +509,15 @@ def run_scene_point(fit, fitted: MotionDataset, test: MotionDataset, epochs: int
     if fitted.labels is None or test.labels is None:
         raise UserError("run_scene_point picks each sample's primitive by its label: both data sets need labels")
     n_clusters = int(np.unique(fitted.labels[fitted.labels >= 0]).size)
-    clusters = cluster_codes(fit.latents, n_clusters, fitted.labels, fitted.label_names,
-                             random_state=int(fit.train_config.seed))
-    counts = np.array([[np.sum((clusters.labels == k) & (fitted.labels == lab)) for k in range(n_clusters)]
-                       for lab in range(int(max(fitted.labels.max(), test.labels.max())) + 1)])
+    clusters = cluster_codes(
+        fit.latents, n_clusters, fitted.labels, fitted.label_names, random_state=int(fit.train_config.seed)
+    )
+    counts = np.array(
+        [
+            [np.sum((clusters.labels == k) & (fitted.labels == lab)) for k in range(n_clusters)]
+            for lab in range(int(max(fitted.labels.max(), test.labels.max())) + 1)
+        ]
+    )
     chosen = np.full(len(test), -1, dtype=np.int64)
     for i, lab in enumerate(test.labels):
         if lab >= 0 and counts[lab].max() > 0:
@@ -423,10 +527,16 @@ def run_scene_point(fit, fitted: MotionDataset, test: MotionDataset, epochs: int
     mse, ranks = np.full(len(test), np.nan), {}
     for k in np.unique(chosen[chosen >= 0]):
         rows = np.flatnonzero(chosen == k)
-        p = predict_scene(fit, test, int(k), clusters=clusters, epochs=epochs, indices=rows, frames=False,
-                          progress=False)
+        p = predict_scene(
+            fit, test, int(k), clusters=clusters, epochs=epochs, indices=rows, frames=False, progress=False
+        )
         scaled[rows], mse[rows] = fit.scaler.transform(p.motor), p.errors["motor_mse"]
         ranks[int(k)] = p.details["scene"]["rank"]
     motor = np.where(np.isnan(scaled), np.nan, fit.scaler.inverse_transform(np.nan_to_num(scaled)))
-    return {"scaled": scaled, "motor": motor.astype(np.float32), "cluster": chosen, "mse": mse,
-            "clusters": {**clusters.summary(), "ranks": ranks}}
+    return {
+        "scaled": scaled,
+        "motor": motor.astype(np.float32),
+        "cluster": chosen,
+        "mse": mse,
+        "clusters": {**clusters.summary(), "ranks": ranks},
+    }

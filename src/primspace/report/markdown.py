@@ -33,20 +33,49 @@ from primspace.experiments.claims import check_claims
 from primspace.experiments.results import projection_lead
 from primspace.experiments.summary import read_summary
 from primspace.report.summary_tables import (
-    COMPARISONS, final_losses, g, mean_spread, outcome_rows, render_comparison, render_composite, render_predict,
-    render_scene, render_summary, table)
+    COMPARISONS,
+    final_losses,
+    g,
+    mean_spread,
+    outcome_rows,
+    render_comparison,
+    render_composite,
+    render_predict,
+    render_scene,
+    render_summary,
+    table,
+)
 
-__all__ = ["g", "mean_spread", "render_summary", "render_comparison", "render_composite", "render_scene",
-           "render_predict", "glance", "blocks", "replace_blocks", "load_summaries", "main", "SUMMARY_DIR",
-           "TARGETS", "ORDER", "TUNED_IN"]
+__all__ = [
+    "g",
+    "mean_spread",
+    "render_summary",
+    "render_comparison",
+    "render_composite",
+    "render_scene",
+    "render_predict",
+    "glance",
+    "blocks",
+    "replace_blocks",
+    "load_summaries",
+    "main",
+    "SUMMARY_DIR",
+    "TARGETS",
+    "ORDER",
+    "TUNED_IN",
+]
 
 #: Where the summaries are kept, relative to the repository.
 SUMMARY_DIR = Path("docs") / "results"
 
 #: Each generated block: the file it lives in.
-TARGETS = {"glance": Path("README.md"), "results": Path("docs") / "results.md",
-           "predict": Path("docs") / "predict.md", "scene": Path("docs") / "predict.md",
-           "composite": Path("docs") / "sequences.md"}
+TARGETS = {
+    "glance": Path("README.md"),
+    "results": Path("docs") / "results.md",
+    "predict": Path("docs") / "predict.md",
+    "scene": Path("docs") / "predict.md",
+    "composite": Path("docs") / "sequences.md",
+}
 
 #: The order summaries are shown in (others follow, by name); README's table shows these only.
 ORDER = ("paper", "paper-q10-20", "paper-q10", "paper-images", "demo", "lasa")
@@ -59,8 +88,19 @@ TUNED_IN = {"paper-q10-20": "paper-tune20"}
 #: The experiments docs/results.md shows (a summary holding none of them is shown elsewhere only).
 _REPRODUCED = {"intra", "success", "clustering", "inter", "tune"}
 
-_GLANCE_COLUMNS = ["summary", "seeds", "q", "eval loss: projection", "zero", "success: projection", "zero",
-                   "clustering: projection", "zero", "tuned: projection below zero / pca", "paper's sentences holding"]
+_GLANCE_COLUMNS = [
+    "summary",
+    "seeds",
+    "q",
+    "eval loss: projection",
+    "zero",
+    "success: projection",
+    "zero",
+    "clustering: projection",
+    "zero",
+    "tuned: projection below zero / pca",
+    "paper's sentences holding",
+]
 
 
 def glance(summaries: dict[str, dict]) -> str:
@@ -85,11 +125,18 @@ def glance(summaries: dict[str, dict]) -> str:
         success, clustering = bool(s["results"].get("success")), bool(s["results"].get("clustering"))
         verdicts = [r for r in check_claims(s["results"]) if r["verdict"] not in ("not run", "cannot be checked")]
         held = sum(r["verdict"].startswith("holds in every") or r["verdict"] == "holds" for r in verdicts)
-        rows.append([f"*{name}*", str(len(by.get("projection", []))), str(max(r["latent_dim"] for r in intra["runs"])),
-                     *(mean_spread(by.get(i, []), rng=False) for i in ("projection", "zero")),
-                     *(outcome(i, 2) if success else "—" for i in ("projection", "zero")),
-                     *(outcome(i, 4) if clustering else "—" for i in ("projection", "zero")),
-                     _tuned_cell(summaries.get(TUNED_IN.get(name, name), {})), f"{held} of {len(verdicts)}"])
+        rows.append(
+            [
+                f"*{name}*",
+                str(len(by.get("projection", []))),
+                str(max(r["latent_dim"] for r in intra["runs"])),
+                *(mean_spread(by.get(i, []), rng=False) for i in ("projection", "zero")),
+                *(outcome(i, 2) if success else "—" for i in ("projection", "zero")),
+                *(outcome(i, 4) if clustering else "—" for i in ("projection", "zero")),
+                _tuned_cell(summaries.get(TUNED_IN.get(name, name), {})),
+                f"{held} of {len(verdicts)}",
+            ]
+        )
     if not rows:
         return "No stored summaries yet (docs/results/)."
     return table(_GLANCE_COLUMNS, rows)
@@ -101,8 +148,11 @@ def _tuned_cell(summary: dict) -> str:
     tune = summary.get("results", {}).get("tune")
     if not tune:
         return "—"
-    leads = [projection_lead(tune, summary["results"].get("intra"), init)["tuned"]
-             for init in ("zero", "pca") if init in tune["chosen"]]
+    leads = [
+        projection_lead(tune, summary["results"].get("intra"), init)["tuned"]
+        for init in ("zero", "pca")
+        if init in tune["chosen"]
+    ]
     return " / ".join(leads) + f" (q = {tune['latent_dim']})"
 
 
@@ -116,25 +166,35 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block, by block name (:data:`TARGETS`)."""
     tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
     parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
-    parts += [render_comparison(summaries[a], summaries[b], what) for a, b, what in COMPARISONS
-              if a in summaries and b in summaries]
+    parts += [
+        render_comparison(summaries[a], summaries[b], what)
+        for a, b, what in COMPARISONS
+        if a in summaries and b in summaries
+    ]
     results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
     scene = "\n\n".join(render_scene(s) for s in summaries.values() if "scene" in s["results"])
     composite = "\n\n".join(render_composite(s) for s in summaries.values() if "composite" in s["results"])
-    return {"glance": glance(summaries), "results": results,
-            "predict": predicted or "No stored prediction summaries yet (docs/results/).",
-            "scene": scene or "No stored scene-only summaries yet (docs/results/).",
-            "composite": composite or "No stored composite summaries yet (docs/results/)."}
+    return {
+        "glance": glance(summaries),
+        "results": results,
+        "predict": predicted or "No stored prediction summaries yet (docs/results/).",
+        "scene": scene or "No stored scene-only summaries yet (docs/results/).",
+        "composite": composite or "No stored composite summaries yet (docs/results/).",
+    }
 
 
 def replace_blocks(text: str, new: dict[str, str], path: Path | str = "") -> str:
     """``text`` with the block of each name in ``new`` replaced (markers kept)."""
     for name, body in new.items():
-        pattern = re.compile(rf"(<!-- generated: {re.escape(name)} -->\n)(.*?)(<!-- end generated: {re.escape(name)} -->)", re.S)
+        pattern = re.compile(
+            rf"(<!-- generated: {re.escape(name)} -->\n)(.*?)(<!-- end generated: {re.escape(name)} -->)", re.S
+        )
         if not pattern.search(text):
-            raise ValueError(f"{path}: no generated block {name!r} (markers <!-- generated: {name} --> ... "
-                             f"<!-- end generated: {name} -->)")
+            raise ValueError(
+                f"{path}: no generated block {name!r} (markers <!-- generated: {name} --> ... "
+                f"<!-- end generated: {name} -->)"
+            )
         text = pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(3), text, count=1)
     return text
 

@@ -107,7 +107,9 @@ class HtmlReport:
             return
         data = base64.b64encode(data).decode("ascii")
         cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-        self._parts.append(f'<figure><img alt="{html.escape(image.stem)}" src="data:{mime};base64,{data}">{cap}</figure>')
+        self._parts.append(
+            f'<figure><img alt="{html.escape(image.stem)}" src="data:{mime};base64,{data}">{cap}</figure>'
+        )
 
     def _refused(self, image: Path) -> str:
         """Why ``image`` may not be embedded ("" if it may): a link, or outside ``root``."""
@@ -127,7 +129,7 @@ class HtmlReport:
         nav = " ".join(f'<a href="#{a}">{html.escape(t)}</a>' for a, t in self._toc)
         sub = f'<p class="sub">{html.escape(self.subtitle)}</p>' if self.subtitle else ""
         return (
-            "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>"
             f"<h1>{html.escape(self.title)}</h1>{sub}<nav>{nav}</nav>" + "\n".join(self._parts) + "</body></html>\n"
         )

@@ -72,12 +72,14 @@ def summary(out_dir: Path, report: HtmlReport) -> None:
         report.note(
             "The paper's central result, as we test it, holds here: after inference with θ frozen, codes "
             "initialised by random projection reach a lower evaluation loss than zero and random "
-            "initialisation. (The paper's own sentences are checked one by one in the next section.) " + text, "good",
+            "initialisation. (The paper's own sentences are checked one by one in the next section.) " + text,
+            "good",
         )
     else:
         report.note(
             "The paper's central result, as we test it, does NOT hold in every case here (projection's final "
-            "evaluation loss is not below both zero and random initialisation). " + text, "warn",
+            "evaluation loss is not below both zero and random initialisation). " + text,
+            "warn",
         )
     if results["failures"]:
         _failures(report, results["failures"], "run(s)", detail=True)
@@ -90,7 +92,7 @@ def claims(out_dir: Path, report: HtmlReport) -> None:
     report.section("The paper's claims, checked")
     report.paragraph(
         "Each sentence is quoted verbatim from the paper's Experimental Results; the paper gives no numbers for "
-        "its curves, so the rule in the second column is our reading of it. \"does not hold\" marks where our "
+        'its curves, so the rule in the second column is our reading of it. "does not hold" marks where our '
         "results differ from the sentence (stronger or weaker: the numbers say which)."
     )
     columns, rows = claims_table(out_dir)
@@ -106,7 +108,8 @@ def data(out_dir: Path, report: HtmlReport) -> None:
         report.note(
             f"No data summary here: results/{results_file(out_dir, 'data').name} is written when an experiment "
             "loads its data, and an older primspace did not write it. Re-run an experiment command with "
-            f"--out {out_dir} (finished runs are skipped) to write it. Data file: {meta.get('data', '?')}.", "warn",
+            f"--out {out_dir} (finished runs are skipped) to write it. Data file: {meta.get('data', '?')}.",
+            "warn",
         )
         return
     report.paragraph(
@@ -139,8 +142,13 @@ def intra(out_dir: Path, report: HtmlReport) -> None:
             "budget; the camera images are generated and shown, but not learned. The paper preset learns both.",
             "warn",
         )
-    report.figure(figure_file(out_dir, "intra_loss_fit"), "Loss while fitting θ and Z (the paper's first convergence figure).")
-    report.figure(figure_file(out_dir, "intra_loss_infer"), "Loss while inferring Z with θ frozen (the paper's second convergence figure).")
+    report.figure(
+        figure_file(out_dir, "intra_loss_fit"), "Loss while fitting θ and Z (the paper's first convergence figure)."
+    )
+    report.figure(
+        figure_file(out_dir, "intra_loss_infer"),
+        "Loss while inferring Z with θ frozen (the paper's second convergence figure).",
+    )
     columns, rows = final_loss_table(results)
     report.table(columns, rows, "Final losses per run.")
     spread = spread_table(results, read_results(out_dir, PROBE_RESULTS))
@@ -161,12 +169,12 @@ def calibration(out_dir: Path, report: HtmlReport) -> None:
     report.paragraph(
         "The paper starts a new sample's code at its projection P m. Its reason (Initialization of Latent Vectors, "
         "Appendix A) is what P keeps of the trajectory space: inner products in expectation (E[Pa·Pb] = a·b), so "
-        "similar motions start at similar codes, and subspaces: \"Moreover, under the assumption of motion "
+        'similar motions start at similar codes, and subspaces: "Moreover, under the assumption of motion '
         "primitives being close to linear subspaces in trajectory space, the projected primitives are also close to "
         "linear subspaces in latent space if latent dimension suffice.\" That the codes stay near P m is the paper's "
-        "reading of its own inference result (Intra-primitive generalisation): \"On the other hand, initialization "
+        'reading of its own inference result (Intra-primitive generalisation): "On the other hand, initialization '
         "with random linear projection yields good results already without any training, which means the initial "
-        "distribution of projected points did not change much during the first part of the training.\" The "
+        'distribution of projected points did not change much during the first part of the training." The '
         "movement below tests that reading: the fitted codes do move (5-7 % on the paper preset, 11-53 % on the "
         "smaller demo, LASA and wrist-sensor data; CHANGELOG.md, 0.5.0). Calibrated projection starts a new code at "
         "B P m + c instead: a ridge regression (with intercept, its strength chosen by leave-one-out on the training "
@@ -176,8 +184,11 @@ def calibration(out_dir: Path, report: HtmlReport) -> None:
     )
     report.table(*table, "Eval-part loss at the start and the end of inference, mean ± std over seeds.")
     ok, text = calibration_verdict(results)
-    verdict = {True: "calibrated never loses (by more than 5%) to projection or zero", False: "calibrated loses in some runs",
-               None: "cannot be checked"}[ok]
+    verdict = {
+        True: "calibrated never loses (by more than 5%) to projection or zero",
+        False: "calibrated loses in some runs",
+        None: "cannot be checked",
+    }[ok]
     report.paragraph(f"{verdict}: {text}.")
 
 
@@ -195,16 +206,29 @@ def clustering(out_dir: Path, report: HtmlReport) -> None:
     )
     columns, rows = latent_table(results)
     report.table(columns, rows)
-    report.figure(figure_file(out_dir, "latent_accuracy_vs_r2"),
-                  "Accuracy of clustering the codes when τ is chosen for other R² targets (dashed: the projection "
-                  "before training). With few points per primitive in q dimensions, high targets keep every component "
-                  "and the affinity degenerates towards the identity.")
+    report.figure(
+        figure_file(out_dir, "latent_accuracy_vs_r2"),
+        "Accuracy of clustering the codes when τ is chosen for other R² targets (dashed: the projection "
+        "before training). With few points per primitive in q dimensions, high targets keep every component "
+        "and the affinity degenerates towards the identity.",
+    )
     for r in results["latent"]:
-        name = "latent_clustering_projection_initial" if r["codes"] == INITIAL_CODES else f"latent_clustering_{r['init']}"
-        report.figure(figure_file(out_dir, name), f"{r['init']} ({r['codes']}): affinity ordered by primitive, and the predicted cluster of each sample.")
+        name = (
+            "latent_clustering_projection_initial" if r["codes"] == INITIAL_CODES else f"latent_clustering_{r['init']}"
+        )
+        report.figure(
+            figure_file(out_dir, name),
+            f"{r['init']} ({r['codes']}): affinity ordered by primitive, and the predicted cluster of each sample.",
+        )
     for name in results["trajectory"]:
-        report.figure(figure_file(out_dir, f"trajectory_sweep_{name}"), f"τ sweep on raw trajectories ({name}): R², rank and scores per τ.")
-        report.figure(figure_file(out_dir, f"trajectory_clustering_{name}"), f"Raw trajectories ({name}) clustered at the chosen τ.")
+        report.figure(
+            figure_file(out_dir, f"trajectory_sweep_{name}"),
+            f"τ sweep on raw trajectories ({name}): R², rank and scores per τ.",
+        )
+        report.figure(
+            figure_file(out_dir, f"trajectory_clustering_{name}"),
+            f"Raw trajectories ({name}) clustered at the chosen τ.",
+        )
 
 
 def success(out_dir: Path, report: HtmlReport) -> None:
@@ -240,7 +264,10 @@ def inter(out_dir: Path, report: HtmlReport) -> None:
         "Seven folds: θ and Z fitted on six primitives (phase 1), then on the seventh plus "
         f"{results['replay']:.0%} replay of the others (phase 2), q = {results['latent_dim']}."
     )
-    report.figure(figure_file(out_dir, "inter_loss"), "Phase-2 loss, mean ± std over folds (the paper's inter-primitive figure; on the log axis the band stops at the lowest fold).")
+    report.figure(
+        figure_file(out_dir, "inter_loss"),
+        "Phase-2 loss, mean ± std over folds (the paper's inter-primitive figure; on the log axis the band stops at the lowest fold).",
+    )
     columns, rows = inter_table(results)
     report.table(columns, rows)
     if results["failures"]:
@@ -290,11 +317,18 @@ def prediction(out_dir: Path, report: HtmlReport) -> None:
         "conditions); each with the continuity correction. The peers on the same split: "
         "ProMP conditioning given the labels, one ProMP for all, the nearest fitted demonstration, the mean motion "
         "of the primitive (given the label); the ProMPs' noise chosen on the answer. MSE of the unobserved steps, "
-        "mean ± std over seeds" + ("; success as judged by the simulator (at 100 % nothing is left to predict)."
-                                   if results.get("judged") else "."))
+        "mean ± std over seeds"
+        + (
+            "; success as judged by the simulator (at 100 % nothing is left to predict)."
+            if results.get("judged")
+            else "."
+        )
+    )
     columns, rows = predict_error_table(results)
     report.table(columns, rows)
-    report.figure(figure_file(out_dir, "predict_errors"), "Error of the unobserved steps against the observed fraction.")
+    report.figure(
+        figure_file(out_dir, "predict_errors"), "Error of the unobserved steps against the observed fraction."
+    )
     if results["failures"]:
         _failures(report, results["failures"], "prediction point(s)")
 
@@ -312,7 +346,8 @@ def scene_only(out_dir: Path, report: HtmlReport) -> None:
         f"at q = {results['latent_dim']} frozen) and decoded whole (docs/predict.md). Beside it, on the same samples: "
         "the mean motion of the primitive's fitted demonstrations (given the label) and the same run's codes inferred "
         "from the whole motion (the reproduction). MSE of the steps after the first (scaled units), mean ± std over "
-        "seeds" + ("; success as judged by the simulator." if results.get("judged") else "."))
+        "seeds" + ("; success as judged by the simulator." if results.get("judged") else ".")
+    )
     columns, rows = scene_table(results)
     report.table(columns, rows)
     if results["failures"]:
@@ -333,20 +368,30 @@ def composite(out_dir: Path, report: HtmlReport) -> None:
         "(docs/sequences.md)."
     )
     columns, rows = composite_table(results)
-    report.table(columns, rows, "primspace per init, then its peers on the raw scaled joints (peer: rows; "
-                 "ruptures, hmmlearn), the same held-out demonstrations and scores; mean ± std over seeds.")
+    report.table(
+        columns,
+        rows,
+        "primspace per init, then its peers on the raw scaled joints (peer: rows; "
+        "ruptures, hmmlearn), the same held-out demonstrations and scores; mean ± std over seeds.",
+    )
     single = primitives_table(results)
     if single is not None:
-        report.table(*single, "A model of single primitives segments the same held-out demonstrations: by synthesis "
-                     "(the partition it generates best) and by surprise (where its prediction of the next steps "
-                     "fails); the bound gives each found segment its nearest template's true primitive.")
+        report.table(
+            *single,
+            "A model of single primitives segments the same held-out demonstrations: by synthesis "
+            "(the partition it generates best) and by surprise (where its prediction of the next steps "
+            "fails); the bound gives each found segment its nearest template's true primitive.",
+        )
     _composite_bounds(results, report)
     for phase in ("fit", "infer"):
         report.figure(figure_file(out_dir, f"composite_loss_{phase}"), f"Loss per epoch ({phase}), per init.")
     for path in sorted((out_dir / "figures").glob("composite_timeline_*.png")):
-        report.figure(path, "Held-out demonstrations: the heat map shows code values per window (window codes) or "
-                      "the scaled joints per step (synthesis, surprise); true (solid) and found (dashed) boundaries, "
-                      "true and found labels (found colours are cluster ids).")
+        report.figure(
+            path,
+            "Held-out demonstrations: the heat map shows code values per window (window codes) or "
+            "the scaled joints per step (synthesis, surprise); true (solid) and found (dashed) boundaries, "
+            "true and found labels (found colours are cluster ids).",
+        )
     if results["failures"]:
         _failures(report, results["failures"], "run(s)")
 
@@ -370,7 +415,9 @@ def _composite_bounds(results: dict, report: HtmlReport) -> None:
 
 def latent_figures(out_dir: Path, report: HtmlReport) -> None:
     """The latent-encoding figures and the Appendix B reconstructions, as drawn."""
-    figs = sorted((out_dir / "figures").glob("latent_pca*.png")) + sorted((out_dir / "figures").glob("reconstruction_*.png"))
+    figs = sorted((out_dir / "figures").glob("latent_pca*.png")) + sorted(
+        (out_dir / "figures").glob("reconstruction_*.png")
+    )
     if not figs:
         return
     report.section("Latent space and reconstructions")
@@ -381,7 +428,9 @@ def latent_figures(out_dir: Path, report: HtmlReport) -> None:
                 "position on the table (left: the positions), per initialisation — the paper's latent-encoding figure."
             )
         else:
-            caption = "Generated (dashed, lower frames) against recorded (solid, upper frames) — the paper's Appendix B."
+            caption = (
+                "Generated (dashed, lower frames) against recorded (solid, upper frames) — the paper's Appendix B."
+            )
         report.figure(fig, caption)
         if fig.name == "latent_pca2d.png":
             _probe(out_dir, report)
@@ -442,12 +491,22 @@ def appendix_a(out_dir: Path, report: HtmlReport) -> None:
         report.note(
             f"Not computed here: results/{results_file(out_dir, 'appendix_a').name} is written by the intra and "
             "inter experiments, and an older primspace did not write it. Re-run "
-            f"`primspace experiment intra --out {out_dir}` (finished runs are skipped) to compute it.", "warn",
+            f"`primspace experiment intra --out {out_dir}` (finished runs are skipped) to compute it.",
+            "warn",
         )
         return
     rows = [
-        [r["pair"], r["latent_dim"], r["dot"], r["mean"], r["mean_z"], r["var"], r["var_exact"], r["var_bound"],
-         "yes" if r["var"] <= r["var_bound"] else "no"]
+        [
+            r["pair"],
+            r["latent_dim"],
+            r["dot"],
+            r["mean"],
+            r["mean_z"],
+            r["var"],
+            r["var_exact"],
+            r["var_bound"],
+            "yes" if r["var"] <= r["var_bound"] else "no",
+        ]
         for r in results["rows"]
     ]
     report.table(["pair", "q", "a·b", "mean Pa·Pb", "mean z", "var", "exact var", "bound", "var ≤ bound"], rows)

@@ -15,12 +15,29 @@ import re
 import numpy as np
 
 from primspace.experiments.claims import check_claims, eighth_loss
-from primspace.experiments.composite.results import PEER_RULES, bounds_table, composite_table, primitives_table, recall_table
+from primspace.experiments.composite.results import (
+    PEER_RULES,
+    bounds_table,
+    composite_table,
+    primitives_table,
+    recall_table,
+)
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
 from primspace.stats import wilson_interval
 
-__all__ = ["g", "mean_spread", "table", "outcome_rows", "final_losses", "render_summary", "render_comparison",
-           "render_composite", "render_scene", "render_predict", "COMPARISONS"]
+__all__ = [
+    "g",
+    "mean_spread",
+    "table",
+    "outcome_rows",
+    "final_losses",
+    "render_summary",
+    "render_comparison",
+    "render_composite",
+    "render_scene",
+    "render_predict",
+    "COMPARISONS",
+]
 
 
 def g(x: float | None, digits: int = 2) -> str:
@@ -53,11 +70,19 @@ def _intra_rows(intra: dict) -> list[list[str]]:
         groups.setdefault((r["latent_dim"], r["init"]), []).append(r)
     order = ["projection", "calibrated", "pca", "zero", "random"]
     rows = []
-    for (q, init), runs in sorted(groups.items(), key=lambda kv: (kv[0][0], order.index(kv[0][1]) if kv[0][1] in order else 9)):
-        rows.append([str(q), init, str(len(runs)),
-                     mean_spread([_last(r["fit"]) for r in runs]) if runs[0]["fit"] else "(projection's fit)",
-                     mean_spread([r["infer"][0]["loss"] for r in runs], rng=False),
-                     mean_spread([_last(r["infer"]) for r in runs])])
+    for (q, init), runs in sorted(
+        groups.items(), key=lambda kv: (kv[0][0], order.index(kv[0][1]) if kv[0][1] in order else 9)
+    ):
+        rows.append(
+            [
+                str(q),
+                init,
+                str(len(runs)),
+                mean_spread([_last(r["fit"]) for r in runs]) if runs[0]["fit"] else "(projection's fit)",
+                mean_spread([r["infer"][0]["loss"] for r in runs], rng=False),
+                mean_spread([_last(r["infer"]) for r in runs]),
+            ]
+        )
     return rows
 
 
@@ -105,8 +130,15 @@ def outcome_rows(results: dict) -> list[list[str]]:
     out = []
     for init in dict.fromkeys([*points, *acc]):
         p = points.get(init, [])
-        out.append([init, str(max(len(p), len(acc.get(init, [])))), _rate(p, None) if p else "—",
-                    _rate(p, "grasp") if p else "—", mean_spread(acc.get(init, []))])
+        out.append(
+            [
+                init,
+                str(max(len(p), len(acc.get(init, [])))),
+                _rate(p, None) if p else "—",
+                _rate(p, "grasp") if p else "—",
+                mean_spread(acc.get(init, [])),
+            ]
+        )
     return out
 
 
@@ -118,8 +150,15 @@ def _inter_rows(inter: dict) -> list[list[str]]:
     for init, runs in by.items():
         seeds = sorted({r.get("seed", 0) for r in runs})
         eighth = [eighth_loss(r["phase2"]) for r in runs]
-        rows.append([init, f"{len(runs)} ({len(seeds)} seeds)", mean_spread([r["phase2"][0]["loss"] for r in runs], rng=False),
-                     mean_spread(eighth, rng=False), mean_spread([_last(r["phase2"]) for r in runs])])
+        rows.append(
+            [
+                init,
+                f"{len(runs)} ({len(seeds)} seeds)",
+                mean_spread([r["phase2"][0]["loss"] for r in runs], rng=False),
+                mean_spread(eighth, rng=False),
+                mean_spread([_last(r["phase2"]) for r in runs]),
+            ]
+        )
     return rows
 
 
@@ -132,7 +171,9 @@ def _claim_rows(results: dict) -> list[list[str]]:
         if len(r["per_seed"]) > 1:
             verdict += " (" + ", ".join(f"seed {s}: {v}" for s, v in r["per_seed"].items()) + ")"
         if r.get("sweep"):
-            verdict += "; by judge tolerance: " + ", ".join(f"{float(t) * 1000:g} mm {v}" for t, v in r["sweep"].items())
+            verdict += "; by judge tolerance: " + ", ".join(
+                f"{float(t) * 1000:g} mm {v}" for t, v in r["sweep"].items()
+            )
             verdict += " (robust)" if r["robust"] else " (**not robust** to the tolerance)"
         earlier = "; ".join(f"v{p['version']}: {p['verdict']}" for p in r["previous"]) or "—"
         rows.append([f"“{r['quote']}”", f"v{r['version']}: {r['test']}", verdict, earlier])
@@ -146,38 +187,68 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
     res, preset = summary["results"], summary.get("preset", {})
     cpu = summary.get("cpu", {})
     seeds = preset.get("seeds", [])
-    out = [f"#### {summary['name']}", "",
-           "```", summary["command"].strip(), "```", "",
-           f"primspace {summary.get('primspace')}; preset {preset.get('name')}, "
-           f"{'with images' if preset.get('images') else 'motor only'}, seeds {', '.join(map(str, seeds))}, "
-           f"epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}, loss "
-           f"{preset.get('train', {}).get('loss_reduction', 'mean')}; measured on {cpu.get('model', '?')} ({cpu.get('isa', '?')})."
-           + (f" {summary['note']}" if summary.get("note") else "")]
+    out = [
+        f"#### {summary['name']}",
+        "",
+        "```",
+        summary["command"].strip(),
+        "```",
+        "",
+        f"primspace {summary.get('primspace')}; preset {preset.get('name')}, "
+        f"{'with images' if preset.get('images') else 'motor only'}, seeds {', '.join(map(str, seeds))}, "
+        f"epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}, loss "
+        f"{preset.get('train', {}).get('loss_reduction', 'mean')}; measured on {cpu.get('model', '?')} ({cpu.get('isa', '?')})."
+        + (f" {summary['note']}" if summary.get("note") else ""),
+    ]
     if tune_only:
         return "\n".join(out + _tune_section(res))
     if "intra" in res:
-        out += ["", "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
-                    "(θ frozen) before the first and after the last inference epoch.", "",
-                table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"]))]
+        out += [
+            "",
+            "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
+            "(θ frozen) before the first and after the last inference epoch.",
+            "",
+            table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"])),
+        ]
     outcome = outcome_rows(res)
     if outcome:
         q = (res.get("clustering") or res.get("success") or {}).get("latent_dim")
         columns = ["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"]
         keep = [0, 1] + ([2, 3] if res.get("success") else []) + ([4] if res.get("clustering") else [])
-        said = (["success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
-                 "over seeds with its Wilson 95 % interval)"] if res.get("success") else []) + (
-                [f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± std over seeds [range])"]
-                if res.get("clustering") else [])
-        out += ["", f"At q = {q}: {', and '.join(said)}.", "",
-                table([columns[i] for i in keep], [[row[i] for i in keep] for row in outcome])]
+        said = (
+            [
+                "success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
+                "over seeds with its Wilson 95 % interval)"
+            ]
+            if res.get("success")
+            else []
+        ) + (
+            [f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± std over seeds [range])"]
+            if res.get("clustering")
+            else []
+        )
+        out += [
+            "",
+            f"At q = {q}: {', and '.join(said)}.",
+            "",
+            table([columns[i] for i in keep], [[row[i] for i in keep] for row in outcome]),
+        ]
     if "inter" in res:
-        out += ["", f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):", "",
-                table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"]))]
+        out += [
+            "",
+            f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):",
+            "",
+            table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"])),
+        ]
     out += _tune_section(res)
     claims = _claim_rows(res)
     if claims:
-        out += ["", "The paper's sentences, checked (`primspace.experiments.claims`):", "",
-                table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims)]
+        out += [
+            "",
+            "The paper's sentences, checked (`primspace.experiments.claims`):",
+            "",
+            table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims),
+        ]
     return "\n".join(out)
 
 
@@ -188,13 +259,17 @@ def _tune_section(res: dict) -> list[str]:
     tune = res["tune"]
     columns, rows = tuning_table(tune, res["intra"])
     factors = ", ".join(f"{f:.3g}" for f in tune["grid"]["latent_lr_factor"])
-    return ["", f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
-                f"the fitted part, over the same grid (layer time constants {tune['grid']['taus']}, latent "
-                f"learning rate x {factors}) at q = {tune['latent_dim']} and applied at every q, epochs the "
-                "preset's for all; the final eval loss with the shared and the tuned setting (mean ± std over "
-                "seeds). README's table and the claims use the shared setting (the paper's protocol); this table "
-                "says whether a gap survives tuning:", "",
-            table(columns, [[str(c) for c in row] for row in rows])]
+    return [
+        "",
+        f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
+        f"the fitted part, over the same grid (layer time constants {tune['grid']['taus']}, latent "
+        f"learning rate x {factors}) at q = {tune['latent_dim']} and applied at every q, epochs the "
+        "preset's for all; the final eval loss with the shared and the tuned setting (mean ± std over "
+        "seeds). README's table and the claims use the shared setting (the paper's protocol); this table "
+        "says whether a gap survives tuning:",
+        "",
+        table(columns, [[str(c) for c in row] for row in rows]),
+    ]
 
 
 def final_losses(intra: dict, q: int | None = None) -> dict[str, list[float]]:
@@ -210,10 +285,18 @@ def final_losses(intra: dict, q: int | None = None) -> dict[str, list[float]]:
 
 
 #: Pairs of summaries shown side by side: (a, b, what differs). Both must be stored.
-COMPARISONS = (("demo-images-mean", "demo-images-sum",
-                "the per-element loss (ours) against the paper's summed loss (`--loss-reduction sum`)"),
-               ("paper-images-short-mean", "paper-images-short-sum",
-                "the same at the paper preset with images, 35 % of the schedule, one seed, one H200"))
+COMPARISONS = (
+    (
+        "demo-images-mean",
+        "demo-images-sum",
+        "the per-element loss (ours) against the paper's summed loss (`--loss-reduction sum`)",
+    ),
+    (
+        "paper-images-short-mean",
+        "paper-images-short-sum",
+        "the same at the paper preset with images, 35 % of the schedule, one seed, one H200",
+    ),
+)
 
 
 def _final_metric(run: dict, phase: str, key: str) -> float | None:
@@ -236,15 +319,27 @@ def render_comparison(a: dict, b: dict, what: str) -> str:
         for key in ("motor", "psnr"):
             for s in (a, b):
                 runs = [r for r in s["results"]["intra"]["runs"] if r["init"] == init]
-                row.append(mean_spread([_final_metric(r, "infer", key) for r in runs], 3 if key == "psnr" else 2, rng=False))
+                row.append(
+                    mean_spread([_final_metric(r, "infer", key) for r in runs], 3 if key == "psnr" else 2, rng=False)
+                )
         for col in (2, 4):
             row += [outcomes[k].get(init, [""] * 5)[col] for k in ("a", "b")]
         rows.append(row)
-    columns = ["init"] + [f"{m}: {n}" for m in ("eval motor MSE", "eval vision PSNR dB", "success, all", "clustering")
-                          for n in (a["name"], b["name"])]
-    return "\n".join([f"#### {a['name']} against {b['name']}: {what}", "",
-                      "Per-element errors recomputed on every frame, so the two losses are compared on the same scale; "
-                      "mean ± std over seeds (pooled success with its Wilson 95 % interval).", "", table(columns, rows)])
+    columns = ["init"] + [
+        f"{m}: {n}"
+        for m in ("eval motor MSE", "eval vision PSNR dB", "success, all", "clustering")
+        for n in (a["name"], b["name"])
+    ]
+    return "\n".join(
+        [
+            f"#### {a['name']} against {b['name']}: {what}",
+            "",
+            "Per-element errors recomputed on every frame, so the two losses are compared on the same scale; "
+            "mean ± std over seeds (pooled success with its Wilson 95 % interval).",
+            "",
+            table(columns, rows),
+        ]
+    )
 
 
 def _md_table(columns_rows) -> str:
@@ -258,23 +353,41 @@ def render_composite(summary: dict) -> str:
     co = summary["results"]["composite"]
     preset, cpu = summary.get("preset", {}), summary.get("cpu", {})
     seeds = sorted({r["seed"] for r in co["runs"]})
-    out = [f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
-           f"primspace {summary.get('primspace')}; preset {preset.get('name')}, seeds {', '.join(map(str, seeds))}, "
-           f"W = {co.get('window')}, epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}; measured on "
-           f"{cpu.get('model', '?')}." + (f" {summary['note']}" if summary.get("note") else ""), "",
-           "Mean ± std over seeds; losses are mean squared errors of the scaled joints of the held-out "
-           "demonstrations; boundaries match one-to-one within the tolerance; accuracies are per step (Hungarian). "
-           "Peers: " + "; ".join(f"`{k}` {v}" for k, v in PEER_RULES.items()) + ".", "",
-           _md_table(composite_table(co))]
+    out = [
+        f"#### {summary['name']}",
+        "",
+        "```",
+        summary["command"].strip(),
+        "```",
+        "",
+        f"primspace {summary.get('primspace')}; preset {preset.get('name')}, seeds {', '.join(map(str, seeds))}, "
+        f"W = {co.get('window')}, epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}; measured on "
+        f"{cpu.get('model', '?')}." + (f" {summary['note']}" if summary.get("note") else ""),
+        "",
+        "Mean ± std over seeds; losses are mean squared errors of the scaled joints of the held-out "
+        "demonstrations; boundaries match one-to-one within the tolerance; accuracies are per step (Hungarian). "
+        "Peers: " + "; ".join(f"`{k}` {v}" for k, v in PEER_RULES.items()) + ".",
+        "",
+        _md_table(composite_table(co)),
+    ]
     single = primitives_table(co)
     if single is not None:
-        out += ["", "The model of single primitives (synthesis, surprise; same held-out demonstrations, same scores) "
-                    "and its labeller's bound: each found segment given its nearest template's true primitive:", "",
-                _md_table(single)]
+        out += [
+            "",
+            "The model of single primitives (synthesis, surprise; same held-out demonstrations, same scores) "
+            "and its labeller's bound: each found segment given its nearest template's true primitive:",
+            "",
+            _md_table(single),
+        ]
     bounds, recall = bounds_table(co), recall_table(co)
     if bounds is not None:
-        out += ["", "Upper bounds on the true segments of the same held-out demonstrations (per-step accuracy; "
-                    "classifiers given the labels, 5-fold stratified cross-validation):", "", _md_table(bounds)]
+        out += [
+            "",
+            "Upper bounds on the true segments of the same held-out demonstrations (per-step accuracy; "
+            "classifiers given the labels, 5-fold stratified cross-validation):",
+            "",
+            _md_table(bounds),
+        ]
     if recall is not None:
         out += ["", "Recall of each primitive by the logistic regression (mean over seeds):", "", _md_table(recall)]
     return "\n".join(out)
@@ -285,13 +398,22 @@ def render_scene(summary: dict) -> str:
     sc = summary["results"]["scene"]
     seeds = sc.get("seeds") or summary.get("preset", {}).get("seeds", [])
     columns, rows = scene_table(sc)
-    return "\n".join([
-        f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
-        f"q = {sc['latent_dim']}, seeds {', '.join(map(str, seeds))}, {sc['epochs']} inference epochs in the "
-        "subspace; n: samples per seed; MSE of the steps after the first (joints scaled to [-1, 1] over the data "
-        "set), mean ± std over seeds" + ("; success: the share the simulator judges a success." if sc.get("judged")
-                                         else "."),
-        "", table(columns, [[str(c) for c in row] for row in rows])])
+    return "\n".join(
+        [
+            f"#### {summary['name']}",
+            "",
+            "```",
+            summary["command"].strip(),
+            "```",
+            "",
+            f"q = {sc['latent_dim']}, seeds {', '.join(map(str, seeds))}, {sc['epochs']} inference epochs in the "
+            "subspace; n: samples per seed; MSE of the steps after the first (joints scaled to [-1, 1] over the data "
+            "set), mean ± std over seeds"
+            + ("; success: the share the simulator judges a success." if sc.get("judged") else "."),
+            "",
+            table(columns, [[str(c) for c in row] for row in rows]),
+        ]
+    )
 
 
 def render_predict(summary: dict) -> str:
@@ -300,11 +422,21 @@ def render_predict(summary: dict) -> str:
     seeds = pr.get("seeds") or summary.get("preset", {}).get("seeds", [])  # summaries before 0.6.1: all of them
     columns, rows = predict_error_table(pr)
     cpu = summary.get("cpu", {})
-    return "\n".join([
-        f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", "",
-        f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
-        f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
-        "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
-        + ("; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."),
-        "", table(columns, [[str(c) for c in row] for row in rows])])
-
+    return "\n".join(
+        [
+            f"#### {summary['name']}",
+            "",
+            "```",
+            summary["command"].strip(),
+            "```",
+            "",
+            f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
+            f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
+            "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
+            + (
+                "; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."
+            ),
+            "",
+            table(columns, [[str(c) for c in row] for row in rows]),
+        ]
+    )

@@ -27,9 +27,19 @@ told otherwise.
 
 from primspace.segmentation.result import SEGMENT_R2_TARGET, SegmentationResult, label_segments
 from primspace.segmentation.scores import (
-    boundaries_from_segments, boundary_f1, segmentation_scores, step_labelling_accuracy)
+    boundaries_from_segments,
+    boundary_f1,
+    segmentation_scores,
+    step_labelling_accuracy,
+)
 from primspace.segmentation.windows import (
-    AUTO_PENALTY_FACTOR, DEFAULT_MIN_SIZE, auto_penalty, change_points, noise_variances, segment_sequences)
+    AUTO_PENALTY_FACTOR,
+    DEFAULT_MIN_SIZE,
+    auto_penalty,
+    change_points,
+    noise_variances,
+    segment_sequences,
+)
 
 #: The segmentation methods by name (``primspace segment --method``).
 METHODS = ("synthesis", "surprise", "windows")
@@ -38,7 +48,19 @@ METHODS = ("synthesis", "surprise", "windows")
 DEFAULT_METHOD = "synthesis"
 
 __all__ = [
-    "DEFAULT_METHOD", "METHODS", "AUTO_PENALTY_FACTOR", "DEFAULT_MIN_SIZE", "SEGMENT_R2_TARGET", "SegmentationResult", "auto_penalty",
-    "boundaries_from_segments", "boundary_f1", "change_points", "noise_variances", "segment_sequences",
-    "step_labelling_accuracy", "label_segments", "segmentation_scores",
+    "DEFAULT_METHOD",
+    "METHODS",
+    "AUTO_PENALTY_FACTOR",
+    "DEFAULT_MIN_SIZE",
+    "SEGMENT_R2_TARGET",
+    "SegmentationResult",
+    "auto_penalty",
+    "boundaries_from_segments",
+    "boundary_f1",
+    "change_points",
+    "noise_variances",
+    "segment_sequences",
+    "step_labelling_accuracy",
+    "label_segments",
+    "segmentation_scores",
 ]

@@ -41,9 +41,16 @@ from primspace.segmentation.result import label_segments
 from primspace.segmentation.scores import step_labelling_accuracy
 from primspace.segmentation.peers import LABEL_STEPS, resample_segment
 
-__all__ = ["FOLDS", "CODE_WINDOWS", "TrueSegments", "true_segments", "segment_features", "window_code_features",
-           "supervised_bound",
-           "clustered_bound"]
+__all__ = [
+    "FOLDS",
+    "CODE_WINDOWS",
+    "TrueSegments",
+    "true_segments",
+    "segment_features",
+    "window_code_features",
+    "supervised_bound",
+    "clustered_bound",
+]
 
 #: Folds of the cross-validation.
 FOLDS = 5
@@ -93,15 +100,16 @@ def segment_features(sequences, segments: TrueSegments, kind: str = "raw", n_ste
     return np.asarray(out)
 
 
-def window_code_features(code_sequences, segments: TrueSegments, window: int,
-                         n_windows: int | None = None) -> np.ndarray:
+def window_code_features(
+    code_sequences, segments: TrueSegments, window: int, n_windows: int | None = None
+) -> np.ndarray:
     """The window codes each segment touches (window ``k`` covers steps ``[kW, (k+1)W)``):
     their mean, ``(S, q)``, as primspace labels segments; or, with ``n_windows``, their
     sequence resampled to ``n_windows`` and flattened, ``(S, n_windows * q)`` (the code's
     trajectory through the segment, its order kept)."""
     out = []
     for i, a, b in zip(segments.sample, segments.start, segments.stop):
-        z = np.asarray(code_sequences[i], dtype=np.float64)[a // window: (b - 1) // window + 1]
+        z = np.asarray(code_sequences[i], dtype=np.float64)[a // window : (b - 1) // window + 1]
         out.append(z.mean(axis=0) if n_windows is None else resample_segment(z, n_windows).ravel())
     return np.asarray(out)
 
@@ -112,16 +120,19 @@ def _classifiers(random_state: int) -> dict:
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    return {"logistic": make_pipeline(StandardScaler(), LogisticRegression(max_iter=5000, random_state=random_state)),
-            "nearest": KNeighborsClassifier(n_neighbors=1)}
+    return {
+        "logistic": make_pipeline(StandardScaler(), LogisticRegression(max_iter=5000, random_state=random_state)),
+        "nearest": KNeighborsClassifier(n_neighbors=1),
+    }
 
 
 def _weighted(correct: np.ndarray, weight: np.ndarray, keep: np.ndarray) -> float | None:
     return float(np.sum(correct[keep] * weight[keep]) / np.sum(weight[keep])) if keep.any() else None
 
 
-def supervised_bound(features, segments: TrueSegments, n_primitives: int, *, folds: int = FOLDS,
-                     random_state: int = 0) -> dict | None:
+def supervised_bound(
+    features, segments: TrueSegments, n_primitives: int, *, folds: int = FOLDS, random_state: int = 0
+) -> dict | None:
     """Cross-validated accuracy of classifiers given the labels (module docstring).
 
     Returns
@@ -150,15 +161,19 @@ def supervised_bound(features, segments: TrueSegments, n_primitives: int, *, fol
         correct = (pred == y).astype(np.float64)
         confusion = confusion_matrix(y, pred, labels=np.arange(n_primitives))
         totals = confusion.sum(axis=1)
-        out[name] = {"accuracy": _weighted(correct, weight, np.ones(len(y), dtype=bool)),
-                     "first": _weighted(correct, weight, first), "later": _weighted(correct, weight, ~first),
-                     "recall": [float(confusion[j, j] / totals[j]) if totals[j] else None for j in range(n_primitives)],
-                     "confusion": confusion.tolist()}
+        out[name] = {
+            "accuracy": _weighted(correct, weight, np.ones(len(y), dtype=bool)),
+            "first": _weighted(correct, weight, first),
+            "later": _weighted(correct, weight, ~first),
+            "recall": [float(confusion[j, j] / totals[j]) if totals[j] else None for j in range(n_primitives)],
+            "confusion": confusion.tolist(),
+        }
     return out
 
 
-def clustered_bound(features, segments: TrueSegments, step_labels, n_primitives: int,
-                    random_state: int = 0) -> float | None:
+def clustered_bound(
+    features, segments: TrueSegments, step_labels, n_primitives: int, random_state: int = 0
+) -> float | None:
     """Per-step labelling accuracy when the true segments' ``features`` are clustered without
     labels (:func:`~primspace.segmentation.label_segments`); None if there is nothing to cluster."""
     labels, note = label_segments(np.asarray(features, dtype=np.float64), n_primitives, random_state=random_state)

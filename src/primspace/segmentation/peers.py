@@ -52,9 +52,23 @@ from primspace.errors import UserError
 from primspace.segmentation.result import label_segments
 from primspace.segmentation.windows import auto_penalty, noise_variances
 
-__all__ = ["ChangePointPeer", "HMMPeer", "MissingPackage", "PeerResult", "PEERS", "PEERS_VERSION", "RULES",
-           "LABEL_STEPS", "ELBOW_MAX",
-           "resample_segment", "label_by_clustering", "merge_short_runs", "elbow", "run_peers", "peer_sequences"]
+__all__ = [
+    "ChangePointPeer",
+    "HMMPeer",
+    "MissingPackage",
+    "PeerResult",
+    "PEERS",
+    "PEERS_VERSION",
+    "RULES",
+    "LABEL_STEPS",
+    "ELBOW_MAX",
+    "resample_segment",
+    "label_by_clustering",
+    "merge_short_runs",
+    "elbow",
+    "run_peers",
+    "peer_sequences",
+]
 
 #: Bumped when a peer's rule or setting changes (a stored result of another version is recomputed).
 PEERS_VERSION = 2  # 2: scored within the transition too (0.8)
@@ -119,7 +133,7 @@ def label_by_clustering(sequences, boundaries, n_primitives: int, random_state: 
     labels, note = label_segments(np.asarray(feats), n_primitives, random_state=random_state)
     out, k = [], 0
     for lengths in spans:
-        out.append(np.repeat(labels[k: k + len(lengths)], lengths).astype(np.int64))
+        out.append(np.repeat(labels[k : k + len(lengths)], lengths).astype(np.int64))
         k += len(lengths)
     return out, note
 
@@ -225,7 +239,7 @@ def merge_short_runs(states, min_duration: int) -> np.ndarray:
         if len(starts) < 2 or not len(short):
             return s
         j = short[np.argmin((stops - starts)[short])]
-        s[starts[j]: stops[j]] = s[starts[j] - 1] if j > 0 else s[stops[j]]
+        s[starts[j] : stops[j]] = s[starts[j] - 1] if j > 0 else s[stops[j]]
 
 
 @dataclass(frozen=True)
@@ -259,8 +273,12 @@ class HMMPeer:
         # small matrices: BLAS threads only contend (70x slower on a busy 2-core machine)
         with _quiet("hmmlearn"), threadpool_limits(1):
             for k in range(self.n_init):
-                model = GaussianHMM(n_components=int(n_primitives), covariance_type=self.covariance,
-                                    n_iter=self.n_iter, random_state=int(random_state) * 100 + k).fit(X, lengths)
+                model = GaussianHMM(
+                    n_components=int(n_primitives),
+                    covariance_type=self.covariance,
+                    n_iter=self.n_iter,
+                    random_state=int(random_state) * 100 + k,
+                ).fit(X, lengths)
                 score = model.score(X, lengths)
                 best = (score, model) if best is None or score > best[0] else best
             states = [merge_short_runs(best[1].predict(x), int(window)).astype(np.int64) for x in seqs]

@@ -137,8 +137,10 @@ def segmentation_scores(result: SegmentationResult, data, tolerance: int, transi
         scores["boundary_transition"] = boundary_f1(truth, result.boundaries, tolerance, extent=transition)
     return scores | {
         "boundary": boundary_f1(truth, result.boundaries, tolerance),
-        "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)), **more,
-        "tolerance": int(tolerance), "segments_true": int(sum(len(b) + 1 for b in truth)),
+        "accuracy": step_labelling_accuracy(data.step_labels, result.padded_step_labels(data.length)),
+        **more,
+        "tolerance": int(tolerance),
+        "segments_true": int(sum(len(b) + 1 for b in truth)),
     }
 
 

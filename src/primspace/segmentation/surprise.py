@@ -53,11 +53,28 @@ from primspace.data import MotionDataset, resample
 from primspace.errors import UserError
 from primspace.segmentation.result import SegmentationResult
 from primspace.segmentation.synthesis import (
-    DEFAULT_GRID, FADE, SynthesisSettings, by_offset, candidate_costs, demonstrations, labelled_segments, model_inputs,
-    with_codes)
+    DEFAULT_GRID,
+    FADE,
+    SynthesisSettings,
+    by_offset,
+    candidate_costs,
+    demonstrations,
+    labelled_segments,
+    model_inputs,
+    with_codes,
+)
 
-__all__ = ["HORIZON", "QUANTILE", "MARGIN", "Hypotheses", "hypotheses", "follow", "surprise_threshold",
-           "segment_by_surprise_templates", "segment_by_surprise"]
+__all__ = [
+    "HORIZON",
+    "QUANTILE",
+    "MARGIN",
+    "Hypotheses",
+    "hypotheses",
+    "follow",
+    "surprise_threshold",
+    "segment_by_surprise_templates",
+    "segment_by_surprise",
+]
 
 #: Steps ahead the model predicts; the surprise is the mean squared error over them.
 HORIZON = 3
@@ -89,8 +106,8 @@ def hypotheses(templates: np.ndarray, settings: SynthesisSettings) -> Hypotheses
     motion = np.empty((m * len(durations), longest, j))
     for a, d in enumerate(durations):
         block = resample(templates, int(d))
-        motion[a * m: (a + 1) * m, :d] = block
-        motion[a * m: (a + 1) * m, d:] = block[:, -1:]
+        motion[a * m : (a + 1) * m, :d] = block
+        motion[a * m : (a + 1) * m, d:] = block[:, -1:]
     return Hypotheses(motion, np.repeat(durations, m), np.tile(np.arange(m), len(durations)))
 
 
@@ -128,18 +145,21 @@ def follow(x: np.ndarray, hyp: Hypotheses, fade: float = FADE) -> np.ndarray:
 def _cut(surprise: np.ndarray, threshold: float, settings: SynthesisSettings, rest: int) -> int:
     """Steps of the segment whose surprise is ``surprise`` (module docstring, 3); ``rest``:
     the steps left in the demonstration from the segment's start."""
-    if rest <= settings.max_steps and not np.any(surprise[settings.min_steps: rest - settings.min_steps + 1] > threshold):
+    if rest <= settings.max_steps and not np.any(
+        surprise[settings.min_steps : rest - settings.min_steps + 1] > threshold
+    ):
         return rest
     last = min(settings.max_steps, rest - settings.min_steps)
-    span = surprise[settings.min_steps: last + 1]
+    span = surprise[settings.min_steps : last + 1]
     if len(span) == 0 or not np.isfinite(span).any():
         return min(rest, max(settings.min_steps, last))
     above = np.flatnonzero(span > threshold)
     return settings.min_steps + int(above[0] if len(above) else np.nanargmax(span))
 
 
-def surprise_threshold(templates: np.ndarray, settings: SynthesisSettings, quantile: float = QUANTILE,
-                       margin: float = MARGIN) -> float:
+def surprise_threshold(
+    templates: np.ndarray, settings: SynthesisSettings, quantile: float = QUANTILE, margin: float = MARGIN
+) -> float:
     """The threshold chosen without labels (module docstring, 4): each template, at
     durations spread over the bounds, followed by the other templates' hypotheses."""
     if len(templates) < 2:
@@ -151,14 +171,21 @@ def surprise_threshold(templates: np.ndarray, settings: SynthesisSettings, quant
         others = hyp.without(j)
         for d in durations:
             own = resample(templates[j], int(d))
-            inside.append(follow(own, others, settings.fade)[settings.min_steps: int(d) - HORIZON + 1])
+            inside.append(follow(own, others, settings.fade)[settings.min_steps : int(d) - HORIZON + 1])
     values = np.concatenate(inside)
     return float(margin * np.quantile(values[np.isfinite(values)], quantile))
 
 
-def segment_by_surprise_templates(sequences, lengths, templates: np.ndarray, codes: np.ndarray, n_primitives: int,
-                                  settings: SynthesisSettings, threshold: float | None = None,
-                                  random_state: int = 0) -> SegmentationResult:
+def segment_by_surprise_templates(
+    sequences,
+    lengths,
+    templates: np.ndarray,
+    codes: np.ndarray,
+    n_primitives: int,
+    settings: SynthesisSettings,
+    threshold: float | None = None,
+    random_state: int = 0,
+) -> SegmentationResult:
     """Segment scaled demonstrations ``(N, T, J)`` (valid ``lengths``) where the templates'
     prediction fails; label the segments by their nearest templates' codes. ``penalties``
     of the result holds each demonstration's mean cost per step (as synthesis's: how well
@@ -181,9 +208,19 @@ def segment_by_surprise_templates(sequences, lengths, templates: np.ndarray, cod
     return result
 
 
-def segment_by_surprise(run, data: MotionDataset, n_primitives: int, *, min_steps=None, max_steps=None,
-                        grid: int = DEFAULT_GRID, offset: str = "auto", threshold: float | None = None,
-                        infer_epochs: int = 0, random_state: int = 0) -> SegmentationResult:
+def segment_by_surprise(
+    run,
+    data: MotionDataset,
+    n_primitives: int,
+    *,
+    min_steps=None,
+    max_steps=None,
+    grid: int = DEFAULT_GRID,
+    offset: str = "auto",
+    threshold: float | None = None,
+    infer_epochs: int = 0,
+    random_state: int = 0,
+) -> SegmentationResult:
     """Segment the long demonstrations ``data`` where a single-primitive ``run``'s prediction
     fails (module docstring). ``offset`` as :func:`~primspace.segmentation.synthesis.segment_by_synthesis`
     (``auto``: the offset model whose segments are explained better), and ``infer_epochs``
@@ -192,7 +229,8 @@ def segment_by_surprise(run, data: MotionDataset, n_primitives: int, *, min_step
     sequences, lengths, templates, codes, settings = inputs
 
     def segment(fade: float) -> SegmentationResult:
-        return segment_by_surprise_templates(sequences, lengths, templates, codes, n_primitives,
-                                             replace(settings, fade=fade), threshold, random_state)
+        return segment_by_surprise_templates(
+            sequences, lengths, templates, codes, n_primitives, replace(settings, fade=fade), threshold, random_state
+        )
 
     return with_codes(run, inputs, by_offset(segment, offset), n_primitives, infer_epochs, random_state)

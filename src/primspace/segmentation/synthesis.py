@@ -50,8 +50,24 @@ from primspace.errors import UserError
 from primspace.segmentation.inferred import relabel_by_inference
 from primspace.segmentation.result import SegmentationResult, label_segments
 
-__all__ = ["FADE", "TRANSLATE", "OFFSETS", "by_offset", "with_codes", "DEFAULT_GRID", "SynthesisSettings", "run_templates", "candidate_segments", "candidate_costs",
-           "best_partition", "demonstrations", "labelled_segments", "segment_by_templates", "segment_by_synthesis", "model_inputs"]
+__all__ = [
+    "FADE",
+    "TRANSLATE",
+    "OFFSETS",
+    "by_offset",
+    "with_codes",
+    "DEFAULT_GRID",
+    "SynthesisSettings",
+    "run_templates",
+    "candidate_segments",
+    "candidate_costs",
+    "best_partition",
+    "demonstrations",
+    "labelled_segments",
+    "segment_by_templates",
+    "segment_by_synthesis",
+    "model_inputs",
+]
 
 #: Fraction of the model's steps over which a candidate's start offset is faded out.
 FADE = 0.35
@@ -74,8 +90,9 @@ class SynthesisSettings:
     fade: float = FADE
 
     @classmethod
-    def for_model(cls, model_steps: int, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID,
-                  fade: float = FADE) -> "SynthesisSettings":
+    def for_model(
+        cls, model_steps: int, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID, fade: float = FADE
+    ) -> "SynthesisSettings":
         """Defaults from the model's ``T1``: 0.4 T1 to 0.85 T1 steps per primitive."""
         lo = int(round(0.4 * model_steps)) if min_steps is None else int(min_steps)
         hi = int(round(0.85 * model_steps)) if max_steps is None else int(max_steps)
@@ -91,8 +108,10 @@ def run_templates(run) -> tuple[np.ndarray, np.ndarray]:
     from primspace.train import reconstruct
 
     if run.model_config.code_window is not None:
-        raise UserError("synthesis needs a model of single primitives (one code per demonstration); this run "
-                        "was trained with --code-window")
+        raise UserError(
+            "synthesis needs a model of single primitives (one code per demonstration); this run "
+            "was trained with --code-window"
+        )
     motor, _ = reconstruct(run, images=False)
     return run.scaler.transform(np.asarray(motor, dtype=np.float64)), np.asarray(run.latents, dtype=np.float64)
 
@@ -101,8 +120,11 @@ def candidate_segments(length: int, settings: SynthesisSettings) -> np.ndarray:
     """``(K, 2)`` candidates ``[s, e)`` of a demonstration of ``length`` steps (module docstring, 2)."""
     keys = []
     for s in range(0, length - settings.min_steps + 1, settings.grid):
-        ends = [s + d for d in range(settings.min_steps, settings.max_steps + 1, settings.grid)
-                if s + d <= length - settings.min_steps]
+        ends = [
+            s + d
+            for d in range(settings.min_steps, settings.max_steps + 1, settings.grid)
+            if s + d <= length - settings.min_steps
+        ]
         if settings.min_steps <= length - s <= settings.max_steps:
             ends.append(length)
         keys.extend((s, e) for e in ends)
@@ -131,11 +153,11 @@ def candidate_costs(x: np.ndarray, keys: np.ndarray, templates: np.ndarray, fade
     step = max(1, _BLOCK // max(1, m * templates[0].size))
     shaped = templates - ramp * templates[:, :1]  # y_t - c_t y_0
     for a in range(0, len(candidates), step):
-        c = candidates[a: a + step]
+        c = candidates[a : a + step]
         diff = (c - ramp * c[:, :1])[:, None] - shaped[None]  # (k, M, T1, J)
         err = np.mean(diff * diff, axis=(2, 3))
-        nearest[a: a + step] = err.argmin(axis=1)
-        cost[a: a + step] = err[np.arange(len(c)), nearest[a: a + step]]
+        nearest[a : a + step] = err.argmin(axis=1)
+        cost[a : a + step] = err[np.arange(len(c)), nearest[a : a + step]]
     return cost, nearest
 
 
@@ -166,12 +188,21 @@ def demonstrations(sequences, lengths, settings: SynthesisSettings):
     for i, length in enumerate(np.asarray(lengths, dtype=np.int64)):
         length = int(length)
         if length < settings.min_steps:
-            raise UserError(f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})")
+            raise UserError(
+                f"demonstration {i} has {length} steps, fewer than a segment's least ({settings.min_steps})"
+            )
         yield i, length, np.asarray(sequences[i][:length], dtype=np.float64)
 
 
-def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.ndarray, n_primitives: int,
-                         settings: SynthesisSettings, random_state: int = 0) -> SegmentationResult:
+def segment_by_templates(
+    sequences,
+    lengths,
+    templates: np.ndarray,
+    codes: np.ndarray,
+    n_primitives: int,
+    settings: SynthesisSettings,
+    random_state: int = 0,
+) -> SegmentationResult:
     """Segment scaled demonstrations ``sequences`` ``(N, T, J)`` (valid steps ``lengths``) by
     the ``templates`` and label the segments by clustering their templates' ``codes``."""
     segments, costs = [], []
@@ -188,8 +219,9 @@ def segment_by_templates(sequences, lengths, templates: np.ndarray, codes: np.nd
     return labelled_segments(segments, codes, n_primitives, np.asarray(costs), random_state)
 
 
-def labelled_segments(segments: list, codes: np.ndarray, n_primitives: int, penalties: np.ndarray,
-                      random_state: int = 0) -> SegmentationResult:
+def labelled_segments(
+    segments: list, codes: np.ndarray, n_primitives: int, penalties: np.ndarray, random_state: int = 0
+) -> SegmentationResult:
     """The result of a partition: ``segments`` holds per demonstration its ``(sample, start,
     stop, template)`` rows in time order; each segment's code is its template's row of
     ``codes``, and all are clustered by :func:`~primspace.segmentation.label_segments`
@@ -201,14 +233,30 @@ def labelled_segments(segments: list, codes: np.ndarray, n_primitives: int, pena
     return SegmentationResult(
         boundaries=[start[sample == i][1:] for i in range(len(segments))],
         step_labels=[np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(segments))],
-        segment_codes=seg_codes, segment_sample=sample, segment_start=start, segment_stop=stop,
-        segment_labels=labels, penalties=np.asarray(penalties), window=1, note=note, segment_templates=rows[:, 3],
+        segment_codes=seg_codes,
+        segment_sample=sample,
+        segment_start=start,
+        segment_stop=stop,
+        segment_labels=labels,
+        penalties=np.asarray(penalties),
+        window=1,
+        note=note,
+        segment_templates=rows[:, 3],
     )
 
 
-def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_steps=None, max_steps=None,
-                         grid: int = DEFAULT_GRID, offset: str = "auto", infer_epochs: int = 0,
-                         random_state: int = 0) -> SegmentationResult:
+def segment_by_synthesis(
+    run,
+    data: MotionDataset,
+    n_primitives: int,
+    *,
+    min_steps=None,
+    max_steps=None,
+    grid: int = DEFAULT_GRID,
+    offset: str = "auto",
+    infer_epochs: int = 0,
+    random_state: int = 0,
+) -> SegmentationResult:
     """Segment the long demonstrations ``data`` with a single-primitive ``run`` (module docstring).
 
     ``offset``: ``fade``, ``translate`` or ``auto`` (module docstring, 3; ``chosen["offset"]``
@@ -222,14 +270,16 @@ def segment_by_synthesis(run, data: MotionDataset, n_primitives: int, *, min_ste
     sequences, lengths, templates, codes, settings = inputs
 
     def segment(fade: float) -> SegmentationResult:
-        return segment_by_templates(sequences, lengths, templates, codes, n_primitives, replace(settings, fade=fade),
-                                    random_state)
+        return segment_by_templates(
+            sequences, lengths, templates, codes, n_primitives, replace(settings, fade=fade), random_state
+        )
 
     return with_codes(run, inputs, by_offset(segment, offset), n_primitives, infer_epochs, random_state)
 
 
-def with_codes(run, inputs: tuple, result: SegmentationResult, n_primitives: int, infer_epochs: int,
-               random_state: int = 0) -> SegmentationResult:
+def with_codes(
+    run, inputs: tuple, result: SegmentationResult, n_primitives: int, infer_epochs: int, random_state: int = 0
+) -> SegmentationResult:
     """``result`` as it is (segment codes: the nearest templates'), or with the codes
     inferred for ``infer_epochs > 0`` epochs and the segments labelled by them
     (``inputs``: :func:`model_inputs`'s, read once)."""
@@ -254,16 +304,19 @@ def by_offset(segment, offset: str) -> SegmentationResult:
     return chosen
 
 
-def model_inputs(run, data: MotionDataset, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID,
-                 fade: float = FADE):
+def model_inputs(
+    run, data: MotionDataset, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID, fade: float = FADE
+):
     """What a segmentation by a single-primitive ``run`` reads: the data's joints scaled as
     the run's ``(N, T, J)``, the valid lengths, the templates and codes of
     :func:`run_templates`, and the :class:`SynthesisSettings`. Refuses data whose joints
     are not the run's (names and order)."""
     names = run.config.get("data", {}).get("joint_names") if run.config else None
     if data.n_joints != run.model_config.n_joints or (names is not None and list(data.joint_names) != list(names)):
-        raise UserError(f"the data's joints {list(data.joint_names)} are not the run's "
-                        f"{names if names is not None else f'{run.model_config.n_joints} joints'}")
+        raise UserError(
+            f"the data's joints {list(data.joint_names)} are not the run's "
+            f"{names if names is not None else f'{run.model_config.n_joints} joints'}"
+        )
     templates, codes = run_templates(run)
     settings = SynthesisSettings.for_model(templates.shape[1], min_steps, max_steps, grid, fade)
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)

@@ -46,8 +46,14 @@ from primspace.errors import UserError
 from primspace.segmentation.result import SEGMENT_R2_TARGET, SegmentationResult, label_segments
 from primspace.segmentation.scores import valid_lengths
 
-__all__ = ["AUTO_PENALTY_FACTOR", "DEFAULT_MIN_SIZE", "auto_penalty", "change_points", "noise_variances",
-           "segment_sequences"]
+__all__ = [
+    "AUTO_PENALTY_FACTOR",
+    "DEFAULT_MIN_SIZE",
+    "auto_penalty",
+    "change_points",
+    "noise_variances",
+    "segment_sequences",
+]
 
 #: ``c`` of the automatic penalty (module docstring: why 2).
 AUTO_PENALTY_FACTOR = 2.0
@@ -173,8 +179,16 @@ def _sum_of_squares(S, Q, s, t) -> np.ndarray:
 
 
 def segment_sequences(
-    code_sequences, window: int, lengths, n_primitives: int, *, penalty="auto",
-    min_size: int = DEFAULT_MIN_SIZE, transitions: bool = True, r2_target=SEGMENT_R2_TARGET, random_state=0,
+    code_sequences,
+    window: int,
+    lengths,
+    n_primitives: int,
+    *,
+    penalty="auto",
+    min_size: int = DEFAULT_MIN_SIZE,
+    transitions: bool = True,
+    r2_target=SEGMENT_R2_TARGET,
+    random_state=0,
 ) -> SegmentationResult:
     """Split every sequence at its change points and label the segments by subspace clustering.
 
@@ -218,9 +232,16 @@ def segment_sequences(
     return SegmentationResult(
         boundaries=[t[1][1:] for t in table],
         step_labels=[np.repeat(labels[sample == i], (stop - start)[sample == i]) for i in range(len(valid))],
-        segment_codes=codes, segment_sample=sample, segment_start=start, segment_stop=stop,
-        segment_labels=labels, change_points=[p[0] for p in parts], transitions=[p[1] for p in parts],
-        penalties=penalties, window=window, note=note,
+        segment_codes=codes,
+        segment_sample=sample,
+        segment_start=start,
+        segment_stop=stop,
+        segment_labels=labels,
+        change_points=[p[0] for p in parts],
+        transitions=[p[1] for p in parts],
+        penalties=penalties,
+        window=window,
+        note=note,
     )
 
 

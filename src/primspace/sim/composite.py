@@ -28,13 +28,32 @@ import numpy as np
 
 from primspace.errors import DataError, UserError
 from primspace.sim.config import MIN_LENGTH, PARAM_NAMES
-from primspace.sim.primitives import PRIMITIVES, R_DOWN, SCRIPT, KeyPath, finger_geometry, get_primitive, primitive_index
+from primspace.sim.primitives import (
+    PRIMITIVES,
+    R_DOWN,
+    SCRIPT,
+    KeyPath,
+    finger_geometry,
+    get_primitive,
+    primitive_index,
+)
 from primspace.sim.primitives.judging import TOLERANCES, mm
 from primspace.sim.scene import FINGER_MAX, FINGERTIP_RADIUS, TABLE
 
 __all__ = [
-    "CompositeConfig", "COMPOSITE_PRESETS", "ALLOWED", "MOVES_TO", "resolve_composite", "valid_chains",
-    "SequencePlan", "draw_plan", "transition_path", "transition_steps", "simulate_sequence", "generate_chunk", "generate_composite",
+    "CompositeConfig",
+    "COMPOSITE_PRESETS",
+    "ALLOWED",
+    "MOVES_TO",
+    "resolve_composite",
+    "valid_chains",
+    "SequencePlan",
+    "draw_plan",
+    "transition_path",
+    "transition_steps",
+    "simulate_sequence",
+    "generate_chunk",
+    "generate_composite",
 ]
 
 #: Where push and pull leave the block: the zone it is in afterwards (others leave it in place).
@@ -119,25 +138,44 @@ class CompositeConfig:
         checks = [
             ("n_sequences", self.n_sequences >= 1, "at least 1"),
             ("min_primitives", 2 <= self.min_primitives <= self.max_primitives <= 4, "2 <= min <= max <= 4"),
-            ("duration", len(self.duration) == 2 and MIN_LENGTH <= self.duration[0] <= self.duration[1],
-             f"(lo, hi) with {MIN_LENGTH} <= lo <= hi"),
+            (
+                "duration",
+                len(self.duration) == 2 and MIN_LENGTH <= self.duration[0] <= self.duration[1],
+                f"(lo, hi) with {MIN_LENGTH} <= lo <= hi",
+            ),
             ("transition_steps", self.transition_steps >= 2, "at least 2"),
             ("primitives", len(set(self.primitives)) == len(self.primitives) >= 2, "at least 2 distinct names"),
-            ("image_size", self.image_size is None or (len(self.image_size) == 2 and 1 <= self.image_size[0] <= MAX_IMAGE_SIZE[0]
-                                                       and 1 <= self.image_size[1] <= MAX_IMAGE_SIZE[1]), "None or (H, W)"),
+            (
+                "image_size",
+                self.image_size is None
+                or (
+                    len(self.image_size) == 2
+                    and 1 <= self.image_size[0] <= MAX_IMAGE_SIZE[0]
+                    and 1 <= self.image_size[1] <= MAX_IMAGE_SIZE[1]
+                ),
+                "None or (H, W)",
+            ),
             ("dt", math.isfinite(self.dt) and self.dt > 0, "positive"),
             ("ik_tolerance", self.ik_tolerance > 0, "positive"),
         ]
-        for name, (lo, hi) in (("block_x", TABLE.block_x), ("block_y", TABLE.block_y), ("block_size", TABLE.block_size)):
+        for name, (lo, hi) in (
+            ("block_x", TABLE.block_x),
+            ("block_y", TABLE.block_y),
+            ("block_size", TABLE.block_size),
+        ):
             v = getattr(self, name)
-            checks.append((name, len(v) == 2 and lo - 1e-9 <= v[0] <= v[1] <= hi + 1e-9, f"(lo, hi) within [{lo}, {hi}]"))
+            checks.append(
+                (name, len(v) == 2 and lo - 1e-9 <= v[0] <= v[1] <= hi + 1e-9, f"(lo, hi) within [{lo}, {hi}]")
+            )
         for name, ok, want in checks:
             if not ok:
                 raise UserError(f"composite setting {name} = {getattr(self, name)!r}: must be {want}")
         for k in range(self.min_primitives, self.max_primitives + 1):
             if not valid_chains(self.primitives, k):
-                raise UserError(f"composite setting primitives = {list(self.primitives)}: no allowed chain of {k} "
-                                "(see ALLOWED: push and pull restrict what may follow)")
+                raise UserError(
+                    f"composite setting primitives = {list(self.primitives)}: no allowed chain of {k} "
+                    "(see ALLOWED: push and pull restrict what may follow)"
+                )
         return self
 
 
@@ -153,7 +191,9 @@ def resolve_composite(config_or_preset) -> CompositeConfig:
     """A validated :class:`CompositeConfig` from a config, a preset name or a dict of fields."""
     if isinstance(config_or_preset, str):
         if config_or_preset not in COMPOSITE_PRESETS:
-            raise UserError(f"unknown composite preset {config_or_preset!r}; choose from {', '.join(COMPOSITE_PRESETS)}")
+            raise UserError(
+                f"unknown composite preset {config_or_preset!r}; choose from {', '.join(COMPOSITE_PRESETS)}"
+            )
         config_or_preset = COMPOSITE_PRESETS[config_or_preset]
     elif isinstance(config_or_preset, dict):
         unknown = sorted(set(config_or_preset) - {f.name for f in fields(CompositeConfig)})
@@ -213,7 +253,9 @@ def draw_plan(config: CompositeConfig, seed: int, index: int) -> SequencePlan:
 # ------------------------------------------------------------------- simulation
 
 
-def transition_path(start, finger: float, size: float, first_key, n_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def transition_path(
+    start, finger: float, size: float, first_key, n_steps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The transition from where a primitive ended to where the next one's script starts.
 
     In [0, 0.5] the TCP lifts straight up from ``start`` to the safe height (fingertips
@@ -268,12 +310,20 @@ def _check(primitive, rollout, n_transition: int, config: CompositeConfig, what:
         return
     pen = float(rollout.penetration[:n_transition].max(initial=0.0))
     if pen > TOLERANCES.penetration:
-        raise DataError(f"the transition before {primitive.name} goes {mm(pen)} into the block ({what})", field="motor", index=index)
-    script = Rollout(**{f.name: getattr(rollout, f.name)[n_transition:] if f.name != "size" else rollout.size
-                        for f in fields(Rollout)})
+        raise DataError(
+            f"the transition before {primitive.name} goes {mm(pen)} into the block ({what})", field="motor", index=index
+        )
+    script = Rollout(
+        **{
+            f.name: getattr(rollout, f.name)[n_transition:] if f.name != "size" else rollout.size
+            for f in fields(Rollout)
+        }
+    )
     verdict = primitive.judge(script)
     if not verdict.success:
-        raise DataError(f"the generated motion fails the success judge: {verdict.reason} ({what})", field="motor", index=index)
+        raise DataError(
+            f"the generated motion fails the success judge: {verdict.reason} ({what})", field="motor", index=index
+        )
 
 
 def simulate_sequence(scene, config: CompositeConfig, plan: SequencePlan, index: int) -> dict:
@@ -301,17 +351,25 @@ def simulate_sequence(scene, config: CompositeConfig, plan: SequencePlan, index:
         tcp, fingers, n_tr = _piece(scene, primitive, block, size, duration, config.transition_steps, end)
         ik = solve_path(scene, tcp, R_DOWN, home)
         if not ik.max_position_error <= config.ik_tolerance:
-            raise DataError(f"inverse kinematics misses the scripted path of {name} (primitive {k + 1}) by "
-                            f"{ik.max_position_error * 1e3:.2f} mm (tolerance {config.ik_tolerance * 1e3:.2f} mm; {what})",
-                            field="motor", index=index)
+            raise DataError(
+                f"inverse kinematics misses the scripted path of {name} (primitive {k + 1}) by "
+                f"{ik.max_position_error * 1e3:.2f} mm (tolerance {config.ik_tolerance * 1e3:.2f} mm; {what})",
+                field="motor",
+                index=index,
+            )
         joints = np.column_stack([ik.q, fingers, fingers])
         rollout = replay(scene, joints, block, size, primitive.push_axis, primitive.push_sign)
         _check(primitive, rollout, n_tr, config, what, index)
         parts.append((joints, rollout.block, np.full(len(tcp), primitive.label), np.full(len(tcp), k)))
         block, end, err = rollout.block[-1, :2], (tcp[-1], fingers[-1]), max(err, ik.max_position_error)
     motor, blocks, labels, segments = (np.concatenate(a) for a in zip(*parts))
-    return {"motor": motor, "block": blocks, "step_labels": labels.astype(np.int32),
-            "step_segments": segments.astype(np.int32), "ik_error": err}
+    return {
+        "motor": motor,
+        "block": blocks,
+        "step_labels": labels.astype(np.int32),
+        "step_segments": segments.astype(np.int32),
+        "ik_error": err,
+    }
 
 
 def _render(scene, camera, motor: np.ndarray, blocks: np.ndarray, size: float, out: np.ndarray) -> None:
@@ -321,7 +379,7 @@ def _render(scene, camera, motor: np.ndarray, blocks: np.ndarray, size: float, o
         scene.set_joints(motor[t])
         scene.data.mocap_pos[scene.block_mocap] = blocks[t]
         camera.render(out=out[t])
-    out[len(motor):] = out[len(motor) - 1]
+    out[len(motor) :] = out[len(motor) - 1]
 
 
 # ------------------------------------------------------------------------ files
@@ -380,12 +438,24 @@ def _file_settings(config: CompositeConfig, seed: int) -> dict:
 
     preset = next((name for name, cfg in COMPOSITE_PRESETS.items() if cfg == config), None)
     source = "primspace.sim.composite " + json.dumps({"preset": preset, "seed": int(seed), "config": config.to_dict()})
-    return {"joint_names": list(JOINT_NAMES), "label_names": list(PRIMITIVES), "param_names": list(PARAM_NAMES),
-            "dt": config.dt, "source": source}
+    return {
+        "joint_names": list(JOINT_NAMES),
+        "label_names": list(PRIMITIVES),
+        "param_names": list(PARAM_NAMES),
+        "dt": config.dt,
+        "source": source,
+    }
 
 
-def generate_composite(config_or_preset="composite-demo", seed: int = 0, out: str | os.PathLike | None = None, *,
-                       overwrite: bool = False, progress: bool | None = None, workers: int | None = 1):
+def generate_composite(
+    config_or_preset="composite-demo",
+    seed: int = 0,
+    out: str | os.PathLike | None = None,
+    *,
+    overwrite: bool = False,
+    progress: bool | None = None,
+    workers: int | None = 1,
+):
     """Generate long demonstrations (see the module docstring).
 
     Parameters
@@ -427,14 +497,28 @@ def generate_composite(config_or_preset="composite-demo", seed: int = 0, out: st
     if out is not None:
         check_output(out, overwrite)
     items = [(config, seed, a, b) for a, b in shard_ranges(config.n_sequences)]
-    jobs = run_jobs(generate_chunk, items, workers=default_workers() if workers is None else max(1, int(workers)),
-                    description=f"generating {config.n_sequences} long demonstrations", progress=progress)
+    jobs = run_jobs(
+        generate_chunk,
+        items,
+        workers=default_workers() if workers is None else max(1, int(workers)),
+        description=f"generating {config.n_sequences} long demonstrations",
+        progress=progress,
+    )
     settings = _file_settings(config, seed)
     if out is not None:
         try:
-            with DatasetWriter(out, n_samples=config.n_sequences, length=config.length, image_size=config.image_size,
-                               with_labels=True, with_params=True, with_steps=True, overwrite=overwrite,
-                               writer="primspace generate", **settings) as writer:
+            with DatasetWriter(
+                out,
+                n_samples=config.n_sequences,
+                length=config.length,
+                image_size=config.image_size,
+                with_labels=True,
+                with_params=True,
+                with_steps=True,
+                overwrite=overwrite,
+                writer="primspace generate",
+                **settings,
+            ) as writer:
                 for chunk in finished_shards(jobs):
                     writer.write(chunk["start"], **arrays_of(chunk))
         except DataError as exc:
@@ -458,6 +542,6 @@ def transition_steps(data) -> int:
     if not source.startswith(prefix):
         return 0
     try:
-        return int(json.loads(source[len(prefix):])["config"]["transition_steps"])
+        return int(json.loads(source[len(prefix) :])["config"]["transition_steps"])
     except (ValueError, KeyError, TypeError):
         return 0

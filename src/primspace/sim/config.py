@@ -114,7 +114,11 @@ class GenerationConfig:
             raise UserError("primitives: at least one primitive is needed")
         if len(set(self.primitives)) != len(self.primitives):
             raise UserError(f"primitives: repeated names in {list(self.primitives)}")
-        for name, (lo, hi) in (("block_x", TABLE.block_x), ("block_y", TABLE.block_y), ("block_size", TABLE.block_size)):
+        for name, (lo, hi) in (
+            ("block_x", TABLE.block_x),
+            ("block_y", TABLE.block_y),
+            ("block_size", TABLE.block_size),
+        ):
             values = np.asarray(getattr(self, name), dtype=float)
             if values.size == 0:
                 raise UserError(f"{name}: at least one value is needed")
@@ -127,9 +131,7 @@ class GenerationConfig:
             if bad.size:
                 what = "block size" if name == "block_size" else "block position"
                 extra = f" (with jitter +-{reach:.4g})" if reach else ""
-                raise UserError(
-                    f"{name} = {bad[0]:.4g} m{extra} is outside the table's {what} range [{lo}, {hi}] m"
-                )
+                raise UserError(f"{name} = {bad[0]:.4g} m{extra} is outside the table's {what} range [{lo}, {hi}] m")
         if not (0.0 <= self.jitter <= 0.5):
             raise UserError(f"jitter = {self.jitter}: must be in [0, 0.5] (a fraction of the grid spacing)")
         if not (MIN_LENGTH <= self.length <= 100_000):
@@ -186,8 +188,11 @@ class GenerationConfig:
 
 
 _KIND_WORDS = {
-    "tuple[float, ...]": "a list of numbers", "tuple[str, ...]": "a list of primitive names",
-    "int": "an integer", "float": "a number", "bool": "true or false",
+    "tuple[float, ...]": "a list of numbers",
+    "tuple[str, ...]": "a list of primitive names",
+    "int": "an integer",
+    "float": "a number",
+    "bool": "true or false",
 }
 
 

@@ -107,14 +107,17 @@ def simulate_sample(scene, camera, config: GenerationConfig, label: int, x: floa
         raise DataError(
             f"inverse kinematics misses the scripted path by {err * 1e3:.2f} mm at step {ik.worst_step} "
             f"(tolerance {config.ik_tolerance * 1e3:.2f} mm; {what})",
-            field="motor", index=index,
+            field="motor",
+            index=index,
         )
     motor = np.column_stack([ik.q, script.fingers, script.fingers])
     rollout = replay(scene, motor, (x, y), size, primitive.push_axis, primitive.push_sign)
     if config.verify:
         verdict = primitive.judge(rollout)
         if not verdict.success:
-            raise DataError(f"the generated motion fails the success judge: {verdict.reason} ({what})", field="motor", index=index)
+            raise DataError(
+                f"the generated motion fails the success judge: {verdict.reason} ({what})", field="motor", index=index
+            )
     images = None
     if camera is not None:
         images = np.empty((config.length, config.height, config.width, 3), dtype=np.uint8)
@@ -190,7 +193,9 @@ def write_shard(config: GenerationConfig, seed: int, start: int, stop: int, path
 # ------------------------------------------------------------------------- files
 
 
-def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bool, on_shard, run_options: dict) -> None:
+def _generate_file(
+    config: GenerationConfig, seed: int, out: Path, overwrite: bool, on_shard, run_options: dict
+) -> None:
     """Generate into ``out``: shard files by the jobs, merged by this process as they finish.
 
     Shards already in the shard directory (same manifest) are merged, not generated. A
@@ -210,8 +215,9 @@ def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bo
     failures = []
     published = False
     try:
-        with DatasetWriter(out, overwrite=overwrite, writer="primspace generate",
-                           **file_settings(config, seed, config.n_samples)) as writer:
+        with DatasetWriter(
+            out, overwrite=overwrite, writer="primspace generate", **file_settings(config, seed, config.n_samples)
+        ) as writer:
 
             def merge(i: int, info: dict) -> None:
                 writer.copy_from(ranges[i][0], paths[i])
@@ -219,7 +225,16 @@ def _generate_file(config: GenerationConfig, seed: int, out: Path, overwrite: bo
                     on_shard(info)
 
             for i in (i for i, finished in enumerate(done) if finished):
-                merge(i, {"start": ranges[i][0], "stop": ranges[i][1], "path": str(paths[i]), "ik_error": None, "reused": True})
+                merge(
+                    i,
+                    {
+                        "start": ranges[i][0],
+                        "stop": ranges[i][1],
+                        "path": str(paths[i]),
+                        "ik_error": None,
+                        "reused": True,
+                    },
+                )
             if todo:
                 items = [(config, seed, *ranges[i], paths[i]) for i in todo]
                 with contextlib.closing(run_jobs(write_shard, items, **run_options)) as jobs:
@@ -307,8 +322,11 @@ def generate_dataset(
     if out is not None:
         check_output(out, overwrite)
     run_options = dict(
-        backend=backend, workers=default_workers() if workers is None else max(1, int(workers)), address=address,
-        description=f"generating {config.n_samples} motions", progress=progress,
+        backend=backend,
+        workers=default_workers() if workers is None else max(1, int(workers)),
+        address=address,
+        description=f"generating {config.n_samples} motions",
+        progress=progress,
     )
     if out is not None:
         _generate_file(config, seed, Path(out), overwrite, on_shard, run_options)
@@ -322,7 +340,9 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
     from primspace.data import MotionDataset
     from primspace.parallel import run_jobs
 
-    jobs = run_jobs(generate_shard, [(config, seed, range(a, b)) for a, b in shard_ranges(config.n_samples)], **run_options)
+    jobs = run_jobs(
+        generate_shard, [(config, seed, range(a, b)) for a, b in shard_ranges(config.n_samples)], **run_options
+    )
     n = config.n_samples
     arrays = _buffers(config, n)
     for shard in finished_shards(jobs):
@@ -334,8 +354,12 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
             on_shard(shard)
     meta = file_settings(config, seed, n)
     return MotionDataset(
-        **arrays, joint_names=meta["joint_names"], label_names=meta["label_names"],
-        param_names=meta["param_names"], dt=config.dt, source=meta["source"],
+        **arrays,
+        joint_names=meta["joint_names"],
+        label_names=meta["label_names"],
+        param_names=meta["param_names"],
+        dt=config.dt,
+        source=meta["source"],
     )
 
 

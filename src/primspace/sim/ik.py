@@ -164,7 +164,9 @@ def solve_path(
     pos_err, rot_err = np.empty(n), np.empty(n)
     q = np.asarray(home, dtype=float)
     for t in range(n):
-        q, pos_err[t], rot_err[t] = solver.solve(q, positions[t], np.ascontiguousarray(rotations[t]), tol, rot_tol, max_iter)
+        q, pos_err[t], rot_err[t] = solver.solve(
+            q, positions[t], np.ascontiguousarray(rotations[t]), tol, rot_tol, max_iter
+        )
         out[t] = q
     return IKResult(out, pos_err, rot_err)
 

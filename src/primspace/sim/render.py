@@ -85,7 +85,9 @@ class Camera:
         self.close()
 
 
-def replay_frames(joints, params, primitive, height: int = 48, width: int = 64, scene: Scene | None = None) -> np.ndarray:
+def replay_frames(
+    joints, params, primitive, height: int = 48, width: int = 64, scene: Scene | None = None
+) -> np.ndarray:
     """The camera's view of a joint trajectory replayed in the simulator, e.g. a
     generated motion: what :func:`primspace.sim.generate.simulate_sample` renders.
 

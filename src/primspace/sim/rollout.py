@@ -135,7 +135,9 @@ class Rollout:
         return np.maximum(0.0, -deepest)
 
 
-def replay(scene: Scene, joints: np.ndarray, block_xy, size: float, push_axis: int | None = None, push_sign: int = 1) -> Rollout:
+def replay(
+    scene: Scene, joints: np.ndarray, block_xy, size: float, push_axis: int | None = None, push_sign: int = 1
+) -> Rollout:
     """Run a joint trajectory through the scene's kinematics.
 
     Parameters
@@ -163,9 +165,13 @@ def replay(scene: Scene, joints: np.ndarray, block_xy, size: float, push_axis: i
     block = np.array([block_xy[0], block_xy[1], half], dtype=float)
     fingers = scene.left_finger_geoms + scene.right_finger_geoms
     out = {
-        "tcp": np.empty((t_len, 3)), "rotation": np.empty((t_len, 3, 3)), "block": np.empty((t_len, 3)),
-        "finger_distance": np.empty((t_len, 2)), "finger_side": np.empty((t_len, 2)),
-        "arm_distance": np.empty(t_len), "table_distance": np.empty(t_len),
+        "tcp": np.empty((t_len, 3)),
+        "rotation": np.empty((t_len, 3, 3)),
+        "block": np.empty((t_len, 3)),
+        "finger_distance": np.empty((t_len, 2)),
+        "finger_side": np.empty((t_len, 2)),
+        "arm_distance": np.empty(t_len),
+        "table_distance": np.empty(t_len),
     }
     behind = False  # was the pusher at or behind the block's trailing face at the last step?
     for t in range(t_len):
@@ -196,8 +202,12 @@ def _record(scene: Scene, out: dict, t: int, block: np.ndarray) -> None:
     out["rotation"][t] = d.site_xmat[scene.tcp].reshape(3, 3)
     out["block"][t] = block
     bg, tg = scene.block_geom, scene.table_geom
-    out["finger_distance"][t, 0] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.left_finger_geoms)
-    out["finger_distance"][t, 1] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.right_finger_geoms)
+    out["finger_distance"][t, 0] = min(
+        mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.left_finger_geoms
+    )
+    out["finger_distance"][t, 1] = min(
+        mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.right_finger_geoms
+    )
     out["finger_side"][t] = [d.geom_xpos[g, 1] - block[1] for g in tip_geoms]
     out["arm_distance"][t] = min(mujoco.mj_geomDistance(m, d, g, bg, DIST_MAX, None) for g in scene.hand_geoms)
     out["table_distance"][t] = min(

@@ -161,7 +161,11 @@ def _collision_meshes(asset_root: ET.Element, assets: Path) -> tuple[ET.Element,
             continue  # the heavy visual meshes are never loaded
         name = "franka_" + rel.replace("/", "_")
         files[name] = (assets / "meshes" / rel).read_bytes()
-        meshes.append(ET.Element("mesh", name=mesh.get("name"), file=name, **({"scale": mesh.get("scale")} if mesh.get("scale") else {})))
+        meshes.append(
+            ET.Element(
+                "mesh", name=mesh.get("name"), file=name, **({"scale": mesh.get("scale")} if mesh.get("scale") else {})
+            )
+        )
     return meshes, files
 
 
@@ -183,8 +187,13 @@ def _robot_body(chain_root: ET.Element) -> ET.Element:
                 geom.set("mass", "0")
         if body.get("name") == "panda0_link7":
             ET.SubElement(
-                body, "site", name="tcp", pos=" ".join(map(str, TCP_POS)),
-                quat=" ".join(map(str, TCP_QUAT)), size="0.005", group="4",
+                body,
+                "site",
+                name="tcp",
+                pos=" ".join(map(str, TCP_POS)),
+                quat=" ".join(map(str, TCP_QUAT)),
+                size="0.005",
+                group="4",
             )
     return robot
 
@@ -212,17 +221,33 @@ def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]
     root.append(meshes)
     world = ET.SubElement(root, "worldbody")
     ET.SubElement(
-        world, "light", name="key", directional="true", castshadow="false",
-        pos="0.5 -0.5 2", dir="-0.2 0.3 -1", diffuse="0.55 0.55 0.55", specular="0.1 0.1 0.1",
+        world,
+        "light",
+        name="key",
+        directional="true",
+        castshadow="false",
+        pos="0.5 -0.5 2",
+        dir="-0.2 0.3 -1",
+        diffuse="0.55 0.55 0.55",
+        specular="0.1 0.1 0.1",
     )
     ET.SubElement(world, "geom", name="floor", type="plane", size="3 3 0.1", pos="0 0 -0.75", rgba=_FLOOR_RGBA)
     ET.SubElement(
-        world, "geom", name="table", type="box",
-        size=f"{(tx1 - tx0) / 2} {(ty1 - ty0) / 2} 0.02", pos=f"{(tx0 + tx1) / 2} {(ty0 + ty1) / 2} -0.02",
+        world,
+        "geom",
+        name="table",
+        type="box",
+        size=f"{(tx1 - tx0) / 2} {(ty1 - ty0) / 2} 0.02",
+        pos=f"{(tx0 + tx1) / 2} {(ty0 + ty1) / 2} -0.02",
         rgba=_TABLE_RGBA,
     )
     ET.SubElement(
-        world, "camera", name="front", pos=" ".join(map(str, camera.pos)), quat=cam_quat, fovy=str(camera.fovy),
+        world,
+        "camera",
+        name="front",
+        pos=" ".join(map(str, camera.pos)),
+        quat=cam_quat,
+        fovy=str(camera.fovy),
     )
     block = ET.SubElement(world, "body", name="block", mocap="true", pos="0.5 0 0.025")
     ET.SubElement(block, "geom", name="block", type="box", size="0.025 0.025 0.025", rgba=_BLOCK_RGBA)

@@ -64,9 +64,13 @@ def shard_manifest(config: GenerationConfig, seed: int) -> dict[str, Any]:
     from primspace.data.schema import SCHEMA_VERSION
 
     manifest = {
-        "format": "primspace generation shards", "primspace_version": __version__,
-        "schema_version": SCHEMA_VERSION, "seed": int(seed), "config": config.to_dict(),
-        "n_samples": config.n_samples, "shard_size": shard_size(config.n_samples),
+        "format": "primspace generation shards",
+        "primspace_version": __version__,
+        "schema_version": SCHEMA_VERSION,
+        "seed": int(seed),
+        "config": config.to_dict(),
+        "n_samples": config.n_samples,
+        "shard_size": shard_size(config.n_samples),
     }
     return json.loads(json.dumps(manifest))  # as it reads back from the file
 
@@ -131,9 +135,14 @@ def _source(config: GenerationConfig, seed: int) -> str:
 def file_settings(config: GenerationConfig, seed: int, n_samples: int) -> dict[str, Any]:
     """:class:`~primspace.data.DatasetWriter` settings of a generated file of ``n_samples``."""
     return {
-        "n_samples": n_samples, "length": config.length, "joint_names": _joint_names(),
-        "image_size": config.image_size, "label_names": list(PRIMITIVES), "param_names": list(PARAM_NAMES),
-        "dt": config.dt, "source": _source(config, seed),
+        "n_samples": n_samples,
+        "length": config.length,
+        "joint_names": _joint_names(),
+        "image_size": config.image_size,
+        "label_names": list(PRIMITIVES),
+        "param_names": list(PARAM_NAMES),
+        "dt": config.dt,
+        "source": _source(config, seed),
     }
 
 

@@ -129,12 +129,16 @@ def _replay(primitive, joints, params) -> tuple[Primitive, Rollout]:
     prim = get_primitive(primitive)
     joints = np.asarray(joints, dtype=float)
     if joints.ndim != 2 or joints.shape[1] != len(JOINT_NAMES) or len(joints) < 2:
-        raise DataError(f"joints must have shape (T, {len(JOINT_NAMES)}) with T >= 2, got {joints.shape}", field="motor")
+        raise DataError(
+            f"joints must have shape (T, {len(JOINT_NAMES)}) with T >= 2, got {joints.shape}", field="motor"
+        )
     if not np.isfinite(joints).all():
         raise DataError("joints contain NaN or inf", field="motor")
     params = np.asarray(params, dtype=float).reshape(-1)
     if params.shape != (3,) or not np.isfinite(params).all() or params[2] <= 0:
-        raise DataError(f"params must be finite (block_x, block_y, block_size > 0), got {params.tolist()}", field="params")
+        raise DataError(
+            f"params must be finite (block_x, block_y, block_size > 0), got {params.tolist()}", field="params"
+        )
     x, y, size = params
     return prim, replay(_scene(), joints, (x, y), size, prim.push_axis, prim.push_sign)
 
@@ -182,8 +186,9 @@ def _check_separations(separations: Sequence[float], tol: Tolerances) -> list[fl
     return seps
 
 
-def judge_rollout_sweep(name, r: Rollout, separations: Sequence[float] = SEPARATION_SWEEP,
-                        tol: Tolerances = TOLERANCES) -> dict[float, SuccessResult]:
+def judge_rollout_sweep(
+    name, r: Rollout, separations: Sequence[float] = SEPARATION_SWEEP, tol: Tolerances = TOLERANCES
+) -> dict[float, SuccessResult]:
     """Judge one replayed trajectory at every ``held`` distance of ``separations``.
 
     Only primitives that check :data:`SWEPT_CRITERION` (push, pull) are judged again, with
@@ -238,8 +243,13 @@ def evaluate_batch(primitives: Sequence, joints, params, tolerances: Tolerances 
     return [prim.judge(r, tolerances) for prim, r in _rollouts(primitives, joints, params)]
 
 
-def evaluate_batch_sweep(primitives: Sequence, joints, params, separations: Sequence[float] = SEPARATION_SWEEP,
-                         tolerances: Tolerances = TOLERANCES) -> dict[float, list[SuccessResult]]:
+def evaluate_batch_sweep(
+    primitives: Sequence,
+    joints,
+    params,
+    separations: Sequence[float] = SEPARATION_SWEEP,
+    tolerances: Tolerances = TOLERANCES,
+) -> dict[float, list[SuccessResult]]:
     """Judge many trajectories at every ``held`` distance of ``separations``, replaying each once.
 
     Arguments as :func:`evaluate_batch`; ``separations`` as :func:`judge_rollout_sweep`.
@@ -263,11 +273,14 @@ def check_judgeable(dataset) -> None:
     labels named as :data:`PRIMITIVES`, params ``block_x, block_y, block_size`` and the
     Panda's 9 joints. Cheap: experiments call it before any training."""
     if dataset.labels is None or dataset.params is None:
-        raise DataError("judging needs labels and params (block_x, block_y, block_size)", path=dataset.path, field="labels")
+        raise DataError(
+            "judging needs labels and params (block_x, block_y, block_size)", path=dataset.path, field="labels"
+        )
     if list(dataset.label_names) != list(PRIMITIVES):
         raise DataError(
             f"label names {dataset.label_names} are not the simulator's primitives {list(PRIMITIVES)}",
-            path=dataset.path, field="label_names",
+            path=dataset.path,
+            field="label_names",
         )
     if list(dataset.joint_names) != list(JOINT_NAMES):
         raise DataError("joint names are not the simulator's Panda joints", path=dataset.path, field="joint_names")
@@ -303,8 +316,9 @@ def evaluate_dataset(dataset, motor=None, tolerances: Tolerances = TOLERANCES) -
         raise exc.located(path=dataset.path) from None
 
 
-def evaluate_dataset_sweep(dataset, motor=None, separations: Sequence[float] = SEPARATION_SWEEP,
-                           tolerances: Tolerances = TOLERANCES) -> dict[float, list[SuccessResult]]:
+def evaluate_dataset_sweep(
+    dataset, motor=None, separations: Sequence[float] = SEPARATION_SWEEP, tolerances: Tolerances = TOLERANCES
+) -> dict[float, list[SuccessResult]]:
     """Judge a data set's motions (or other joints for its samples) at every ``held`` distance.
 
     As :func:`evaluate_dataset`, with each motion replayed once and judged at every

@@ -178,9 +178,21 @@ def fit(
         codes = initial_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
         table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
     session = Session(
-        store=store, config=config, model=model, theta_opt=theta_opt, table=table, scaler=scaler,
-        initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"], calibrate=_calibrator(initializer, scaled, mc.latent_dim), log_to=log_to,
+        store=store,
+        config=config,
+        model=model,
+        theta_opt=theta_opt,
+        table=table,
+        scaler=scaler,
+        initializer=initializer,
+        data=data,
+        use_images=use_images,
+        tc=tc,
+        device=device,
+        shuffle_seed=seeds["shuffle"],
+        frames_seed=seeds["frames"],
+        calibrate=_calibrator(initializer, scaled, mc.latent_dim),
+        log_to=log_to,
     )
     with thread_limit(tc.threads):  # torch's and BLAS's threads, put back after (no process-wide change)
         session.run(ckpt, progress, label="fit")
@@ -200,7 +212,8 @@ def infer(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool | None = None,
-    observe=None, observe_frames=None,
+    observe=None,
+    observe_frames=None,
     fitted_data: MotionDataset | None = None,
     log_to: tuple | None = None,
     **overrides: Any,
@@ -282,14 +295,28 @@ def infer(
         table = LatentTable.from_state_dict(parts.latents, device)
     else:
         scaled = parent.scaler.transform(data.motor)
-        initializer, codes = inference_start(parent, init, data, scaled, observation, fitted_data, tc.seed,
-                                             initial_latents)
+        initializer, codes = inference_start(
+            parent, init, data, scaled, observation, fitted_data, tc.seed, initial_latents
+        )
         table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
     model.to(device).requires_grad_(False)
     session = Session(
-        store=store, config=config, model=model, theta_opt=None, table=table, scaler=parent.scaler,
-        initializer=initializer, data=data, use_images=use_images, tc=tc, device=device, shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"], calibration=parent.calibration, observation=observation, log_to=log_to,
+        store=store,
+        config=config,
+        model=model,
+        theta_opt=None,
+        table=table,
+        scaler=parent.scaler,
+        initializer=initializer,
+        data=data,
+        use_images=use_images,
+        tc=tc,
+        device=device,
+        shuffle_seed=seeds["shuffle"],
+        frames_seed=seeds["frames"],
+        calibration=parent.calibration,
+        observation=observation,
+        log_to=log_to,
     )
     with thread_limit(tc.threads):
         session.run(ckpt, progress, label="infer")

@@ -12,8 +12,16 @@ from primspace.latent import CALIBRATABLE, CALIBRATED, START_METHODS
 from primspace.model import ModelConfig
 from primspace.train.run import TrainedRun
 
-__all__ = ["check_init", "check_calibrated", "check_scaler", "fit_model_config", "check_initial_latents", "select",
-           "check_data_fits", "run_name"]
+__all__ = [
+    "check_init",
+    "check_calibrated",
+    "check_scaler",
+    "fit_model_config",
+    "check_initial_latents",
+    "select",
+    "check_data_fits",
+    "run_name",
+]
 
 
 def check_init(init: str, starts: tuple[str, ...] = START_METHODS) -> None:
@@ -28,16 +36,22 @@ def check_calibrated(init: str, parent: TrainedRun | None) -> None:
     if init != CALIBRATED:
         return
     if parent is None:
-        raise UserError("init 'calibrated' starts from a trained run's calibration map: use it to infer codes "
-                        "with a run fitted with projection or pca init (or with weights_from such a run)")
+        raise UserError(
+            "init 'calibrated' starts from a trained run's calibration map: use it to infer codes "
+            "with a run fitted with projection or pca init (or with weights_from such a run)"
+        )
     if parent.calibration is not None:
         return
     method = parent.initializer.method
     if method in CALIBRATABLE and parent.kind == "fit":
-        raise UserError(f"{run_name(parent)}: has no calibration map (fitted by primspace < 0.5); "
-                        "resume its fit once (same epochs) to add it")
-    raise UserError(f"{run_name(parent)}: init 'calibrated' needs a run fitted with projection or pca init; "
-                    f"this run's codes start from '{method}'")
+        raise UserError(
+            f"{run_name(parent)}: has no calibration map (fitted by primspace < 0.5); "
+            "resume its fit once (same epochs) to add it"
+        )
+    raise UserError(
+        f"{run_name(parent)}: init 'calibrated' needs a run fitted with projection or pca init; "
+        f"this run's codes start from '{method}'"
+    )
 
 
 def check_scaler(scaler, parent: TrainedRun | None, data: MotionDataset) -> None:
@@ -107,5 +121,7 @@ def check_something_to_train(tc, use_images: bool) -> None:
     """Refuse a run whose loss is identically 0: no motor weight and no vision trained
     (``motor_weight=0`` on data without images, or with images turned off)."""
     if tc.motor_weight == 0 and not use_images:
-        raise UserError("motor_weight is 0 and no vision loss is trained (no images, images off, or vision_weight 0): "
-                        "the loss would be 0 at every step; give motor_weight > 0 or train with images")
+        raise UserError(
+            "motor_weight is 0 and no vision loss is trained (no images, images off, or vision_weight 0): "
+            "the loss would be 0 at every step; give motor_weight > 0 or train with images"
+        )

@@ -16,8 +16,15 @@ from typing import Iterator
 
 from primspace.errors import UserError, config_from_dict
 
-__all__ = ["TrainConfig", "TrainingDivergedError", "LOSS_REDUCTIONS", "lr_factor", "resolve_device", "configure_process",
-           "thread_limit"]
+__all__ = [
+    "TrainConfig",
+    "TrainingDivergedError",
+    "LOSS_REDUCTIONS",
+    "lr_factor",
+    "resolve_device",
+    "configure_process",
+    "thread_limit",
+]
 
 #: :attr:`TrainConfig.loss_reduction`'s values: primspace's per-element means, the paper's sums.
 LOSS_REDUCTIONS = ("mean", "sum")
@@ -177,12 +184,16 @@ class TrainConfig:
         if not (self.code_smoothness >= 0 and math.isfinite(self.code_smoothness)):
             raise UserError(f"code_smoothness must be a finite number >= 0, got {self.code_smoothness}")
         if self.vision_frames is not None and (not isinstance(self.vision_frames, int) or self.vision_frames < 1):
-            raise UserError(f"vision_frames must be a whole number >= 1 (or None: every frame), got {self.vision_frames}")
+            raise UserError(
+                f"vision_frames must be a whole number >= 1 (or None: every frame), got {self.vision_frames}"
+            )
         if self.loss_reduction not in LOSS_REDUCTIONS:
             raise UserError(f"loss_reduction must be 'mean' or 'sum', got {self.loss_reduction!r}")
         if self.motor_weight == 0 and self.vision_weight == 0:
             raise UserError("motor_weight and vision_weight are both 0: nothing to train")
-        if self.checkpoint_every is not None and (not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1):
+        if self.checkpoint_every is not None and (
+            not isinstance(self.checkpoint_every, int) or self.checkpoint_every < 1
+        ):
             raise UserError(f"checkpoint_every must be at least 1, got {self.checkpoint_every}")
         if not (isinstance(self.checkpoint_seconds, (int, float)) and self.checkpoint_seconds >= 0):
             raise UserError(f"checkpoint_seconds must be a number >= 0, got {self.checkpoint_seconds}")

@@ -43,8 +43,17 @@ from primspace.data.images import IMAGE_BLOCK, as_view
 from primspace.errors import UserError
 from primspace.train.observe import Observation, observation_masks
 
-__all__ = ["FRAMES_PROJECTION_KEY", "PROJECTION_BYTES", "FramesStart", "frame_matrix", "frames_projection",
-           "mean_frame", "frames_start", "frames_start_codes", "check_frames_start"]
+__all__ = [
+    "FRAMES_PROJECTION_KEY",
+    "PROJECTION_BYTES",
+    "FramesStart",
+    "frame_matrix",
+    "frames_projection",
+    "mean_frame",
+    "frames_start",
+    "frames_start_codes",
+    "check_frames_start",
+]
 
 #: Mixed with the run's seed (and the step) to draw ``P_t``: keeps these draws apart from the run's others.
 FRAMES_PROJECTION_KEY = 25
@@ -58,8 +67,9 @@ def frame_matrix(seed: int, step: int, dim: int, size: int) -> np.ndarray:
     return rng.standard_normal((dim, size), dtype=np.float32) / np.float32(np.sqrt(dim))
 
 
-def frames_projection(images, observed, mean: np.ndarray, dim: int, seed: int, *,
-                      budget: int = PROJECTION_BYTES) -> np.ndarray:
+def frames_projection(
+    images, observed, mean: np.ndarray, dim: int, seed: int, *, budget: int = PROJECTION_BYTES
+) -> np.ndarray:
     """``x_i = Σ_t M_it P_t (s_it − s̄)`` for every sample: float64 ``(n, dim)``.
 
     Parameters
@@ -138,8 +148,10 @@ class FramesStart:
 def check_frames_start(parent, data: MotionDataset | None, what: str) -> None:
     """One line: a run without an image head, or ``data`` without frames (None: not checked)."""
     if not parent.model_config.has_images:
-        raise UserError("init 'calibrated' from frames alone (observe='none') needs a run with an image head; "
-                        "this run was fitted on joints only")
+        raise UserError(
+            "init 'calibrated' from frames alone (observe='none') needs a run with an image head; "
+            "this run was fitted on joints only"
+        )
     if data is not None and not data.has_images:
         where = str(data.path) if data.path is not None else what
         raise UserError(f"init 'calibrated' from frames alone (observe='none') reads frames, and {where} has no frames")
@@ -158,8 +170,9 @@ def frames_start(parent, observation, images, lengths: np.ndarray) -> FramesStar
     if not parent.model_config.has_images:
         check_frames_start(parent, None, "the fitted data")
     if images is None:
-        raise UserError("init 'calibrated' from frames alone (observe='none') reads frames, and the fitted data "
-                        "has no frames")
+        raise UserError(
+            "init 'calibrated' from frames alone (observe='none') reads frames, and the fitted data has no frames"
+        )
     dim = int(parent.model_config.code_size)
     seed = int(parent.train_config.seed)
     length = images.shape[1]
@@ -173,6 +186,7 @@ def frames_start_codes(start: FramesStart, data: MotionDataset, observation) -> 
     """Starting codes (float64, (n, K·q)) of ``data`` from its observed frames alone
     (module docstring), by the run's :class:`FramesStart` ``start``."""
     if tuple(data.images.shape[2:]) != tuple(start.mean.shape):
-        raise UserError(f"frames of size {tuple(data.images.shape[2:4])} differ from the run's "
-                        f"{tuple(start.mean.shape[:2])}")
+        raise UserError(
+            f"frames of size {tuple(data.images.shape[2:4])} differ from the run's {tuple(start.mean.shape[:2])}"
+        )
     return start.transform(data.images, observation_masks(observation, data)[1])

@@ -140,8 +140,14 @@ def _summary_writer(option: str = "log_to"):
 def _wait_for_a_new_second(folder: Path) -> None:
     """Return in a second later than the newest event file's in ``folder`` (its name starts
     with the second it was created in); a newer one (another clock) is not waited for."""
-    newest = max((int(part) for part in (p.name[len(_EVENTS_PREFIX):].split(".", 1)[0]
-                                         for p in folder.glob(_EVENTS_PREFIX + "*")) if part.isdigit()), default=-1)
+    newest = max(
+        (
+            int(part)
+            for part in (p.name[len(_EVENTS_PREFIX) :].split(".", 1)[0] for p in folder.glob(_EVENTS_PREFIX + "*"))
+            if part.isdigit()
+        ),
+        default=-1,
+    )
     now = time.time()
     if int(now) == newest:
         time.sleep(newest + 1 - now + 0.01)

@@ -34,8 +34,19 @@ from primspace.train.observe import observation_masks
 from primspace.train.rundir import RunDirectory, checkpoint_state, restore_rng, unpack_checkpoint
 from primspace.train.streaming import FrameStream, should_stream
 
-__all__ = ["DataTensors", "Session", "batch_loss", "code_step", "batch_frames", "evaluate_loop", "epoch_values", "local_parts",
-           "frame_batches", "open_stream", "opened_stream"]
+__all__ = [
+    "DataTensors",
+    "Session",
+    "batch_loss",
+    "code_step",
+    "batch_frames",
+    "evaluate_loop",
+    "epoch_values",
+    "local_parts",
+    "frame_batches",
+    "open_stream",
+    "opened_stream",
+]
 
 
 @dataclass
@@ -56,8 +67,9 @@ class DataTensors:
     streamed: bool = False  # the frames are trained on but not held: each batch brings its own
 
     @classmethod
-    def build(cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device,
-              observation=None, stream: bool = False) -> "DataTensors":
+    def build(
+        cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device, observation=None, stream: bool = False
+    ) -> "DataTensors":
         """The tensors of ``data``; ``observation`` (:class:`~primspace.train.observe.Observation`)
         sets the observed masks (a modality observed at every valid step keeps ``mask``);
         ``stream``: the frames are left in the file (:mod:`primspace.train.streaming`)."""
@@ -72,8 +84,10 @@ class DataTensors:
         tensors = cls(motor, images, mask, streamed=use_images and stream)
         if observation is not None:
             valid = observation_masks(None, data)[0]
-            motor_mask, frame_mask = (None if np.array_equal(m, valid) else torch.from_numpy(m.astype(np.float32)).to(device)
-                                      for m in observation_masks(observation, data))
+            motor_mask, frame_mask = (
+                None if np.array_equal(m, valid) else torch.from_numpy(m.astype(np.float32)).to(device)
+                for m in observation_masks(observation, data)
+            )
             tensors.motor_mask, tensors.frame_mask = motor_mask, frame_mask
         return tensors
 
@@ -104,8 +118,9 @@ def _mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) ->
     return ((per_step * mask).sum(dim=1) / mask.sum(dim=1).clamp_min(1.0)).mean()
 
 
-def _sse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None,
-         scale: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+def _sse(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None, scale: float = 1.0
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The paper's summed squared error (*Main Results*, ``Σ_i ‖d(θ, z_i) − o_i‖²``) and,
     detached, the per-element mean squared error that :func:`_mse` computes.
 
@@ -137,7 +152,13 @@ def batch_frames(images: torch.Tensor, idx: torch.Tensor, steps: torch.Tensor | 
 
 
 def batch_loss(
-    model, z, idx, tensors: DataTensors, tc: TrainConfig, autocast, steps: torch.Tensor | None = None,
+    model,
+    z,
+    idx,
+    tensors: DataTensors,
+    tc: TrainConfig,
+    autocast,
+    steps: torch.Tensor | None = None,
     frames: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The loss of one batch and the detached ``[loss, motor, vision]`` means.
@@ -181,8 +202,9 @@ def batch_loss(
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
 
 
-def code_step(model, table: LatentTable, idx: torch.Tensor, tensors: DataTensors, tc: TrainConfig, autocast,
-              to_code=None) -> torch.Tensor:
+def code_step(
+    model, table: LatentTable, idx: torch.Tensor, tensors: DataTensors, tc: TrainConfig, autocast, to_code=None
+) -> torch.Tensor:
     """One Adam step of the rows ``idx`` of ``table`` with θ frozen, each row on the gradient of
     its own sample's loss (:func:`batch_loss` of the batch ``idx``; its mean over the batch
     scaled each row's gradient by 1/B, undone here). ``to_code``: maps the table's rows to
@@ -213,8 +235,15 @@ def autocast_for(tc: TrainConfig, device: torch.device):
     return contextlib.nullcontext()
 
 
-def evaluate_loop(model, table: LatentTable, tensors: DataTensors, tc: TrainConfig, device,
-                  world: World | None = None, stream: FrameStream | None = None) -> torch.Tensor:
+def evaluate_loop(
+    model,
+    table: LatentTable,
+    tensors: DataTensors,
+    tc: TrainConfig,
+    device,
+    world: World | None = None,
+    stream: FrameStream | None = None,
+) -> torch.Tensor:
     """Sums over samples of ``[loss, motor, vision]`` (no updates, samples in order), over
     every process of ``world``; ``stream``: where the frames come from (None: ``tensors``)."""
     world = world or World()
@@ -235,8 +264,13 @@ def evaluate_loop(model, table: LatentTable, tensors: DataTensors, tc: TrainConf
 def local_parts(plan: list, world: World, join: bool = False) -> list[list]:
     """For each batch ``(idx, steps)`` of ``plan``, this process's parts: ``(part, idx, steps)``
     (:meth:`~primspace.train.distributed.World.parts`)."""
-    return [[(part, idx[part.rows], None if steps is None else steps[part.rows])
-             for part in world.parts(idx.numel(), join=join)] for idx, steps in plan]
+    return [
+        [
+            (part, idx[part.rows], None if steps is None else steps[part.rows])
+            for part in world.parts(idx.numel(), join=join)
+        ]
+        for idx, steps in plan
+    ]
 
 
 def frame_batches(work: list, stream: FrameStream | None):
@@ -284,10 +318,26 @@ class Session:
     """
 
     def __init__(
-        self, *, store: RunDirectory | None, config: dict, model: MTRNNDecoder, theta_opt, table: LatentTable,
-        scaler: JointScaler, initializer: LatentInitializer, data: MotionDataset, use_images: bool,
-        tc: TrainConfig, device: torch.device, shuffle_seed: int, frames_seed: int = 0,
-        calibrate=None, calibration=None, observation=None, log_to=None, world: World | None = None,
+        self,
+        *,
+        store: RunDirectory | None,
+        config: dict,
+        model: MTRNNDecoder,
+        theta_opt,
+        table: LatentTable,
+        scaler: JointScaler,
+        initializer: LatentInitializer,
+        data: MotionDataset,
+        use_images: bool,
+        tc: TrainConfig,
+        device: torch.device,
+        shuffle_seed: int,
+        frames_seed: int = 0,
+        calibrate=None,
+        calibration=None,
+        observation=None,
+        log_to=None,
+        world: World | None = None,
     ) -> None:
         # calibrate: codes -> CodeCalibration, fitted when the last epoch is done (fit);
         # calibration: a map carried as is (infer: the trained run's)
@@ -324,9 +374,17 @@ class Session:
     def state(self) -> dict:
         """The checkpoint of the session as it stands (:func:`~primspace.train.rundir.checkpoint_state`)."""
         return checkpoint_state(
-            config=self.config, epoch=self.epoch, model=self.model, theta_opt=self.theta_opt, table=self.table,
-            initial_codes=self.initial_codes, scaler=self.scaler, initializer=self.initializer,
-            generator=self.generator, frame_generator=self.frame_generator, calibration=self.calibration,
+            config=self.config,
+            epoch=self.epoch,
+            model=self.model,
+            theta_opt=self.theta_opt,
+            table=self.table,
+            initial_codes=self.initial_codes,
+            scaler=self.scaler,
+            initializer=self.initializer,
+            generator=self.generator,
+            frame_generator=self.frame_generator,
+            calibration=self.calibration,
         )
 
     # ------------------------------------------------------------------------ loop
@@ -385,9 +443,17 @@ class Session:
         bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
         if bad:
             what = "loss" if bad[0] == "loss" else f"{bad[0]} loss"
-            then = (f"the last good checkpoint (epoch {self._last_checkpoint}) is kept (lower the learning "
-                    "rates, then resume)") if self.run_dir else "nothing was saved (lower the learning rates and run again)"
-            raise TrainingDivergedError(f"{self.name}: the {what} became {values[bad[0]]} in epoch {self.epoch + 1}; stopped, {then}")
+            then = (
+                (
+                    f"the last good checkpoint (epoch {self._last_checkpoint}) is kept (lower the learning "
+                    "rates, then resume)"
+                )
+                if self.run_dir
+                else "nothing was saved (lower the learning rates and run again)"
+            )
+            raise TrainingDivergedError(
+                f"{self.name}: the {what} became {values[bad[0]]} in epoch {self.epoch + 1}; stopped, {then}"
+            )
 
     def _train_epoch(self) -> torch.Tensor:
         tc = self.tc
@@ -398,8 +464,10 @@ class Session:
                 group["lr"] = tc.lr * factor
         self.model.train(self.theta_opt is not None)
         order = torch.randperm(self.n, generator=self.generator).to(self.device)
-        plan = [(order[start : start + tc.batch_size], self._draw_frames(min(tc.batch_size, self.n - start)))
-                for start in range(0, self.n, tc.batch_size)]  # the epoch's draws, as one process makes them
+        plan = [
+            (order[start : start + tc.batch_size], self._draw_frames(min(tc.batch_size, self.n - start)))
+            for start in range(0, self.n, tc.batch_size)
+        ]  # the epoch's draws, as one process makes them
         work = local_parts(plan, self.world, join=self.net is not self.model)
         frames = frame_batches(work, self.stream)
         sums = torch.zeros(self.world.micro_batches, 3, dtype=torch.float64, device=self.device)
@@ -439,7 +507,12 @@ class Session:
         return steps.to(self.device)
 
     def _log(self, epoch: int, values: dict, seconds: float) -> None:
-        line = {"epoch": epoch, **values, "seconds": round(seconds, 6), "samples_per_s": round(self.n / max(seconds, 1e-9), 3)}
+        line = {
+            "epoch": epoch,
+            **values,
+            "seconds": round(seconds, 6),
+            "samples_per_s": round(self.n / max(seconds, 1e-9), 3),
+        }
         self.history.append(line)
         if self.store is not None:
             self.store.log(line)

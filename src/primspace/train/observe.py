@@ -34,8 +34,10 @@ def _check_amount(value, name: str, words: tuple[str, ...]):
     if isinstance(value, str):
         if value in words:
             return value
-        raise UserError(f"{name} must be a fraction in (0, 1], a number of steps >= 1 or one of "
-                        f"{', '.join(repr(w) for w in words)}; got {value!r}")
+        raise UserError(
+            f"{name} must be a fraction in (0, 1], a number of steps >= 1 or one of "
+            f"{', '.join(repr(w) for w in words)}; got {value!r}"
+        )
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise UserError(f"{name} must be a fraction in (0, 1] or a number of steps >= 1, got {value!r}")
     if isinstance(value, (int, np.integer)):
@@ -98,8 +100,10 @@ class Observation:
         motor = 1.0 if observe is None else _check_amount(observe, "observe", (NOTHING,))
         frames = motor if observe_frames is None else _check_amount(observe_frames, "observe_frames", (FIRST, NOTHING))
         if motor == NOTHING and frames == NOTHING:
-            raise UserError("observe='none' observes no joints and no frames are observed: nothing to infer from; "
-                            "give observe_frames (e.g. 'first' or a fraction) to infer from frames alone")
+            raise UserError(
+                "observe='none' observes no joints and no frames are observed: nothing to infer from; "
+                "give observe_frames (e.g. 'first' or a fraction) to infer from frames alone"
+            )
         return cls(motor, frames, observe_frames is not None and observe_frames != NOTHING)
 
     def to_dict(self) -> dict:
@@ -120,8 +124,10 @@ class Observation:
             where = str(data.path) if data.path is not None else "the data set"
             raise UserError(f"observe_frames={self.frames!r} asks for frames, but {where} has no frames")
         if (frames_asked or self.motor == NOTHING) and not use_images:
-            raise UserError(f"observe_frames={self.frames!r}: the run does not use frames (no image head, images off or "
-                            "vision_weight 0)")
+            raise UserError(
+                f"observe_frames={self.frames!r}: the run does not use frames (no image head, images off or "
+                "vision_weight 0)"
+            )
 
     def masks(self, lengths, length: int) -> tuple[np.ndarray, np.ndarray]:
         """Motor and frame masks (N, T) bool for samples of valid ``lengths`` (padding included)."""
@@ -137,8 +143,9 @@ def observation_masks(observation: Observation | None, data: MotionDataset) -> t
     return observation.masks(lengths, data.length)
 
 
-def observation_record(observation: Observation | None, data: MotionDataset, use_images: bool,
-                       has_image_head: bool) -> dict:
+def observation_record(
+    observation: Observation | None, data: MotionDataset, use_images: bool, has_image_head: bool
+) -> dict:
     """What an infer run's ``config.json`` records of ``observation`` (``{"observe": rule}``;
     nothing without one), after :meth:`Observation.check`."""
     if observation is None:

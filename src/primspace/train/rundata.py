@@ -54,28 +54,37 @@ def check_run_data(run: TrainedRun, dataset: MotionDataset) -> None:
     _check_shape(run, dataset, where)
     is_subset = not np.array_equal(dataset.file_indices, np.arange(len(dataset)))
     if is_subset:
-        raise UserError(f"{where}: holds {len(dataset)} of its file's samples (a subset); run {_name(run)} numbers "
-                        "its samples by their index in the data file: give the whole file (or call "
-                        "primspace.train.rundata.load_fitted_data, which takes a subset)")
+        raise UserError(
+            f"{where}: holds {len(dataset)} of its file's samples (a subset); run {_name(run)} numbers "
+            "its samples by their index in the data file: give the whole file (or call "
+            "primspace.train.rundata.load_fitted_data, which takes a subset)"
+        )
     if len(run.indices) and int(run.indices.max()) >= len(dataset):
-        raise UserError(f"{where}: has {len(dataset)} samples, run {_name(run)} used sample "
-                        f"{int(run.indices.max())}: not its data")
+        raise UserError(
+            f"{where}: has {len(dataset)} samples, run {_name(run)} used sample {int(run.indices.max())}: not its data"
+        )
     saved = run.config.get("data", {}).get("motor_sha1")
     if saved is not None and fingerprint(dataset.subset(run.indices)) != saved:
-        raise UserError(f"{where}: its joint values differ from those run {_name(run)} used "
-                        "(SHA-1 of the run's samples): not its data")
+        raise UserError(
+            f"{where}: its joint values differ from those run {_name(run)} used "
+            "(SHA-1 of the run's samples): not its data"
+        )
 
 
 def recorded_data(run: TrainedRun) -> MotionDataset:
     """The data file ``run`` records (``config.json`` ``data.path``), loaded; one line saying
     what it is and how to give another where there is none or it is gone."""
     if run.data_path is None:
-        raise UserError(f"run {_name(run)} was fitted on a data set in memory and records no data file: "
-                        "give fitted_data= (the data set it was fitted on)")
+        raise UserError(
+            f"run {_name(run)} was fitted on a data set in memory and records no data file: "
+            "give fitted_data= (the data set it was fitted on)"
+        )
     path = Path(run.data_path)
     if not path.is_file():
-        raise UserError(f"{path}: no such file: it is the data file run {_name(run)} was fitted on (recorded in "
-                        "its config.json); if it moved, give its new place as fitted_data=MotionDataset.load(PATH)")
+        raise UserError(
+            f"{path}: no such file: it is the data file run {_name(run)} was fitted on (recorded in "
+            "its config.json); if it moved, give its new place as fitted_data=MotionDataset.load(PATH)"
+        )
     return MotionDataset.load(path)
 
 
@@ -114,7 +123,10 @@ def load_fitted_data(run: TrainedRun, fitted_data: MotionDataset | None = None) 
     if tried[0] is None:
         have = set(fitted_data.file_indices.tolist())
         missing = [int(i) for i in run.indices if int(i) not in have]
-        raise UserError(f"{where}: does not hold sample {missing[0]} of the data file ({len(missing)} of run "
-                        f"{_name(run)}'s {len(run.indices)} samples missing): not its data")
-    raise UserError(f"{where}: its joint values differ from those run {_name(run)} used "
-                    "(SHA-1 of the run's samples): not its data")
+        raise UserError(
+            f"{where}: does not hold sample {missing[0]} of the data file ({len(missing)} of run "
+            f"{_name(run)}'s {len(run.indices)} samples missing): not its data"
+        )
+    raise UserError(
+        f"{where}: its joint values differ from those run {_name(run)} used (SHA-1 of the run's samples): not its data"
+    )

@@ -53,11 +53,30 @@ from primspace.train.run import TrainedRun
 from primspace.train.rundata import check_run_data, fingerprint
 
 __all__ = [
-    "CHECKPOINT_FORMAT", "CONFIG_NAME", "METRICS_NAME", "CHECKPOINT_NAME", "LATENTS_NAME", "LATENTS_INIT_NAME",
+    "CHECKPOINT_FORMAT",
+    "CONFIG_NAME",
+    "METRICS_NAME",
+    "CHECKPOINT_NAME",
+    "LATENTS_NAME",
+    "LATENTS_INIT_NAME",
     "CALIBRATION_NAME",
-    "RUN_FILES", "RESUMABLE_CHANGES", "Checkpoint", "RunDirectory", "run_config", "prepare_run_dir",
-    "checkpoint_state", "unpack_checkpoint", "restore_rng", "run_from_state", "load_run", "write_run",
-    "read_config", "read_checkpoint", "read_metrics", "fingerprint", "check_run_data",
+    "RUN_FILES",
+    "RESUMABLE_CHANGES",
+    "Checkpoint",
+    "RunDirectory",
+    "run_config",
+    "prepare_run_dir",
+    "checkpoint_state",
+    "unpack_checkpoint",
+    "restore_rng",
+    "run_from_state",
+    "load_run",
+    "write_run",
+    "read_config",
+    "read_checkpoint",
+    "read_metrics",
+    "fingerprint",
+    "check_run_data",
 ]
 
 CHECKPOINT_FORMAT = 1
@@ -68,8 +87,17 @@ RUN_FILES = (CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME, LATENTS_NAME, LATENTS_I
 
 # Train-config fields that may change when a run is resumed: they do not change the numbers
 # (micro_batches, like the number of processes, changes only the rounding: docs/scale.md).
-RESUMABLE_CHANGES = {"epochs", "checkpoint_every", "checkpoint_seconds", "threads", "tune_malloc", "stream_frames",
-                     "frames_memory_gb", "loader_workers", "micro_batches"}
+RESUMABLE_CHANGES = {
+    "epochs",
+    "checkpoint_every",
+    "checkpoint_seconds",
+    "threads",
+    "tune_malloc",
+    "stream_frames",
+    "frames_memory_gb",
+    "loader_workers",
+    "micro_batches",
+}
 
 
 def run_config(kind, init, mc, tc, data, use_images, parent) -> dict:
@@ -91,7 +119,9 @@ def run_config(kind, init, mc, tc, data, use_images, parent) -> dict:
             "joint_names": list(data.joint_names),
             "dt": data.dt,
             "motor_sha1": fingerprint(data),
-            **({} if data.source_ids is None else {"source_ids": [str(v) for v in data.source_ids]}),  # data: the selected samples
+            **(
+                {} if data.source_ids is None else {"source_ids": [str(v) for v in data.source_ids]}
+            ),  # data: the selected samples
         },
         "parent": parent,
         "primspace_version": __version__,
@@ -163,8 +193,10 @@ def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
         raise UserError(f"{out_dir}: cannot resume: {what} differs (saved {a}, given {b})")
 
     # a run saved before a field existed has that field's default (which gives its numbers)
-    saved = saved | {"model": ModelConfig.from_dict(saved["model"]).to_dict(),
-                     "train": TrainConfig.from_dict(saved["train"]).to_dict()}
+    saved = saved | {
+        "model": ModelConfig.from_dict(saved["model"]).to_dict(),
+        "train": TrainConfig.from_dict(saved["train"]).to_dict(),
+    }
     for key in ("kind", "init", "parent", "scaler", "observe"):  # observe: the rule of an inference from a prefix
         if saved.get(key) != given.get(key):
             fail(key, saved.get(key), given.get(key))
@@ -201,9 +233,13 @@ def read_checkpoint(path: Path, map_location) -> dict | None:
     try:
         ckpt = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # torch raises many kinds for a damaged file
-        raise UserError(f"{path}: cannot read the checkpoint ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        raise UserError(
+            f"{path}: cannot read the checkpoint ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
+        ) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        raise UserError(f"{path}: not a primspace checkpoint (format {ckpt.get('format') if isinstance(ckpt, dict) else '?'})")
+        raise UserError(
+            f"{path}: not a primspace checkpoint (format {ckpt.get('format') if isinstance(ckpt, dict) else '?'})"
+        )
     return ckpt
 
 
@@ -225,13 +261,23 @@ def save_npy(path: Path, array: np.ndarray) -> None:
         with open(tmp, "wb") as f:
             np.save(f, array)
 
+
 # ------------------------------------------------------------------------ checkpoint
 
 
 def checkpoint_state(
-    *, config: dict, epoch: int, model: torch.nn.Module, theta_opt, table, initial_codes: torch.Tensor,
-    scaler: JointScaler, initializer: LatentInitializer, generator: torch.Generator,
-    frame_generator: torch.Generator | None = None, calibration: CodeCalibration | None = None,
+    *,
+    config: dict,
+    epoch: int,
+    model: torch.nn.Module,
+    theta_opt,
+    table,
+    initial_codes: torch.Tensor,
+    scaler: JointScaler,
+    initializer: LatentInitializer,
+    generator: torch.Generator,
+    frame_generator: torch.Generator | None = None,
+    calibration: CodeCalibration | None = None,
 ) -> dict:
     """Everything a run needs to continue bit-identically, as one dict (``checkpoint.pt``).
 
@@ -284,12 +330,18 @@ def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoi
     """The parts of a checkpoint dict; one clear :class:`UserError` naming ``where`` if a part is missing."""
     try:
         return Checkpoint(
-            epoch=int(state["epoch"]), model=state["model"], theta_optimizer=state["theta_optimizer"],
-            latents=state["latents"], initial_codes=state["initial_codes"],
+            epoch=int(state["epoch"]),
+            model=state["model"],
+            theta_optimizer=state["theta_optimizer"],
+            latents=state["latents"],
+            initial_codes=state["initial_codes"],
             scaler=JointScaler.from_dict(state["scaler"]),
             initializer=LatentInitializer.from_state_dict(state["initializer"]),
-            rng=state["rng"], config=state["config"],
-            calibration=None if state.get("calibration") is None else CodeCalibration.from_state_dict(state["calibration"]),
+            rng=state["rng"],
+            config=state["config"],
+            calibration=None
+            if state.get("calibration") is None
+            else CodeCalibration.from_state_dict(state["calibration"]),
         )
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
@@ -322,11 +374,24 @@ def run_from_state(state: dict, history: list[dict], run_dir: Path | None) -> Tr
         raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
     data = config.get("data", {})
     return TrainedRun(
-        run_dir=run_dir, kind=config["kind"], init=config["init"], model=model, model_config=mc,
-        train_config=tc, scaler=ckpt.scaler, initializer=ckpt.initializer, latents=latents,
-        initial_latents=initial, history=[h for h in history if h["epoch"] <= ckpt.epoch],
-        indices=np.asarray(data.get("indices", []), dtype=np.int64), data_path=data.get("path"),
-        parent=config.get("parent"), epoch=ckpt.epoch, config=config, state=state, calibration=ckpt.calibration,
+        run_dir=run_dir,
+        kind=config["kind"],
+        init=config["init"],
+        model=model,
+        model_config=mc,
+        train_config=tc,
+        scaler=ckpt.scaler,
+        initializer=ckpt.initializer,
+        latents=latents,
+        initial_latents=initial,
+        history=[h for h in history if h["epoch"] <= ckpt.epoch],
+        indices=np.asarray(data.get("indices", []), dtype=np.int64),
+        data_path=data.get("path"),
+        parent=config.get("parent"),
+        epoch=ckpt.epoch,
+        config=config,
+        state=state,
+        calibration=ckpt.calibration,
     )
 
 
@@ -401,7 +466,9 @@ class RunDirectory:
         try:
             atomic_write_json(self.path / CONFIG_NAME, config, overwrite=False)
         except OutputExistsError:
-            raise UserError(f"{self.path}: another run started writing here meanwhile; choose another out_dir") from None
+            raise UserError(
+                f"{self.path}: another run started writing here meanwhile; choose another out_dir"
+            ) from None
         save_npy(self.path / LATENTS_INIT_NAME, np.asarray(initial_codes))
         atomic_write_text(self.path / METRICS_NAME, "")
 
@@ -429,8 +496,13 @@ class RunDirectory:
 
 def _numpy_state() -> dict:
     name, keys, pos, has_gauss, cached = np.random.get_state()
-    return {"name": name, "keys": torch.from_numpy(keys.astype(np.int64)), "pos": int(pos),
-            "has_gauss": int(has_gauss), "cached": float(cached)}
+    return {
+        "name": name,
+        "keys": torch.from_numpy(keys.astype(np.int64)),
+        "pos": int(pos),
+        "has_gauss": int(has_gauss),
+        "cached": float(cached),
+    }
 
 
 def _set_numpy_state(s: dict) -> None:

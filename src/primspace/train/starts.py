@@ -40,8 +40,18 @@ from primspace.train.frames_start import check_frames_start, frames_start, frame
 from primspace.train.observe import NOTHING, Observation, observation_masks
 from primspace.train.rundata import load_fitted_data
 
-__all__ = ["FittedDemonstrations", "derived_seeds", "run_initializer", "initial_codes", "inference_start", "fitted_start", "observed_calibration",
-           "nearest_codes", "fitted_samples", "STARTS_FROM_FITTED"]
+__all__ = [
+    "FittedDemonstrations",
+    "derived_seeds",
+    "run_initializer",
+    "initial_codes",
+    "inference_start",
+    "fitted_start",
+    "observed_calibration",
+    "nearest_codes",
+    "fitted_samples",
+    "STARTS_FROM_FITTED",
+]
 
 #: The starts that read the fitted demonstrations (under an observation rule for ``calibrated``).
 STARTS_FROM_FITTED = (CALIBRATED, NEAREST)
@@ -69,7 +79,9 @@ class FittedDemonstrations:
     def of(cls, parent, fitted: MotionDataset) -> "FittedDemonstrations":
         """From ``fitted``, the run's fitted samples in its order (:func:`fitted_samples`)."""
         lengths = fitted.lengths if fitted.lengths is not None else np.full(len(fitted), fitted.length)
-        return cls(parent.scaler.transform(fitted.motor), np.asarray(lengths), fitted.images if fitted.has_images else None)
+        return cls(
+            parent.scaler.transform(fitted.motor), np.asarray(lengths), fitted.images if fitted.has_images else None
+        )
 
     def masks(self, observation: Observation | None) -> tuple[np.ndarray, np.ndarray]:
         """Their motor and frame masks (m, T) under ``observation`` (valid steps without one)."""
@@ -92,8 +104,14 @@ def run_initializer(init: str, parent, mc: ModelConfig, scaled: np.ndarray, seed
     return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
 
 
-def initial_codes(init: str, parent, initializer: LatentInitializer, scaled: np.ndarray, seed: int,
-                  initial_latents: np.ndarray | None = None) -> np.ndarray:
+def initial_codes(
+    init: str,
+    parent,
+    initializer: LatentInitializer,
+    scaled: np.ndarray,
+    seed: int,
+    initial_latents: np.ndarray | None = None,
+) -> np.ndarray:
     """The starting codes (float64) without an observation rule: the initialiser's, mapped by the
     parent's calibration for ``calibrated``; rows of ``initial_latents`` without NaN replace them."""
     codes = initializer.transform(scaled, random_state=seed)
@@ -108,9 +126,16 @@ def _given(codes: np.ndarray, initial_latents: np.ndarray | None) -> np.ndarray:
     return codes
 
 
-def inference_start(parent, init: str, data: MotionDataset, scaled: np.ndarray, observation: Observation | None,
-                    fitted_data: MotionDataset | None, seed: int,
-                    initial_latents: np.ndarray | None = None) -> tuple[LatentInitializer, np.ndarray]:
+def inference_start(
+    parent,
+    init: str,
+    data: MotionDataset,
+    scaled: np.ndarray,
+    observation: Observation | None,
+    fitted_data: MotionDataset | None,
+    seed: int,
+    initial_latents: np.ndarray | None = None,
+) -> tuple[LatentInitializer, np.ndarray]:
     """The initialiser and the starting codes (float64, (n, K·q)) of :func:`~primspace.train.infer`.
 
     ``scaled``: ``data``'s scaled motor; ``seed``: the inference's ``TrainConfig.seed``;
@@ -128,8 +153,9 @@ def inference_start(parent, init: str, data: MotionDataset, scaled: np.ndarray, 
         return initializer, np.asarray(initial_latents, dtype=np.float64).copy()
     if observed is None:
         return initializer, initial_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents)
-    codes = _observed_start(parent, init, initializer, data, scaled, observed, observation, fitted_data,
-                            seeds["codes_infer"])
+    codes = _observed_start(
+        parent, init, initializer, data, scaled, observed, observation, fitted_data, seeds["codes_infer"]
+    )
     return initializer, _given(codes, initial_latents)
 
 
@@ -141,8 +167,10 @@ def _observed_start(parent, init, initializer, data, scaled, observed, observati
     if frames_only and init not in ("zero", "random"):
         if init == CALIBRATED:
             return fitted_start(parent, init, _fitted(parent, fitted_data), data, scaled, observed, observation)
-        raise UserError(f"init {init!r} starts from the observed joints, and observe='none' observes none: "
-                        "start by 'calibrated' (from the frames), 'zero' or 'random'")
+        raise UserError(
+            f"init {init!r} starts from the observed joints, and observe='none' observes none: "
+            "start by 'calibrated' (from the frames), 'zero' or 'random'"
+        )
     return initializer.transform(scaled, random_state=seed, observed=observed).astype(np.float64)
 
 
@@ -150,8 +178,16 @@ def _fitted(parent, fitted_data: MotionDataset | None) -> FittedDemonstrations:
     return FittedDemonstrations.of(parent, fitted_samples(parent, fitted_data))
 
 
-def fitted_start(parent, init: str, fitted: FittedDemonstrations, data: MotionDataset, scaled: np.ndarray,
-                 observed: np.ndarray, observation: Observation | None, cache: dict | None = None) -> np.ndarray:
+def fitted_start(
+    parent,
+    init: str,
+    fitted: FittedDemonstrations,
+    data: MotionDataset,
+    scaled: np.ndarray,
+    observed: np.ndarray,
+    observation: Observation | None,
+    cache: dict | None = None,
+) -> np.ndarray:
     """Starting codes (float64) of the starts that read the fitted demonstrations.
 
     Parameters
@@ -193,14 +229,16 @@ def observed_calibration(parent, observation: Observation | None, fitted: Fitted
     if observation is None:
         return parent.calibration
     if parent.initializer.method not in CALIBRATABLE:
-        raise UserError(f"init 'calibrated' needs a run fitted with projection or pca init, not "
-                        f"'{parent.initializer.method}'")
+        raise UserError(
+            f"init 'calibrated' needs a run fitted with projection or pca init, not '{parent.initializer.method}'"
+        )
     initial = parent.initializer.transform(fitted.scaled, observed=fitted.masks(observation)[0])
     return CodeCalibration(parent.model_config.latent_dim).fit(initial, parent.latents)
 
 
-def nearest_codes(scaled: np.ndarray, observed: np.ndarray, fitted: np.ndarray, fitted_valid: np.ndarray,
-                  fitted_codes: np.ndarray) -> np.ndarray:
+def nearest_codes(
+    scaled: np.ndarray, observed: np.ndarray, fitted: np.ndarray, fitted_valid: np.ndarray, fitted_codes: np.ndarray
+) -> np.ndarray:
     """For each sample, the code of the fitted demonstration whose motor is nearest over its observed steps.
 
     The squared distance is the mean over the entries observed in the sample and valid in

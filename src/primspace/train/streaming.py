@@ -120,8 +120,10 @@ class FrameReader(torch.utils.data.Dataset):
     def __getitem__(self, key: tuple[np.ndarray, np.ndarray | None]):
         rows, steps = key
         start = time.perf_counter()
-        out = np.empty((len(rows), self.images.shape[1] if steps is None else steps.shape[1]) + self.images.shape[2:],
-                       dtype=np.uint8)
+        out = np.empty(
+            (len(rows), self.images.shape[1] if steps is None else steps.shape[1]) + self.images.shape[2:],
+            dtype=np.uint8,
+        )
         try:
             for j, row in enumerate(rows):  # one sample at a time: see the class docstring
                 frames = self.images[int(row)]
@@ -169,8 +171,12 @@ class FrameStream:
         self.device = device
         self._keys = _Keys()
         self.loader = torch.utils.data.DataLoader(
-            FrameReader(images), batch_size=None, sampler=self._keys, num_workers=workers,
-            persistent_workers=workers > 0, multiprocessing_context=_worker_context() if workers > 0 else None,
+            FrameReader(images),
+            batch_size=None,
+            sampler=self._keys,
+            num_workers=workers,
+            persistent_workers=workers > 0,
+            multiprocessing_context=_worker_context() if workers > 0 else None,
             pin_memory=device.type == "cuda",
         )
         self.waited = self.decoded = 0.0
@@ -188,8 +194,11 @@ class FrameStream:
         workers = max(self.loader.num_workers, 1)
         sizes = [max(-(-len(rows) // workers), CHUNK if workers > 1 else len(rows), 1) for rows, _ in keys]
         counts = [len(range(0, max(len(rows), 1), size)) for (rows, _), size in zip(keys, sizes)]
-        self._keys.keys = [(rows[i : i + size], None if steps is None else steps[i : i + size])
-                           for (rows, steps), size in zip(keys, sizes) for i in range(0, max(len(rows), 1), size)]
+        self._keys.keys = [
+            (rows[i : i + size], None if steps is None else steps[i : i + size])
+            for (rows, steps), size in zip(keys, sizes)
+            for i in range(0, max(len(rows), 1), size)
+        ]
         it = iter(self.loader)  # a pass over the keys (persistent workers carry on from the last pass)
         for count in counts:
             start = time.perf_counter()

@@ -12,9 +12,19 @@ from primspace.data.resample import resample
 from primspace.data.values import as_float32
 from primspace.errors import DataError
 
-__all__ = ["resample_located", "parse_labels", "opt_names", "resampled_dt", "natural_key", "rate_dt", "shown",
-           "printable", "check_fits_memory",
-           "MIN_RATE", "MAX_RATE"]
+__all__ = [
+    "resample_located",
+    "parse_labels",
+    "opt_names",
+    "resampled_dt",
+    "natural_key",
+    "rate_dt",
+    "shown",
+    "printable",
+    "check_fits_memory",
+    "MIN_RATE",
+    "MAX_RATE",
+]
 
 #: The rates (steps per second: LeRobot's ``fps``, robomimic's ``control_freq``) an importer
 #: accepts: a step of 1 microsecond to about 11.6 days. Outside, a rate is a typo or damage.
@@ -124,13 +134,16 @@ def rate_dt(rate, *, path, field: str, where: str = "") -> float:
     if isinstance(rate, bool) or not isinstance(rate, (int, float)):
         raise DataError(f"{field} {shown(rate)}{place} must be a number of steps per second", path=path, field=field)
     if isinstance(rate, float) and not math.isfinite(rate) or rate <= 0:
-        raise DataError(f"{field} {shown(rate)}{place} must be a positive finite number of steps per second",
-                        path=path, field=field)
+        raise DataError(
+            f"{field} {shown(rate)}{place} must be a positive finite number of steps per second", path=path, field=field
+        )
     if not MIN_RATE <= rate <= MAX_RATE:
         dt = 1.0 / rate if isinstance(rate, float) or rate < 10**300 else 0.0
         raise DataError(
             f"{field} {shown(rate)}{place} gives dt = 1/{field} = {dt:g} s; a rate must lie between "
-            f"{MIN_RATE:g} and {MAX_RATE:g} steps per second", path=path, field=field,
+            f"{MIN_RATE:g} and {MAX_RATE:g} steps per second",
+            path=path,
+            field=field,
         )
     return 1.0 / float(rate)
 
@@ -155,8 +168,11 @@ def check_fits_memory(nbytes: int, what: str, **located) -> None:
     """
     total = memory_bytes()
     if total is not None and nbytes > total // 2:
-        raise DataError(f"{what} is {nbytes / 2**30:.3g} GiB, more than half this machine's memory "
-                        f"({total / 2**30:.3g} GiB); it cannot be read", **located)
+        raise DataError(
+            f"{what} is {nbytes / 2**30:.3g} GiB, more than half this machine's memory "
+            f"({total / 2**30:.3g} GiB); it cannot be read",
+            **located,
+        )
 
 
 def natural_key(name: str, prefix: str) -> int:
@@ -164,8 +180,9 @@ def natural_key(name: str, prefix: str) -> int:
     return int(name[len(prefix) + 1 :])
 
 
-def demonstrations(sequences: list, length: int, frames, *, source: str, images: str | None, dt_in: float,
-                   where, **fields):
+def demonstrations(
+    sequences: list, length: int, frames, *, source: str, images: str | None, dt_in: float, where, **fields
+):
     """The :class:`~primspace.data.MotionDataset` of imported demonstrations: joints resampled to
     ``length`` steps, frames (an :class:`~primspace.data.importers.frames.AlignedFrames` or None)
     stacked, the source text naming the image key and the frames' sizes; a :class:`DataError`
@@ -177,8 +194,11 @@ def demonstrations(sequences: list, length: int, frames, *, source: str, images:
         if frames is not None:
             source += f" images={images}; {frames.collect().describe()}"
         return MotionDataset(
-            motor=motor, images=None if frames is None else frames.stack(),
-            dt=resampled_dt(dt_in, [len(seq) for seq in sequences], length), source=source, **fields,
+            motor=motor,
+            images=None if frames is None else frames.stack(),
+            dt=resampled_dt(dt_in, [len(seq) for seq in sequences], length),
+            source=source,
+            **fields,
         )
     except DataError as exc:
         raise exc.located(path=where) from None

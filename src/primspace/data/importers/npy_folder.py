@@ -59,8 +59,14 @@ NPY_FILES = ("joints", "images", "lengths", "labels")
 _NPY_MAGIC = b"\x93NUMPY"
 
 
-def import_npy_folder(path: str | os.PathLike, length: int, *, image_size=DEFAULT_IMAGE_SIZE,
-                      image_fit: str = "crop", keep_padding: bool = False) -> MotionDataset:
+def import_npy_folder(
+    path: str | os.PathLike,
+    length: int,
+    *,
+    image_size=DEFAULT_IMAGE_SIZE,
+    image_fit: str = "crop",
+    keep_padding: bool = False,
+) -> MotionDataset:
     """Read padded joints (and frames, lengths, labels) from a folder of ``.npy`` files (module docstring).
 
     Parameters
@@ -84,8 +90,10 @@ def import_npy_folder(path: str | os.PathLike, length: int, *, image_size=DEFAUL
     root = Path(path)
     image_fit = as_image_fit(image_fit)
     if not root.is_dir():
-        raise DataError("no such folder" if not root.exists() else "is not a folder (a folder holding joints.npy "
-                        "is needed)", path=root)
+        raise DataError(
+            "no such folder" if not root.exists() else "is not a folder (a folder holding joints.npy is needed)",
+            path=root,
+        )
     joints = _joints(root)
     n, t_max = joints.shape[:2]
     images = _images(root, n, t_max)
@@ -101,8 +109,16 @@ def import_npy_folder(path: str | os.PathLike, length: int, *, image_size=DEFAUL
     name = root.resolve().name
     try:
         ds = demonstrations(
-            sequences, length, frames, source=f"npy:{name}", images="images.npy", dt_in=1.0, where=root,
-            labels=labels, label_names=label_names, source_ids=[f"npy:{printable(name)}:{i}" for i in range(n)],
+            sequences,
+            length,
+            frames,
+            source=f"npy:{name}",
+            images="images.npy",
+            dt_in=1.0,
+            where=root,
+            labels=labels,
+            label_names=label_names,
+            source_ids=[f"npy:{printable(name)}:{i}" for i in range(n)],
         )
         ds.source += note
         return ds
@@ -129,8 +145,12 @@ def _load(root: Path, name: str, required: bool = False):
             there = ", ".join(sorted(printable(p.name) for p in root.iterdir())[:12]) or "nothing"
         except OSError:
             there = "(cannot be listed)"
-        raise DataError(f"no {name}.npy in the folder (an npy folder holds joints.npy (N, Tmax, J), and optionally "
-                        f"{', '.join(f + '.npy' for f in NPY_FILES[1:])}); it has: {there}", path=root, field=name)
+        raise DataError(
+            f"no {name}.npy in the folder (an npy folder holds joints.npy (N, Tmax, J), and optionally "
+            f"{', '.join(f + '.npy' for f in NPY_FILES[1:])}); it has: {there}",
+            path=root,
+            field=name,
+        )
     if not file.is_file():
         raise DataError("is not a file", path=file, field=name)
     try:
@@ -146,8 +166,9 @@ def _load(root: Path, name: str, required: bool = False):
     except (ValueError, SyntaxError, TokenError, TypeError, OverflowError) as exc:  # a damaged header
         raise DataError(_unreadable(exc), path=file, field=name) from None
     except (OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise DataError(f"cannot be read, the file may be truncated or damaged ({first_line(exc)})", path=file,
-                        field=name) from None
+        raise DataError(
+            f"cannot be read, the file may be truncated or damaged ({first_line(exc)})", path=file, field=name
+        ) from None
     except MemoryError:
         raise DataError("declares an array too large to read into memory", path=file, field=name) from None
 
@@ -187,8 +208,11 @@ def _images(root: Path, n: int, t_max: int):
     if images.dtype != np.uint8:
         raise fail(f"frames must be uint8, got {images.dtype}")
     if images.shape[0] != n:
-        raise fail(f"holds the frames of {images.shape[0]} samples, joints.npy {n} samples (one frame per "
-                   "joint step is needed)", min(images.shape[0], n))  # the first sample without a partner
+        raise fail(
+            f"holds the frames of {images.shape[0]} samples, joints.npy {n} samples (one frame per "
+            "joint step is needed)",
+            min(images.shape[0], n),
+        )  # the first sample without a partner
     if images.shape[1] != t_max:
         raise fail(f"holds {images.shape[1]} frames per sample for {t_max} joint steps (one frame per step is needed)")
     if images.shape[2] < 1 or images.shape[3] < 1:
@@ -242,8 +266,12 @@ def checked_text(values, *, path=None, field: str | None = None) -> np.ndarray:
         codes = codes.reshape(len(flat), -1)
         bad = np.flatnonzero(((codes > 0x10FFFF) | ((codes >= 0xD800) & (codes <= 0xDFFF))).any(axis=1))
         if bad.size:
-            raise DataError("is not valid Unicode text (a code point that is no character)", path=path, field=field,
-                            index=int(bad[0]))
+            raise DataError(
+                "is not valid Unicode text (a code point that is no character)",
+                path=path,
+                field=field,
+                index=int(bad[0]),
+            )
     return np.asarray(values, dtype=str)
 
 
@@ -252,5 +280,6 @@ def _read_frames(root: Path, images, index: int, indices: np.ndarray) -> np.ndar
     try:
         return np.asarray(images[index, indices])
     except (OSError, ValueError) as exc:
-        raise DataError(f"cannot be read ({first_line(exc)})", path=root / "images.npy", field="images",
-                        index=index) from None
+        raise DataError(
+            f"cannot be read ({first_line(exc)})", path=root / "images.npy", field="images", index=index
+        ) from None

@@ -52,7 +52,12 @@ import numpy as np
 
 from primspace.data.dataset import MotionDataset
 from primspace.data.importers.common import (
-    natural_key, opt_names, parse_labels, printable, resample_located, resampled_dt,
+    natural_key,
+    opt_names,
+    parse_labels,
+    printable,
+    resample_located,
+    resampled_dt,
 )
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, as_image_fit, check_frames
 from primspace.data.importers.npy_folder import checked_text
@@ -66,8 +71,14 @@ _STACKED = ("motor", "joints")  # the joints of every demonstration in one array
 _PER_DEMO = ("motor", "joints")  # prefixes of one array per demonstration (besides arr_)
 
 
-def import_npz(path: str | os.PathLike, length: int, image_size=DEFAULT_IMAGE_SIZE, *, image_fit: str = "crop",
-               keep_padding: bool = False) -> MotionDataset:
+def import_npz(
+    path: str | os.PathLike,
+    length: int,
+    image_size=DEFAULT_IMAGE_SIZE,
+    *,
+    image_fit: str = "crop",
+    keep_padding: bool = False,
+) -> MotionDataset:
     """Read variable-length sequences (and frames) from an ``.npz`` archive (module docstring).
 
     Parameters
@@ -125,8 +136,11 @@ def _read_archive(path: Path) -> dict:
         magic = fh.read(6)
     if not magic.startswith(_ZIP_MAGIC):
         what = "a single .npy array, not a zip file" if magic == b"\x93NUMPY" else "not a zip file"
-        raise DataError(f"not a readable .npz archive: it is {what} (an npz archive is a zip file of .npy "
-                        "arrays, as np.savez writes)", path=path)
+        raise DataError(
+            f"not a readable .npz archive: it is {what} (an npz archive is a zip file of .npy "
+            "arrays, as np.savez writes)",
+            path=path,
+        )
     try:
         archive = np.load(path, allow_pickle=False)
     except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError) as exc:
@@ -146,13 +160,15 @@ def _member(archive, key: str, path: Path) -> np.ndarray:
         raise DataError(  # object arrays need pickle, which we never enable
             f"holds Python objects ({first_line(exc)}); save each sequence as its own array "
             "(np.savez(f, *sequences)) or use 'motor' with 'lengths'",
-            path=path, field=field,
+            path=path,
+            field=field,
         ) from None
     # a damaged zip: bad deflate data (zlib.error), a version or method field it cannot read, an
     # encryption flag (RuntimeError: a password is required)
     except (OSError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError, RuntimeError) as exc:
-        raise DataError(f"cannot be read, the archive may be truncated or damaged ({first_line(exc)})", path=path,
-                        field=field) from None
+        raise DataError(
+            f"cannot be read, the archive may be truncated or damaged ({first_line(exc)})", path=path, field=field
+        ) from None
     except MemoryError:  # a header that declares more than this machine holds
         raise DataError("declares an array too large to read into memory", path=path, field=field) from None
     if not isinstance(value, np.ndarray):  # numpy gives a member that is not a .npy file as bytes
@@ -187,8 +203,7 @@ def npz_sequences(data: dict, *, keep_padding: bool = False) -> NpzJoints:
             keys = _check_numbered(found, len(found), prefix)
     if not keys:
         raise DataError(
-            "no 'motor' array (nor 'joints'), and no 'arr_0', 'arr_1', ... sequences "
-            "(nor 'motor_0' / 'joints_0', ...)",
+            "no 'motor' array (nor 'joints'), and no 'arr_0', 'arr_1', ... sequences (nor 'motor_0' / 'joints_0', ...)",
             field="motor",
         )
     return NpzJoints([data[k] for k in keys], [printable(k) for k in keys], None, "")
@@ -227,8 +242,9 @@ def _split(values: np.ndarray, data: dict, name: str, shapes: tuple[str, str]) -
     if lengths.dtype.kind not in "iu":
         raise DataError(f"must be integers, got {lengths.dtype}", field="lengths")
     if values.ndim != rank - 1:
-        raise DataError(f"must be {stacked} (padded), or {concatenated} with 'lengths'; got shape {values.shape}",
-                        field=name)
+        raise DataError(
+            f"must be {stacked} (padded), or {concatenated} with 'lengths'; got shape {values.shape}", field=name
+        )
     if lengths.sum() != values.shape[0]:
         raise DataError(f"lengths sum to {int(lengths.sum())} but {name} has {values.shape[0]} rows", field="lengths")
     for i, t in enumerate(lengths):
@@ -250,7 +266,8 @@ def _check_numbered(keys: list[str], n: int, prefix: str) -> list[str]:
             raise DataError(
                 f"missing: per-demonstration arrays must be numbered {prefix}_0 .. {prefix}_{n - 1} "
                 f"(found {', '.join(keys[:6])}{', ...' if len(keys) > 6 else ''})",
-                field=f"{prefix}_{i}", index=i,
+                field=f"{prefix}_{i}",
+                index=i,
             )
     if len(keys) > n:
         raise DataError(f"has no demonstration: there are {n} (0 .. {n - 1})", field=keys[n], index=n)

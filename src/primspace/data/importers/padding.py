@@ -65,8 +65,12 @@ def checked_lengths(lengths, n: int, t_max: int, *, path=None, field: str = "len
         raise DataError(f"must be one length per sample, shape ({n},), got {lengths.shape}", path=path, field=field)
     for i, t in enumerate(lengths.tolist()):
         if not 2 <= t <= t_max:
-            raise DataError(f"length {t} is outside 2 .. {t_max} (the padded steps; at least 2 are needed "
-                            "to resample)", path=path, field=field, index=i)
+            raise DataError(
+                f"length {t} is outside 2 .. {t_max} (the padded steps; at least 2 are needed to resample)",
+                path=path,
+                field=field,
+                index=i,
+            )
     return lengths.astype(np.int64)
 
 

@@ -131,8 +131,14 @@ def import_robomimic(
         dt_in = _control_dt(f, path)
     split = "" if filter_key is None else f" filter_key={printable(filter_key)}"
     return demonstrations(
-        sequences, length, frames, source=f"robomimic:{path.name} joints={','.join(joints)}{split}", images=images,
-        dt_in=dt_in, where=path, joint_names=names,
+        sequences,
+        length,
+        frames,
+        source=f"robomimic:{path.name} joints={','.join(joints)}{split}",
+        images=images,
+        dt_in=dt_in,
+        where=path,
+        joint_names=names,
         source_ids=[f"robomimic:{printable(path.name)}:data/{demo}" for demo in demos],
     )
 
@@ -172,8 +178,11 @@ def _demos(f: h5py.File, path: Path) -> list[str]:
         raise DataError(f"'data' holds no demo_N groups; it has: {', '.join(names) or 'nothing'}", path=path)
     for a, b in zip(demos, demos[1:]):
         if natural_key(a, "demo") == natural_key(b, "demo"):
-            raise DataError(f"data/{a} and data/{b} have the same number {natural_key(a, 'demo')}; "
-                            "which comes first is ambiguous, keep one name per demonstration", path=path)
+            raise DataError(
+                f"data/{a} and data/{b} have the same number {natural_key(a, 'demo')}; "
+                "which comes first is ambiguous, keep one name per demonstration",
+                path=path,
+            )
     return demos
 
 
@@ -182,13 +191,23 @@ def _names(group: h5py.Group, path: Path, where: str, **located) -> list[str]:
     try:
         names = list(group)
     except _DAMAGED as exc:
-        raise DataError(f"{where} cannot be listed, the file is damaged ({first_line(exc)})", path=path,
-                        **located) from None
+        raise DataError(
+            f"{where} cannot be listed, the file is damaged ({first_line(exc)})", path=path, **located
+        ) from None
     return sorted(printable(n if isinstance(n, str) else bytes(n).decode("utf-8", "backslashreplace")) for n in names)
 
 
-def _get(group: h5py.Group, name: str, path: Path, where: str, demo: str | None = None, *, field=None, index=None,
-         hops: int = 0):
+def _get(
+    group: h5py.Group,
+    name: str,
+    path: Path,
+    where: str,
+    demo: str | None = None,
+    *,
+    field=None,
+    index=None,
+    hops: int = 0,
+):
     """``group[name]`` (None if absent; ``where``: its path in the file), refusing what reads beyond
     this file or ``data/<demo>``: an external link, a soft link out of the demo (a soft link is
     followed one component at a time, each checked so), a dataset stored in other files."""
@@ -224,8 +243,9 @@ def _get(group: h5py.Group, name: str, path: Path, where: str, demo: str | None 
             raise fail(f"is stored outside the file (in {', '.join(sorted({str(e[0]) for e in node.external}))})")
         return node
     except _DAMAGED as exc:
-        raise DataError(f"{where} cannot be read, the file is damaged ({first_line(exc)})", path=path, field=field,
-                        index=index) from None
+        raise DataError(
+            f"{where} cannot be read, the file is damaged ({first_line(exc)})", path=path, field=field, index=index
+        ) from None
 
 
 def _keys(f: h5py.File, demo: str) -> str:
@@ -241,8 +261,12 @@ def _check_key(key: str, path: Path) -> str:
     """``key`` if it names something inside a demo (module docstring, *Keys*); DataError otherwise."""
     parts, _ = _key_parts(key)
     if not parts or any(p in ("", ".", "..") for p in parts):
-        raise DataError("a key is a name, or a path inside data/demo_N (obs/<key>, ./actions) without '..', "
-                        "'.', an empty part or a leading '/'", path=path, field=printable(key))
+        raise DataError(
+            "a key is a name, or a path inside data/demo_N (obs/<key>, ./actions) without '..', "
+            "'.', an empty part or a leading '/'",
+            path=path,
+            field=printable(key),
+        )
     return key
 
 
@@ -310,8 +334,12 @@ def _all_joint_values(f: h5py.File, demos: list[str], keys: list[str], path: Pat
         values, own = _joint_values(f, demo, keys, path, i)
         if widths is not None and own != widths:
             k = next(j for j in range(len(keys)) if own[j] != widths[j])
-            raise DataError(f"{keys[k]} has {own[k]} columns in data/{demo}, {widths[k]} in data/{demos[0]}",
-                            path=path, field=keys[k], index=i)
+            raise DataError(
+                f"{keys[k]} has {own[k]} columns in data/{demo}, {widths[k]} in data/{demos[0]}",
+                path=path,
+                field=keys[k],
+                index=i,
+            )
         widths = widths or own
         sequences.append(values)
     names = []
@@ -329,7 +357,9 @@ def _joint_values(f: h5py.File, demo: str, keys: list[str], path: Path, index: i
         if node.ndim not in (1, 2) or node.dtype.kind not in "fiu":
             raise DataError(
                 f"{where} must be (T_i,) or (T_i, d) numbers, got {node.dtype} {node.shape}",
-                path=path, field=key, index=index,
+                path=path,
+                field=key,
+                index=index,
             )
         if node.shape[0] == 0:
             raise DataError(f"{where} is empty (0 steps)", path=path, field=key, index=index)
@@ -338,7 +368,9 @@ def _joint_values(f: h5py.File, demo: str, keys: list[str], path: Path, index: i
         if steps is not None and value.shape[0] != steps[1]:
             raise DataError(
                 f"{where} has {value.shape[0]} steps, {steps[0]} has {steps[1]}",
-                path=path, field=key, index=index,
+                path=path,
+                field=key,
+                index=index,
             )
         steps = steps or (key, value.shape[0])
         columns.append(value)
@@ -352,8 +384,12 @@ def _filtered(f: h5py.File, demos: list[str], filter_key: str, path: Path) -> li
         raise DataError("a filter key is one name under mask/ (e.g. train, valid)", path=path, field=field)
     mask = _get(f, "mask", path, "mask", field=field)
     if not isinstance(mask, h5py.Group):
-        raise DataError(f"no filter key {printable(filter_key)!r}: the file has no 'mask' group (robomimic's "
-                        "filter keys are mask/<name>, lists of demo names)", path=path, field=field)
+        raise DataError(
+            f"no filter key {printable(filter_key)!r}: the file has no 'mask' group (robomimic's "
+            "filter keys are mask/<name>, lists of demo names)",
+            path=path,
+            field=field,
+        )
     node = _get(mask, filter_key, path, field, field=field)
     if node is None:
         there = ", ".join(_names(mask, path, "mask", field=field)) or "none"
@@ -364,8 +400,11 @@ def _filtered(f: h5py.File, demos: list[str], filter_key: str, path: Path) -> li
     known, seen = set(demos), set()
     for name in named:
         if name not in known:
-            raise DataError(f"{field} names {name}, which is not among data's {len(demos)} demo_N groups "
-                            f"({_span(demos)})", path=path, field=field)
+            raise DataError(
+                f"{field} names {name}, which is not among data's {len(demos)} demo_N groups ({_span(demos)})",
+                path=path,
+                field=field,
+            )
         if name in seen:
             raise DataError(f"{field} names {name} twice", path=path, field=field)
         seen.add(name)
@@ -377,8 +416,9 @@ def _mask_names(node, path: Path, field: str) -> list[str]:
     strings = isinstance(node, h5py.Dataset) and (node.dtype.kind == "S" or h5py.check_string_dtype(node.dtype))
     if not strings or node.ndim != 1:
         got = f"{node.dtype} {node.shape}" if isinstance(node, h5py.Dataset) else "a group"
-        raise DataError(f"{field} must be a 1-D array of demo names (strings such as b'demo_0'), got {got}",
-                        path=path, field=field)
+        raise DataError(
+            f"{field} must be a 1-D array of demo names (strings such as b'demo_0'), got {got}", path=path, field=field
+        )
     values = _read(node, path, field, None).tolist()
     return [printable(v.decode("utf-8", "backslashreplace") if isinstance(v, bytes) else str(v)) for v in values]
 
@@ -396,11 +436,13 @@ def _read(node: h5py.Dataset, path: Path, key: str, index: int, selection=()) ->
     try:
         return np.asarray(node[selection])
     except (OSError, ValueError, RuntimeError) as exc:
-        raise DataError(f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=key,
-                        index=index) from None
+        raise DataError(
+            f"cannot be read, the file may be truncated ({first_line(exc)})", path=path, field=key, index=index
+        ) from None
     except MemoryError:
-        raise DataError(f"{node.name.lstrip('/')} {node.shape} is too large to read into memory", path=path,
-                        field=key, index=index) from None
+        raise DataError(
+            f"{node.name.lstrip('/')} {node.shape} is too large to read into memory", path=path, field=key, index=index
+        ) from None
 
 
 def _read_frames(node: h5py.Dataset, indices: np.ndarray, path: Path, key: str, index: int) -> np.ndarray:

@@ -60,8 +60,15 @@ def split_sequences(n: int, train_fraction: float, seed: int) -> tuple[np.ndarra
     return np.sort(order[:k]), np.sort(order[k:])
 
 
-def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_dim: int, *,
-                  tolerance: int | None = None, n_primitives: int | None = None):
+def segment_codes(
+    codes: np.ndarray,
+    data: MotionDataset,
+    window: int,
+    latent_dim: int,
+    *,
+    tolerance: int | None = None,
+    n_primitives: int | None = None,
+):
     """Segment and label code sequences; score them when ``data`` has the ground truth.
 
     Parameters
@@ -94,12 +101,17 @@ def segment_codes(codes: np.ndarray, data: MotionDataset, window: int, latent_di
     tol = window if tolerance is None else int(tolerance)
     if tol < 0:
         raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tol}")
-    given = {} if data.step_segments is None else {
-        "accuracy_true_boundaries": _accuracy_given_boundaries(sequences, data, window, n_primitives)}
+    given = (
+        {}
+        if data.step_segments is None
+        else {"accuracy_true_boundaries": _accuracy_given_boundaries(sequences, data, window, n_primitives)}
+    )
     return result, segmentation_scores(result, data, tol, transition_steps(data), **given)
 
 
-def _accuracy_given_boundaries(sequences: np.ndarray, data: MotionDataset, window: int, n_primitives: int) -> float | None:
+def _accuracy_given_boundaries(
+    sequences: np.ndarray, data: MotionDataset, window: int, n_primitives: int
+) -> float | None:
     """Per-step labelling accuracy when the true boundaries are given: each true segment's
     code is the mean of the windows it touches, clustered as :func:`segment_codes` does.
     Separates labelling from finding the boundaries."""
@@ -129,16 +141,24 @@ def run_composite_point(
     preset_obj = ExperimentPreset.from_dict(preset)
     data, use_images = load_run_data(data_path, preset_obj)
     start = time.perf_counter()
-    fitted, inferred, _ = fit_and_infer(run_dir, data, preset_obj, init, latent_dim, seed, train_idx, eval_idx, use_images)
+    fitted, inferred, _ = fit_and_infer(
+        run_dir, data, preset_obj, init, latent_dim, seed, train_idx, eval_idx, use_images
+    )
     held_out = data.subset(np.asarray(eval_idx))
     window = preset_obj.model.code_window
     _, scores = segment_codes(inferred.latents, held_out, window, latent_dim)
     _, untrained = segment_codes(inferred.initial_latents, held_out, window, latent_dim)
     return {
-        "init": init, "latent_dim": latent_dim, "seed": seed, "window": window,
-        "n_train": len(train_idx), "n_eval": len(eval_idx),
-        "fit": curves(fitted.history), "infer": curves(inferred.history),
-        "segmentation": scores, "segmentation_untrained": untrained,
+        "init": init,
+        "latent_dim": latent_dim,
+        "seed": seed,
+        "window": window,
+        "n_train": len(train_idx),
+        "n_eval": len(eval_idx),
+        "fit": curves(fitted.history),
+        "infer": curves(inferred.history),
+        "segmentation": scores,
+        "segmentation_untrained": untrained,
         "seconds": round(time.perf_counter() - start, 2),
     }
 
@@ -151,8 +171,10 @@ def run_composite(exp: ExperimentDir) -> dict:
         raise UserError(f"preset {preset.name!r} has no code window (model.code_window); use --preset demo or paper")
     data = exp.dataset()
     if data.step_segments is None:
-        raise UserError(f"{exp.data_path}: the composite experiment needs long demonstrations with step_segments "
-                        "(primspace generate --preset composite-demo)")
+        raise UserError(
+            f"{exp.data_path}: the composite experiment needs long demonstrations with step_segments "
+            "(primspace generate --preset composite-demo)"
+        )
     points, splits, held_out = [], {}, {}
     for seed in preset.seeds:
         train, evaluation = split_sequences(len(data), preset.train_fraction, seed)
@@ -168,9 +190,15 @@ def run_composite(exp: ExperimentDir) -> dict:
     previous = exp.read_results("composite") or {}
     with exp.stage("composite peers"):
         peers = _peers_by_seed(exp, data, runs, previous.get("peers", {}))
-    results = {"runs": runs, "failures": grid.failures, "splits": splits, "window": preset.model.code_window,
-               "label_names": list(data.label_names), "peers": peers,
-               "primitives": run_primitives(exp, held_out)}
+    results = {
+        "runs": runs,
+        "failures": grid.failures,
+        "splits": splits,
+        "window": preset.model.code_window,
+        "label_names": list(data.label_names),
+        "peers": peers,
+        "primitives": run_primitives(exp, held_out),
+    }
     exp.write_results("composite", results)
     if runs:
         _write_timelines(exp, runs)
@@ -193,8 +221,10 @@ def _rescored(exp: ExperimentDir, runs: list[dict]) -> list[dict]:
         if "boundary_transition" not in r["segmentation"]:
             run = load_run(run_dir_of(exp.path, r["key"]) / "infer")
             held = data.subset(run.indices)
-            extra = {"segmentation": segment_codes(run.latents, held, r["window"], r["latent_dim"])[1],
-                     "segmentation_untrained": segment_codes(run.initial_latents, held, r["window"], r["latent_dim"])[1]}
+            extra = {
+                "segmentation": segment_codes(run.latents, held, r["window"], r["latent_dim"])[1],
+                "segmentation_untrained": segment_codes(run.initial_latents, held, r["window"], r["latent_dim"])[1],
+            }
             r = complete_result(exp.path, r["key"], extra) | {"key": r["key"]}
         out.append(r)
     return out
@@ -247,9 +277,20 @@ def _write_timelines(exp: ExperimentDir, runs: list[dict]) -> None:
         arrays[f"codes_{r['init']}"] = run.latents[:n].reshape(n, -1, r["latent_dim"])
         arrays[f"found_{r['init']}"] = result.padded_step_labels(data.length)[:n]
         arrays[f"bounds_{r['init']}"] = padded_boundaries(result.boundaries[:n])
-    arrays |= {"samples": run.indices[:n], "lengths": held_out.lengths[:n], "step_labels": held_out.step_labels[:n],
-               "step_segments": held_out.step_segments[:n]}
+    arrays |= {
+        "samples": run.indices[:n],
+        "lengths": held_out.lengths[:n],
+        "step_labels": held_out.step_labels[:n],
+        "step_segments": held_out.step_segments[:n],
+    }
     exp.write_arrays("composite", arrays)
-    exp.write_results("composite_timeline", {"inits": [r["init"] for r in chosen], "window": first["window"],
-                                             "latent_dim": first["latent_dim"], "seed": first["seed"],
-                                             "label_names": list(data.label_names)})
+    exp.write_results(
+        "composite_timeline",
+        {
+            "inits": [r["init"] for r in chosen],
+            "window": first["window"],
+            "latent_dim": first["latent_dim"],
+            "seed": first["seed"],
+            "label_names": list(data.label_names),
+        },
+    )

@@ -47,9 +47,11 @@ def score_found(held: MotionDataset, boundaries, step_labels, tolerance: int) ->
         found[i, : len(labels)] = labels
     transition = transition_steps(held)
     within = {"boundary_transition": boundary_f1(truth, boundaries, tolerance, extent=transition)} if transition else {}
-    return within | {"boundary": boundary_f1(truth, boundaries, tolerance),
-            "accuracy": step_labelling_accuracy(held.step_labels, found),
-            "segments_found": int(sum(len(b) + 1 for b in boundaries))}
+    return within | {
+        "boundary": boundary_f1(truth, boundaries, tolerance),
+        "accuracy": step_labelling_accuracy(held.step_labels, found),
+        "segments_found": int(sum(len(b) + 1 for b in boundaries)),
+    }
 
 
 def _methods(held: MotionDataset, seqs: list, n_primitives: int, window: int, seed: int) -> tuple[dict, dict]:
@@ -58,16 +60,20 @@ def _methods(held: MotionDataset, seqs: list, n_primitives: int, window: int, se
 
     counts = [len(b) for b in boundaries_from_segments(held.step_segments, held.lengths)]
     found, missing = run_peers(seqs, n_primitives, window, true_counts=counts, random_state=seed)
-    methods = {name: score_found(held, r.boundaries, r.step_labels, window) | {"seconds": r.seconds, "note": r.note}
-               for name, r in found.items()}
+    methods = {
+        name: score_found(held, r.boundaries, r.step_labels, window) | {"seconds": r.seconds, "note": r.note}
+        for name, r in found.items()
+    }
     return methods, missing
 
 
 def _bound(features, segments, held: MotionDataset, n_primitives: int, seed: int) -> dict:
     from primspace.segmentation.bounds import clustered_bound, supervised_bound
 
-    return {"supervised": supervised_bound(features, segments, n_primitives, random_state=seed),
-            "clustered": clustered_bound(features, segments, held.step_labels, n_primitives, random_state=seed)}
+    return {
+        "supervised": supervised_bound(features, segments, n_primitives, random_state=seed),
+        "clustered": clustered_bound(features, segments, held.step_labels, n_primitives, random_state=seed),
+    }
 
 
 def peers_block(data: MotionDataset, eval_idx, window: int, seed: int, codes: dict) -> dict:
@@ -101,8 +107,10 @@ def peers_block(data: MotionDataset, eval_idx, window: int, seed: int, codes: di
     n_primitives = max(len(data.label_names), 1)
     segments = true_segments(held.step_segments, held.step_labels, held.lengths)
     methods, missing = _methods(held, seqs, n_primitives, window, seed)
-    bounds = {kind: _bound(segment_features(seqs, segments, kind), segments, held, n_primitives, seed)
-              for kind in ("raw", "relative")}
+    bounds = {
+        kind: _bound(segment_features(seqs, segments, kind), segments, held, n_primitives, seed)
+        for kind in ("raw", "relative")
+    }
     for init, (inferred, untrained, q) in codes.items():
         for which, rows in (("codes", inferred), ("untrained codes", untrained)):
             seq = np.asarray(rows, dtype=np.float64).reshape(len(held), -1, q)
@@ -113,6 +121,13 @@ def peers_block(data: MotionDataset, eval_idx, window: int, seed: int, codes: di
                 bounds[f"{which}{how} {init}"] = _bound(feats, segments, held, n_primitives, seed)
     from primspace.segmentation.peers import PEERS_VERSION
 
-    return {"version": PEERS_VERSION, "n_eval": len(held), "tolerance": int(window), "segments_true": len(segments),
-            "inits": sorted(codes),
-            "methods": methods, "missing": missing, "bounds": bounds}
+    return {
+        "version": PEERS_VERSION,
+        "n_eval": len(held),
+        "tolerance": int(window),
+        "segments_true": len(segments),
+        "inits": sorted(codes),
+        "methods": methods,
+        "missing": missing,
+        "bounds": bounds,
+    }

@@ -39,8 +39,15 @@ from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_p
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["PRIMITIVES_FILE", "METHODS", "TIMELINE_FILE", "primitives_key", "primitive_indices", "run_primitives_point",
-           "run_primitives"]
+__all__ = [
+    "PRIMITIVES_FILE",
+    "METHODS",
+    "TIMELINE_FILE",
+    "primitives_key",
+    "primitive_indices",
+    "run_primitives_point",
+    "run_primitives",
+]
 
 #: The single primitives' data file inside the experiment folder.
 PRIMITIVES_FILE = "primitives.h5"
@@ -78,16 +85,21 @@ def template_label_bound(fitted, primitives: MotionDataset, held: MotionDataset,
     if primitives.labels is None or (primitives.labels < 0).any():
         return None
     names = list(held.label_names)
-    labels = np.array([names.index(primitives.label_names[int(v)]) if primitives.label_names[int(v)] in names else -1
-                       for v in primitives.labels[np.asarray(fitted.indices)]])
+    labels = np.array(
+        [
+            names.index(primitives.label_names[int(v)]) if primitives.label_names[int(v)] in names else -1
+            for v in primitives.labels[np.asarray(fitted.indices)]
+        ]
+    )
     found = np.full(held.step_labels.shape, -1)
     for i, a, b, t in zip(result.segment_sample, result.segment_start, result.segment_stop, result.segment_templates):
         found[i, a:b] = labels[t]
     return step_labelling_accuracy(held.step_labels, found)
 
 
-def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, data_path: str, eval_idx: list,
-                         preset: dict, seed: int) -> dict:
+def run_primitives_point(
+    run_dir: Path, primitives_path: str, indices: list, data_path: str, eval_idx: list, preset: dict, seed: int
+) -> dict:
     """One seed: fit the model of single primitives, then segment the held-out long
     demonstrations by synthesis and by surprise and score both."""
     from primspace.experiments.runs import experiment_scaler, shared_fit, train_configs
@@ -104,11 +116,25 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
     model_config, train_config = train_configs(single, q, seed, single.fit_epochs)
     configure_process(train_config)
     start = time.perf_counter()
-    fitted = shared_fit(run_dir / "fit", dataset=primitives, model_config=model_config, train_config=train_config,
-                        init="projection", indices=np.asarray(indices), images=False,
-                        scaler=experiment_scaler(primitives), progress=False)
-    out = {"seed": seed, "preset": single.name, "latent_dim": q, "n_templates": len(indices),
-           "fit_seconds": round(time.perf_counter() - start, 2), "final_loss": fitted.history[-1]["loss"]}
+    fitted = shared_fit(
+        run_dir / "fit",
+        dataset=primitives,
+        model_config=model_config,
+        train_config=train_config,
+        init="projection",
+        indices=np.asarray(indices),
+        images=False,
+        scaler=experiment_scaler(primitives),
+        progress=False,
+    )
+    out = {
+        "seed": seed,
+        "preset": single.name,
+        "latent_dim": q,
+        "n_templates": len(indices),
+        "fit_seconds": round(time.perf_counter() - start, 2),
+        "final_loss": fitted.history[-1]["loss"],
+    }
     held = MotionDataset.load(data_path).subset(np.asarray(eval_idx))
     k = max(len(held.label_names), 1)
     lo, hi = composite.segment_steps or (None, None)
@@ -119,8 +145,11 @@ def run_primitives_point(run_dir: Path, primitives_path: str, indices: list, dat
         result = method(fitted, held, k, min_steps=lo, max_steps=hi, random_state=seed)
         timeline |= _timeline_arrays(name, fitted, held, result)
         scores = segmentation_scores(result, held, window, transition_steps(held))
-        out[name] = scores | {"seconds": round(time.perf_counter() - start, 2), "note": result.note,
-                              "accuracy_template_labels": template_label_bound(fitted, primitives, held, result)}
+        out[name] = scores | {
+            "seconds": round(time.perf_counter() - start, 2),
+            "note": result.note,
+            "accuracy_template_labels": template_label_bound(fitted, primitives, held, result),
+        }
         out[name] |= {k: result.chosen[k] for k in ("offset", "costs", "threshold") if k in result.chosen}
     from primspace.files import atomic_path
 
@@ -133,9 +162,14 @@ def _timeline_arrays(name: str, fitted, held: MotionDataset, result) -> dict:
     """The first :data:`~primspace.experiments.composite.timeline.TIMELINE_SAMPLES` held-out
     demonstrations' scaled joints, true steps and ``name``'s found labels and boundaries."""
     n = min(TIMELINE_SAMPLES, len(held))
-    return {"joints": fitted.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64)),
-            "lengths": held.lengths[:n], "step_labels": held.step_labels[:n], "step_segments": held.step_segments[:n],
-            f"found_{name}": result.padded_step_labels(held.length)[:n], f"bounds_{name}": padded_boundaries(result.boundaries[:n])}
+    return {
+        "joints": fitted.scaler.transform(np.asarray(held.motor[:n], dtype=np.float64)),
+        "lengths": held.lengths[:n],
+        "step_labels": held.step_labels[:n],
+        "step_segments": held.step_segments[:n],
+        f"found_{name}": result.padded_step_labels(held.length)[:n],
+        f"bounds_{name}": padded_boundaries(result.boundaries[:n]),
+    }
 
 
 def _check_unseen(chains: MotionDataset) -> None:
@@ -146,9 +180,11 @@ def _check_unseen(chains: MotionDataset) -> None:
     for i, source in enumerate([] if chains.source_ids is None else chains.source_ids):
         pieces = str(source).split(": ", 1)[-1].split(" + ")
         if any(int(p.rsplit(" ", 1)[-1]) in PRIMITIVE_DEMOS for p in pieces if " demo " in p):
-            raise UserError(f"{chains.source or 'the data'}: chain {i} ({source}) uses a LASA demonstration "
-                            f"({', '.join(map(str, PRIMITIVE_DEMOS))}) that the model of single strokes is fitted on; "
-                            "chains made before 0.8 drew from all seven: run the experiment into a new --out")
+            raise UserError(
+                f"{chains.source or 'the data'}: chain {i} ({source}) uses a LASA demonstration "
+                f"({', '.join(map(str, PRIMITIVE_DEMOS))}) that the model of single strokes is fitted on; "
+                "chains made before 0.8 drew from all seven: run the experiment into a new --out"
+            )
 
 
 def run_primitives(exp: ExperimentDir, splits: dict) -> list[dict]:
@@ -164,9 +200,12 @@ def run_primitives(exp: ExperimentDir, splits: dict) -> list[dict]:
     if not path.exists():
         exp.write_data(single.data_preset, path, single.lasa_length, stage="single primitives data")
     indices = primitive_indices(MotionDataset.load(path), single).tolist()
-    points = [GridPoint(primitives_key(seed), (str(path), indices, str(exp.data_path), splits[seed],
-                                               exp.preset.to_dict(), seed))
-              for seed in exp.preset.seeds]
+    points = [
+        GridPoint(
+            primitives_key(seed), (str(path), indices, str(exp.data_path), splits[seed], exp.preset.to_dict(), seed)
+        )
+        for seed in exp.preset.seeds
+    ]
     with exp.stage("composite primitives"):
         grid = exp.grid(run_primitives_point, points, "single-primitive segmentation")
     done = [grid.results[p.key] for p in points if p.key in grid.results]
@@ -176,4 +215,3 @@ def run_primitives(exp: ExperimentDir, splits: dict) -> list[dict]:
         with np.load(run_dir_of(exp.path, primitives_key(done[0]["seed"])) / TIMELINE_FILE) as npz:
             exp.write_arrays("composite_primitives", {k: npz[k] for k in npz.files})
     return done
-

@@ -12,7 +12,15 @@ import numpy as np
 
 from primspace.experiments.results import final, mean_std
 
-__all__ = ["METHODS", "composite_table", "primitives_table", "bounds_table", "recall_table", "PEER_RULES", "BOUND_FEATURES"]
+__all__ = [
+    "METHODS",
+    "composite_table",
+    "primitives_table",
+    "bounds_table",
+    "recall_table",
+    "PEER_RULES",
+    "BOUND_FEATURES",
+]
 
 #: The segmentations by a model of single primitives
 #: (:mod:`primspace.experiments.composite.primitives`), in table order.
@@ -53,23 +61,41 @@ def composite_table(results: dict) -> tuple[list[str], list[list]]:
     for (q, init), runs in sorted(groups.items()):
         seg = [r["segmentation"] for r in runs]
         raw = [r["segmentation_untrained"] for r in runs]
-        rows.append([
-            init, q, len(runs), mean_std([r["infer"][0]["loss"] for r in runs]),
-            mean_std([final([h["loss"] for h in r["infer"]]) for r in runs]),
-            *[mean_std([s["boundary"][k] for s in seg]) for k in ("precision", "recall", "f1")],
-            _within_transition(seg),
-            mean_std([s["accuracy"] for s in seg]), mean_std([s.get("accuracy_true_boundaries") for s in seg]),
-            mean_std([s["boundary"]["f1"] for s in raw]), mean_std([s["accuracy"] for s in raw]),
-            f"{np.mean([s['segments_found'] for s in seg]):.0f} / {np.mean([s['segments_true'] for s in seg]):.0f}",
-        ])
+        rows.append(
+            [
+                init,
+                q,
+                len(runs),
+                mean_std([r["infer"][0]["loss"] for r in runs]),
+                mean_std([final([h["loss"] for h in r["infer"]]) for r in runs]),
+                *[mean_std([s["boundary"][k] for s in seg]) for k in ("precision", "recall", "f1")],
+                _within_transition(seg),
+                mean_std([s["accuracy"] for s in seg]),
+                mean_std([s.get("accuracy_true_boundaries") for s in seg]),
+                mean_std([s["boundary"]["f1"] for s in raw]),
+                mean_std([s["accuracy"] for s in raw]),
+                f"{np.mean([s['segments_found'] for s in seg]):.0f} / {np.mean([s['segments_true'] for s in seg]):.0f}",
+            ]
+        )
     rows += _primitive_rows(results)
     rows += _peer_rows(results)
     tol = next(iter(groups.values()))[0]["segmentation"]["tolerance"] if groups else None
-    return ["method", "q", "seeds", "held-out loss before inference", "after inference",
-            f"boundary precision (±{tol} steps)", "recall", "F1", f"F1 within ±{tol} of the transition",
-            "step labelling accuracy",
-            "accuracy given the true boundaries",
-            "F1, untrained codes", "accuracy, untrained codes", "segments found / true"], rows
+    return [
+        "method",
+        "q",
+        "seeds",
+        "held-out loss before inference",
+        "after inference",
+        f"boundary precision (±{tol} steps)",
+        "recall",
+        "F1",
+        f"F1 within ±{tol} of the transition",
+        "step labelling accuracy",
+        "accuracy given the true boundaries",
+        "F1, untrained codes",
+        "accuracy, untrained codes",
+        "segments found / true",
+    ], rows
 
 
 def _within_transition(scores: list[dict]) -> str:
@@ -87,10 +113,22 @@ def _primitive_rows(results: dict) -> list[list]:
         got = [r[name] for r in seeds if name in r]
         if not got:
             continue
-        rows.append([f"{name} ({seeds[0]['preset']} single primitives)", seeds[0]["latent_dim"], len(got), "—", "—",
-                     *[mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
-                     _within_transition(got), mean_std([m["accuracy"] for m in got]), "—", "—", "—",
-                     f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean([m['segments_true'] for m in got]):.0f}"])
+        rows.append(
+            [
+                f"{name} ({seeds[0]['preset']} single primitives)",
+                seeds[0]["latent_dim"],
+                len(got),
+                "—",
+                "—",
+                *[mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
+                _within_transition(got),
+                mean_std([m["accuracy"] for m in got]),
+                "—",
+                "—",
+                "—",
+                f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean([m['segments_true'] for m in got]):.0f}",
+            ]
+        )
     return rows
 
 
@@ -109,14 +147,30 @@ def primitives_table(results: dict) -> tuple[list[str], list[list]] | None:
         per = ", ".join(f"{s}: {m['boundary']['f1']:.2f} / {m['accuracy']:.2f}" for s, m in got)
         offsets = [m.get("offset") for _, m in got if m.get("offset")]
         chosen = ", ".join(f"{o} ({offsets.count(o)} of {len(got)})" for o in dict.fromkeys(offsets)) or "—"
-        rows.append([name, len(got), chosen, mean_std([m["boundary"]["f1"] for _, m in got]),
-                     mean_std([m["accuracy"] for _, m in got]),
-                     mean_std([m.get("accuracy_template_labels") for _, m in got]),
-                     mean_std([m.get("threshold") for _, m in got]) if name == "surprise" else "—", per])
+        rows.append(
+            [
+                name,
+                len(got),
+                chosen,
+                mean_std([m["boundary"]["f1"] for _, m in got]),
+                mean_std([m["accuracy"] for _, m in got]),
+                mean_std([m.get("accuracy_template_labels") for _, m in got]),
+                mean_std([m.get("threshold") for _, m in got]) if name == "surprise" else "—",
+                per,
+            ]
+        )
     first = seeds[0]
-    return [f"method ({first['preset']} preset, q = {first['latent_dim']}, {first['n_templates']} single primitives "
-            "fitted)", "seeds", "offset model chosen", "boundary F1", "step labelling accuracy",
-            "accuracy, nearest template's true primitive", "surprise threshold", "per seed (F1 / accuracy)"], rows
+    return [
+        f"method ({first['preset']} preset, q = {first['latent_dim']}, {first['n_templates']} single primitives "
+        "fitted)",
+        "seeds",
+        "offset model chosen",
+        "boundary F1",
+        "step labelling accuracy",
+        "accuracy, nearest template's true primitive",
+        "surprise threshold",
+        "per seed (F1 / accuracy)",
+    ], rows
 
 
 def _peer_rows(results: dict) -> list[list]:
@@ -125,13 +179,28 @@ def _peer_rows(results: dict) -> list[list]:
     rows = []
     for name in names:
         got = [b["methods"][name] for b in blocks if name in b.get("methods", {})]
-        oracle = [b["bounds"]["raw"]["clustered"] for b in blocks if name in b.get("methods", {})] \
-            if not name.startswith("hmm") else []
+        oracle = (
+            [b["bounds"]["raw"]["clustered"] for b in blocks if name in b.get("methods", {})]
+            if not name.startswith("hmm")
+            else []
+        )
         true = [b["segments_true"] for b in blocks if name in b.get("methods", {})]
-        rows.append([f"peer: {name}", "—", len(got), "—", "—",
-                     *[mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
-                     _within_transition(got), mean_std([m["accuracy"] for m in got]), mean_std(oracle), "—", "—",
-                     f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean(true):.0f}"])
+        rows.append(
+            [
+                f"peer: {name}",
+                "—",
+                len(got),
+                "—",
+                "—",
+                *[mean_std([m["boundary"][k] for m in got]) for k in ("precision", "recall", "f1")],
+                _within_transition(got),
+                mean_std([m["accuracy"] for m in got]),
+                mean_std(oracle),
+                "—",
+                "—",
+                f"{np.mean([m['segments_found'] for m in got]):.0f} / {np.mean(true):.0f}",
+            ]
+        )
     return rows
 
 
@@ -155,11 +224,26 @@ def bounds_table(results: dict) -> tuple[list[str], list[list]] | None:
     for key in _bound_keys(blocks):
         got = [b["bounds"][key] for b in blocks if key in b["bounds"]]
         sup = [g["supervised"] for g in got if g["supervised"]]
-        rows.append([_feature_name(key), len(got), mean_std([s["logistic"]["accuracy"] for s in sup]),
-                     mean_std([s["logistic"]["first"] for s in sup]), mean_std([s["logistic"]["later"] for s in sup]),
-                     mean_std([s["nearest"]["accuracy"] for s in sup]), mean_std([g["clustered"] for g in got])])
-    return ["features of a true segment", "seeds", "logistic regression, given labels (CV)", "first segments",
-            "later segments", "nearest neighbour, given labels (CV)", "clustered without labels"], rows
+        rows.append(
+            [
+                _feature_name(key),
+                len(got),
+                mean_std([s["logistic"]["accuracy"] for s in sup]),
+                mean_std([s["logistic"]["first"] for s in sup]),
+                mean_std([s["logistic"]["later"] for s in sup]),
+                mean_std([s["nearest"]["accuracy"] for s in sup]),
+                mean_std([g["clustered"] for g in got]),
+            ]
+        )
+    return [
+        "features of a true segment",
+        "seeds",
+        "logistic regression, given labels (CV)",
+        "first segments",
+        "later segments",
+        "nearest neighbour, given labels (CV)",
+        "clustered without labels",
+    ], rows
 
 
 def recall_table(results: dict) -> tuple[list[str], list[list]] | None:
@@ -175,8 +259,10 @@ def recall_table(results: dict) -> tuple[list[str], list[list]] | None:
         sup = [b["bounds"][key]["supervised"] for b in blocks if key in b["bounds"] and b["bounds"][key]["supervised"]]
         if not sup:
             continue
-        recall = [np.mean([s["logistic"]["recall"][j] for s in sup if s["logistic"]["recall"][j] is not None] or [np.nan])
-                  for j in range(len(names))]
+        recall = [
+            np.mean([s["logistic"]["recall"][j] for s in sup if s["logistic"]["recall"][j] is not None] or [np.nan])
+            for j in range(len(names))
+        ]
         confusion = np.sum([s["logistic"]["confusion"] for s in sup], axis=0)
         np.fill_diagonal(confusion, 0)
         t, p = np.unravel_index(int(np.argmax(confusion)), confusion.shape)

@@ -40,8 +40,24 @@ from primspace.sim.primitives.circle import Circle, CircleCCW, CircleCW
 from primspace.sim.primitives.contact import Grasp, Touch, TouchRight
 from primspace.sim.primitives.geometry import FingerGeometry, finger_geometry, home_posture
 from primspace.sim.primitives.move import MoveBlock, Pull, Push
-from primspace.sim.primitives.registry import PRIMITIVES, PUSH_AXIS, REGISTRY, get_primitive, primitive_index, script_motion
-from primspace.sim.primitives.script import R_DOWN, SCRIPT, KeyPath, Script, ScriptConstants, circle_radius, grip_height, min_jerk
+from primspace.sim.primitives.registry import (
+    PRIMITIVES,
+    PUSH_AXIS,
+    REGISTRY,
+    get_primitive,
+    primitive_index,
+    script_motion,
+)
+from primspace.sim.primitives.script import (
+    R_DOWN,
+    SCRIPT,
+    KeyPath,
+    Script,
+    ScriptConstants,
+    circle_radius,
+    grip_height,
+    min_jerk,
+)
 
 __all__ = [
     "Primitive",

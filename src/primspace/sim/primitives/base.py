@@ -61,8 +61,16 @@ class Primitive:
         return f"{type(self).__name__}(label={self.label}, name={self.name!r})"
 
     # ------------------------------------------------------------------ script
-    def script(self, scene: "Scene", block_x: float, block_y: float, size: float, n_steps: int,
-               c: ScriptConstants = SCRIPT, start=None) -> Script:
+    def script(
+        self,
+        scene: "Scene",
+        block_x: float,
+        block_y: float,
+        size: float,
+        n_steps: int,
+        c: ScriptConstants = SCRIPT,
+        start=None,
+    ) -> Script:
         """The scripted path of this primitive for a block at (x, y) of edge ``size``.
 
         Parameters
@@ -121,9 +129,19 @@ class Primitive:
         v = Verdict(self.name)
         r = rollout
         pen = float(r.penetration.max())
-        v.check("no_penetration", pen <= tol.penetration, pen, f"the robot goes {mm(pen)} into the block (at most {mm(tol.penetration)})")
+        v.check(
+            "no_penetration",
+            pen <= tol.penetration,
+            pen,
+            f"the robot goes {mm(pen)} into the block (at most {mm(tol.penetration)})",
+        )
         low = float(-r.table_distance.min())
-        v.check("above_table", low <= tol.below_table, low, f"the robot goes {mm(low)} below the table top (at most {mm(tol.below_table)})")
+        v.check(
+            "above_table",
+            low <= tol.below_table,
+            low,
+            f"the robot goes {mm(low)} below the table top (at most {mm(tol.below_table)})",
+        )
         self.criteria(v, Observed.of(r, tol), tol)
         return v.result()
 

@@ -45,19 +45,31 @@ class Circle(Primitive):
         radius = circle_radius(seen.size)
         rho = np.hypot(*offset[phase].T)
         dev = float(np.abs(rho - radius).max())
-        v.check("radius", dev <= tol.position, dev, f"radius off by {mm(dev)} from {mm(radius)} (at most {mm(tol.position)})")
+        v.check(
+            "radius",
+            dev <= tol.position,
+            dev,
+            f"radius off by {mm(dev)} from {mm(radius)} (at most {mm(tol.position)})",
+        )
         dz = float(np.abs(r.tcp[phase, 2] - seen.z_grip).max())
         v.check("height", dz <= tol.position, dz, f"circles {mm(dz)} off its height (at most {mm(tol.position)})")
         angle = np.unwrap(np.arctan2(offset[phase, 1], offset[phase, 0]))
         swept = float(np.degrees(angle[-1] - angle[0]))
         want = float(self.direction)
         v.check(
-            "turn", want * swept >= tol.min_turn_deg, swept,
+            "turn",
+            want * swept >= tol.min_turn_deg,
+            swept,
             f"turns {swept:+.0f} degrees (wanted at least {tol.min_turn_deg:.0f} "
             f"{'clockwise' if want < 0 else 'counter-clockwise'})",
         )
         near = float(r.contact_distance[phase].min())
-        v.check("no_touch", near >= tol.touch_gap, near, f"comes within {mm(near)} of the block (at least {mm(tol.touch_gap)})")
+        v.check(
+            "no_touch",
+            near >= tol.touch_gap,
+            near,
+            f"comes within {mm(near)} of the block (at least {mm(tol.touch_gap)})",
+        )
 
 
 class CircleCW(Circle):

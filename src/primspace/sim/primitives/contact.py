@@ -44,17 +44,35 @@ class Touch(Primitive):
     def criteria(self, v: Verdict, seen: Observed, tol: Tolerances) -> None:
         r, hold, z_top = seen.rollout, seen.hold, seen.z_top
         gap = float(r.contact_distance[hold].max())
-        v.check("touching", gap <= tol.touch_gap, gap, f"fingertips {mm(gap)} from the block while holding (touch: at most {mm(tol.touch_gap)})")
+        v.check(
+            "touching",
+            gap <= tol.touch_gap,
+            gap,
+            f"fingertips {mm(gap)} from the block while holding (touch: at most {mm(tol.touch_gap)})",
+        )
         off = float(np.hypot(*seen.offset[hold].T).max())
-        v.check("on_top", off <= tol.position, off, f"TCP {mm(off)} from the top face's centre (at most {mm(tol.position)})")
+        v.check(
+            "on_top", off <= tol.position, off, f"TCP {mm(off)} from the top face's centre (at most {mm(tol.position)})"
+        )
         dz = float(np.abs(r.tcp[hold, 2] - z_top).max())
-        v.check("height", dz <= tol.position, dz, f"TCP {mm(dz)} off the top-face touch height (at most {mm(tol.position)})")
+        v.check(
+            "height", dz <= tol.position, dz, f"TCP {mm(dz)} off the top-face touch height (at most {mm(tol.position)})"
+        )
         near = r.contact_distance <= tol.separation
         low = float((z_top - r.tcp[near, 2]).max()) if near.any() else 0.0
-        v.check("from_above", low <= tol.position, low,
-                f"near the block the TCP goes {mm(low)} below the top-face touch height (at most {mm(tol.position)})")
+        v.check(
+            "from_above",
+            low <= tol.position,
+            low,
+            f"near the block the TCP goes {mm(low)} below the top-face touch height (at most {mm(tol.position)})",
+        )
         travel = float(np.ptp(r.tcp[hold], axis=0).max())
-        v.check("stopped", travel <= tol.stopped, travel, f"the gripper moves {mm(travel)} while it should stay (at most {mm(tol.stopped)})")
+        v.check(
+            "stopped",
+            travel <= tol.stopped,
+            travel,
+            f"the gripper moves {mm(travel)} while it should stay (at most {mm(tol.stopped)})",
+        )
 
 
 class Grasp(Primitive):
@@ -86,14 +104,25 @@ class Grasp(Primitive):
     def criteria(self, v: Verdict, seen: Observed, tol: Tolerances) -> None:
         r, hold = seen.rollout, seen.hold
         gap = float(r.finger_distance[hold].max())
-        v.check("closed", gap <= tol.touch_gap, gap, f"a finger is {mm(gap)} from the block while holding (at most {mm(tol.touch_gap)})")
+        v.check(
+            "closed",
+            gap <= tol.touch_gap,
+            gap,
+            f"a finger is {mm(gap)} from the block while holding (at most {mm(tol.touch_gap)})",
+        )
         straddle = float((r.finger_side[hold, 0] * r.finger_side[hold, 1]).max())
         v.check("opposite_sides", straddle < 0, straddle, "the fingertips are not on opposite sides of the block")
         inside = float((seen.half - np.abs(r.finger_side[hold])).max())
-        v.check("around", inside <= 0.0, inside,
-                f"a fingertip is {mm(inside)} inside the block's side faces (the fingers must hold it by its sides, not rest on top)")
+        v.check(
+            "around",
+            inside <= 0.0,
+            inside,
+            f"a fingertip is {mm(inside)} inside the block's side faces (the fingers must hold it by its sides, not rest on top)",
+        )
         off = float(np.hypot(*seen.offset[hold].T).max())
-        v.check("centred", off <= tol.position, off, f"grip {mm(off)} off the block's centre (at most {mm(tol.position)})")
+        v.check(
+            "centred", off <= tol.position, off, f"grip {mm(off)} off the block's centre (at most {mm(tol.position)})"
+        )
         dz = float(np.abs(r.tcp[hold, 2] - seen.z_grip).max())
         v.check("height", dz <= tol.position, dz, f"grips {mm(dz)} off the grip height (at most {mm(tol.position)})")
 
@@ -148,5 +177,7 @@ class TouchRight(Primitive):
         else:
             beyond = off = dz = 0.0
         v.check("right_side", beyond < 0, beyond, "touches the block elsewhere than on its right (-y) face")
-        v.check("centred", off <= tol.position, off, f"touches {mm(off)} off the face's centre (at most {mm(tol.position)})")
+        v.check(
+            "centred", off <= tol.position, off, f"touches {mm(off)} off the face's centre (at most {mm(tol.position)})"
+        )
         v.check("height", dz <= tol.position, dz, f"touches {mm(dz)} off the touch height (at most {mm(tol.position)})")

@@ -69,7 +69,9 @@ class FingerGeometry:
             half = 0.5 * size
             lo = np.array([p[0] - half, p[1] - half, p[2] - tcp_height])
             hi = lo + size
-            front = pusher_front(self.scene, self.scene.left_finger_geoms + self.scene.right_finger_geoms, axis, sign, lo, hi)
+            front = pusher_front(
+                self.scene, self.scene.left_finger_geoms + self.scene.right_finger_geoms, axis, sign, lo, hi
+            )
             self._cache[key] = sign * (front - p[axis])
         return self._cache[key]
 

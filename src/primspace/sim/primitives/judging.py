@@ -136,8 +136,14 @@ class Observed:
         """Observe the replay ``r`` with the hold window of ``tol``."""
         t = np.linspace(0.0, 1.0, len(r.tcp))
         return cls(
-            rollout=r, t=t, hold=t >= tol.hold_from - 1e-12, offset=r.tcp[:, :2] - r.block[:, :2],
-            size=r.size, half=0.5 * r.size, z_grip=grip_height(r.size), z_top=r.size + FINGERTIP_RADIUS,
+            rollout=r,
+            t=t,
+            hold=t >= tol.hold_from - 1e-12,
+            offset=r.tcp[:, :2] - r.block[:, :2],
+            size=r.size,
+            half=0.5 * r.size,
+            z_grip=grip_height(r.size),
+            z_top=r.size + FINGERTIP_RADIUS,
         )
 
 

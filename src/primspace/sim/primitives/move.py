@@ -60,18 +60,32 @@ class MoveBlock(Primitive):
         r = seen.rollout
         target = self.target_x(SCRIPT)
         miss = float(abs(r.block[-1, 0] - target))
-        v.check("on_target", miss <= tol.position, miss, f"the block ends {mm(miss)} from its target x = {target} m (at most {mm(tol.position)})")
+        v.check(
+            "on_target",
+            miss <= tol.position,
+            miss,
+            f"the block ends {mm(miss)} from its target x = {target} m (at most {mm(tol.position)})",
+        )
         moving = np.r_[False, np.abs(np.diff(r.block[:, 0])) > 1e-9]
         if moving.any():
             off = float(np.abs(seen.offset[moving, 1]).max())
             dz = float(np.abs(r.tcp[moving, 2] - seen.z_grip).max())
         else:
             off = dz = 0.0
-        v.check("centred", off <= tol.position, off, f"pushes {mm(off)} off the block's centre line (at most {mm(tol.position)})")
+        v.check(
+            "centred",
+            off <= tol.position,
+            off,
+            f"pushes {mm(off)} off the block's centre line (at most {mm(tol.position)})",
+        )
         v.check("height", dz <= tol.position, dz, f"pushes {mm(dz)} off the push height (at most {mm(tol.position)})")
         gap = float(r.contact_distance[seen.hold].max())
-        v.check("held", gap <= tol.separation, gap,
-                f"the fingers are {mm(gap)} from the block while holding (at most {mm(tol.separation)}: the hand stays at the block it delivered)")
+        v.check(
+            "held",
+            gap <= tol.separation,
+            gap,
+            f"the fingers are {mm(gap)} from the block while holding (at most {mm(tol.separation)}: the hand stays at the block it delivered)",
+        )
 
 
 class Push(MoveBlock):

@@ -32,13 +32,17 @@ def _in_label_order(*primitives: Primitive) -> tuple[Primitive, ...]:
 
 
 #: One instance of every primitive, in label order (``REGISTRY[i].label == i``).
-REGISTRY: tuple[Primitive, ...] = _in_label_order(Touch(), Grasp(), Push(), Pull(), TouchRight(), CircleCW(), CircleCCW())
+REGISTRY: tuple[Primitive, ...] = _in_label_order(
+    Touch(), Grasp(), Push(), Pull(), TouchRight(), CircleCW(), CircleCCW()
+)
 
 #: Primitive names in label order (label i is PRIMITIVES[i]).
 PRIMITIVES: tuple[str, ...] = tuple(p.name for p in REGISTRY)
 
 #: The axis and direction along which each primitive moves the block (absent: it stays).
-PUSH_AXIS: dict[str, tuple[int, int]] = {p.name: (p.push_axis, p.push_sign) for p in REGISTRY if p.push_axis is not None}
+PUSH_AXIS: dict[str, tuple[int, int]] = {
+    p.name: (p.push_axis, p.push_sign) for p in REGISTRY if p.push_axis is not None
+}
 
 
 def primitive_index(primitive) -> int:
@@ -72,8 +76,9 @@ def get_primitive(primitive) -> Primitive:
     return REGISTRY[primitive_index(primitive)]
 
 
-def script_motion(scene: Scene, primitive, block_x: float, block_y: float, size: float, n_steps: int,
-                  c: ScriptConstants = SCRIPT) -> Script:
+def script_motion(
+    scene: Scene, primitive, block_x: float, block_y: float, size: float, n_steps: int, c: ScriptConstants = SCRIPT
+) -> Script:
     """The scripted path of one primitive (name or index) for a block at (x, y) of edge ``size``:
     :meth:`Primitive.script` of :func:`get_primitive` ``(primitive)``."""
     return get_primitive(primitive).script(scene, block_x, block_y, size, n_steps, c)

@@ -172,5 +172,13 @@ class Script:
         t = np.linspace(0.0, 1.0, len(self.tcp))
         weight = min_jerk((t - (self.contact_start - ramp)) / ramp)
         tcp = self.tcp + weight[:, None] * np.asarray(offset, dtype=float)[None]
-        return Script(self.primitive, tcp, self.fingers.copy(), self.block_xy.copy(), self.size,
-                      self.contact_start, self.push_axis, self.push_sign)
+        return Script(
+            self.primitive,
+            tcp,
+            self.fingers.copy(),
+            self.block_xy.copy(),
+            self.size,
+            self.contact_start,
+            self.push_axis,
+            self.push_sign,
+        )
