@@ -1,6 +1,7 @@
 """The motion data layer: data sets, their HDF5 file, resampling, scaling, importers.
 
-Modules: :mod:`~primspace.data.schema` (the fields of a data set, once),
+Modules: :mod:`~primspace.data.schema` (the fields of a data set, once; each field's
+conversion and checks in :mod:`~primspace.data.field_checks`),
 :mod:`~primspace.data.dataset` (:class:`MotionDataset`, in memory),
 :mod:`~primspace.data.storage` (its HDF5 file: reading, :class:`DatasetWriter`),
 :mod:`~primspace.data.checks` (the constructor's conversions and checks, without the class),

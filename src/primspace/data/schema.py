@@ -3,8 +3,8 @@
 A data set file holds arrays (HDF5 datasets, batch-first) and file attributes. Each is
 one :class:`Field` in :data:`FIELDS`, which says what it stores (dtype, shape, whether
 it is required), how it is stored (chunks, compression, fill value), how the in-memory
-:class:`~primspace.data.MotionDataset` converts and checks it, and how it is subset.
-Code that handles "every field" iterates the table instead of naming fields:
+:class:`~primspace.data.MotionDataset` converts and checks it (the functions are in
+:mod:`primspace.data.field_checks`), and how it is subset. Code that handles "every field" iterates the table instead of naming fields:
 
 * :class:`~primspace.data.MotionDataset` converts (``coerce``, ``normalize``) and
   checks (``validate``) every field, subsets the arrays (``lazy``: a view, else rows)
@@ -46,10 +46,28 @@ from typing import Any, Callable, Literal, Mapping
 
 import numpy as np
 
-from primspace.data.images import LazyImages
+from primspace.data.field_checks import (
+    as_number,
+    as_text,
+    coerce_images,
+    coerce_labels,
+    coerce_motor,
+    coerce_params,
+    default_label_names,
+    default_names,
+    stored_floating,
+    stored_strings,
+    stored_uint8,
+    validate_dt,
+    validate_images,
+    validate_joint_names,
+    validate_labels,
+    validate_motor,
+    validate_param_names,
+    validate_params,
+)
 from primspace.data.steps import coerce_steps, validate_lengths, validate_step_labels, validate_step_segments
-from primspace.data.values import as_float32, check_finite, check_int32_labels, coerce_source_ids, validate_source_ids
-from primspace.errors import DataError
+from primspace.data.values import coerce_source_ids, validate_source_ids
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -212,145 +230,6 @@ class Field:
         return np.empty(self.file_shape(dims), dtype=self.dtype)
 
 
-# ------------------------------------------------------------------- conversions
-
-
-def _coerce_motor(motor, path) -> np.ndarray:
-    return as_float32(motor, "motor", path)
-
-
-def _coerce_params(params, path) -> np.ndarray:
-    return as_float32(params, "params", path)
-
-
-def _coerce_images(images, path):
-    if isinstance(images, LazyImages):
-        return images
-    images = np.asarray(images)
-    if images.dtype != np.uint8:
-        raise DataError(f"images must be uint8, got {images.dtype}", path=path, field="images")
-    return images
-
-
-def _coerce_labels(labels, path):
-    labels = np.asarray(labels)
-    if labels.size and labels.dtype.kind not in "iu":
-        raise DataError(f"labels must be integers, got {labels.dtype}", path=path, field="labels")
-    check_int32_labels(labels, path)
-    return labels.astype(np.int32)
-
-
-def _default_names(names, ds, *, prefix: str, array: str, ndim: int) -> list[str]:
-    """Names as given, else ``prefix0..``, one per entry of the last axis of ``array``."""
-    value = getattr(ds, array)
-    n = value.shape[-1] if value is not None and value.ndim == ndim else 0
-    if names is None or len(names) == 0:
-        return [f"{prefix}{i}" for i in range(n)]
-    return [str(s) for s in names]
-
-
-def _number(value, ds) -> float:
-    return float(value)
-
-
-def _text(value, ds) -> str:
-    return str(value)
-
-
-def _label_names(names, ds) -> list[str]:
-    """Names as given, else ``"0".."K-1"`` for labels up to K-1."""
-    if names is None:
-        top = 0
-        for values in (ds.labels, ds.step_labels):
-            if values is not None and values.size:
-                top = max(top, int(values.max()) + 1)
-        return [str(i) for i in range(top)]
-    return [str(s) for s in names]
-
-
-# ---------------------------------------------------------------------- checks
-
-
-def _validate_motor(ds) -> None:
-    p, m = ds.path, ds.motor
-    if m.ndim != 3:
-        raise DataError(f"must have shape (N, T, J), got rank {m.ndim} {m.shape}", path=p, field="motor")
-    n, t, j = m.shape
-    if n < 1:
-        raise DataError("holds no samples", path=p, field="motor")
-    if t < 2:
-        raise DataError(f"sequences need at least 2 time steps, got T={t}", path=p, field="motor")
-    if j < 1:
-        raise DataError("has no joints (J=0)", path=p, field="motor")
-    check_finite(m, "motor", p)
-
-
-def _validate_joint_names(ds) -> None:
-    j = ds.motor.shape[2]
-    if len(ds.joint_names) != j:
-        raise DataError(f"{len(ds.joint_names)} joint names for J={j} joints", path=ds.path, field="joint_names")
-    if len(set(ds.joint_names)) != j:
-        raise DataError("joint names are not unique", path=ds.path, field="joint_names")
-
-
-def _validate_images(ds) -> None:
-    p, (n, t, _) = ds.path, ds.motor.shape
-    s = tuple(ds.images.shape)
-    if len(s) != 5 or s[4] != 3:
-        raise DataError(f"must have shape (N, T, H, W, 3), got {s}", path=p, field="images")
-    if s[0] != n:
-        raise DataError(f"{s[0]} samples but motor has {n}", path=p, field="images")
-    if s[1] != t:
-        raise DataError(f"{s[1]} time steps but motor has T={t}", path=p, field="images")
-    if ds.images.dtype != np.uint8:
-        raise DataError(f"must be uint8, got {ds.images.dtype}", path=p, field="images")
-
-
-def _validate_labels(ds) -> None:
-    p, n, lab = ds.path, ds.motor.shape[0], ds.labels
-    if lab.shape != (n,):
-        raise DataError(f"must have shape ({n},) to match motor, got {lab.shape}", path=p, field="labels")
-    k = len(ds.label_names)
-    bad = np.flatnonzero((lab < -1) | (lab >= k))
-    if bad.size:
-        i = int(bad[0])
-        raise DataError(
-            f"label {int(lab[i])} out of range [-1, {k - 1}] ({k} label names)", path=p, field="labels", index=i
-        )
-
-
-def _validate_params(ds) -> None:
-    p, n, pr = ds.path, ds.motor.shape[0], ds.params
-    if pr.ndim != 2 or pr.shape[0] != n:
-        raise DataError(f"must have shape ({n}, P), got {pr.shape}", path=p, field="params")
-    check_finite(pr, "params", p)
-
-
-def _validate_param_names(ds) -> None:
-    n_params = ds.params.shape[1]
-    if len(ds.param_names) != n_params:
-        raise DataError(f"{len(ds.param_names)} names for P={n_params} params", path=ds.path, field="param_names")
-
-
-def _validate_dt(ds) -> None:
-    if not np.isfinite(ds.dt) or ds.dt <= 0:
-        raise DataError(f"must be a positive number, got {ds.dt}", path=ds.path, field="dt")
-
-
-def _floating(dtype: np.dtype) -> str | None:
-    return None if dtype.kind == "f" else f"must be floating point, got {dtype}"
-
-
-def _uint8(dtype: np.dtype) -> str | None:
-    return None if dtype == np.uint8 else f"must be uint8, got {dtype}"
-
-
-def _strings(dtype: np.dtype) -> str | None:
-    import h5py
-
-    return None if h5py.check_string_dtype(dtype) is not None else f"must be strings, got {dtype}"
-
-
 # ----------------------------------------------------------------------- table
 
 #: Every field, in the order they are converted, checked, read and written: arrays
@@ -367,9 +246,9 @@ FIELDS: tuple[Field, ...] = (
         block_dims=("T", "J"),
         summary_key="joint_ranges",
         missing="missing (every data set needs joint values)",
-        coerce=_coerce_motor,
-        validate=_validate_motor,
-        check_stored=_floating,
+        coerce=coerce_motor,
+        validate=validate_motor,
+        check_stored=stored_floating,
     ),
     Field(
         "images",
@@ -382,9 +261,9 @@ FIELDS: tuple[Field, ...] = (
         lazy=True,
         writer_option="image_size",
         block_dims=("H", "W"),
-        coerce=_coerce_images,
-        validate=_validate_images,
-        check_stored=_uint8,
+        coerce=coerce_images,
+        validate=validate_images,
+        check_stored=stored_uint8,
     ),
     Field(
         "labels",
@@ -395,8 +274,8 @@ FIELDS: tuple[Field, ...] = (
         shape=("N",),
         fillvalue=-1,
         writer_option="with_labels",
-        coerce=_coerce_labels,
-        validate=_validate_labels,
+        coerce=coerce_labels,
+        validate=validate_labels,
     ),
     Field(
         "params",
@@ -407,8 +286,8 @@ FIELDS: tuple[Field, ...] = (
         shape=("N", "P"),
         writer_option="with_params",
         summary_key="param_ranges",
-        coerce=_coerce_params,
-        validate=_validate_params,
+        coerce=coerce_params,
+        validate=validate_params,
     ),
     Field(
         "lengths",
@@ -454,7 +333,7 @@ FIELDS: tuple[Field, ...] = (
         writer_option="with_source_ids",
         coerce=coerce_source_ids,
         validate=validate_source_ids,
-        check_stored=_strings,
+        check_stored=stored_strings,
     ),
     Field("schema_version", "attribute", "layout version of the file", codec="version", default=None),
     Field(
@@ -465,8 +344,8 @@ FIELDS: tuple[Field, ...] = (
         matched=True,
         codec="strings",
         default=None,
-        normalize=partial(_default_names, prefix="j", array="motor", ndim=3),
-        validate=_validate_joint_names,
+        normalize=partial(default_names, prefix="j", array="motor", ndim=3),
+        validate=validate_joint_names,
     ),
     Field(
         "label_names",
@@ -476,7 +355,7 @@ FIELDS: tuple[Field, ...] = (
         matched=True,
         codec="strings",
         default=None,
-        normalize=_label_names,
+        normalize=default_label_names,
     ),
     Field(
         "param_names",
@@ -486,8 +365,8 @@ FIELDS: tuple[Field, ...] = (
         matched=True,
         codec="strings",
         default=None,
-        normalize=partial(_default_names, prefix="p", array="params", ndim=2),
-        validate=_validate_param_names,
+        normalize=partial(default_names, prefix="p", array="params", ndim=2),
+        validate=validate_param_names,
     ),
     Field(
         "dt",
@@ -496,8 +375,8 @@ FIELDS: tuple[Field, ...] = (
         matched=True,
         codec="number",
         default=1.0,
-        normalize=_number,
-        validate=_validate_dt,
+        normalize=as_number,
+        validate=validate_dt,
     ),
     Field(
         "source",
@@ -505,7 +384,7 @@ FIELDS: tuple[Field, ...] = (
         "free text: where the data came from",
         codec="text",
         default="",
-        normalize=_text,
+        normalize=as_text,
     ),
 )
 
