@@ -39,7 +39,7 @@ def test_segment_defaults_to_synthesis_as_the_segmentation_package_says():
     from types import SimpleNamespace
 
     from primspace import segmentation
-    from primspace.cli.cluster import SegmentMethod, segment_method
+    from primspace.cli.segment import SegmentMethod, segment_method
 
     def run(window):
         return SimpleNamespace(model_config=SimpleNamespace(code_window=window))

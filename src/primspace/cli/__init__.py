@@ -8,6 +8,7 @@ module per group of commands registers them on :data:`primspace.cli.app.app`.
 from primspace.cli import importing  # noqa: F401, I001
 from primspace.cli import data  # noqa: F401
 from primspace.cli import cluster  # noqa: F401
+from primspace.cli import segment  # noqa: F401
 from primspace.cli import train  # noqa: F401
 from primspace.cli import animate  # noqa: F401
 from primspace.cli import predict  # noqa: F401
