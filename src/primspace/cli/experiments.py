@@ -95,6 +95,54 @@ def _fit_infer_epochs(text: str) -> tuple[int, int | None]:
     return (values + (None,))[:2]
 
 
+def _overrides(
+    name: str, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads
+) -> dict:
+    """The preset's fields that the options of ``primspace experiment NAME`` override (None: kept)."""
+    overrides = {
+        "latent_dims": int_list(latent_dims, "--latent-dims") if latent_dims is not None else None,
+        "inits": name_list(inits, "--inits") if inits is not None else None,
+        # the inter-primitive experiment compares its own inits (the paper: zero and projection)
+        "inter_inits": name_list(inits, "--inits") if inits is not None and name in ("inter", "all") else None,
+        "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
+        "images": images,
+        "vision_frames": vision_frames,
+        "loss_reduction": None if loss_reduction is None else loss_reduction.value,
+        "device": device,
+        "threads": threads,
+    }
+    if epochs is not None:
+        fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
+        overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
+    return overrides
+
+
+def _preset_of(preset: str | None, preset_names: str | None) -> str | None:
+    """The preset an experiment runs for the ``--preset`` given: through the map of
+    :mod:`primspace.experiments.presets` named ``preset_names`` where there is one."""
+    if preset_names is None:
+        return preset
+    from primspace.experiments import presets as experiment_presets
+
+    names = getattr(experiment_presets, preset_names)
+    return names.get(preset or experiment_presets.DEFAULT_PRESET, preset)
+
+
+def _run_steps(exp, name: str, steps: tuple[str, ...], table: str | None) -> None:
+    """Run each step (``module:function`` of :mod:`primspace.experiments`) on ``exp``, then
+    print ``table`` of the first step's results."""
+    import importlib
+
+    results = []
+    for step in _judgeable_steps(exp, name, steps):
+        module, function = step.split(":")
+        results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
+    if table is not None:  # "function" of experiments.results, or "module:function" of another reader
+        module, _, function = table.rpartition(":")
+        tables = importlib.import_module(f"primspace.experiments.{module or 'results'}")
+        echo_table(*getattr(tables, function)(results[0]))
+
+
 #: --device and --threads of the commands that run a grid of runs (the preset's TrainConfig).
 _RUN_DEVICE_HELP = "Where each run trains: auto, cpu, cuda or cuda:N (default: the preset's, auto)."
 _RUN_THREADS_HELP = (
@@ -151,37 +199,11 @@ def _experiment_command(
         device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
         threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
     ) -> None:
-        import importlib
-
-        overrides = {
-            "latent_dims": int_list(latent_dims, "--latent-dims") if latent_dims is not None else None,
-            "inits": name_list(inits, "--inits") if inits is not None else None,
-            # the inter-primitive experiment compares its own inits (the paper: zero and projection)
-            "inter_inits": name_list(inits, "--inits") if inits is not None and name in ("inter", "all") else None,
-            "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
-            "images": images,
-            "vision_frames": vision_frames,
-            "loss_reduction": None if loss_reduction is None else loss_reduction.value,
-            "device": device,
-            "threads": threads,
-        }
-        if epochs is not None:
-            fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
-            overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
-        if preset_names is not None:
-            from primspace.experiments import presets as experiment_presets
-
-            names = getattr(experiment_presets, preset_names)
-            preset = names.get(preset or experiment_presets.DEFAULT_PRESET, preset)
-        exp = _experiment(preset, data, out, backend, address, workers, seed, overrides)
-        results = []
-        for step in _judgeable_steps(exp, name, steps):
-            module, function = step.split(":")
-            results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
-        if table is not None:  # "function" of experiments.results, or "module:function" of another reader
-            module, _, function = table.rpartition(":")
-            tables = importlib.import_module(f"primspace.experiments.{module or 'results'}")
-            echo_table(*getattr(tables, function)(results[0]))
+        overrides = _overrides(
+            name, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads
+        )
+        exp = _experiment(_preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides)
+        _run_steps(exp, name, steps, table)
         _finish(exp, report or name == "all")
 
     command.__doc__ = doc
