@@ -341,3 +341,22 @@ def test_the_frames_start_refuses_in_one_line(linear_scene, image_set):
         _infer(run, test, observe="none", observe_frames="first", init="pca", fitted_data=train)
     with pytest.raises(UserError, match="has no frames"):  # infer's own check, before any start
         _infer(run, test.without_images(), observe="none", observe_frames="first", init="calibrated", fitted_data=train)
+
+
+def test_nearest_without_observed_joints_is_refused(image_run, image_set):
+    """Issue 38, item 3: with no joint observed, 'nearest' has nothing to compare and started
+    every sample from fitted demonstration 0; it is refused in one line, as the other starts are."""
+    from primspace.predict import predict
+
+    with pytest.raises(UserError, match=r"'nearest' .* observe='none' observes none"):
+        _infer(image_run, image_set, observe="none", observe_frames="first", init="nearest", fitted_data=image_set)
+    with pytest.raises(UserError, match=r"'nearest' .* observe='none' observes none"):
+        predict(
+            image_run,
+            image_set,
+            observe="none",
+            observe_frames="first",
+            init="nearest",
+            fitted_data=image_set,
+            epochs=1,
+        )

@@ -162,7 +162,7 @@ def inference_start(
 def _observed_start(parent, init, initializer, data, scaled, observed, observation, fitted_data, seed) -> np.ndarray:
     """The start under an observation rule (or ``nearest``)."""
     frames_only = observation is not None and observation.motor == NOTHING
-    if init == NEAREST or (init == CALIBRATED and not frames_only):
+    if not frames_only and init in STARTS_FROM_FITTED:
         return fitted_start(parent, init, _fitted(parent, fitted_data), data, scaled, observed, observation)
     if frames_only and init not in ("zero", "random"):
         if init == CALIBRATED:
@@ -206,6 +206,11 @@ def fitted_start(
         The caller's: calibrations fitted for a rule are kept there, keyed by the rule.
     """
     if init == NEAREST:
+        if observation is not None and observation.motor == NOTHING:  # nothing to be near to
+            raise UserError(
+                "init 'nearest' compares the observed joints, and observe='none' observes none: "
+                "start by 'calibrated' (from the frames), 'zero' or 'random'"
+            )
         return nearest_codes(scaled, observed, fitted.scaled, fitted.masks(None)[0], parent.latents)
     if init != CALIBRATED:
         raise UserError(f"init {init!r} does not read the fitted demonstrations: start by 'nearest' or 'calibrated'")
