@@ -26,6 +26,7 @@ READERS = {
     "primspace.experiments.results",
     "primspace.experiments.claims",
     "primspace.experiments.claim_rules_v1",
+    "primspace.experiments.claim_verdicts",
     "primspace.experiments.summary",
     "primspace.experiments.composite.results",
 }

@@ -24,8 +24,9 @@ is :mod:`primspace.experiments.claim_rules_v1`; version 2 (0.6) changed four rul
 Verdicts: ``holds``, ``partly`` (the sentence half holds: the numbers say which half),
 ``does not hold``, ``cannot be checked`` (the runs it needs are missing), ``not run``.
 With several seeds each seed is checked on its own (its own split, weights and P) and the
-verdict counts them. The success rule is also judged at every tolerance of the judge's
-declared sweep (:data:`primspace.sim.success.SEPARATION_SWEEP`), with a robustness flag.
+verdict counts them (:mod:`primspace.experiments.claim_verdicts`). The success rule is
+also judged at every tolerance of the judge's declared sweep
+(:data:`primspace.sim.success.SEPARATION_SWEEP`), with a robustness flag.
 
 :func:`check_claims` reads an experiment directory, or the results held in a stored
 summary (:mod:`primspace.experiments.summary`), through the same readers; this module
@@ -36,11 +37,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, NamedTuple
+from typing import Callable, Mapping
 
 import numpy as np
 
 from primspace.experiments.claim_rules_v1 import CLAIMS_V1, has_inits, losses_by_q  # the same readings of the results
+from primspace.experiments.claim_verdicts import PARTLY, Outcome, rule_verdict
 from primspace.experiments.results import LEARNED_CODES, read_results
 from primspace.stats import wilson_interval
 
@@ -48,19 +50,6 @@ __all__ = ["Outcome", "Claim", "CLAIMS", "RULES_VERSION", "check_claims", "claim
 
 #: The version of the rule set as a whole (the highest version of any rule).
 RULES_VERSION = 2
-
-#: The verdict of a sentence that half holds.
-PARTLY = "partly"
-
-
-class Outcome(NamedTuple):
-    """What a rule says of one set of results: ``ok`` (True, False, :data:`PARTLY`, or None
-    when it cannot be checked), the numbers behind it, and for rules judged at several
-    tolerances ``{tolerance: ok}``."""
-
-    ok: bool | str | None
-    numbers: str
-    sweep: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -395,85 +384,6 @@ CLAIMS: tuple[Claim, ...] = (
 )
 
 
-_VERDICTS = {True: "holds", False: "does not hold", PARTLY: PARTLY, None: "cannot be checked"}
-
-
-def _seed_views(experiment: str, results: dict) -> dict:
-    """``{seed: results as one seed's}``: intra and inter runs filtered by seed; success and
-    clustering results with their focus seed's entries replaced by each seed's
-    (``by_seed``); empty for anything else."""
-    if experiment in ("intra", "inter"):
-        seeds = sorted({r.get("seed", 0) for r in results.get("runs", [])})
-        return {s: results | {"runs": [r for r in results["runs"] if r.get("seed", 0) == s]} for s in seeds}
-    field_ = {"success": "generated", "clustering": "latent"}.get(experiment)
-    if field_ is None or not results.get("by_seed"):
-        return {}
-    views = {results.get("seed", 0): results}
-    views |= {int(s): results | {field_: v} for s, v in results["by_seed"].items()}
-    return dict(sorted(views.items()))
-
-
-def _count(per_seed: dict) -> str:
-    """ "holds in every seed (3 of 3)", "holds in 1 of 3 seeds (not in seed 0, 2)",
-    "holds in 1 of 3 seeds, partly in 1 (seed 2), not in seed 0", "partly in 1 of 3 seeds (seed 1), not in seed 0, 2"."""
-    judged = {s: ok for s, ok in per_seed.items() if ok is not None}
-    if not judged:
-        return _VERDICTS[None]
-    n = len(judged)
-    held = [s for s, ok in judged.items() if ok is True]
-    partly = [s for s, ok in judged.items() if ok == PARTLY]
-    failed = [s for s, ok in judged.items() if ok is False]
-    if len(held) == n:
-        return f"holds in every seed ({n} of {n})"
-    if len(failed) == n:
-        return f"does not hold in any seed (0 of {n})"
-    if len(partly) == n:
-        return f"partly in every seed ({n} of {n})"
-    if not partly:
-        return f"holds in {len(held)} of {n} seeds (not in seed {', '.join(map(str, failed))})"
-    parts = [f"holds in {len(held)} of {n} seeds"] if held else []
-    parts.append(f"partly in {len(partly)}{'' if held else f' of {n} seeds'} (seed {', '.join(map(str, partly))})")
-    if failed:
-        parts.append(f"not in seed {', '.join(map(str, failed))}")
-    return ", ".join(parts)
-
-
-def _plain(ok):
-    """A rule's verdict as True / False / PARTLY / None (numpy booleans made plain)."""
-    return ok if ok is None or ok == PARTLY else bool(ok)
-
-
-def _checked(check: Callable[[dict], Outcome], results: dict) -> Outcome:
-    """``check(results)`` with plain verdicts, at every tolerance too."""
-    o = check(results)
-    return o._replace(ok=_plain(o.ok), sweep=o.sweep and {t: _plain(v) for t, v in o.sweep.items()})
-
-
-def _verdict(check: Callable[[dict], Outcome], experiment: str, results: dict) -> dict:
-    """The verdict of one rule: one seed as the rule says; several seeds each on its own
-    (each seed its own split, weights and projection), counted. ``per_seed`` keeps each
-    seed's verdict word; ``sweep`` each tolerance's count (rules judged at several)."""
-    views = _seed_views(experiment, results)
-    if len(views) < 2:
-        views = {results.get("seed", 0): results}
-    outcomes = {s: _checked(check, view) for s, view in views.items()}
-    per_seed = {s: o.ok for s, o in outcomes.items()}
-    verdict = _VERDICTS[next(iter(per_seed.values()))] if len(per_seed) == 1 else _count(per_seed)
-    numbers = (
-        next(iter(outcomes.values())).numbers
-        if len(outcomes) == 1
-        else "; ".join(f"seed {s}: {o.numbers}" for s, o in outcomes.items())
-    )
-    row = {"verdict": verdict, "ours": numbers, "per_seed": {str(s): _VERDICTS[ok] for s, ok in per_seed.items()}}
-    sweeps = [o.sweep for o in outcomes.values() if o.sweep]
-    if sweeps:
-        tolerances = sorted({t for sw in sweeps for t in sw}, key=float)
-        by_tol = {t: {s: o.sweep.get(t) for s, o in outcomes.items() if o.sweep} for t in tolerances}
-        row["sweep"] = {t: (_VERDICTS[next(iter(v.values()))] if len(v) == 1 else _count(v)) for t, v in by_tol.items()}
-        row["robust"] = len(set(row["sweep"].values())) == 1
-    return row
-
-
 Source = str | Path | Mapping
 
 
@@ -509,13 +419,13 @@ def check_claims(source: Source) -> list[dict]:
         if results is None:
             rows.append(row | {"verdict": "not run", "ours": "", "per_seed": {}, "previous": []})
             continue
-        row |= _verdict(claim.check, claim.experiment, results)
+        row |= rule_verdict(claim.check, claim.experiment, results)
 
         row["previous"] = [
             {
                 "version": 1,
                 "test": old.test,
-                "verdict": _verdict(lambda view, old=old: Outcome(*old.check(view)), claim.experiment, results)[
+                "verdict": rule_verdict(lambda view, old=old: Outcome(*old.check(view)), claim.experiment, results)[
                     "verdict"
                 ],
             }
