@@ -7,7 +7,7 @@ A command's mark is ``"primspace <command>"`` (``"primspace show"``). Where it i
   to matplotlib's ``savefig(metadata=...)``);
 - GIF animations: the comment extension, ``primspace <command>`` (:func:`gif_comment`);
 - HDF5 data sets: the root attribute ``primspace_writer``
-  (``MotionDataset.save(writer=...)``, read by :func:`primspace.data.storage.file_writer`).
+  (``MotionDataset.save(writer=...)``, read by :func:`primspace.data.reading.file_writer`).
   A data set without that attribute whose ``source`` is the simulator's is taken as
   ``primspace generate``'s (the generator records its settings there);
 - summaries (JSON): their own ``summary_version`` field (``primspace summarize``).
@@ -23,7 +23,7 @@ unless it carries the command's own mark; the one-line error names the file and 
 (:func:`describe`).
 
 This module sits above the data layer (it reads a data set file's mark through
-:mod:`primspace.data.storage`) and above :mod:`primspace.files`, which the data layer
+:mod:`primspace.data.reading`) and above :mod:`primspace.files`, which the data layer
 writes through.
 """
 
@@ -104,7 +104,7 @@ def _image_mark(path: Path, kind: str) -> str | None:
 def _data_set_mark(path: Path) -> str | None:
     import h5py
 
-    from primspace.data.storage import file_writer as data_writer
+    from primspace.data.reading import file_writer as data_writer
 
     mark = data_writer(path)
     if mark is not None:

@@ -3,7 +3,8 @@
 Modules: :mod:`~primspace.data.schema` (the fields of a data set, once; each field's
 conversion and checks in :mod:`~primspace.data.field_checks`),
 :mod:`~primspace.data.dataset` (:class:`MotionDataset`, in memory),
-:mod:`~primspace.data.storage` (its HDF5 file: reading, :class:`DatasetWriter`),
+:mod:`~primspace.data.reading` (its HDF5 file read), :mod:`~primspace.data.storage`
+(written: :class:`DatasetWriter`),
 :mod:`~primspace.data.checks` (the constructor's conversions and checks, without the class),
 :mod:`~primspace.data.images` (:class:`LazyImages`), :mod:`~primspace.data.indices`
 (sample indices), :mod:`~primspace.data.values` (number checks),

@@ -4,8 +4,8 @@ One data set is one HDF5 file. Arrays are batch-first, ``(n, T, J)``; its fields
 (``motor``, and optionally ``images``, ``labels``, ``params``; the attributes
 ``joint_names``, ``label_names``, ``param_names``, ``dt``, ``source``) are described
 once, in the schema table :data:`primspace.data.schema.FIELDS`, which this class
-iterates to convert, check, subset and summarise them. The file is read and written by
-:mod:`primspace.data.storage`; images are :class:`~primspace.data.images.LazyImages`
+iterates to convert, check, subset and summarise them. The file is read by
+:mod:`primspace.data.reading` and written by :mod:`primspace.data.storage`; images are :class:`~primspace.data.images.LazyImages`
 views, read only when indexed, so :meth:`MotionDataset.subset` selects train/eval
 samples without copying images.
 
@@ -33,7 +33,8 @@ from primspace.data.checks import convert_fields, validate_fields
 from primspace.data.images import LazyImages, as_view
 from primspace.data.indices import check_indices, mask_indices
 from primspace.data.schema import ARRAYS, SCHEMA_VERSION, names_of
-from primspace.data.storage import DatasetWriter, read_fields, write_dataset
+from primspace.data.reading import read_fields
+from primspace.data.storage import DatasetWriter, write_dataset
 from primspace.errors import DataError
 
 __all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
@@ -193,7 +194,7 @@ class MotionDataset:
         Images are written in blocks of samples, one gzip-compressed chunk per sample,
         so saving a lazily-read image set never holds it all in memory. ``writer``, when
         given, is stored as the file attribute ``primspace_writer`` (read back by
-        :func:`primspace.data.storage.file_writer`).
+        :func:`primspace.data.reading.file_writer`).
 
         Raises
         ------

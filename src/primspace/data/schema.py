@@ -9,7 +9,7 @@ it is required), how it is stored (chunks, compression, fill value), how the in-
 * :class:`~primspace.data.MotionDataset` converts (``coerce``, ``normalize``) and
   checks (``validate``) every field, subsets the arrays (``lazy``: a view, else rows)
   and summarises them (``summary_key``);
-* :func:`primspace.data.storage.read_fields` reads and checks the file
+* :func:`primspace.data.reading.read_fields` reads and checks the file
   (``check_stored``, ``missing``, ``codec``);
 * :class:`~primspace.data.DatasetWriter` creates the file's arrays (``file_shape``,
   ``create_options``) and attributes (``codec``), checks each block against the file
@@ -96,7 +96,7 @@ CHECKSUM_CHUNK_BYTES = 1 << 18
 
 #: The optional file attribute marking which program wrote the file (``writer=`` of
 #: :meth:`MotionDataset.save` and :class:`DatasetWriter`; read by
-#: :func:`primspace.data.storage.file_writer`). Not a :class:`MotionDataset` field:
+#: :func:`primspace.data.reading.file_writer`). Not a :class:`MotionDataset` field:
 #: loading ignores it, and a file without it (every file written without ``writer=``,
 #: every file of other tools) has no mark.
 WRITER_ATTRIBUTE = "primspace_writer"
