@@ -622,7 +622,7 @@ def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tm
     """The intra grid's calibrated point has no fit of its own: it and the projection point
     share ``projection-q4-s0/fit`` under a lock (two workers: trained once, every epoch logged
     once), and its codes start at that fit's calibration map applied to P m."""
-    from primspace.experiments.results import calibration_table, calibration_verdict
+    from primspace.experiments.calibration_results import calibration_table, calibration_verdict
     from primspace.experiments.runs import intra_run_dir
     from primspace.train import load_run
 

@@ -24,6 +24,7 @@ SRC = Path(primspace.__file__).resolve().parent
 # the modules of primspace.experiments that read results and import no experiment
 READERS = {
     "primspace.experiments.results",
+    "primspace.experiments.calibration_results",
     "primspace.experiments.claims",
     "primspace.experiments.claim_rules_v1",
     "primspace.experiments.claim_verdicts",

@@ -13,6 +13,7 @@ import json
 import platform
 from pathlib import Path
 
+from primspace.experiments.calibration_results import calibration_table, calibration_verdict
 from primspace.experiments.claims import check_claims, claims_table
 from primspace.experiments.composite.results import bounds_table, composite_table, primitives_table, recall_table
 from primspace.experiments.results import (
@@ -28,8 +29,6 @@ from primspace.experiments.results import (
     inter_table,
     latent_table,
     probe_table,
-    calibration_table,
-    calibration_verdict,
     qualitative_check,
     spread_table,
     outcome_spread_table,
