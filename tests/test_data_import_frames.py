@@ -287,8 +287,12 @@ def test_npz_frames_with_lengths_and_without_frames_unchanged(tmp_path):
             dict(arr_0=np.zeros((5, 2)), motor_0=np.zeros((5, 2))),
             r"holds per-demonstration arrays named arr_0 and motor_0",
         ),
+        (  # issue 38: arr_2's joints were paired with images_1's frames
+            dict(arr_0=np.zeros((5, 2)), arr_2=np.zeros((5, 2)), images_0=frames_of(5), images_1=frames_of(5)),
+            r"field 'arr_1', sample 1: missing: per-demonstration arrays must be numbered arr_0 \.\. arr_1",
+        ),
     ],
-    ids=["dtype", "count", "n", "rank", "channels", "missing-images", "missing-joints", "both", "mixed"],
+    ids=["dtype", "count", "n", "rank", "channels", "missing-images", "missing-joints", "both", "mixed", "arr-gap"],
 )
 def test_npz_bad_frames_name_file_field_and_sample(tmp_path, arrays, match):
     path = tmp_path / "bad.npz"

@@ -192,12 +192,13 @@ def npz_sequences(data: dict, *, keep_padding: bool = False) -> NpzJoints:
         raise DataError("holds both 'motor' and 'joints'; keep one", field="joints")
     if stacked:
         return _stacked_joints(data, stacked[0], keep_padding)
-    keys = sorted((k for k in data if k.startswith("arr_")), key=lambda k: int(k[4:]) if k[4:].isdigit() else -1)
+    keys = _numbered(data, "arr")
     per_demo = {p: _numbered(data, p) for p in _PER_DEMO}
     layouts = [name for name, found in (("arr", keys), *per_demo.items()) if found]
     if len(layouts) > 1:
         named = " and ".join(name + "_0" for name in layouts)
         raise DataError(f"holds per-demonstration arrays named {named}; keep one")
+    keys = _check_numbered(keys, len(keys), "arr")  # a gap would pair joints with another sample's frames
     for prefix, found in per_demo.items():
         if found:
             keys = _check_numbered(found, len(found), prefix)
