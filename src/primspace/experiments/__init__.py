@@ -23,7 +23,9 @@ Shared by them:
 Reading results (import no experiment; the report uses only these):
 
 - :mod:`~primspace.experiments.results`: file names, readers, tables and the qualitative verdict.
+- :mod:`~primspace.experiments.calibration_results`: the calibrated start's table and verdict.
 - :mod:`~primspace.experiments.claims`: the paper's sentences, verbatim, checked against results.
+- :mod:`~primspace.experiments.claim_verdicts`: a rule's outcome, its verdict counted over seeds.
 - :mod:`~primspace.experiments.figures`: every experiment figure, drawn from results files.
 
 This package's ``__init__`` imports nothing, so reading results never loads an experiment.

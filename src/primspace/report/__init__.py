@@ -13,6 +13,7 @@ results readers :mod:`primspace.experiments.results` and :mod:`primspace.experim
 
 - :mod:`~primspace.report.page`: :class:`HtmlReport`, the page writer.
 - :mod:`~primspace.report.sections`: one function per section, reading results files.
+- :mod:`~primspace.report.appendices`: the closing sections (Appendix A, the environment).
 - :mod:`~primspace.report.build`: :func:`build_report`, the sections in order.
 """
 

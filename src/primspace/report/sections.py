@@ -5,12 +5,12 @@ A section reads ``OUT/experiment.json``, ``OUT/results/*.json`` and the PNGs and
 :mod:`primspace.experiments.claims`, which import no experiment) and computes nothing:
 no model is loaded, no data set is read, nothing is drawn or sampled. A section whose
 results are absent adds nothing, or a note saying what is missing.
+The closing sections (Appendix A, the environment) live in :mod:`primspace.report.appendices`
+and are importable from here.
 """
 
 from __future__ import annotations
 
-import json
-import platform
 from pathlib import Path
 
 from primspace.experiments.calibration_results import calibration_table, calibration_verdict
@@ -39,6 +39,7 @@ from primspace.experiments.results import (
     success_table,
     tuning_table,
 )
+from primspace.report.appendices import appendix_a, environment
 from primspace.report.page import HtmlReport
 
 __all__ = [
@@ -472,69 +473,3 @@ def animations(out_dir: Path, report: HtmlReport) -> None:
     strips = figure_file(out_dir, IMAGE_STRIPS)
     if strips.exists():
         report.figure(strips, "The same samples as stills: generated frames under recorded frames, per primitive.")
-
-
-def appendix_a(out_dir: Path, report: HtmlReport) -> None:
-    """Appendix A's identities, checked by sampling (``results/appendix_a.json``)."""
-    results = read_results(out_dir, "appendix_a")
-    if results is None and not any(results_file(out_dir, n).exists() for n in ("intra", "inter", "data")):
-        return  # nothing has run here yet
-    report.section("Appendix A: random projections keep inner products")
-    report.paragraph(
-        "For P with entries N(0, 1/q), the paper shows E[Pa·Pb] = a·b and "
-        f"Var[Pa·Pb] ≤ (3|a|²|b|² − (a·b)²)/q. Checked by drawing {results['n_draws'] if results else 2000} matrices P, "
-        "with a and b two scaled, flattened motor sequences of this data set. 'mean z' is the deviation of the sample "
-        "mean from a·b in standard errors; the exact variance for Gaussian P is (|a|²|b|² + (a·b)²)/q."
-    )
-    if results is None:
-        report.note(
-            f"Not computed here: results/{results_file(out_dir, 'appendix_a').name} is written by the intra and "
-            "inter experiments, and an older primspace did not write it. Re-run "
-            f"`primspace experiment intra --out {out_dir}` (finished runs are skipped) to compute it.",
-            "warn",
-        )
-        return
-    rows = [
-        [
-            r["pair"],
-            r["latent_dim"],
-            r["dot"],
-            r["mean"],
-            r["mean_z"],
-            r["var"],
-            r["var_exact"],
-            r["var_bound"],
-            "yes" if r["var"] <= r["var_bound"] else "no",
-        ]
-        for r in results["rows"]
-    ]
-    report.table(["pair", "q", "a·b", "mean Pa·Pb", "mean z", "var", "exact var", "bound", "var ≤ bound"], rows)
-
-
-def environment(out_dir: Path, report: HtmlReport) -> None:
-    """Software versions of the machine writing the report, timings per stage, experiment.json."""
-    import numpy
-    import torch
-
-    from primspace import __version__
-
-    meta = read_meta(out_dir)
-    report.section("Configuration, versions, timings")
-    versions = [
-        ["primspace", __version__],
-        ["python", platform.python_version()],
-        ["numpy", numpy.__version__],
-        ["torch", torch.__version__],
-        ["machine", f"{platform.machine()} {platform.system()}"],
-    ]
-    try:
-        import mujoco
-
-        versions.append(["mujoco", mujoco.__version__])
-    except ImportError:  # pragma: no cover - a dependency
-        pass
-    report.table(["software", "version"], versions)
-    timings = meta.get("timings", {})
-    if timings:
-        report.table(["stage", "seconds"], [[k, float(v)] for k, v in timings.items()], "Wall-clock time per stage.")
-    report.code(json.dumps(meta, indent=2))
