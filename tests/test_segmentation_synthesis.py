@@ -230,3 +230,22 @@ def test_the_offset_model_is_chosen_by_how_well_it_explains_the_data():
     assert translated.chosen["costs"]["translate"] < translated.chosen["costs"]["fade"]
     assert boundary_f1(bounds, translated.boundaries, 2)["f1"] == 1.0
     assert run(shifted, "fade").chosen == {"offset": "fade"} and set(OFFSETS) == {"fade", "translate"}
+
+
+def test_max_steps_beyond_the_data_are_capped_at_its_length(run_cli, tmp_path):
+    """Issue 38, item 5: --max-steps 1e20 never returned (synthesis) and 5000 on 40-step data took
+    gigabytes (surprise): no segment can outlast the data, so the duration is capped at its T."""
+    from primspace.segmentation.surprise import segment_by_surprise
+    from primspace.segmentation.synthesis import model_inputs, segment_by_synthesis
+    from primspace.train import load_run
+
+    pieces = single_primitive_run(run_cli, tmp_path)
+    run = load_run(tmp_path / "run")
+    long = MotionDataset(
+        np.concatenate([pieces.motor[:2], pieces.motor[2:4]], axis=1)[:, :40], joint_names=pieces.joint_names
+    )
+    assert model_inputs(run, long, min_steps=8, max_steps=10**20)[-1].max_steps == 40
+    capped = segment_by_synthesis(run, long, 3, min_steps=8, max_steps=10**20)
+    same = segment_by_synthesis(run, long, 3, min_steps=8, max_steps=40)
+    assert [list(b) for b in capped.boundaries] == [list(b) for b in same.boundaries]
+    assert len(segment_by_surprise(run, long, 3, min_steps=8, max_steps=5000).boundaries) == 2

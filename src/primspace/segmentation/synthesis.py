@@ -309,8 +309,8 @@ def model_inputs(
 ):
     """What a segmentation by a single-primitive ``run`` reads: the data's joints scaled as
     the run's ``(N, T, J)``, the valid lengths, the templates and codes of
-    :func:`run_templates`, and the :class:`SynthesisSettings`. Refuses data whose joints
-    are not the run's (names and order)."""
+    :func:`run_templates`, and the :class:`SynthesisSettings` (``max_steps`` capped at the
+    data's T). Refuses data whose joints are not the run's (names and order)."""
     names = run.config.get("data", {}).get("joint_names") if run.config else None
     if data.n_joints != run.model_config.n_joints or (names is not None and list(data.joint_names) != list(names)):
         raise UserError(
@@ -319,6 +319,8 @@ def model_inputs(
         )
     templates, codes = run_templates(run)
     settings = SynthesisSettings.for_model(templates.shape[1], min_steps, max_steps, grid, fade)
+    # no segment outlasts the data: a larger max_steps only made candidates to skip (and surprise's memory grow)
+    settings = replace(settings, max_steps=max(settings.min_steps, min(settings.max_steps, int(data.length))))
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     sequences = run.scaler.transform(np.asarray(data.motor, dtype=np.float64))
     return sequences, np.asarray(lengths, dtype=np.int64), templates, codes, settings
