@@ -106,65 +106,16 @@ def run_tune(exp: ExperimentDir) -> dict:
     init's choice; write ``results/tune.json`` (runs ``intra`` first for the shared setting)."""
     preset = exp.preset
     intra = exp.read_results("intra") or run_intra(exp)
-    data = exp.dataset()
+    labels = exp.dataset().labels
     inits = [i for i in preset.inits if i in TUNED_INITS]
     q = preset.cluster_latent_dim if preset.cluster_latent_dim in preset.latent_dims else max(preset.latent_dims)
     settings = settings_of(preset)
-    points, meta = [], {}
-    for seed in preset.seeds:
-        train, evaluation = split_indices(data.labels, preset.train_fraction, seed)
-        fit_idx, val_idx = validation_split(data.labels, train, seed)
-        if not len(val_idx):
-            raise UserError(
-                f"tune: seed {seed}'s fitted part has one sample per primitive, so none is left to "
-                "validate on; tuning needs at least 2 fitted samples of a primitive (more data or a "
-                "larger train_fraction)"
-            )
-        for setting, init in product(settings, inits):
-            key = f"tune/{init}-q{q}-s{seed}-{_name(setting)}"
-            args = (
-                str(exp.data_path),
-                fit_idx.tolist(),
-                val_idx.tolist(),
-                init,
-                q,
-                seed,
-                _with(preset, setting).to_dict(),
-            )
-            points.append(GridPoint(key, args))
-            meta[key] = {"init": init, "seed": seed, "latent_dim": q, "setting": setting}
+    points, meta = _validation_points(exp, labels, inits, q, settings)
     with exp.stage("tune: validation"):
         grid = exp.grid(run_intra_point, points, "tuning on the validation split")
-    validation = [
-        meta[k]
-        | {
-            "validation_start": r["infer"][0]["loss"],
-            "validation_loss": _final(r),
-            "n_fit": r["n_train"],
-            "n_validation": r["n_eval"],
-        }
-        for k, r in grid.results.items()
-        if k in meta
-    ]
+    validation = _validation_rows(grid.results, meta)
     chosen = _choose(validation, settings)
-    shared = {(r["init"], r["latent_dim"], r["seed"]): r for r in intra["runs"]}
-    tuned_points, reused = [], []
-    for seed in preset.seeds:
-        train, evaluation = split_indices(data.labels, preset.train_fraction, seed)
-        for latent_dim, init in product(preset.latent_dims, chosen):
-            if _same(chosen[init], settings[0]) and (init, latent_dim, seed) in shared:
-                reused.append(shared[(init, latent_dim, seed)])  # the preset's own setting: the intra run
-                continue
-            args = (
-                str(exp.data_path),
-                train.tolist(),
-                evaluation.tolist(),
-                init,
-                latent_dim,
-                seed,
-                _with(preset, chosen[init]).to_dict(),
-            )
-            tuned_points.append(GridPoint(f"tuned/{init}-q{latent_dim}-s{seed}", args))
+    tuned_points, reused = _tuned_points(exp, labels, intra, chosen, settings)
     with exp.stage("tune: tuned runs"):
         tuned_grid = exp.grid(run_intra_point, tuned_points, "intra runs with the tuned settings")
     results = {
@@ -184,3 +135,78 @@ def run_tune(exp: ExperimentDir) -> dict:
     }
     exp.write_results("tune", results)
     return results
+
+
+def _validation_points(
+    exp: ExperimentDir, labels: np.ndarray, inits: list[str], q: int, settings: list[dict]
+) -> tuple[list[GridPoint], dict]:
+    """The tuning grid's points (every setting and init, per seed, at ``q``: fit on the
+    fitted part less its validation share, infer the validation share), and each key's
+    ``{"init", "seed", "latent_dim", "setting"}``."""
+    preset = exp.preset
+    points, meta = [], {}
+    for seed in preset.seeds:
+        train, evaluation = split_indices(labels, preset.train_fraction, seed)
+        fit_idx, val_idx = validation_split(labels, train, seed)
+        if not len(val_idx):
+            raise UserError(
+                f"tune: seed {seed}'s fitted part has one sample per primitive, so none is left to "
+                "validate on; tuning needs at least 2 fitted samples of a primitive (more data or a "
+                "larger train_fraction)"
+            )
+        for setting, init in product(settings, inits):
+            key = f"tune/{init}-q{q}-s{seed}-{_name(setting)}"
+            args = (
+                str(exp.data_path),
+                fit_idx.tolist(),
+                val_idx.tolist(),
+                init,
+                q,
+                seed,
+                _with(preset, setting).to_dict(),
+            )
+            points.append(GridPoint(key, args))
+            meta[key] = {"init": init, "seed": seed, "latent_dim": q, "setting": setting}
+    return points, meta
+
+
+def _validation_rows(results: dict, meta: dict) -> list[dict]:
+    """Each finished tuning point's ``meta`` with its validation loss at the start and the end."""
+    return [
+        meta[k]
+        | {
+            "validation_start": r["infer"][0]["loss"],
+            "validation_loss": _final(r),
+            "n_fit": r["n_train"],
+            "n_validation": r["n_eval"],
+        }
+        for k, r in results.items()
+        if k in meta
+    ]
+
+
+def _tuned_points(
+    exp: ExperimentDir, labels: np.ndarray, intra: dict, chosen: dict, settings: list[dict]
+) -> tuple[list[GridPoint], list[dict]]:
+    """The intra protocol's points with each init's chosen setting (every seed and q), and
+    the intra runs reused where the choice is the preset's own setting."""
+    preset = exp.preset
+    shared = {(r["init"], r["latent_dim"], r["seed"]): r for r in intra["runs"]}
+    tuned_points, reused = [], []
+    for seed in preset.seeds:
+        train, evaluation = split_indices(labels, preset.train_fraction, seed)
+        for latent_dim, init in product(preset.latent_dims, chosen):
+            if _same(chosen[init], settings[0]) and (init, latent_dim, seed) in shared:
+                reused.append(shared[(init, latent_dim, seed)])  # the preset's own setting: the intra run
+                continue
+            args = (
+                str(exp.data_path),
+                train.tolist(),
+                evaluation.tolist(),
+                init,
+                latent_dim,
+                seed,
+                _with(preset, chosen[init]).to_dict(),
+            )
+            tuned_points.append(GridPoint(f"tuned/{init}-q{latent_dim}-s{seed}", args))
+    return tuned_points, reused
