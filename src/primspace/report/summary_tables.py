@@ -184,10 +184,23 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
     """The markdown section of one summary; ``tune_only``: its tuning table alone (a tune
     run whose shared-setting runs are another summary's, :data:`primspace.report.markdown.TUNED_IN`, whose tables
     show them)."""
-    res, preset = summary["results"], summary.get("preset", {})
-    cpu = summary.get("cpu", {})
+    res = summary["results"]
+    out = _header(summary)
+    if tune_only:
+        return "\n".join(out + _tune_section(res))
+    out += _intra_section(res)
+    out += _outcome_section(res, summary.get("preset", {}))
+    out += _inter_section(res)
+    out += _tune_section(res)
+    out += _claims_section(res)
+    return "\n".join(out)
+
+
+def _header(summary: dict) -> list[str]:
+    """A summary's heading, its command and one line of its settings and machine."""
+    preset, cpu = summary.get("preset", {}), summary.get("cpu", {})
     seeds = preset.get("seeds", [])
-    out = [
+    return [
         f"#### {summary['name']}",
         "",
         "```",
@@ -200,56 +213,72 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
         f"{preset.get('train', {}).get('loss_reduction', 'mean')}; measured on {cpu.get('model', '?')} ({cpu.get('isa', '?')})."
         + (f" {summary['note']}" if summary.get("note") else ""),
     ]
-    if tune_only:
-        return "\n".join(out + _tune_section(res))
-    if "intra" in res:
-        out += [
-            "",
-            "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
-            "(θ frozen) before the first and after the last inference epoch.",
-            "",
-            table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"])),
-        ]
+
+
+def _intra_section(res: dict) -> list[str]:
+    """The lines of a summary's intra losses (none where it holds no intra)."""
+    if "intra" not in res:
+        return []
+    return [
+        "",
+        "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
+        "(θ frozen) before the first and after the last inference epoch.",
+        "",
+        table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"])),
+    ]
+
+
+def _outcome_section(res: dict, preset: dict) -> list[str]:
+    """The lines of a summary's success rates and clustering accuracies (none where it holds neither)."""
     outcome = outcome_rows(res)
-    if outcome:
-        q = (res.get("clustering") or res.get("success") or {}).get("latent_dim")
-        columns = ["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"]
-        keep = [0, 1] + ([2, 3] if res.get("success") else []) + ([4] if res.get("clustering") else [])
-        said = (
-            [
-                "success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
-                "over seeds with its Wilson 95 % interval)"
-            ]
-            if res.get("success")
-            else []
-        ) + (
-            [f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± std over seeds [range])"]
-            if res.get("clustering")
-            else []
-        )
-        out += [
-            "",
-            f"At q = {q}: {', and '.join(said)}.",
-            "",
-            table([columns[i] for i in keep], [[row[i] for i in keep] for row in outcome]),
+    if not outcome:
+        return []
+    q = (res.get("clustering") or res.get("success") or {}).get("latent_dim")
+    columns = ["init", "seeds", "success, all primitives", "success, grasp", "clustering accuracy"]
+    keep = [0, 1] + ([2, 3] if res.get("success") else []) + ([4] if res.get("clustering") else [])
+    said = (
+        [
+            "success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
+            "over seeds with its Wilson 95 % interval)"
         ]
-    if "inter" in res:
-        out += [
-            "",
-            f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):",
-            "",
-            table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"])),
-        ]
-    out += _tune_section(res)
+        if res.get("success")
+        else []
+    ) + (
+        [f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± std over seeds [range])"]
+        if res.get("clustering")
+        else []
+    )
+    return [
+        "",
+        f"At q = {q}: {', and '.join(said)}.",
+        "",
+        table([columns[i] for i in keep], [[row[i] for i in keep] for row in outcome]),
+    ]
+
+
+def _inter_section(res: dict) -> list[str]:
+    """The lines of a summary's inter-primitive phase 2 (none where it holds no inter)."""
+    if "inter" not in res:
+        return []
+    return [
+        "",
+        f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):",
+        "",
+        table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"])),
+    ]
+
+
+def _claims_section(res: dict) -> list[str]:
+    """The lines of a summary's claims table (none where no claim is checked)."""
     claims = _claim_rows(res)
-    if claims:
-        out += [
-            "",
-            "The paper's sentences, checked (`primspace.experiments.claims`):",
-            "",
-            table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims),
-        ]
-    return "\n".join(out)
+    if not claims:
+        return []
+    return [
+        "",
+        "The paper's sentences, checked (`primspace.experiments.claims`):",
+        "",
+        table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims),
+    ]
 
 
 def _tune_section(res: dict) -> list[str]:
