@@ -8,6 +8,7 @@ from typing import Optional
 
 import typer
 
+from primspace.seeds import check_seed
 from primspace.errors import UserError
 
 from primspace.cli.app import app
@@ -104,7 +105,7 @@ def _overrides(
         "inits": name_list(inits, "--inits") if inits is not None else None,
         # the inter-primitive experiment compares its own inits (the paper: zero and projection)
         "inter_inits": name_list(inits, "--inits") if inits is not None and name in ("inter", "all") else None,
-        "seeds": int_list(seeds, "--seeds") if seeds is not None else None,
+        "seeds": tuple(check_seed(s, "--seeds") for s in int_list(seeds, "--seeds")) if seeds is not None else None,
         "images": images,
         "vision_frames": vision_frames,
         "loss_reduction": None if loss_reduction is None else loss_reduction.value,

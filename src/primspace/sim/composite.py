@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from primspace.seeds import check_seed
 from primspace.errors import DataError
 from primspace.sim.composite_config import (
     ALLOWED,
@@ -326,7 +327,7 @@ def generate_composite(
     from primspace.sim.generate import finished_shards
     from primspace.sim.shards import shard_ranges
 
-    config, seed = resolve_composite(config_or_preset), int(seed)
+    config, seed = resolve_composite(config_or_preset), check_seed(seed)
     if out is not None:
         check_output(out, overwrite)
     items = [(config, seed, a, b) for a, b in shard_ranges(config.n_sequences)]

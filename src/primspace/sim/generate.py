@@ -38,6 +38,7 @@ from typing import Callable
 import numpy as np
 
 from primspace.data.schema import arrays_of, empty_arrays
+from primspace.seeds import check_seed
 from primspace.errors import DataError, UserError
 from primspace.sim.config import MIN_LENGTH, PARAM_NAMES, PRESETS, GenerationConfig, resolve_config, sample_params
 from primspace.sim.primitives import R_DOWN, finger_geometry, get_primitive
@@ -316,7 +317,7 @@ def generate_dataset(
     from primspace.parallel import BACKENDS, default_workers
 
     config = resolve_config(config_or_preset)
-    seed = int(seed)
+    seed = check_seed(seed)
     if backend not in BACKENDS:
         raise UserError(f"unknown backend {backend!r}; choose from {', '.join(BACKENDS)}")
     if out is not None:

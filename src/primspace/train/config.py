@@ -14,7 +14,9 @@ import sys
 from dataclasses import asdict, dataclass
 from typing import Iterator
 
+
 from primspace.errors import UserError, config_from_dict
+from primspace.seeds import check_seed
 
 __all__ = [
     "TrainConfig",
@@ -166,10 +168,12 @@ class TrainConfig:
     micro_batches: int = 1
 
     def validate(self) -> "TrainConfig":
+        """This config, checked: one UserError naming the first field out of its range."""
         if not isinstance(self.epochs, int) or self.epochs < 0:
             raise UserError(f"epochs must be a whole number >= 0, got {self.epochs}")
         if not isinstance(self.batch_size, int) or self.batch_size < 1:
             raise UserError(f"batch_size must be at least 1, got {self.batch_size}")
+        check_seed(self.seed)
         for name in ("lr", "latent_lr"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):

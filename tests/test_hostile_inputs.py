@@ -1,0 +1,61 @@
+"""Inputs that gave a traceback, a hang or a silent wrong answer (issue 38), each answered in
+one line with exit status 2 and nothing written."""
+
+import numpy as np
+import pytest
+
+from conftest import assert_user_error
+from primspace.errors import UserError
+from primspace.seeds import MAX_SEED, check_seed
+from test_train import primitives
+
+
+@pytest.fixture(scope="module")
+def data_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("hostile") / "d.h5"
+    primitives(2, seed=0, T=12, J=2).save(path)
+    return path
+
+
+@pytest.mark.parametrize("seed", [-1, MAX_SEED + 1, 2.5, True])
+def test_a_seed_out_of_range_is_one_line(seed):
+    with pytest.raises(UserError, match=r"^seed must be a whole number in 0\.\.\d+, got"):
+        check_seed(seed)
+    assert check_seed(np.int64(3)) == 3 and check_seed(MAX_SEED) == MAX_SEED
+
+
+def test_a_negative_seed_is_refused_by_every_command_that_takes_one(run_cli, data_file, tmp_path):
+    train = ("train", data_file, "--epochs", "1", "--latent-dim", "2", "--layers", "4,2")
+    assert_user_error(run_cli(*train, "--seed", "-1", "--out", tmp_path / "neg"), "seed", "-1")
+    assert not (tmp_path / "neg").exists()
+    assert run_cli(*train, "--out", tmp_path / "run").code == 0
+    assert_user_error(
+        run_cli("infer", tmp_path / "run", data_file, "--epochs", "1", "--seed", "-1", "--out", tmp_path / "inf"), "-1"
+    )
+    assert_user_error(
+        run_cli(
+            "predict",
+            tmp_path / "run",
+            data_file,
+            "--init",
+            "zero",
+            "--epochs",
+            "1",
+            "--seed",
+            "-1",
+            "--out",
+            tmp_path / "pred",
+        ),
+        "-1",
+    )
+    assert not (tmp_path / "inf").exists() and not (tmp_path / "pred").exists()
+    assert_user_error(run_cli("generate", "--preset", "demo", "--seed", "-1", "--out", tmp_path / "g.h5"), "-1")
+    assert not (tmp_path / "g.h5").exists()
+
+
+def test_negative_experiment_seeds_are_refused_before_the_folder_is_made(run_cli, data_file, tmp_path):
+    res = run_cli(
+        "experiment", "intra", "--preset", "demo", "--data", data_file, "--seeds", "0,-1", "--out", tmp_path / "exp"
+    )
+    assert_user_error(res, "--seeds", "-1")
+    assert not (tmp_path / "exp").exists()  # a corrected run is not refused by a half-made folder
