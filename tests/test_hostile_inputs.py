@@ -59,3 +59,26 @@ def test_negative_experiment_seeds_are_refused_before_the_folder_is_made(run_cli
     )
     assert_user_error(res, "--seeds", "-1")
     assert not (tmp_path / "exp").exists()  # a corrected run is not refused by a half-made folder
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [("0_1", "'0_1' is not a whole number"), ("1e3", "'1e3' is not a whole"), (str(2**70), "beyond 64-bit integers")],
+)
+def test_an_index_file_holds_plain_whole_numbers(tmp_path, text, match):
+    """Issue 38: '0_1' read as 1 (Python's digit grouping) and 2**70 gave an OverflowError traceback."""
+    from primspace.data.indices import read_indices
+    from primspace.errors import DataError
+
+    path = tmp_path / "idx.txt"
+    path.write_text(f"0 {text}\n")
+    with pytest.raises(DataError, match=match):
+        read_indices(path)
+
+
+def test_an_image_size_beyond_reason_is_refused_before_any_allocation(run_cli, data_file, tmp_path):
+    """Issue 38: --image-size 80000x80000 asked for 179 GiB; -T had a bound, the size none."""
+    np.savez(tmp_path / "f.npz", motor=np.zeros((2, 5, 2)), images=np.zeros((2, 5, 8, 8, 3), np.uint8))
+    res = run_cli("import", tmp_path / "f.npz", "-T", "5", "--image-size", "80000x80000", "--out", tmp_path / "x.h5")
+    assert_user_error(res, "--image-size 80000x80000", "at most 1024")
+    assert not (tmp_path / "x.h5").exists()

@@ -39,6 +39,10 @@ _PADDED_FORMATS = ("npz", "npy")  # formats whose stacked arrays may be padded (
 #: float64 while resampling, N x T x H x W x 3 bytes of frames), so a larger T is a typo that
 #: would end in a memory error, not a data set.
 MAX_LENGTH = 100_000
+#: The largest side of stored frames, ``--image-size``: a 1024x1024 frame is 3 MiB, so T of them
+#: per sample are already more than the decoder's head is meant for; a larger size is a typo
+#: that would end in a memory error (80000x80000 asked for 179 GiB), not a data set.
+MAX_IMAGE_SIDE = 1024
 # the mark this command writes into its outputs (primspace.outputs): --overwrite replaces only its own
 _IMPORT_MARK = "primspace import"
 
@@ -70,7 +74,10 @@ _IMAGES = typer.Option(
     "feature (e.g. observation.images.top). npz and npy: frames are read from 'images'.",
 )
 _IMAGE_SIZE = typer.Option(
-    None, "--image-size", help="HxW of the stored frames (default 48x64): resized with an anti-aliasing filter."
+    None,
+    "--image-size",
+    help=f"HxW of the stored frames (default 48x64, each side at most {MAX_IMAGE_SIDE}): resized with an "
+    "anti-aliasing filter.",
 )
 _IMAGE_FIT = typer.Option(
     ImageFit.crop,
@@ -222,6 +229,8 @@ def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
     if len(parts) != 2 or not all(p.isdigit() and int(p) > 0 for p in parts):
         raise UserError(f"--image-size must be HxW in pixels, e.g. 48x64; got '{text}'")
     size = (int(parts[0]), int(parts[1]))
+    if max(size) > MAX_IMAGE_SIDE:
+        raise UserError(f"--image-size {text}: each side at most {MAX_IMAGE_SIDE} pixels")
     try:
         check_image_size(size, ModelConfig().image_channels)
     except UserError as exc:

@@ -18,6 +18,7 @@ primspace.errors.UserError: sample indices list a sample more than once
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -119,6 +120,16 @@ def mask_indices(mask, n_samples: int) -> np.ndarray:
     return np.flatnonzero(mask)
 
 
+def _whole(token: str) -> int:
+    """A text index: digits only, with an optional sign (``0_1`` and ``1e3`` are not indices)."""
+    if not re.fullmatch(r"[+-]?[0-9]+", token):
+        raise ValueError(f"{token!r} is not a whole number")
+    value = int(token)
+    if abs(value) >= 2**63:
+        raise OverflowError(f"{token} is beyond 64-bit integers")
+    return value
+
+
 def read_indices(path: str | os.PathLike, dataset=None) -> np.ndarray:
     """Sample indices from a ``.npy`` file or a text file (integers separated by
     whitespace or commas; ``#`` starts a comment); with ``dataset``, each must be one of
@@ -150,8 +161,8 @@ def read_indices(path: str | os.PathLike, dataset=None) -> np.ndarray:
         else:
             text = path.read_text(encoding="utf-8")
             tokens = [t for line in text.splitlines() for t in line.split("#", 1)[0].replace(",", " ").split()]
-            arr = np.array([int(t) for t in tokens], dtype=np.int64)
-    except (ValueError, OSError, UnicodeDecodeError) as exc:
+            arr = np.array([_whole(t) for t in tokens], dtype=np.int64)
+    except (ValueError, OverflowError, OSError, UnicodeDecodeError) as exc:
         raise DataError(
             f"cannot read sample indices ({str(exc).splitlines()[0]})", path=path, field="indices"
         ) from None
