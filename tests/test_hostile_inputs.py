@@ -82,3 +82,36 @@ def test_an_image_size_beyond_reason_is_refused_before_any_allocation(run_cli, d
     res = run_cli("import", tmp_path / "f.npz", "-T", "5", "--image-size", "80000x80000", "--out", tmp_path / "x.h5")
     assert_user_error(res, "--image-size 80000x80000", "at most 1024")
     assert not (tmp_path / "x.h5").exists()
+
+
+HOSTILE = [
+    "/../../../victim",
+    "../up",
+    "/abs/path",
+    "nul\x00byte",
+    "new\nline",
+    "x" * 300,
+    "<script>alert(1)</script>",
+    ".hidden",
+    "..",
+    "a/b",
+    "a_b",
+    "",
+]
+
+
+def test_a_name_from_data_never_reaches_a_path(tmp_path):
+    """Issue 38, item 1: a label '/../../../victim' became figures/reconstruction_/../../../victim.png
+    and replaced a file two levels above the experiment. Every figure and animation name goes
+    through one function: the file stays in OUT/figures, its name is short, and two names never
+    share a file."""
+    from primspace.experiments.results import animation_file, figure_file
+
+    out = tmp_path / "exp"
+    figures = (out / "figures").resolve()
+    paths = [figure_file(out, f"reconstruction_{name}") for name in HOSTILE] + [animation_file(out, n) for n in HOSTILE]
+    for path in paths:
+        assert path.resolve().parent == figures, path
+        assert len(path.name) < 120 and "\x00" not in path.name and "\n" not in path.name
+    assert len({p.name for p in paths}) == len(paths)  # 'a/b' and 'a_b' differ
+    assert figure_file(out, "reconstruction_push").name == "reconstruction_push.png"  # plain names unchanged

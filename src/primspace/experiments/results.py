@@ -17,6 +17,7 @@ Files of ``OUT``::
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from pathlib import Path
@@ -27,6 +28,7 @@ import numpy as np
 from primspace.errors import UserError, first_line
 
 __all__ = [
+    "file_stem",
     "META_FILE",
     "LATENT_RESULTS",
     "ANIMATION_RESULTS",
@@ -89,16 +91,29 @@ def arrays_file(out_dir: str | Path, name: str) -> Path:
     return Path(out_dir) / "results" / f"{name}.npz"
 
 
+def file_stem(name) -> str:
+    """``name`` as the stem of a file name: it may come from data (a label, a LeRobot task, a
+    primitive's name), so it never reaches a path. Letters, digits, ``-``, ``_`` and ``.``
+    are kept, every other character (``/``, NUL, a newline) becomes ``_`` and a leading dot
+    too; a name this changed, or longer than 80 characters, is cut to 80 and gets the first
+    8 hex digits of its SHA-1, so two names never share a file."""
+    text = str(name)
+    safe = re.sub(r"^\.", "_", re.sub(r"[^A-Za-z0-9_.-]", "_", text))
+    if safe != text or len(safe) > 80:
+        digest = hashlib.sha1(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+        safe = f"{safe[:80]}-{digest}"
+    return safe
+
+
 def figure_file(out_dir: str | Path, name: str) -> Path:
-    """Where figure ``name`` is drawn: ``OUT/figures/<name>.png``."""
-    return Path(out_dir) / "figures" / f"{name}.png"
+    """Where figure ``name`` is drawn: ``OUT/figures/<name>.png`` (:func:`file_stem` of ``name``)."""
+    return Path(out_dir) / "figures" / f"{file_stem(name)}.png"
 
 
 def animation_file(out_dir: str | Path, name: str) -> Path:
     """Where the animation of ``name`` (a primitive) is drawn: ``OUT/figures/animation_<name>.gif``
-    (characters other than letters, digits, ``-``, ``_`` and ``.`` replaced by ``_``)."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(name))
-    return Path(out_dir) / "figures" / f"animation_{safe}.gif"
+    (:func:`file_stem` of ``name``)."""
+    return Path(out_dir) / "figures" / f"animation_{file_stem(name)}.gif"
 
 
 def _read_json(path: Path, what: str) -> Any:
