@@ -21,7 +21,7 @@ from primspace.experiments.presets import default_train, resolve_preset
 from primspace.experiments.workspace import ExperimentDir
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
-from primspace.train.loop import DataTensors, batch_loss
+from primspace.train.loss import DataTensors, batch_loss
 from test_train import SMALL, primitives
 
 IMAGE_MODEL = ModelConfig(

@@ -9,7 +9,7 @@ from primspace.errors import UserError
 from primspace.latent import appendix_a_observed
 from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer
-from primspace.train.loop import DataTensors
+from primspace.train.loss import DataTensors
 from primspace.train.observe import Observation, observation_masks
 from test_train import SMALL, primitives
 

@@ -164,7 +164,7 @@ def test_fit_and_infer_with_code_windows_resume_exactly(tmp_path):
 
 
 def test_code_smoothness_is_the_total_variation_of_valid_windows():
-    from primspace.train.loop import code_variation
+    from primspace.train.loss import code_variation
 
     mc = ModelConfig(latent_dim=2, n_joints=1, length=9, code_window=3).validate()  # K = 3
     z = torch.tensor([[0.0, 0.0, 3.0, 4.0, 3.0, 4.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
@@ -179,7 +179,7 @@ def test_code_smoothness_is_the_total_variation_of_valid_windows():
 def test_code_smoothness_makes_codes_change_less(tmp_path):
     data = _long_demos()
     mc = ModelConfig(latent_dim=3, code_window=6, **SMALL)
-    from primspace.train.loop import code_variation
+    from primspace.train.loss import code_variation
 
     rates = {"latent_lr": 0.05, "final_lr_fraction": 1.0}  # the 0.8 below was measured at a constant rate
     plain = fit(data, model_config=mc, train_config=_tc(epochs=10, **rates), progress=False)

@@ -9,7 +9,7 @@ import torch
 from primspace.errors import UserError
 from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
-from primspace.train.loop import DataTensors, batch_loss
+from primspace.train.loss import DataTensors, batch_loss
 from test_train import primitives
 
 SMALL = ModelConfig(

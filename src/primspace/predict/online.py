@@ -10,7 +10,7 @@ processed together as one batch, each within its own valid length):
 1. ``k`` iterations of the row-wise Adam of :func:`~primspace.train.infer`
    (:class:`~primspace.latent.LatentTable`: the run's ``latent_lr``, Adam's betas) on the
    codes, θ frozen, with the loss of ``infer(..., observe=t)``
-   (:func:`~primspace.train.loop.batch_loss`: the motor MSE over each sample's observed
+   (:func:`~primspace.train.loss.batch_loss`: the motor MSE over each sample's observed
    valid entries, plus the vision term over its observed frames when the run uses
    frames), warm-started from the code after step ``t - 1``. By default each step's
    Adam starts afresh (moments reset) on the warm code; ``carry_moments=True`` runs
@@ -55,7 +55,7 @@ from primspace.progress import progress_bar
 from primspace.train.api import as_run, infer, uses_images
 from primspace.train.checks import check_calibrated, check_data_fits, check_init
 from primspace.train.config import resolve_device
-from primspace.train.loop import DataTensors, autocast_for, code_step
+from primspace.train.loss import DataTensors, autocast_for, code_step
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import inference_start

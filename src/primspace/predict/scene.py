@@ -11,7 +11,7 @@ the code of the new motion is searched inside the chosen cluster's affine subspa
 ``μ_k`` the mean of cluster ``k``'s fitted codes and ``U_k`` (r x K·q) their top ``r``
 principal directions (``r``: the fewest that explain at least 90 % of the cluster's
 variance, or ``rank=``). θ is frozen and only ``a`` is optimised (start ``a = 0``: the
-cluster mean), by the masked loss of inference (:func:`primspace.train.loop.batch_loss`)
+cluster mean), by the masked loss of inference (:func:`primspace.train.loss.batch_loss`)
 on the observed entries: the first step's joints and the first frame. Row-wise Adam
 (:class:`~primspace.latent.LatentTable`), the whole set in order, on the CPU, seeded by the
 run's seed: the same call gives the same codes. The decoder's whole sequence is the
@@ -54,7 +54,7 @@ from primspace.progress import progress_bar
 from primspace.train.api import as_run, reconstruct, uses_images
 from primspace.train.checks import select
 from primspace.train.config import lr_factor
-from primspace.train.loop import DataTensors, code_step
+from primspace.train.loss import DataTensors, code_step
 from primspace.train.observe import FIRST, Observation, observation_masks
 from primspace.train.starts import fitted_samples
 

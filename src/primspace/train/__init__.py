@@ -29,8 +29,11 @@ The package, one concept per module:
 - :mod:`~primspace.train.config`: :class:`TrainConfig`, the schedule, the device, and
   :func:`configure_process` (the process-wide settings that only entry points apply);
 - :mod:`~primspace.train.run`: :class:`TrainedRun`, a run in memory;
-- :mod:`~primspace.train.rundir`: the run directory and the checkpoint format (the only
-  code that names checkpoint keys), :func:`load_run`, :func:`write_run`;
+- :mod:`~primspace.train.rundir`: the run directory, :func:`load_run`, :func:`write_run`;
+- :mod:`~primspace.train.checkpoint`: the checkpoint format (packing, checking and
+  unpacking a checkpoint's keys);
+- :mod:`~primspace.train.loss`: the loss of a batch (``DataTensors``, ``batch_loss``,
+  ``code_step``);
 - :mod:`~primspace.train.loop`: the training loop (one ``Session`` per call);
 - :mod:`~primspace.train.streaming`: frames read from the data file batch by batch;
 - :mod:`~primspace.train.distributed`: one model trained by several processes (torchrun);

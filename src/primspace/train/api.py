@@ -29,7 +29,8 @@ from primspace.model import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device, thread_limit
 from primspace.train.logger import check_log_to
 from primspace.train.distributed import current_world
-from primspace.train.loop import DataTensors, Session, epoch_values, evaluate_loop, opened_stream
+from primspace.train.loop import Session, epoch_values, evaluate_loop, opened_stream
+from primspace.train.loss import DataTensors
 from primspace.train.checks import (
     check_calibrated,
     check_data_fits,
@@ -44,13 +45,13 @@ from primspace.train.checks import (
 from primspace.train.observe import Observation, observation_record
 from primspace.train.run import TrainedRun
 from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
+from primspace.train.checkpoint import unpack_checkpoint
 from primspace.train.rundir import (
     RunDirectory,
     load_run,
     prepare_run_dir,
     run_config,
     run_from_state,
-    unpack_checkpoint,
 )
 
 __all__ = ["fit", "infer", "reconstruct", "evaluate", "uses_images", "as_run"]

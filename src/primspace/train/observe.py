@@ -4,7 +4,7 @@ One mechanism for every "which entries were observed" (docs/model.md, *Inference
 has been seen so far*): an :class:`Observation` rule gives, for each sample, a motor mask
 and a frame mask (N, T) over its steps, combined with the padding of demonstrations of
 different lengths (:func:`primspace.data.steps.valid_steps`). The loss counts only the
-observed entries (:class:`primspace.train.loop.DataTensors`); the starts of
+observed entries (:class:`primspace.train.loss.DataTensors`); the starts of
 :func:`primspace.train.infer` read the same masks (:mod:`primspace.train.starts`).
 
 The rule is recorded in an infer run's ``config.json`` (``observe``), so a resume checks it.

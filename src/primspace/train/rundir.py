@@ -1,5 +1,5 @@
-"""A run on disk and the checkpoint format: the one module that names a run's files and
-its checkpoint's keys.
+"""A run on disk: the one module that names a run's files (the checkpoint's keys are
+:mod:`primspace.train.checkpoint`'s).
 
 A run directory holds::
 
@@ -19,8 +19,9 @@ Anything else in the directory is not the run's: an overwrite removes only the f
 above, and only when the new run starts writing (:meth:`RunDirectory.begin`).
 
 The training loop (:mod:`primspace.train.loop`) hands its state to
-:func:`checkpoint_state` and its files to a :class:`RunDirectory`; everything that reads a
-checkpoint goes through :func:`unpack_checkpoint` (resume) or :func:`run_from_state`
+:func:`~primspace.train.checkpoint.checkpoint_state` and its files to a
+:class:`RunDirectory`; everything that reads a checkpoint goes through
+:func:`~primspace.train.checkpoint.unpack_checkpoint` (resume) or :func:`run_from_state`
 (:func:`load_run`, and a run trained in memory).
 """
 
@@ -28,15 +29,11 @@ from __future__ import annotations
 
 import contextlib
 import json
-import random
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from primspace.calibration import CodeCalibration
-from primspace.data import JointScaler
 from primspace.errors import OutputExistsError, UserError
 from primspace.files import (
     atomic_path,
@@ -46,14 +43,13 @@ from primspace.files import (
     check_writable_directory,
     os_error,
 )
-from primspace.latent import LatentInitializer
 from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.train.checkpoint import read_checkpoint, unpack_checkpoint
 from primspace.train.config import TrainConfig
 from primspace.train.run import TrainedRun
 from primspace.train.rundata import check_run_data, fingerprint
 
 __all__ = [
-    "CHECKPOINT_FORMAT",
     "CONFIG_NAME",
     "METRICS_NAME",
     "CHECKPOINT_NAME",
@@ -62,24 +58,18 @@ __all__ = [
     "CALIBRATION_NAME",
     "RUN_FILES",
     "RESUMABLE_CHANGES",
-    "Checkpoint",
     "RunDirectory",
     "run_config",
     "prepare_run_dir",
-    "checkpoint_state",
-    "unpack_checkpoint",
-    "restore_rng",
     "run_from_state",
     "load_run",
     "write_run",
     "read_config",
-    "read_checkpoint",
     "read_metrics",
     "fingerprint",
     "check_run_data",
 ]
 
-CHECKPOINT_FORMAT = 1
 CONFIG_NAME, METRICS_NAME, CHECKPOINT_NAME = "config.json", "metrics.jsonl", "checkpoint.pt"
 LATENTS_NAME, LATENTS_INIT_NAME = "latents.npy", "latents_init.npy"
 CALIBRATION_NAME = "calibration.json"
@@ -227,22 +217,6 @@ def read_config(run_dir: Path) -> dict:
     return config
 
 
-def read_checkpoint(path: Path, map_location) -> dict | None:
-    if not path.is_file():
-        return None
-    try:
-        ckpt = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as exc:  # torch raises many kinds for a damaged file
-        raise UserError(
-            f"{path}: cannot read the checkpoint ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
-        ) from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        raise UserError(
-            f"{path}: not a primspace checkpoint (format {ckpt.get('format') if isinstance(ckpt, dict) else '?'})"
-        )
-    return ckpt
-
-
 def read_metrics(path: Path) -> list[dict]:
     if not path.is_file():
         return []
@@ -260,101 +234,6 @@ def save_npy(path: Path, array: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.save(f, array)
-
-
-# ------------------------------------------------------------------------ checkpoint
-
-
-def checkpoint_state(
-    *,
-    config: dict,
-    epoch: int,
-    model: torch.nn.Module,
-    theta_opt,
-    table,
-    initial_codes: torch.Tensor,
-    scaler: JointScaler,
-    initializer: LatentInitializer,
-    generator: torch.Generator,
-    frame_generator: torch.Generator | None = None,
-    calibration: CodeCalibration | None = None,
-) -> dict:
-    """Everything a run needs to continue bit-identically, as one dict (``checkpoint.pt``).
-
-    ``theta_opt`` is None while inferring (θ frozen). The RNG states are the batch-order
-    generator's, the frame-drawing generator's (``vision_frames`` runs only) and the
-    process's global torch, Python and NumPy generators. ``calibration``: the run's map
-    from initial to fitted codes, or the one an inferred run carries from its trained run.
-    """
-    rng = {
-        "shuffle": generator.get_state(),
-        "torch": torch.get_rng_state(),
-        "python": random.getstate(),
-        "numpy": _numpy_state(),
-    }
-    if frame_generator is not None:
-        rng["frames"] = frame_generator.get_state()
-    return {
-        "format": CHECKPOINT_FORMAT,
-        "kind": config["kind"],
-        "epoch": epoch,
-        "model": model.state_dict(),
-        "theta_optimizer": None if theta_opt is None else theta_opt.state_dict(),
-        "latents": table.state_dict(),
-        "initial_codes": initial_codes,
-        "scaler": scaler.to_dict(),
-        "initializer": initializer.state_dict(),
-        "calibration": None if calibration is None else calibration.state_dict(),
-        "rng": rng,
-        "config": config,
-    }
-
-
-@dataclass
-class Checkpoint:
-    """A checkpoint's parts, unpacked and checked (:func:`unpack_checkpoint`)."""
-
-    epoch: int
-    model: dict  # state dict of the MTRNNDecoder
-    theta_optimizer: dict | None
-    latents: dict  # LatentTable state dict
-    initial_codes: torch.Tensor
-    scaler: JointScaler
-    initializer: LatentInitializer
-    rng: dict
-    config: dict
-    calibration: CodeCalibration | None = None
-
-
-def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoint:
-    """The parts of a checkpoint dict; one clear :class:`UserError` naming ``where`` if a part is missing."""
-    try:
-        return Checkpoint(
-            epoch=int(state["epoch"]),
-            model=state["model"],
-            theta_optimizer=state["theta_optimizer"],
-            latents=state["latents"],
-            initial_codes=state["initial_codes"],
-            scaler=JointScaler.from_dict(state["scaler"]),
-            initializer=LatentInitializer.from_state_dict(state["initializer"]),
-            rng=state["rng"],
-            config=state["config"],
-            calibration=None
-            if state.get("calibration") is None
-            else CodeCalibration.from_state_dict(state["calibration"]),
-        )
-    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
-        raise UserError(f"{where}: not a primspace checkpoint ({str(exc).splitlines()[0]})") from None
-
-
-def restore_rng(rng: dict, generator: torch.Generator, frame_generator: torch.Generator | None = None) -> None:
-    """Put the batch-order and frame-drawing generators and the global generators back where a checkpoint saved them."""
-    generator.set_state(rng["shuffle"])
-    if frame_generator is not None:
-        frame_generator.set_state(rng["frames"])
-    torch.set_rng_state(rng["torch"])
-    random.setstate(_to_tuple(rng["python"]))
-    _set_numpy_state(rng["numpy"])
 
 
 def run_from_state(state: dict, history: list[dict], run_dir: Path | None) -> TrainedRun:
@@ -492,22 +371,3 @@ class RunDirectory:
         kept = [h for h in read_metrics(self.path / METRICS_NAME) if h["epoch"] <= epoch]
         atomic_write_text(self.path / METRICS_NAME, "".join(json.dumps(h) + "\n" for h in kept))
         return kept
-
-
-def _numpy_state() -> dict:
-    name, keys, pos, has_gauss, cached = np.random.get_state()
-    return {
-        "name": name,
-        "keys": torch.from_numpy(keys.astype(np.int64)),
-        "pos": int(pos),
-        "has_gauss": int(has_gauss),
-        "cached": float(cached),
-    }
-
-
-def _set_numpy_state(s: dict) -> None:
-    np.random.set_state((s["name"], s["keys"].numpy().astype(np.uint32), s["pos"], s["has_gauss"], s["cached"]))
-
-
-def _to_tuple(x):
-    return tuple(_to_tuple(v) for v in x) if isinstance(x, (list, tuple)) else x

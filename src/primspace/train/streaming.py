@@ -14,7 +14,7 @@ What keeps the numbers identical to the in-memory path, bit for bit:
   generators, the same calls, in the same order), the whole epoch's draws before the
   epoch, so the loader knows every batch in advance and its workers read ahead;
 - a worker returns the stored ``uint8`` frames of those samples at those steps, the
-  bytes the in-memory path gathers (:func:`primspace.train.loop.batch_frames`); the loss
+  bytes the in-memory path gathers (:func:`primspace.train.loss.batch_frames`); the loss
   converts both alike;
 - batches come back in the order asked (the loader's ``in_order``).
 
