@@ -615,12 +615,12 @@ PINNED_READ_INDICES = [
     [
         "float.txt",
         "DataError",
-        "<tmp>/float.txt, field 'indices': cannot read sample indices (invalid literal for int() with base 10: '1.5')",
+        "<tmp>/float.txt, field 'indices': cannot read sample indices ('1.5' is not a whole number)",
     ],
     [
         "word.txt",
         "DataError",
-        "<tmp>/word.txt, field 'indices': cannot read sample indices (invalid literal for int() with base 10: 'two')",
+        "<tmp>/word.txt, field 'indices': cannot read sample indices ('two' is not a whole number)",
     ],
     ["empty.txt", "DataError", "<tmp>/empty.txt, field 'indices': must be a non-empty list of integers"],
     ["comment.txt", "DataError", "<tmp>/comment.txt, field 'indices': must be a non-empty list of integers"],
