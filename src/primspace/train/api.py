@@ -48,6 +48,7 @@ from primspace.train.starts import derived_seeds, inference_start, initial_codes
 from primspace.train.checkpoint import unpack_checkpoint
 from primspace.train.rundir import (
     RunDirectory,
+    WriterLock,
     load_run,
     prepare_run_dir,
     run_config,
@@ -457,8 +458,13 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
             raise UserError("resume=True needs the out_dir of the run to continue")
         return None, None
     out_dir = Path(out_dir)
-    ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=inputs, epochs=epochs)
-    return RunDirectory(out_dir), ckpt
+    lock = WriterLock(out_dir).acquire()  # held until the run ends (RunDirectory.close): one writer at a time
+    try:
+        ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=inputs, epochs=epochs)
+    except BaseException:
+        lock.release()
+        raise
+    return RunDirectory(out_dir, lock), ckpt
 
 
 def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: int):

@@ -202,6 +202,8 @@ class Session:
                 self.sink = None
             if self.stream is not None:
                 self.stream.close()
+            if self.store is not None:
+                self.store.close()  # the writer's lock: the run is over, however it ended
 
     def _run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
         tc = self.tc

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +60,9 @@ __all__ = [
     "RUN_FILES",
     "RESUMABLE_CHANGES",
     "RunDirectory",
+    "WriterLock",
+    "LOCK_NAME",
+    "check_same_run",
     "run_config",
     "prepare_run_dir",
     "run_from_state",
@@ -137,7 +141,7 @@ def prepare_run_dir(
         raise UserError(f"{out_dir}: exists and is not a directory")
     if out_dir.is_dir():
         check_writable_directory(out_dir)  # used in place (never replaced): refused now, not after loading
-    existing = out_dir.is_dir() and any(out_dir.iterdir())
+    existing = out_dir.is_dir() and any(p.name != LOCK_NAME for p in out_dir.iterdir())
     is_run = (out_dir / CONFIG_NAME).is_file() or (out_dir / CHECKPOINT_NAME).is_file()
     if existing and not is_run:
         raise UserError(f"{out_dir}: exists and is not a primspace run directory; choose another out_dir")
@@ -164,6 +168,57 @@ def prepare_run_dir(
     return None
 
 
+#: The file a run's writer holds locked (``flock``) from the check of the directory to the run's
+#: end: a second writer (``--overwrite`` or ``--resume`` while one runs) is refused at once. The
+#: kernel releases the lock when the process ends, however it ends: a kill leaves none behind.
+LOCK_NAME = ".writer.lock"
+
+
+class WriterLock:
+    """The exclusive lock of the one process writing ``run_dir`` (:data:`LOCK_NAME`)."""
+
+    def __init__(self, run_dir: Path) -> None:
+        self.run_dir, self.handle = Path(run_dir), None
+
+    def acquire(self) -> "WriterLock":
+        """Take the lock (a no-op when held, or while the folder does not exist yet); one
+        UserError when another process holds it."""
+        import fcntl
+
+        if self.handle is not None or not self.run_dir.is_dir():
+            return self
+        try:
+            handle = open(self.run_dir / LOCK_NAME, "a+", encoding="utf-8")
+        except OSError as exc:
+            raise os_error(exc, self.run_dir) from None
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip()
+            handle.close()
+            who = f" (pid {holder})" if holder.isdigit() else ""
+            raise UserError(
+                f"{self.run_dir}: another primspace process{who} is writing this run; wait for it to end "
+                "or choose another out_dir"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(str(os.getpid()))
+        handle.flush()
+        self.handle = handle
+        return self
+
+    def __getstate__(self) -> dict:  # handed to other processes (distributed training): they hold nothing
+        return {"run_dir": self.run_dir, "handle": None}
+
+    def release(self) -> None:
+        """Let go of the lock (closing the file releases it)."""
+        if self.handle is not None:
+            self.handle.close()
+            self.handle = None
+
+
 def start_run_dir(out_dir: Path, remove: bool = True) -> None:
     """Make ``out_dir`` ready for a new run: with ``remove``, remove an earlier run's files
     (only those a run writes: anything else in the directory stays); create it (an
@@ -179,9 +234,15 @@ def start_run_dir(out_dir: Path, remove: bool = True) -> None:
 
 
 def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
-    def fail(what: str, a, b) -> None:
+    found = first_difference(saved, given)
+    if found is not None:
+        what, a, b = found
         raise UserError(f"{out_dir}: cannot resume: {what} differs (saved {a}, given {b})")
 
+
+def first_difference(saved: dict, given: dict) -> tuple | None:
+    """``(what, saved value, given value)`` of the first setting in which two run configs differ
+    beyond what a resume may change (:data:`RESUMABLE_CHANGES`); None when they are one run's."""
     # a run saved before a field existed has that field's default (which gives its numbers)
     saved = saved | {
         "model": ModelConfig.from_dict(saved["model"]).to_dict(),
@@ -189,19 +250,20 @@ def _check_compatible(out_dir: Path, saved: dict, given: dict) -> None:
     }
     for key in ("kind", "init", "parent", "scaler", "observe"):  # observe: the rule of an inference from a prefix
         if saved.get(key) != given.get(key):
-            fail(key, saved.get(key), given.get(key))
+            return key, saved.get(key), given.get(key)
     for key, value in given["model"].items():
         if saved["model"].get(key) != value:
-            fail(f"model {key}", saved["model"].get(key), value)
+            return f"model {key}", saved["model"].get(key), value
     for key, value in given["train"].items():
         if key not in RESUMABLE_CHANGES and saved["train"].get(key) != value:
-            fail(f"train {key}", saved["train"].get(key), value)
+            return f"train {key}", saved["train"].get(key), value
     sd, gd = saved["data"], given["data"]
     for key in ("n_samples", "images", "motor_sha1"):
         if sd.get(key) != gd.get(key):
-            fail("data" if key == "motor_sha1" else f"data {key}", sd.get(key), gd.get(key))
+            return ("data" if key == "motor_sha1" else f"data {key}"), sd.get(key), gd.get(key)
     if sd.get("indices") != gd.get("indices"):
-        fail("data indices", f"{len(sd.get('indices', []))} samples", f"{len(gd['indices'])} samples")
+        return "data indices", f"{len(sd.get('indices', []))} samples", f"{len(gd['indices'])} samples"
+    return None
 
 
 def read_config(run_dir: Path) -> dict:
@@ -285,11 +347,24 @@ def load_run(run_dir: str | Path, *, map_location: str | torch.device = "cpu") -
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise UserError(f"{run_dir}: no such run directory")
-    read_config(run_dir)
+    config = read_config(run_dir)
     state = read_checkpoint(run_dir / CHECKPOINT_NAME, map_location)
     if state is None:
         raise UserError(f"{run_dir}: has no {CHECKPOINT_NAME} (the run never completed an epoch)")
+    check_same_run(run_dir, config, state)
     return run_from_state(state, read_metrics(run_dir / METRICS_NAME), run_dir)
+
+
+def check_same_run(run_dir: Path, config: dict, state: dict) -> None:
+    """One UserError when the checkpoint belongs to another run than ``config.json`` (two
+    writers mixed the folder): the checkpoint names the config it was written with."""
+    saved = state.get("config")
+    found = None if saved is None else first_difference(saved, config)
+    if found is not None:
+        raise UserError(
+            f"{run_dir}: its {CHECKPOINT_NAME} belongs to another run than its {CONFIG_NAME} ({found[0]} differs: "
+            "two runs wrote this folder); train it again in another out_dir"
+        )
 
 
 def write_run(out_dir: str | Path, run: TrainedRun, *, overwrite: bool = False, inputs: tuple = ()) -> Path:
@@ -298,12 +373,16 @@ def write_run(out_dir: str | Path, run: TrainedRun, *, overwrite: bool = False, 
     out_dir = Path(out_dir)
     if run.state is None:
         raise UserError("this run holds no checkpoint state to save")
-    prepare_run_dir(out_dir, run.config, resume=False, overwrite=overwrite, inputs=inputs)
-    store = RunDirectory(out_dir)
-    store.begin(run.config, run.initial_latents)
-    for line in run.history:
-        store.log(line)
-    store.save(run.state, run.latents)
+    lock = WriterLock(out_dir).acquire()
+    try:
+        prepare_run_dir(out_dir, run.config, resume=False, overwrite=overwrite, inputs=inputs)
+        store = RunDirectory(out_dir, lock)
+        store.begin(run.config, run.initial_latents)
+        for line in run.history:
+            store.log(line)
+        store.save(run.state, run.latents)
+    finally:
+        lock.release()
     return out_dir
 
 
@@ -331,9 +410,14 @@ class RunDirectory:
     it was not asked to replace.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, lock: WriterLock | None = None) -> None:
         self.path = Path(path)
+        self.lock = WriterLock(self.path) if lock is None else lock
         self._found = _run_identity(self.path)
+
+    def close(self) -> None:
+        """The run is over: release the writer's lock."""
+        self.lock.release()
 
     def begin(self, config: dict, initial_codes: np.ndarray) -> None:
         """Start a new run: remove the earlier run's files (only those of the run that was
@@ -342,6 +426,7 @@ class RunDirectory:
         if _run_identity(self.path) != self._found:
             raise UserError(f"{self.path}: another run started writing here meanwhile; choose another out_dir")
         start_run_dir(self.path, remove=self._found != (None, None))
+        self.lock.acquire()  # a folder made just now: locked before the first file is written
         try:
             atomic_write_json(self.path / CONFIG_NAME, config, overwrite=False)
         except OutputExistsError:
