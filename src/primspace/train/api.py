@@ -47,10 +47,8 @@ from primspace.train.run import TrainedRun
 from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
 from primspace.train.checkpoint import unpack_checkpoint
 from primspace.train.rundir import (
-    RunDirectory,
-    WriterLock,
     load_run,
-    prepare_run_dir,
+    open_run_dir,
     run_config,
     run_from_state,
 )
@@ -457,14 +455,7 @@ def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, e
         if resume:
             raise UserError("resume=True needs the out_dir of the run to continue")
         return None, None
-    out_dir = Path(out_dir)
-    lock = WriterLock(out_dir).acquire()  # held until the run ends (RunDirectory.close): one writer at a time
-    try:
-        ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=inputs, epochs=epochs)
-    except BaseException:
-        lock.release()
-        raise
-    return RunDirectory(out_dir, lock), ckpt
+    return open_run_dir(Path(out_dir), config, resume, overwrite, inputs, epochs)
 
 
 def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: int):

@@ -65,6 +65,7 @@ __all__ = [
     "check_same_run",
     "run_config",
     "prepare_run_dir",
+    "open_run_dir",
     "run_from_state",
     "load_run",
     "write_run",
@@ -217,6 +218,18 @@ class WriterLock:
         if self.handle is not None:
             self.handle.close()
             self.handle = None
+
+
+def open_run_dir(out_dir: Path, config: dict, resume: bool, overwrite: bool, inputs: tuple = (), epochs=None):
+    """The :class:`RunDirectory` to write, holding the writer's lock until the run ends
+    (:meth:`RunDirectory.close`), and the checkpoint to resume from (:func:`prepare_run_dir`)."""
+    lock = WriterLock(out_dir).acquire()
+    try:
+        ckpt = prepare_run_dir(out_dir, config, resume, overwrite, inputs=inputs, epochs=epochs)
+    except BaseException:
+        lock.release()
+        raise
+    return RunDirectory(out_dir, lock), ckpt
 
 
 def start_run_dir(out_dir: Path, remove: bool = True) -> None:
