@@ -115,3 +115,34 @@ def test_a_name_from_data_never_reaches_a_path(tmp_path):
         assert len(path.name) < 120 and "\x00" not in path.name and "\n" not in path.name
     assert len({p.name for p in paths}) == len(paths)  # 'a/b' and 'a_b' differ
     assert figure_file(out, "reconstruction_push").name == "reconstruction_push.png"  # plain names unchanged
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 300 KiB file system of our own (tmpfs, as root), removed after the test; skipped where
+    this machine does not allow one."""
+    import subprocess
+
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    made = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=300k", "tmpfs", str(mount)], capture_output=True)
+    if made.returncode != 0:
+        pytest.skip(f"cannot mount a small file system here ({made.stderr.decode().strip()[:80]})")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], check=False)
+
+
+def test_a_full_disk_is_one_line_naming_the_output_and_the_disk(run_cli, data_file, tmp_path, small_disk):
+    """Issue 38, item 4: an HDF5 import segfaulted after pages of h5py errors; train printed a
+    torch.save traceback. Now: one line, exit 2, the output and its disk named, nothing half-written."""
+    np.savez(tmp_path / "big.npz", motor=np.random.default_rng(0).normal(size=(200, 100, 7)))
+    res = run_cli("import", tmp_path / "big.npz", "-T", "100", "--out", small_disk / "x.h5")
+    assert_user_error(res, str(small_disk / "x.h5"), "cannot write", "free")
+    assert not any(small_disk.iterdir())
+    big = primitives(40, seed=0, T=60, J=7)  # a checkpoint of this model does not fit in 300 KiB
+    big.save(tmp_path / "big.h5")
+    res = run_cli("train", tmp_path / "big.h5", "--epochs", "1", "--latent-dim", "16", "--out", small_disk / "run")
+    assert_user_error(res, "checkpoint.pt", "cannot write", "no space left")
+    assert not [p for p in (small_disk / "run").iterdir() if p.name.endswith(".tmp")]  # no half-written file

@@ -289,9 +289,40 @@ def atomic_path(path: str | os.PathLike, overwrite: bool = True) -> Iterator[Pat
                 rename_noreplace(tmp, path)
             except FileExistsError:
                 raise OutputExistsError(path) from None
-    except BaseException:
+    except BaseException as exc:
+        full = disk_full(path.parent) if isinstance(exc, Exception) and not isinstance(exc, UserError) else None
         _discard(tmp)
+        if full is not None:  # torch says it as 'unexpected pos', h5py in pages of its own
+            raise UserError(f"{path}: cannot write: {full}; nothing was written") from None
         raise
+
+
+#: A disk with less free space than this after a failed write is taken to be why it failed.
+FULL_MARGIN = 1 << 20
+
+
+def check_free_space(path: str | os.PathLike, need: int) -> None:
+    """One UserError before writing ``path`` when its disk has fewer than ``need`` bytes free
+    (an HDF5 writer that runs out of space mid-file fills stderr and may crash the process)."""
+    directory = Path(path).parent
+    try:
+        free = shutil.disk_usage(directory if directory.exists() else Path.cwd()).free
+    except OSError:
+        return
+    if free < need:
+        raise UserError(
+            f"{path}: cannot write: it needs up to {need} bytes and the disk of {directory} has {free} free"
+        )
+
+
+def disk_full(directory: str | os.PathLike) -> str | None:
+    """``"no space left on DIR (N bytes free)"`` when the file system holding ``directory``
+    has less than :data:`FULL_MARGIN` bytes free, else None (or when it cannot be asked)."""
+    try:
+        free = shutil.disk_usage(directory).free
+    except OSError:
+        return None
+    return f"no space left on the disk of {os.fspath(directory)} ({free} bytes free)" if free < FULL_MARGIN else None
 
 
 @contextlib.contextmanager

@@ -34,7 +34,7 @@ from primspace.data.schema import (
 from primspace.data.reading import read_fields
 from primspace.data.values import as_float32
 from primspace.errors import DataError, first_line
-from primspace.files import atomic_path
+from primspace.files import atomic_path, check_free_space
 
 __all__ = ["DatasetWriter", "write_dataset"]
 
@@ -45,7 +45,9 @@ _LAZY = tuple(f for f in ARRAYS if f.lazy)
 
 
 def write_dataset(ds, path: Path, overwrite: bool, compression_level: int, writer=None) -> Path:
-    """Write the data set ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`)."""
+    """Write the data set ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`);
+    refused first when its disk cannot hold the arrays uncompressed (:func:`~primspace.files.check_free_space`)."""
+    check_free_space(path, (1 << 20) + sum(_raw_bytes(v) for v in arrays_of(ds).values() if v is not None))
     settings = {a.writer_option: _option_value(a, getattr(ds, a.name)) for a in ARRAYS if a.writer_option}
     with DatasetWriter(
         path,
@@ -65,6 +67,14 @@ def write_dataset(ds, path: Path, overwrite: bool, compression_level: int, write
             stop = min(start + IMAGE_BLOCK, len(ds))
             out.write(start, **{name: None if v is None else v[start:stop] for name, v in arrays.items()})
     return path
+
+
+def _raw_bytes(values) -> int:
+    """Bytes of an array (or an array-like with ``shape`` and ``dtype``) uncompressed; 0 if unknown."""
+    try:
+        return int(np.prod(values.shape, dtype=np.int64)) * np.dtype(values.dtype).itemsize
+    except (AttributeError, TypeError):
+        return 0
 
 
 def _option_value(array: Field, value):
