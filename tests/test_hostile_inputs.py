@@ -146,3 +146,23 @@ def test_a_full_disk_is_one_line_naming_the_output_and_the_disk(run_cli, data_fi
     res = run_cli("train", tmp_path / "big.h5", "--epochs", "1", "--latent-dim", "16", "--out", small_disk / "run")
     assert_user_error(res, "checkpoint.pt", "cannot write", "no space left")
     assert not [p for p in (small_disk / "run").iterdir() if p.name.endswith(".tmp")]  # no half-written file
+
+
+def test_predict_options_are_never_ignored_without_a_word(run_cli, data_file, tmp_path):
+    """Issue 38, item 7: --observe '' meant 0.25, --iterations without --online and --fitted-data
+    with a start that does not read it were ignored, a fully observed motion trailed off."""
+    train = ("train", data_file, "--epochs", "1", "--latent-dim", "2", "--layers", "4,2", "--out", tmp_path / "run")
+    assert run_cli(*train).code == 0
+    predict = ("predict", tmp_path / "run", data_file)
+    assert_user_error(run_cli(*predict, "--observe", "", "--out", tmp_path / "a"), "--observe ''")
+    assert_user_error(
+        run_cli(*predict, "--iterations", "3", "--out", tmp_path / "b"), "--iterations goes with --online"
+    )
+    assert_user_error(
+        run_cli(*predict, "--init", "zero", "--fitted-data", data_file, "--out", tmp_path / "c"),
+        "--fitted-data is read by mixture, nearest and calibrated",
+    )
+    assert not any((tmp_path / name).exists() for name in "abc")
+    whole = run_cli(*predict, "--observe", "1.0", "--no-judge", "--out", tmp_path / "d")
+    assert whole.code == 0, whole.err
+    assert "no step left to score" in whole.out and not whole.out.rstrip().endswith(":")

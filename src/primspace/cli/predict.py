@@ -144,7 +144,9 @@ def predict_command(
         "after each, warm-started (predictive coding); result.json gets the latency per step "
         "and the error of the rest after each step.",
     ),
-    iterations: int = typer.Option(5, "--iterations", help="With --online: inference iterations per arriving step."),
+    iterations: Optional[int] = typer.Option(
+        None, "--iterations", help="With --online: inference iterations per arriving step (default 5)."
+    ),
     scene: bool = typer.Option(
         False,
         "--scene",
@@ -178,6 +180,7 @@ def predict_command(
 
     motor, frames = _amounts(scene, primitive, clusters, observe, observe_frames, init, online)
     check_outside_inputs(out, (file, indices, run, fitted))
+    _check_ignored(iterations, online, fitted, init, scene)
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
     dataset, idx, fitted_data = _inputs(file, indices, fitted)
     overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
@@ -194,7 +197,7 @@ def predict_command(
             frames,
             init,
             continuity,
-            iterations if online else None,
+            (5 if iterations is None else iterations) if online else None,
             common,
         )
         command = {"run": str(run), "data": str(file), **command, "epochs": epochs}
@@ -249,9 +252,21 @@ def _amounts(scene: bool, primitive, clusters, observe, observe_frames, init, on
     from primspace.train.observe import FIRST, NOTHING
 
     _check_scene_flags(scene, primitive, clusters, observe, observe_frames, init, online)
-    motor = None if scene else parse_amount(observe or "0.25", "--observe", (NOTHING,))
+    motor = None if scene else parse_amount("0.25" if observe is None else observe, "--observe", (NOTHING,))
     frames = None if observe_frames is None else parse_amount(observe_frames, "--observe-frames", (FIRST, NOTHING))
     return motor, frames
+
+
+def _check_ignored(iterations, online: bool, fitted, init, scene: bool) -> None:
+    """One line for an option that would be ignored (issue 38: they were, without a word)."""
+    from primspace.predict import DEFAULT_PREDICTOR
+    from primspace.train.starts import STARTS_FROM_FITTED
+
+    if iterations is not None and not online:
+        raise UserError("--iterations goes with --online (the iterations per arriving step)")
+    start = init or DEFAULT_PREDICTOR
+    if fitted is not None and not scene and init is not None and start not in STARTS_FROM_FITTED + (DEFAULT_PREDICTOR,):
+        raise UserError(f"--fitted-data is read by mixture, nearest and calibrated; --init {start} does not read it")
 
 
 def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames, init, online: bool) -> None:
@@ -279,6 +294,7 @@ def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames
 def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
     """What ``primspace predict`` prints when it is done."""
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
+    means = means or "every valid step was observed, no step left to score"
     line = (
         f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
     )
