@@ -166,3 +166,12 @@ def test_predict_options_are_never_ignored_without_a_word(run_cli, data_file, tm
     whole = run_cli(*predict, "--observe", "1.0", "--no-judge", "--out", tmp_path / "d")
     assert whole.code == 0, whole.err
     assert "no step left to score" in whole.out and not whole.out.rstrip().endswith(":")
+
+
+@pytest.mark.parametrize("name", ["", "   ", "two\nlines", "nul\x00"])
+def test_a_summary_name_is_one_line(tmp_path, name):
+    """Issue 38, item 7: summarize --name empty or multi-line was accepted (it is a heading)."""
+    from primspace.experiments.summary import summarize
+
+    with pytest.raises(UserError, match="the summary's name is a heading on one line"):
+        summarize(tmp_path, name)

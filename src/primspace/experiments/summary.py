@@ -268,6 +268,8 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
         ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict, scene,
         composite: those run).
     """
+    if not isinstance(name, str) or not name.strip() or any(c in name for c in "\n\r\x00"):
+        raise UserError(f"the summary's name is a heading on one line, not empty: got {name!r}")
     meta = read_meta(out_dir)
     if command is None:
         command = recorded_commands(meta)
