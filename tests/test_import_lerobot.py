@@ -396,6 +396,18 @@ def test_v3_timestamps_drifting_beyond_half_a_period_are_refused(tmp_path):
     )
 
 
+def test_v3_timestamps_that_run_back_are_refused(tmp_path):
+    """Issue 38, item 7: a clock running backwards was accepted (frames are taken nearest in time; the
+    joints, without frames, are taken in row order and do not read it)."""
+    times = np.arange(9) / FPS
+    times[4] = times[2]  # row 4 goes back to row 2's time
+    write_v3(tmp_path / "ds", times={1: times})
+    with pytest.raises(
+        DataError, match=r"field 'timestamp', sample 1: episode 1: row 4: timestamp 0\.2 runs back from 0\.3"
+    ):
+        import_lerobot(tmp_path / "ds", 9, images=CAMERA)
+
+
 def test_v3_frames_outside_the_episode_span_are_not_taken(tmp_path):
     """to_timestamp one frame early: the last row's frame would be the next episode's first."""
     write_v3(tmp_path / "ds")

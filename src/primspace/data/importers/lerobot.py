@@ -292,6 +292,16 @@ class _Reader:
                 field=key,
                 index=sample,
             )
+        back = np.flatnonzero(np.diff(values[:, 0]) < 0)
+        if back.size:  # frames are taken nearest in time: a clock that runs back would reorder them
+            r = int(back[0]) + 1
+            raise DataError(
+                f"episode {episode.index}: row {r}: {key} {float(values[r, 0]):g} runs back from "
+                f"{float(values[r - 1, 0]):g}",
+                path=file,
+                field=key,
+                index=sample,
+            )
         return values[:, 0] if key == "timestamp" else values[:, 0] / self.shape["fps"]
 
     def row_tasks(self, rows) -> tuple:
