@@ -175,3 +175,19 @@ def test_a_summary_name_is_one_line(tmp_path, name):
 
     with pytest.raises(UserError, match="the summary's name is a heading on one line"):
         summarize(tmp_path, name)
+
+
+def test_a_folder_of_another_command_is_named_for_what_it_is(run_cli, data_file, tmp_path):
+    """Issue 38, item 8: '(no such result.json)' for a folder holding predict's result.json, and
+    summarize calling predict's and segment's result.json 'not written by a primspace command'."""
+    from primspace.outputs import describe
+
+    train = ("train", data_file, "--epochs", "1", "--latent-dim", "2", "--layers", "4,2", "--out", tmp_path / "run")
+    assert run_cli(*train).code == 0
+    pred = tmp_path / "pred"
+    assert run_cli("predict", tmp_path / "run", data_file, "--no-judge", "--out", pred).code == 0
+    assert describe(pred / "result.json") == "a JSON file written by primspace predict"
+    res = run_cli("cluster", data_file, "--primitives", "2", "--out", pred, "--overwrite")
+    assert_user_error(
+        res, "is not a primspace cluster output", "its result.json is a JSON file written by primspace predict"
+    )

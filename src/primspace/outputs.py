@@ -123,7 +123,12 @@ def _json_mark(path: Path) -> str | None:
         content = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError, UnicodeDecodeError):
         return None
-    return "primspace summarize" if isinstance(content, dict) and "summary_version" in content else None
+    if not isinstance(content, dict):
+        return None
+    if "summary_version" in content:
+        return "primspace summarize"
+    writer = content.get("writer")  # the result.json of cluster, segment and predict say who wrote them
+    return writer if isinstance(writer, str) and writer.startswith("primspace ") else None
 
 
 def file_writer(path: str | os.PathLike) -> str | None:

@@ -188,6 +188,7 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
     figure = clustering_figure(
         result, title=f"{src.name}: tau = {result.tau:.3g}, R^2 = {result.r2:.4f}, rank {result.rank}{acc}{shown}"
     )
+    record["writer"] = CLUSTER_OUTPUT.command  # result.json says who wrote it (primspace.outputs reads it)
     with atomic_directory(out, overwrite) as tmp:
         write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true, samples)
         write_json(tmp / "result.json", record)

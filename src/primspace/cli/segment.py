@@ -123,7 +123,7 @@ def segment_command(
         _write_segments(tmp / "segments.csv", samples, result)
         np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
         _timeline(tmp / "timeline.png", trained, held, result, window, method.value)
-        write_json(tmp / "result.json", record)
+        write_json(tmp / "result.json", record | {"writer": kind.command})
     typer.echo(_segment_summary(scores, len(held)))
     typer.echo(f"wrote {out}")
 

@@ -35,6 +35,7 @@ import numpy as np
 from primspace import files
 from primspace.errors import OutputExistsError, UserError
 from primspace.files import atomic_write_json, atomic_write_text
+from primspace.outputs import describe
 
 __all__ = [
     "OutputKind",
@@ -86,10 +87,16 @@ def check_output_directory(path: str | os.PathLike, overwrite: bool = False, kin
                 raise OutputExistsError(path)
             if not is_output_of(path, kind):
                 raise UserError(
-                    f"{path}: exists and is not a {kind.command} output (no such result.json); "
+                    f"{path}: exists and is not a {kind.command} output ({_result_of(path)}); "
                     f"--overwrite only replaces an earlier {kind.command} output: choose another --out"
                 )
     return path
+
+
+def _result_of(path: Path) -> str:
+    """What ``path``'s result.json is, for a refusal: none, or the mark of the command that wrote it."""
+    result = Path(path) / "result.json"
+    return f"its result.json is {describe(result)}" if result.is_file() else "it holds no result.json"
 
 
 def is_output_of(path: Path, kind: OutputKind) -> bool:
