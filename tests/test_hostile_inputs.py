@@ -191,3 +191,38 @@ def test_a_folder_of_another_command_is_named_for_what_it_is(run_cli, data_file,
     assert_user_error(
         res, "is not a primspace cluster output", "its result.json is a JSON file written by primspace predict"
     )
+
+
+def test_a_write_error_names_the_output_not_its_temporary(tmp_path):
+    """Issue 38, item 8: a read-only folder's error named the temporary file instead of --out."""
+    from primspace.files import os_error, temp_prefix
+
+    out = tmp_path / "result.h5"
+    tmp = tmp_path / f"{temp_prefix(out.name)}abc.tmp"
+    err = os_error(PermissionError(13, "Permission denied", str(tmp)), out)
+    assert str(err) == f"{out}: cannot write (Permission denied)"
+    other = os_error(PermissionError(13, "Permission denied", str(tmp_path / "x")), out)
+    assert str(other).startswith(str(tmp_path / "x"))  # a file of the user's is named as it is
+
+
+def test_segment_names_the_file_field_and_sample_of_a_short_demonstration(run_cli, tmp_path):
+    """Issue 38, item 8: segment named a demonstration but not the file or field."""
+    from test_segmentation_synthesis import single_primitive_run
+
+    from primspace.data import MotionDataset
+
+    pieces = single_primitive_run(run_cli, tmp_path)
+    steps = np.full((2, 60), -1)
+    steps[0], steps[1, :9] = 0, 0
+    long = MotionDataset(
+        np.repeat(pieces.motor[:2], 2, axis=1),
+        lengths=[60, 9],
+        step_labels=steps,
+        step_segments=steps,
+        joint_names=pieces.joint_names,
+        label_names=["a"],
+    )
+    long.save(tmp_path / "long.h5")
+    res = run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--min-steps", "12", "--out", tmp_path / "seg")
+    assert_user_error(res, f"{tmp_path / 'long.h5'}, field 'lengths', sample 1: 9 steps, fewer than a segment's least")
+    assert not (tmp_path / "seg").exists()

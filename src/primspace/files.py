@@ -163,6 +163,8 @@ def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
 def os_error(exc: OSError, path: str | os.PathLike) -> UserError:
     """A one-line :class:`UserError` for a file-system failure on ``path``."""
     where = exc.filename if getattr(exc, "filename", None) else os.fspath(path)
+    if Path(os.fspath(where)).name.startswith(temp_prefix(Path(path).name)):
+        where = os.fspath(path)  # our temporary is no name the user knows: the output it stands for is
     return UserError(f"{where}: cannot write ({exc.strerror or type(exc).__name__})")
 
 

@@ -46,7 +46,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.errors import UserError
+from primspace.errors import DataError, UserError
 from primspace.segmentation.inferred import relabel_by_inference
 from primspace.segmentation.result import SegmentationResult, label_segments
 
@@ -322,5 +322,14 @@ def model_inputs(
     # no segment outlasts the data: a larger max_steps only made candidates to skip (and surprise's memory grow)
     settings = replace(settings, max_steps=max(settings.min_steps, min(settings.max_steps, int(data.length))))
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    short = np.flatnonzero(np.asarray(lengths) < settings.min_steps)
+    if short.size:  # named by the file, field and sample, as every data error
+        i = int(short[0])
+        raise DataError(
+            f"{int(lengths[i])} steps, fewer than a segment's least ({settings.min_steps}, --min-steps)",
+            path=data.path,
+            field="lengths",
+            index=i,
+        )
     sequences = run.scaler.transform(np.asarray(data.motor, dtype=np.float64))
     return sequences, np.asarray(lengths, dtype=np.int64), templates, codes, settings
