@@ -226,3 +226,39 @@ def test_segment_names_the_file_field_and_sample_of_a_short_demonstration(run_cl
     res = run_cli("segment", tmp_path / "run", tmp_path / "long.h5", "--min-steps", "12", "--out", tmp_path / "seg")
     assert_user_error(res, f"{tmp_path / 'long.h5'}, field 'lengths', sample 1: 9 steps, fewer than a segment's least")
     assert not (tmp_path / "seg").exists()
+
+
+def test_an_experiment_on_data_with_hostile_names_writes_inside_its_folder_only(tmp_path):
+    """Issue 38, item 1, end to end: label names that are paths ('/../../../victim', '../up', an
+    absolute path, a newline, 300 characters, markup) go through the intra experiment, its
+    figures and its report; every file written lies inside the experiment folder, and a file
+    beside it is untouched."""
+    import dataclasses
+
+    from test_experiments import TINY
+
+    from primspace.data import MotionDataset
+    from primspace.experiments.intra import run_intra
+    from primspace.experiments.workspace import ExperimentDir
+    from primspace.report import build_report
+    from primspace.sim.generate import GenerationConfig, generate_dataset
+
+    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
+    generate_dataset(config, seed=0, out=tmp_path / "plain.h5", progress=False)
+    data = MotionDataset.load(tmp_path / "plain.h5")
+    hostile = ["/../../../victim", "../up", "/abs/x", "new\nline", "x" * 300, "<script>alert(1)</script>", "a/b"]
+    dataclasses.replace(data, label_names=hostile[: len(data.label_names)], path=None).save(tmp_path / "hostile.h5")
+    victim = tmp_path / "victim.png"
+    victim.write_bytes(b"mine")
+    root = tmp_path / "deep" / "er"
+    root.mkdir(parents=True)
+    before = {p for p in tmp_path.rglob("*")}
+    exp = ExperimentDir(root / "exp", TINY, data=tmp_path / "hostile.h5", workers=1, progress=False)
+    run_intra(exp)
+    build_report(exp.path)
+    written = {p for p in tmp_path.rglob("*")} - before
+    outside = [p for p in written if exp.path not in p.parents and p != exp.path]
+    assert not outside, outside
+    assert victim.read_bytes() == b"mine"
+    figures = list((exp.path / "figures").iterdir())
+    assert figures and all(p.parent == exp.path / "figures" for p in figures)
