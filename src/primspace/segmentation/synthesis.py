@@ -102,6 +102,11 @@ class SynthesisSettings:
             raise UserError(f"grid must be >= 1 step and fade in (0, 1] or inf (translate), got {grid} and {fade}")
         return cls(lo, hi, int(grid), float(fade))
 
+    def capped(self, length: int) -> "SynthesisSettings":
+        """These settings for data of ``length`` (T) steps: no segment outlasts the data, so a larger
+        ``max_steps`` only made candidates to skip (a hang at 1e20) and surprise's memory grow."""
+        return replace(self, max_steps=max(self.min_steps, min(self.max_steps, int(length))))
+
 
 def run_templates(run) -> tuple[np.ndarray, np.ndarray]:
     """The decoded fitted codes of a single-primitive run, scaled: ``(M, T1, J)``, and the codes ``(M, q)``."""
@@ -319,8 +324,7 @@ def model_inputs(
         )
     templates, codes = run_templates(run)
     settings = SynthesisSettings.for_model(templates.shape[1], min_steps, max_steps, grid, fade)
-    # no segment outlasts the data: a larger max_steps only made candidates to skip (and surprise's memory grow)
-    settings = replace(settings, max_steps=max(settings.min_steps, min(settings.max_steps, int(data.length))))
+    settings = settings.capped(int(data.length))
     lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
     short = np.flatnonzero(np.asarray(lengths) < settings.min_steps)
     if short.size:  # named by the file, field and sample, as every data error
