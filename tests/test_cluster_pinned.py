@@ -216,6 +216,7 @@ def _summarise_result(result: dict) -> dict:
     result = dict(result)
     assert isinstance(result.pop("seconds"), (int, float))
     result.pop("input")
+    assert result.pop("writer", "primspace cluster") == "primspace cluster"  # issue 38: result.json names its writer
     return result
 
 
