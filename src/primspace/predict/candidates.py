@@ -47,6 +47,7 @@ import numpy as np
 from primspace.errors import UserError
 
 __all__ = [
+    "condition_ensemble",
     "CodeMixture",
     "continuity_correction",
     "SEGMENT_POINTS",
@@ -151,13 +152,7 @@ class CodeMixture:
         top = np.argpartition(-w, k - 1, axis=1)[:, :k] if k < flat.shape[0] else np.tile(np.arange(k), (n, 1))
         out = np.empty_like(x, dtype=np.float64)
         for i in range(n):
-            wi = w[i, top[i]]
-            wi = wi / wi.sum()
-            mu = wi @ flat[top[i]]
-            a = np.sqrt(wi)[:, None] * (flat[top[i]] - mu)
-            ao = a[:, masks[i]]
-            gram = ao @ ao.T + r * np.eye(k)
-            out[i] = mu + a.T @ np.linalg.solve(gram, ao @ (x[i, masks[i]] - mu[masks[i]]))
+            out[i] = condition_ensemble(flat[top[i]], w[i, top[i]], x[i], masks[i], r)
         return out.reshape(n, t, j)
 
     def choose_noise(
@@ -192,6 +187,19 @@ class CodeMixture:
                 settings[key] = (float(noise), None if r is None else float(r))
         self.noise, self.condition = settings[min(scores, key=scores.get)]
         return {"noise": self.noise, "condition": self.condition, "loo": scores}
+
+
+def condition_ensemble(members: np.ndarray, weights: np.ndarray, x: np.ndarray, mask: np.ndarray, r: float):
+    """One sequence's ensemble ``members`` (k, D), weighted ``weights`` (k,), conditioned on the
+    entries ``x[mask]`` with observation noise ``r`` per entry: ``μ + Aᵀ (A_o A_oᵀ + r I)⁻¹ A_o
+    (x_o - μ_o)``, ``A`` the weighted deviations ``√w (d - μ)`` (the ensemble Kalman update;
+    module docstring). Returns (D,)."""
+    w = weights / weights.sum()
+    mu = w @ members
+    a = np.sqrt(w)[:, None] * (members - mu)
+    ao = a[:, mask]
+    gram = ao @ ao.T + r * np.eye(len(members))
+    return mu + a.T @ np.linalg.solve(gram, ao @ (x[mask] - mu[mask]))
 
 
 def continuity_correction(predicted: np.ndarray, scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray):
