@@ -451,3 +451,20 @@ def test_predicted_joints_stay_within_their_recorded_range(trained, train_set, e
         assert (p.motor >= lo - 1e-5).all() and (p.motor <= hi + 1e-5).all(), init
     raw = predict(trained, eval_set, observe=0.25, init="zero", epochs=3, fitted_data=train_set, frames=False)
     assert np.isfinite(raw.errors["motor_mse"]).all()
+
+
+def test_a_gradient_predictor_predicts_from_arrays_of_motions_of_different_lengths(trained, train_set, eval_set):
+    """The predictor interface on arrays alone (no data set): given lengths went through a
+    MotionDataset without the step fields padded samples need, and failed."""
+    from primspace.predict import GradientPredictor, fit_predictor
+    from primspace.train.observe import Observation
+
+    predictor = fit_predictor(GradientPredictor(trained, "projection", epochs=2, progress=False), trained, train_set)
+    truth = trained.scaler.transform(eval_set.motor)
+    full = np.full(len(eval_set), eval_set.length)
+    scaled = predictor.predict(truth, Observation.build(0.5), lengths=full)
+    via_data = predict(trained, eval_set, observe=0.5, init="projection", epochs=2, frames=False, fitted_data=train_set)
+    np.testing.assert_allclose(np.clip(scaled, -1, 1), trained.scaler.transform(via_data.motor), atol=1e-4)
+    shorter = full.copy()
+    shorter[0] = eval_set.length - 5  # a motion that ends early: padded, with the step fields made for it
+    assert np.isfinite(predictor.predict(truth, Observation.build(0.5), lengths=shorter)).all()

@@ -41,7 +41,7 @@ from primspace.errors import UserError
 from primspace.predict.metrics import check_lengths, check_observed, valid_mask
 from primspace.train.observe import Observation
 
-__all__ = ["Predictor", "Forecast", "observed_mask", "observation_rule"]
+__all__ = ["Predictor", "Forecast", "observed_mask", "observation_rule", "motions_as_dataset"]
 
 
 @dataclass
@@ -110,3 +110,18 @@ def observation_rule(observed, lengths, shape: tuple[int, int]) -> Observation:
     if counts[0] < 1:
         raise UserError("observed marks no step: nothing to predict from")
     return Observation.build(int(counts[0]))
+
+
+def motions_as_dataset(motor: np.ndarray, lengths=None, frames=None):
+    """Arrays of motions (physical units) as a :class:`~primspace.data.MotionDataset` for the
+    predictors that infer through :func:`~primspace.train.infer`: motions of different valid
+    ``lengths`` carry the step fields the data set asks of padded samples (one segment each)."""
+    from primspace.data import MotionDataset
+
+    n, steps = motor.shape[:2]
+    lengths = check_lengths(lengths, n, steps)
+    if (lengths == steps).all():
+        return MotionDataset(motor=motor, images=frames)
+    valid = valid_mask(lengths, steps)
+    step = np.where(valid, 0, -1).astype(np.int32)
+    return MotionDataset(motor=motor, lengths=lengths, step_labels=step, step_segments=step.copy(), images=frames)

@@ -19,7 +19,7 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.latent import INFER_STARTS
-from primspace.predict.base import Forecast, Predictor, observation_rule
+from primspace.predict.base import Forecast, Predictor, motions_as_dataset, observation_rule
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask
 from primspace.predict.online import OnlineResult, infer_online
@@ -91,9 +91,7 @@ class GradientPredictor(Predictor):
 
     def _dataset(self, motor: np.ndarray, lengths, frames) -> MotionDataset:
         """The samples as a data set in physical units (what :func:`~primspace.train.infer` reads)."""
-        physical = self.run_.scaler.inverse_transform(motor).astype(np.float32)
-        lengths = None if lengths is None else np.asarray(lengths)
-        return MotionDataset(motor=physical, lengths=lengths, images=frames)
+        return motions_as_dataset(self.run_.scaler.inverse_transform(motor).astype(np.float32), lengths, frames)
 
     def start_codes(self, data: MotionDataset, scaled: np.ndarray, rule: Observation) -> np.ndarray | None:
         """The starting codes of the starts that read the fitted demonstrations (None for the others:

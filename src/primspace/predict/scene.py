@@ -46,7 +46,7 @@ from primspace.data.steps import valid_steps
 from primspace.errors import UserError
 from primspace.latent import LatentTable
 from primspace.predict.api import Prediction
-from primspace.predict.base import Forecast, Predictor
+from primspace.predict.base import Forecast, Predictor, motions_as_dataset
 from primspace.predict.scene_clusters import SCENE_VARIANCE, SceneClusters, affine_subspace, cluster_codes
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS
 from primspace.predict.metrics import frame_errors, unobserved_mse
@@ -318,7 +318,7 @@ class ScenePredictor(Predictor):
         motor = np.asarray(motor, dtype=np.float64)
         wanted = [self.clusters_.check(k) for k in labels]
         physical = self.run_.scaler.inverse_transform(motor).astype(np.float32)
-        data = MotionDataset(motor=physical, lengths=None if lengths is None else np.asarray(lengths), images=frames)
+        data = motions_as_dataset(physical, lengths, frames)
         codes = np.empty((len(motor), self.run_.latents.shape[1]), dtype=np.float32)
         for k in sorted(set(wanted)):
             rows = np.flatnonzero(np.asarray(wanted) == k)
