@@ -124,6 +124,11 @@ class MotionDataset:
         return self.motor.shape[1]
 
     @property
+    def valid_lengths(self) -> np.ndarray:
+        """(N,) the valid steps of each sample: ``lengths``, or T each when there is no padding."""
+        return self.lengths if self.lengths is not None else np.full(len(self), self.length)
+
+    @property
     def n_joints(self) -> int:
         """J, the number of joint values per step."""
         return self.motor.shape[2]

@@ -115,7 +115,7 @@ def run_predict_point(
     table: dict = {}
     for f in tuple(fractions) + ((1.0,) if judge else ()):
         key = f"{f:g}"
-        observed = Observation.build(f).masks(_lengths(test), test.length)[0]
+        observed = Observation.build(f).masks(test.valid_lengths, test.length)[0]
         for name, forecast in grid_forecasts(rows, fit, test, f).items():
             entry = {"mse": finite_mean(unobserved_mse(forecast.motor, truth, observed, test.lengths))}
             if "mixture" in forecast.details:
@@ -132,10 +132,6 @@ def run_predict_point(
         "n_test": int(len(test_idx)),
         "n_eval": int(len(load_run(test_dir).indices)),
     }
-
-
-def _lengths(data: MotionDataset) -> np.ndarray:
-    return data.lengths if data.lengths is not None else np.full(len(data), data.length)
 
 
 def projection_seeds(intra: dict, q: int) -> list[int]:

@@ -129,7 +129,7 @@ class Prediction:
         source's sample numbers: ``source_ids`` (``"sample i"``, ``i`` the data file's index,
         where the source has none)."""
         taken = source.subset(self.indices)
-        lengths = taken.lengths if taken.lengths is not None else np.full(len(taken), taken.length)
+        lengths = taken.valid_lengths
         valid = valid_steps(lengths, taken.length)
         motor = np.where(valid[..., None], self.motor, taken.motor).astype(np.float32)
         images = self.frames if self.frames is not None else None
@@ -171,7 +171,7 @@ def fit_predictor(predictor: Predictor, run: TrainedRun, fitted_data: MotionData
     if isinstance(predictor, GradientPredictor) and (predictor.start or run.init) not in STARTS_FROM_FITTED:
         return predictor.fit(None)
     fitted = fitted_samples(run, fitted_data)
-    lengths = fitted.lengths if fitted.lengths is not None else np.full(len(fitted), fitted.length)
+    lengths = fitted.valid_lengths
     return predictor.fit(
         run.scaler.transform(fitted.motor), fitted.labels, lengths, fitted.images if fitted.has_images else None
     )
@@ -272,7 +272,7 @@ def predict(
     data, idx = select(dataset, indices)
     head = parent.model_config.has_images
     observation.check(data, use_images=head and data.has_images, has_image_head=head)  # before any fitting
-    motor_observed, frames_observed = observation.masks(_lengths(data), data.length)
+    motor_observed, frames_observed = observation.masks(data.valid_lengths, data.length)
     if online is not None:
         codes, scaled, details = _online(predictor, parent, data, observation, online, fitted_data, progress)
         init_used = predictor.start or parent.init if isinstance(predictor, GradientPredictor) else MIXTURE
@@ -284,7 +284,7 @@ def predict(
     predicted_frames = None
     if frames and parent.model_config.has_images:
         predicted_frames = reconstruct(parent, codes, images=True)[1]
-    lengths = _lengths(data)
+    lengths = data.valid_lengths
     errors = {"motor_mse": unobserved_mse(scaled, parent.scaler.transform(data.motor), motor_observed, lengths)}
     if predicted_frames is not None and data.has_images:
         errors["vision_mse"], errors["psnr"] = frame_errors(
@@ -313,7 +313,7 @@ def run_predictor(predictor: Predictor, run: TrainedRun, data: MotionDataset, ob
     scaled = run.scaler.transform(data.motor)
     extra = {"data": data} if isinstance(predictor, GradientPredictor) else {}
     frames = data.images if data.has_images and not extra else None
-    return predictor.forecast(scaled, observation, data.labels, _lengths(data), frames, **extra)
+    return predictor.forecast(scaled, observation, data.labels, data.valid_lengths, frames, **extra)
 
 
 def _online(
@@ -331,11 +331,11 @@ def _online(
             "online prediction observes joints and frames together, a step at a time: give --observe "
             "only (not --observe-frames, not 'none')"
         )
-    seen = int(observation.masks(_lengths(data), data.length)[0].sum(axis=1).max())
+    seen = int(observation.masks(data.valid_lengths, data.length)[0].sum(axis=1).max())
     predictor = fit_predictor(predictor, parent, fitted_data)
     scaled_truth = parent.scaler.transform(data.motor)
     if isinstance(predictor, MixturePredictor):  # no gradient: the prefix's posterior, updated a step at a time
-        result = predictor.predict_online(scaled_truth, _lengths(data), prediction_after=seen, progress=progress)
+        result = predictor.predict_online(scaled_truth, data.valid_lengths, prediction_after=seen, progress=progress)
         codes = result.codes[:, result.column(seen)]
         scaled = parent.scaler.transform(result.prediction)
     else:
@@ -345,8 +345,8 @@ def _online(
         codes = result.codes[:, result.column(seen)]
         scaled = parent.scaler.transform(reconstruct(parent, codes, images=False)[0])
         if predictor.continuity:
-            observed = observation.masks(_lengths(data), data.length)[0]
-            scaled = continuity_correction(scaled, scaled_truth, observed, valid_steps(_lengths(data), data.length))
+            observed = observation.masks(data.valid_lengths, data.length)[0]
+            scaled = continuity_correction(scaled, scaled_truth, observed, valid_steps(data.valid_lengths, data.length))
     details = {
         "online": {
             "iterations": int(getattr(result, "iterations", 0)),
@@ -357,7 +357,3 @@ def _online(
         }
     }
     return codes.astype(np.float32), scaled, details
-
-
-def _lengths(data: MotionDataset) -> np.ndarray:
-    return data.lengths if data.lengths is not None else np.full(len(data), data.length)

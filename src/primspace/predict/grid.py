@@ -81,7 +81,7 @@ def grid_forecasts(rows: dict[str, Predictor], run: TrainedRun, test: MotionData
     """``{row: Forecast}`` of every fitted row on ``test`` with the first ``fraction`` of each
     motion observed (scaled units)."""
     rule = Observation.build(fraction)
-    lengths = test.lengths if test.lengths is not None else np.full(len(test), test.length)
+    lengths = test.valid_lengths
     observed = rule.masks(lengths, test.length)[0]
     scaled = run.scaler.transform(test.motor)
     left = (np.arange(test.length)[None, :] < lengths[:, None]) & ~observed
@@ -107,13 +107,11 @@ def grid_predictions(
     """``{row: {fraction: mean unobserved MSE}}`` of every row (and, with ``online_iterations``,
     the online gradient start ``projection`` and the online mixture) on ``test``."""
     rows = grid_predictors(run, fitted_data, starts, epochs)
-    scaled, lengths = run.scaler.transform(test.motor), test.lengths
+    scaled, lengths = run.scaler.transform(test.motor), test.valid_lengths
     table: dict = {}
     for f in fractions:
         key = f"{f:g}"
-        observed = Observation.build(f).masks(
-            lengths if lengths is not None else np.full(len(test), test.length), test.length
-        )[0]
+        observed = Observation.build(f).masks(lengths, test.length)[0]
         for name, forecast in grid_forecasts(rows, run, test, f).items():
             table.setdefault(name, {})[key] = finite_mean(unobserved_mse(forecast.motor, scaled, observed, lengths))
         if online_iterations is not None:

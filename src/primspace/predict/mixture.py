@@ -101,8 +101,8 @@ class MixturePredictor(Predictor):
                 f"the mixture is fitted on the run's {len(self.run_.latents)} fitted demonstrations "
                 f"(one per code), got {len(motor)}"
             )
-        self.fitted_, self.valid_ = motor, valid_mask(check_lengths(lengths, *motor.shape[:2]), motor.shape[1])
-        self.fitted_lengths_ = check_lengths(lengths, *motor.shape[:2])
+        self.fitted_, self.fitted_lengths_ = motor, check_lengths(lengths, *motor.shape[:2])
+        self.valid_ = valid_mask(self.fitted_lengths_, motor.shape[1])
         if self.candidates is not None:
             self.mixture_ = self.candidates
         else:

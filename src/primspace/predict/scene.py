@@ -222,7 +222,7 @@ def predict_scene(
     codes = infer_in_subspace(parent, sub, mean, basis, epochs=epochs, progress=progress, **overrides)
     motor, predicted_frames = reconstruct(parent, codes, images=frames)
     motor_observed, frames_observed = observation_masks(_observation(), sub)
-    lengths = sub.lengths if sub.lengths is not None else np.full(len(sub), sub.length)
+    lengths = sub.valid_lengths
     scaled, truth = parent.scaler.transform(motor), parent.scaler.transform(sub.motor)
     errors = {"motor_mse": unobserved_mse(scaled, truth, motor_observed, lengths)}
     if predicted_frames is not None:

@@ -131,7 +131,7 @@ def segmentation_scores(result: SegmentationResult, data, tolerance: int, transi
     scores: dict = {"segments_found": int(sum(len(b) + 1 for b in result.boundaries))}
     if data.step_segments is None:
         return scores
-    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    lengths = data.valid_lengths
     truth = boundaries_from_segments(data.step_segments, lengths)
     if transition:
         scores["boundary_transition"] = boundary_f1(truth, result.boundaries, tolerance, extent=transition)

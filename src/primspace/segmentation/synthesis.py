@@ -325,7 +325,7 @@ def model_inputs(
     templates, codes = run_templates(run)
     settings = SynthesisSettings.for_model(templates.shape[1], min_steps, max_steps, grid, fade)
     settings = settings.capped(int(data.length))
-    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    lengths = data.valid_lengths
     short = np.flatnonzero(np.asarray(lengths) < settings.min_steps)
     if short.size:  # named by the file, field and sample, as every data error
         i = int(short[0])

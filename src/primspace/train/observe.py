@@ -136,7 +136,7 @@ class Observation:
 
 def observation_masks(observation: Observation | None, data: MotionDataset) -> tuple[np.ndarray, np.ndarray]:
     """Motor and frame masks (N, T) bool of ``data``: the observed valid steps (every valid step without a rule)."""
-    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    lengths = data.valid_lengths
     if observation is None:
         valid = valid_steps(lengths, data.length)
         return valid, valid

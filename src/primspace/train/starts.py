@@ -78,7 +78,7 @@ class FittedDemonstrations:
     @classmethod
     def of(cls, parent, fitted: MotionDataset) -> "FittedDemonstrations":
         """From ``fitted``, the run's fitted samples in its order (:func:`fitted_samples`)."""
-        lengths = fitted.lengths if fitted.lengths is not None else np.full(len(fitted), fitted.length)
+        lengths = fitted.valid_lengths
         return cls(
             parent.scaler.transform(fitted.motor), np.asarray(lengths), fitted.images if fitted.has_images else None
         )
@@ -162,15 +162,13 @@ def inference_start(
 def _observed_start(parent, init, initializer, data, scaled, observed, observation, fitted_data, seed) -> np.ndarray:
     """The start under an observation rule (or ``nearest``)."""
     frames_only = observation is not None and observation.motor == NOTHING
-    if not frames_only and init in STARTS_FROM_FITTED:
-        return fitted_start(parent, init, _fitted(parent, fitted_data), data, scaled, observed, observation)
-    if frames_only and init not in ("zero", "random"):
-        if init == CALIBRATED:
-            return fitted_start(parent, init, _fitted(parent, fitted_data), data, scaled, observed, observation)
+    if frames_only and init not in ("zero", "random", CALIBRATED):
         raise UserError(
             f"init {init!r} starts from the observed joints, and observe='none' observes none: "
             "start by 'calibrated' (from the frames), 'zero' or 'random'"
         )
+    if init in STARTS_FROM_FITTED:  # calibrated (from the joints, or from the frames alone) and nearest
+        return fitted_start(parent, init, _fitted(parent, fitted_data), data, scaled, observed, observation)
     return initializer.transform(scaled, random_state=seed, observed=observed).astype(np.float64)
 
 

@@ -94,7 +94,7 @@ def segment_codes(
     from primspace.segmentation import segment_sequences, segmentation_scores
     from primspace.sim.composite import transition_steps
 
-    lengths = data.lengths if data.lengths is not None else np.full(len(data), data.length)
+    lengths = data.valid_lengths
     sequences = np.asarray(codes, dtype=np.float64).reshape(len(data), -1, latent_dim)
     n_primitives = n_primitives or max(len(data.label_names), 1)
     result = segment_sequences(sequences, window, lengths, n_primitives)
