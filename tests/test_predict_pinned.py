@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from conftest import pinned_for_this_cpu
+from primspace.predict.grid import PRIOR_ROWS
 from test_train import SMALL, primitives
 
 PINNED = Path(__file__).with_suffix(".json")
@@ -45,7 +46,7 @@ def grid_numbers(run, train, test) -> dict:
 def test_the_prediction_grid_keeps_its_numbers(case):
     pinned = pinned_for_this_cpu(json.loads(PINNED.read_text()), "prediction numbers", vendor=True)
     numbers = grid_numbers(*case)
-    assert set(numbers) == set(pinned)
+    assert set(numbers) - set(pinned) == set(PRIOR_ROWS)  # the rows pinned before 0.9, and the priors' (issue 39)
     for row, cells in pinned.items():
         for key, value in cells.items():
             assert numbers[row][key] == pytest.approx(value, rel=1e-6, abs=1e-12), (row, key)

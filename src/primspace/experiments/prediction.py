@@ -50,8 +50,9 @@ PREDICT_FRACTIONS = (0.1, 0.25, 0.5)
 #: primspace's starts in the grid (the gradient ones run ``epochs`` of inference).
 PREDICT_STARTS_GRID = ("zero", "projection", "calibrated", "nearest", "mixture")
 #: Bumped when a grid point's content changes: points of another version are not reused
-#: (3: the mixture may condition its ensemble; its posterior mean alone is a row of its own).
-PREDICT_VERSION = 3
+#: (3: the mixture may condition its ensemble; its posterior mean alone is a row of its own;
+#: 4: the priors in code space per primitive, and the posterior's top-1 accuracy).
+PREDICT_VERSION = 4
 #: Inference epochs of the gradient starts.
 PREDICT_EPOCHS = 200
 #: Evaluation samples predicted per seed at most: a subset stratified by label, drawn with
@@ -98,7 +99,7 @@ def run_predict_point(
     """One seed: every row (:func:`~primspace.predict.grid.grid_predictors`) at every fraction; mean
     unobserved MSE (and success) over the run's evaluation samples (at most ``max_samples``:
     :func:`predicted_subset`)."""
-    from primspace.predict.grid import grid_forecasts, grid_predictors
+    from primspace.predict.grid import GIVEN_ROWS, grid_forecasts, grid_predictors, posterior_accuracy
     from primspace.predict.metrics import finite_mean, unobserved_mse
     from primspace.train import TrainConfig, configure_process, load_run
     from primspace.train.observe import Observation
@@ -118,6 +119,9 @@ def run_predict_point(
         observed = Observation.build(f).masks(test.valid_lengths, test.length)[0]
         for name, forecast in grid_forecasts(rows, fit, test, f).items():
             entry = {"mse": finite_mean(unobserved_mse(forecast.motor, truth, observed, test.lengths))}
+            accuracy = posterior_accuracy(forecast, test.labels)
+            if accuracy is not None and name not in GIVEN_ROWS:
+                entry["accuracy"] = accuracy
             if "mixture" in forecast.details:
                 entry["noise"] = forecast.details["mixture"]["noise"]
                 entry["condition"] = forecast.details["mixture"]["condition"]

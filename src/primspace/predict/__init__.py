@@ -6,8 +6,9 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
 * :class:`MixturePredictor`: the posterior over the run's fitted codes, offline and online
   (no gradient; the default, the best we have measured);
 * :class:`GradientPredictor`: gradient inference of the code from a start, offline and online;
-* :class:`GaussianCodePrior`: given the primitive, a Gaussian over its fitted codes, drawn, decoded and
-  conditioned on the observed steps (issue 39's first piece, not yet measured at scale);
+* :class:`PriorPredictor`: a prior in code space per primitive (a label or a cluster of the fitted
+  codes), drawn, decoded and conditioned on the observed steps, given the primitive or weighted by
+  the posterior over primitives (:mod:`primspace.predict.prior`), offline and online;
 * :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the whole motion from the first frame and
   joints, the primitive given (a cluster id or a label name);
 * the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
@@ -33,7 +34,7 @@ from primspace.predict.grid import grid_predictions
 from primspace.predict.metrics import finite_mean, frame_errors, observed_prefix, unobserved_mse
 from primspace.predict.mixture import MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
-from primspace.predict.prior import GaussianCodePrior
+from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.scene import ScenePredictor, predict_scene
 
 __all__ = [
@@ -52,7 +53,8 @@ __all__ = [
     "CodeMixture",
     "code_mixture",
     "continuity_correction",
-    "GaussianCodePrior",
+    "PriorPredictor",
+    "PRIOR",
     "ScenePredictor",
     "predict_scene",
     "ProMPPeer",

@@ -172,6 +172,8 @@ def fit_predictor(predictor: Predictor, run: TrainedRun, fitted_data: MotionData
         return predictor.fit(None)
     fitted = fitted_samples(run, fitted_data)
     lengths = fitted.valid_lengths
+    if "label_names" in predictor.get_params() and predictor.label_names is None:
+        predictor.set_params(label_names=fitted.label_names)  # a primitive may be asked for by name
     return predictor.fit(
         run.scaler.transform(fitted.motor), fitted.labels, lengths, fitted.images if fitted.has_images else None
     )

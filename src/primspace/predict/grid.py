@@ -19,6 +19,7 @@ from primspace.predict.base import Forecast, Predictor
 from primspace.predict.metrics import finite_mean, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import fitted_samples
@@ -31,6 +32,9 @@ __all__ = [
     "POSTERIOR_MEAN",
     "LABELS_DIAGNOSTIC",
     "MIXTURE_ROWS",
+    "PRIOR_ROWS",
+    "GIVEN_ROWS",
+    "posterior_accuracy",
 ]
 
 #: The peers' rows (labels: the peer is given the test sample's primitive).
@@ -46,6 +50,32 @@ MIXTURE_ROWS = (
     ("mixture (no continuity)", False, True, False),
     (LABELS_DIAGNOSTIC, True, False, True),
 )
+
+#: The priors' rows (issue 39): given the test motion's primitive (the fitted labels' priors);
+#: not given, the posterior over the fitted labels' priors; not given and without any label, the
+#: posterior over clusters of the fitted codes (as many as the labels).
+PRIOR_ROWS = ("prior (labels)", "prior (posterior)", "prior (clusters)")
+#: The rows given the test motion's primitive (the task with the primitive given; the others are label-free
+#: at test time).
+GIVEN_ROWS = ("prior (labels)", "promp (labels)", "mean motion (labels)", LABELS_DIAGNOSTIC)
+
+
+def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
+    """The priors' rows, fitted (the two over the fitted labels share their draws)."""
+    names = fitted.label_names
+    scaled, lengths = run.scaler.transform(fitted.motor), fitted.valid_lengths
+    by_label = PriorPredictor(run, given=True, label_names=names).fit(scaled, fitted.labels, lengths)
+    clusters = PriorPredictor(run, primitives="clusters", label_names=names).fit(scaled, fitted.labels, lengths)
+    return {PRIOR_ROWS[0]: by_label, PRIOR_ROWS[1]: by_label.asked(), PRIOR_ROWS[2]: clusters}
+
+
+def posterior_accuracy(forecast: Forecast, labels) -> float | None:
+    """Share of motions whose most probable primitive stands for their label (None without a posterior)."""
+    if labels is None or "posterior" not in forecast.details:
+        return None
+    stands_for = np.asarray([-2 if v is None else v for v in forecast.details["prior"]["primitives"]["labels"]])
+    top = np.asarray(forecast.details["posterior"]).argmax(axis=1)
+    return float(np.mean(stands_for[top] == np.asarray(labels)))
 
 
 def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int) -> dict[str, Predictor]:
@@ -74,6 +104,8 @@ def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs:
     )
     for predictor in rows.values():
         fit_predictor(predictor, run, fitted_data)
+    if fitted.labels is not None:
+        rows.update(_prior_rows(run, fitted))
     return rows
 
 

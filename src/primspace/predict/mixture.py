@@ -34,7 +34,7 @@ from primspace.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, unobserved_mse, valid_mask
-from primspace.predict.online import OnlineResult
+from primspace.predict.online import OnlineResult, online_steps
 from primspace.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
@@ -196,16 +196,7 @@ class MixturePredictor(Predictor):
         """
         truth = check_motor(motor)
         n, length, _ = truth.shape
-        if (
-            isinstance(start_step, bool)
-            or not isinstance(start_step, (int, np.integer))
-            or not 1 <= start_step <= length
-        ):
-            raise UserError(f"start_step must be a whole number in 1..T={length}, got {start_step!r}")
-        steps = np.arange(int(start_step), length + 1)
-        keep = length if prediction_after is None else int(prediction_after)
-        if keep not in steps:
-            raise UserError(f"prediction_after must be a step in {int(start_step)}..{length}, got {prediction_after!r}")
+        steps, keep = online_steps(start_step, prediction_after, length)
         with stage(f"mixture: choosing its noise for {len(steps)} prefix lengths", enabled=self.progress):
             noises = {int(t): self.online_noise(int(t)) for t in steps}
         lengths = check_lengths(lengths, n, length)

@@ -60,7 +60,7 @@ from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import inference_start
 
-__all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors"]
+__all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors", "online_steps"]
 
 
 # ----------------------------------------------------------------------- the measure
@@ -478,3 +478,15 @@ def _check_lr(value) -> float:
     ):
         raise UserError(f"latent_lr must be a finite number > 0, got {value!r}")
     return float(value)
+
+
+def online_steps(start_step, prediction_after, length: int) -> tuple[np.ndarray, int]:
+    """The arriving steps ``start_step..T`` (1-based) and the step after which the prediction is kept
+    (``prediction_after``, default T), or one UserError."""
+    if isinstance(start_step, bool) or not isinstance(start_step, (int, np.integer)) or not 1 <= start_step <= length:
+        raise UserError(f"start_step must be a whole number in 1..T={length}, got {start_step!r}")
+    steps = np.arange(int(start_step), length + 1)
+    keep = length if prediction_after is None else prediction_after
+    if keep not in steps:
+        raise UserError(f"prediction_after must be a step in {int(start_step)}..{length}, got {prediction_after!r}")
+    return steps, int(keep)

@@ -1,121 +1,449 @@
-"""A prior in code space per primitive, given the primitive (issue 39, its first piece).
+"""Priors in code space per primitive, and the primitive as an input (issue 39).
 
-The paper observes that codes of one primitive lie near a common affine subspace
-(*Clustering*). :class:`GaussianCodePrior` makes that a distribution: for each primitive
-(a label of the fitted demonstrations), a Gaussian over its fitted codes (their mean and
-full covariance, shrunk towards a multiple of the identity so that a primitive with fewer
-codes than dimensions still has one). ``n_samples`` codes are drawn from it once, in
-:meth:`GaussianCodePrior.fit`, and decoded once; a new motion asked to be primitive ``k``
-is predicted by that decoded ensemble conditioned on its observed entries
-(:func:`~primspace.predict.candidates.condition_ensemble`, the ensemble Kalman update that
-ProMP conditioning also is, with its own Gaussian over trajectories), then the continuity
-correction. The code returned is the drawn code whose decoded motion is nearest the
-prediction.
+The paper's latent space is structured: codes of one primitive lie near a common affine
+subspace (*Clustering*). :class:`PriorPredictor` makes each primitive a distribution
+over codes and predicts the rest of a motion under it, with θ frozen:
 
-Unlike :class:`~primspace.predict.mixture.MixturePredictor` (candidates at and between the
-fitted codes, all primitives, weighted by the prefix), the prior is continuous and is
-given the primitive, as ProMP-with-labels is. Measuring it against ProMP-with-labels on the
-paper preset, and the observation noise's choice, are issue 39's work still to do.
+1. **Primitives** (:mod:`primspace.predict.primitives`): the labels of the fitted
+   demonstrations, or clusters of the fitted codes found without labels (the paper's
+   affine low-rank subspace clustering).
+2. **A prior per primitive** (:mod:`primspace.predict.code_prior`): a Gaussian over its
+   fitted codes, the family (shrunk full covariance, low rank plus diagonal, or the affine
+   subspace with an isotropic spread) chosen by the held-out likelihood of the fitted codes.
+3. **Draws decoded once**: ``n_samples`` codes per primitive, decoded in :meth:`fit`; the
+   decoded motions and their codes form one Gaussian per primitive (their moments).
+4. **Conditioning** on the observed entries (the ensemble Kalman update, as ProMP
+   conditions its Gaussian over trajectories): given the primitive (``primitive=`` a name
+   or id for every motion, or ``given=True``: each motion's label), its conditioned
+   mean; without it, the posterior over primitives, each primitive's evidence of the
+   observed steps ``log N(x_o; μ_o, Σ_oo + r I)`` tempered by ``T`` plus the log share of
+   the fitted codes it holds, and the posterior-weighted conditioned means (the best
+   prediction under a squared error when the prefix leaves the primitive ambiguous).
+5. The continuity correction (:func:`~primspace.predict.candidates.continuity_correction`).
+
+The noise ``r`` (given the primitive, and without it) and the temperature ``T`` are chosen
+per observation rule without the answer, by K-fold prediction of the fitted
+demonstrations: each fold's codes are left out of the priors, which are drawn and decoded
+again without them; ``r`` by the error of the rest, ``T`` by the log-loss of the held-out
+demonstrations' own primitive (calibration), then the label-free ``r`` by the error of the
+posterior-weighted prediction.
+
+Online (:meth:`PriorPredictor.predict_online`): the same Gaussians filtered a step at a
+time (:class:`~primspace.predict.code_prior.SequentialGaussian`), equal after step ``t``
+to the offline forecast of that prefix with the same ``r`` and ``T`` (tested).
 """
 
 from __future__ import annotations
 
+import copy
+import time
+
 import numpy as np
 
 from primspace.errors import UserError
-from primspace.predict.base import Forecast, Predictor, observed_mask
-from primspace.predict.candidates import condition_ensemble, continuity_correction
-from primspace.predict.metrics import check_labels, check_lengths, check_motor, valid_mask
+from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
+from primspace.predict.candidates import continuity_correction
+from primspace.predict.code_prior import DecodedGaussian, SequentialGaussian, choose_prior, fit_gaussian
+from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
+from primspace.predict.online import OnlineResult, online_steps
+from primspace.predict.primitives import PRIMITIVE_SOURCES, primitives_from_clusters, primitives_from_labels
+from primspace.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
+from primspace.train.observe import NOTHING, Observation
 
-__all__ = ["GaussianCodePrior"]
+__all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "CV_SAMPLES"]
+
+#: The name of the prior predictor among the predictors of :func:`primspace.predict.predict`.
+PRIOR = "prior"
+#: Observation noise ``r`` per entry (scaled units²) tried by the K-fold choice.
+NOISE_GRID = (1e-5, 1e-4, 1e-3, 1e-2)
+#: Temperatures of the evidence tried by the K-fold choice (1: the evidence as it is).
+TEMPERATURE_GRID = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0)
+#: Draws per primitive of each fold's priors in the K-fold choice (at most ``n_samples``).
+CV_SAMPLES = 500
+#: Folds of the choice of ``r`` and ``T``.
+CV_FOLDS = 5
 
 
-class GaussianCodePrior(Predictor):
-    """A Gaussian over each primitive's fitted codes, its draws decoded and conditioned (module docstring).
+class PriorPredictor(Predictor):
+    """A prior in code space per primitive, conditioned on the observed steps (module docstring).
 
     Parameters
     ----------
     run : TrainedRun or path-like
         The trained run (θ frozen; not changed).
+    primitive : str or int, optional
+        The primitive of every motion (a name of :attr:`primitives_` or an id); None: each
+        motion's label when ``given``, else the posterior over primitives.
+    given : bool
+        Each motion's primitive is its label (``labels`` of :meth:`predict`).
+    primitives : {"labels", "clusters"}
+        The fitted demonstrations' labels, or clusters of the fitted codes.
+    n_clusters : int, optional
+        Clusters when ``primitives="clusters"`` (default: the number of labels).
+    label_names : list of str, optional
+        Names of the labels (set by :func:`~primspace.predict.api.fit_predictor` from the data).
+    family : "auto" or (name, setting)
+        The prior's family (:data:`~primspace.predict.code_prior.PRIOR_GRID`); auto: chosen by
+        held-out likelihood.
     n_samples : int
-        Codes drawn per primitive (the ensemble's size).
-    noise : float
-        Observation noise ``r`` per observed entry (scaled units²) of the conditioning.
-    shrinkage : float
-        The covariance is ``(1 - s) C + s (tr C / d) I``: ``s`` in [0, 1].
+        Codes drawn and decoded per primitive.
+    noise, temperature : "auto" or float
+        ``r`` and ``T``; auto: chosen per observation rule by K-fold prediction.
     continuity : bool
-        Apply the continuity correction after conditioning.
     random_state : int, optional
-        Seed of the draws (default: the run's seed).
+        Seed of the draws and folds (default: the run's seed).
+    progress : bool, optional
     """
-
-    needs_labels = True
 
     def __init__(
         self,
         run,
+        primitive=None,
+        given: bool = False,
+        primitives: str = "labels",
+        n_clusters: int | None = None,
+        label_names=None,
+        family="auto",
         n_samples: int = 2000,
-        noise: float = 1e-4,
-        shrinkage: float = 0.05,
+        noise="auto",
+        temperature="auto",
         continuity: bool = True,
         random_state: int | None = None,
+        progress: bool | None = False,
     ):
         self.run = run
+        self.primitive = primitive
+        self.given = given
+        self.primitives = primitives
+        self.n_clusters = n_clusters
+        self.label_names = label_names
+        self.family = family
         self.n_samples = n_samples
         self.noise = noise
-        self.shrinkage = shrinkage
+        self.temperature = temperature
         self.continuity = continuity
         self.random_state = random_state
+        self.progress = progress
 
-    def fit(self, motor=None, labels=None, lengths=None, frames=None) -> "GaussianCodePrior":
-        """Draw and decode ``n_samples`` codes per primitive of ``labels`` (the fitted
-        demonstrations' labels, in the run's order; ``motor`` is not read)."""
+    @property
+    def needs_labels(self) -> bool:
+        """Given each motion's primitive by its label."""
+        return bool(self.given) and self.primitive is None
+
+    # -- fit ------------------------------------------------------------------------------
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> "PriorPredictor":
+        """Group the run's fitted codes into primitives, choose and fit their priors, draw and decode.
+        ``motor`` (scaled, the run's fitted samples in its order) is kept for the choices of ``r`` and ``T``."""
         run = self.run_ = as_run(self.run)
+        self._check_params()
+        motor = check_motor(motor)
         codes = np.asarray(run.latents, dtype=np.float64)
+        if len(motor) != len(codes):
+            raise UserError(f"the prior is fitted on the run's {len(codes)} fitted demonstrations, got {len(motor)}")
         labels = check_labels(labels, len(codes))
-        if labels is None:
-            raise UserError("a prior per primitive needs the labels of the run's fitted demonstrations")
-        if not (isinstance(self.n_samples, (int, np.integer)) and self.n_samples >= 2):
-            raise UserError(f"n_samples must be a whole number >= 2, got {self.n_samples!r}")
-        if not (0.0 <= float(self.shrinkage) <= 1.0) or not float(self.noise) > 0:
-            raise UserError(f"shrinkage must be in [0, 1] and noise > 0, got {self.shrinkage} and {self.noise}")
-        seed = int(run.train_config.seed) if self.random_state is None else int(self.random_state)
-        rng = np.random.default_rng([seed, 39])
-        self.means_, self.codes_, self.decoded_ = {}, {}, {}
-        for label in np.unique(labels[labels >= 0]):
-            own = codes[labels == label]
-            mean, cov = own.mean(axis=0), np.atleast_2d(np.cov(own, rowvar=False)) if len(own) > 1 else None
-            if cov is None:
-                cov = np.zeros((codes.shape[1], codes.shape[1]))
-            s = float(self.shrinkage)
-            cov = (1.0 - s) * cov + s * (np.trace(cov) / len(mean) + 1e-12) * np.eye(len(mean))
-            drawn = rng.multivariate_normal(mean, cov, size=int(self.n_samples), method="eigh")
-            decoded = run.scaler.transform(reconstruct(run, drawn.astype(np.float32), images=False, batch_size=1024)[0])
-            self.means_[int(label)], self.codes_[int(label)], self.decoded_[int(label)] = mean, drawn, decoded
+        self.fitted_, self.fitted_lengths_ = motor, check_lengths(lengths, *motor.shape[:2])
+        self.seed_ = int(run.train_config.seed) if self.random_state is None else int(self.random_state)
+        self.primitives_ = self._primitives(codes, labels)
+        self.primitive_ = None if self.primitive is None else self.primitives_.resolve(self.primitive)
+        groups = [codes[self.primitives_.members(k)] for k in range(self.primitives_.count)]
+        self.prior_choice_ = (
+            choose_prior(groups, seed=self.seed_) if self.family == "auto" else {"family": tuple(self.family)}
+        )
+        self.shares_ = np.array([len(g) for g in groups], dtype=np.float64) / sum(len(g) for g in groups)
+        with stage(
+            f"prior: drawing and decoding {self.n_samples} codes for each of {len(groups)} primitives",
+            enabled=self.progress,
+        ):
+            # each primitive's prior in code space (GaussianCode), and its draws decoded
+            self.gaussians_, self.ensembles_ = self._ensembles(groups, int(self.n_samples), [self.seed_, 39])
+        self.choices_: dict = {}
+        self.folds_ = None
         return self
 
+    def _check_params(self) -> None:
+        if self.primitives not in PRIMITIVE_SOURCES:
+            raise UserError(f"primitives must be one of {', '.join(PRIMITIVE_SOURCES)}, got {self.primitives!r}")
+        if isinstance(self.n_samples, bool) or not isinstance(self.n_samples, (int, np.integer)) or self.n_samples < 2:
+            raise UserError(f"n_samples must be a whole number >= 2, got {self.n_samples!r}")
+        for name in ("noise", "temperature"):
+            value = getattr(self, name)
+            if value != "auto" and not (isinstance(value, (int, float)) and float(value) > 0):
+                raise UserError(f"{name} must be 'auto' or a number > 0, got {value!r}")
+
+    def _primitives(self, codes: np.ndarray, labels):
+        if self.primitives == "labels":
+            return primitives_from_labels(labels, self.label_names)
+        k = self.n_clusters
+        if k is None:
+            if labels is None:
+                raise UserError("clusters of the codes need n_clusters when the fitted data has no labels")
+            k = len(np.unique(labels[labels >= 0]))
+        return primitives_from_clusters(codes, k, labels, self.label_names, random_state=self.seed_)
+
+    def _ensembles(self, groups: list, n: int, seed) -> tuple[list, list[DecodedGaussian]]:
+        """Each primitive's prior fitted on ``groups`` and its ``n`` draws decoded (codes appended)."""
+        rng = np.random.default_rng(seed)
+        pooled = [g for g in groups if len(g) > 1]
+        var = float(np.mean([g.var(axis=0, ddof=1).mean() for g in pooled])) if pooled else 1.0
+        family = self.prior_choice_["family"]
+        gaussians = [fit_gaussian(g, family, var) for g in groups]
+        draws = [g.sample(n, rng) for g in gaussians]
+        decoded = reconstruct(self.run_, np.concatenate(draws).astype(np.float32), images=False, batch_size=1024)[0]
+        scaled = self.run_.scaler.transform(decoded).reshape(len(decoded), -1)
+        motion = scaled.shape[1]
+        return gaussians, [
+            DecodedGaussian(np.concatenate([scaled[i * n : (i + 1) * n], d], axis=1), motion)
+            for i, d in enumerate(draws)
+        ]
+
+    def asked(self, primitive=None, given: bool = False) -> "PriorPredictor":
+        """This fitted predictor asked differently (a primitive for every motion, each motion's
+        label, or neither: the posterior), sharing its fitted priors, draws and choices."""
+        other = copy.copy(self)
+        other.primitive, other.given = primitive, given
+        other.primitive_ = None if primitive is None else self.primitives_.resolve(primitive)
+        return other
+
+    # -- conditioning ---------------------------------------------------------------------
+    @staticmethod
+    def _condition(ensembles, seen: np.ndarray, mask: np.ndarray, wanted, r: float):
+        """Conditioned means (n, P, D) and log evidences (n, P) of the primitives ``wanted[i]``
+        (a list of ids per motion) on ``seen`` (n, T, J) where ``mask`` (n, T); NaN elsewhere."""
+        n, _, j = seen.shape
+        flat, flat_mask = seen.reshape(n, -1), np.repeat(mask, j, axis=1)
+        d = ensembles[0].mean.shape[0]
+        means = np.full((n, len(ensembles), d), np.nan)
+        evidence = np.full((n, len(ensembles)), -np.inf)
+        rows, inverse = np.unique(flat_mask, axis=0, return_inverse=True)
+        for g, row in enumerate(rows):
+            members = np.flatnonzero(inverse.reshape(-1) == g)
+            for k in sorted({k for i in members for k in wanted[i]}):
+                take = members[[k in wanted[i] for i in members]]
+                cond = ensembles[k].conditioned(row, r)
+                means[take, k], evidence[take, k] = cond.update(flat[take][:, row])
+        return means, evidence
+
+    def _posterior(self, evidence: np.ndarray, temperature: float) -> np.ndarray:
+        """(n, P) posterior over primitives from the evidences and the fitted codes' shares."""
+        logits = evidence / temperature + np.log(self.shares_)[None]
+        logits -= logits.max(axis=1, keepdims=True)
+        w = np.exp(logits)
+        return w / w.sum(axis=1, keepdims=True)
+
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
-        """Each motion as the primitive ``labels[i]`` asks for (scaled units), and its code."""
+        """The conditioned (given) or posterior-weighted (not given) motions, their codes, and
+        ``details["prior"]`` (the choices, and per motion the posterior over primitives)."""
         motor = check_motor(motor)
         n, steps, joints = motor.shape
-        labels = check_labels(labels, n)
-        if labels is None:
-            raise UserError("a prior per primitive is given each motion's primitive: pass labels")
-        unknown = sorted(set(labels.tolist()) - set(self.decoded_))
-        if unknown:
-            raise UserError(f"label(s) {unknown} have no fitted demonstration")
+        rule = observation_rule(observed, lengths, (n, steps))
+        if rule.motor == NOTHING:
+            raise UserError("the prior conditions on the observed joints, and observe='none' observes none")
         mask = observed_mask(observed, lengths, (n, steps))
         seen = np.where(mask[..., None], motor, 0.0)
-        out, codes = np.empty_like(seen), np.empty((n, self.run_.latents.shape[1]), dtype=np.float32)
-        for i, label in enumerate(labels.tolist()):
-            decoded = self.decoded_[label].reshape(int(self.n_samples), -1)
-            flat_mask = np.repeat(mask[i], joints)
-            weights = np.ones(len(decoded))
-            out[i] = condition_ensemble(decoded, weights, seen[i].reshape(-1), flat_mask, float(self.noise)).reshape(
-                steps, joints
-            )
-            codes[i] = self.codes_[label][np.argmin(((decoded - out[i].reshape(-1)) ** 2).sum(axis=1))]
+        ids = self._given_ids(labels, n)
+        choice = self.choice(rule)
+        r = choice["noise_given"] if ids is not None else choice["noise"]
+        wanted = [[int(k)] for k in ids] if ids is not None else [list(range(self.primitives_.count))] * n
+        means, evidence = self._condition(self.ensembles_, seen, mask, wanted, r)
+        if ids is not None:
+            weights = np.eye(self.primitives_.count)[ids]
+        else:
+            weights = self._posterior(evidence, choice["temperature"])
+        out, codes = self._mix(means, weights, seen.shape)
         if self.continuity:
             out = continuity_correction(out, seen, mask, valid_mask(check_lengths(lengths, n, steps), steps))
-        return Forecast(out, codes, {"prior": {"n_samples": int(self.n_samples), "noise": float(self.noise)}})
+        details = {"prior": self.summary(choice), "posterior": weights.tolist()}
+        return Forecast(out, codes, details)
+
+    def _given_ids(self, labels, n: int):
+        """Each motion's primitive when it is given (None: the posterior decides)."""
+        if self.primitive_ is not None:
+            return np.full(n, self.primitive_, dtype=np.int64)
+        if not self.given:
+            return None
+        labels = check_labels(labels, n)
+        if labels is None:
+            raise UserError("a prior given the primitive reads each motion's label: pass labels")
+        return self.primitives_.for_labels(labels)
+
+    def _mix(self, means: np.ndarray, weights: np.ndarray, shape: tuple):
+        """Posterior-weighted motions (n, T, J) and the codes of each motion's top primitive."""
+        motion = self.ensembles_[0].n_motion
+        safe = np.nan_to_num(means)
+        out = np.einsum("np,npd->nd", weights, safe[..., :motion]).reshape(shape)
+        top = np.argmax(weights, axis=1)
+        codes = safe[np.arange(len(top)), top, motion:].astype(np.float32)
+        return out, codes
+
+    def summary(self, choice: dict | None = None) -> dict:
+        """What ``result.json`` records of the prior and its choices."""
+        family = self.prior_choice_["family"]
+        return {
+            "family": [family[0], float(family[1])],
+            "family_scores": self.prior_choice_.get("scores", {}),
+            "n_samples": int(self.n_samples),
+            "primitives": self.primitives_.summary(),
+            "primitive": None if self.primitive_ is None else self.primitives_.names[self.primitive_],
+            **({} if choice is None else {k: v for k, v in choice.items() if k != "cv"}),
+        }
+
+    # -- choices of r and T ------------------------------------------------------------------
+    def choice(self, rule: Observation) -> dict:
+        """``noise_given``, ``noise``, ``temperature`` (and the K-fold scores ``cv``) for ``rule``:
+        the given values, or chosen on first use (module docstring)."""
+        if rule.key not in self.choices_:
+            fixed = {"noise": self.noise, "temperature": self.temperature}
+            if all(v != "auto" for v in fixed.values()):
+                r = float(self.noise)
+                self.choices_[rule.key] = {"noise_given": r, "noise": r, "temperature": float(self.temperature)}
+            else:
+                with stage("prior: choosing its noise and temperature by K-fold prediction", enabled=self.progress):
+                    self.choices_[rule.key] = self._cross_validate(rule)
+        return self.choices_[rule.key]
+
+    def _folds(self) -> list:
+        """K folds of the fitted demonstrations (within each primitive), each with the priors
+        fitted, drawn and decoded without it: ``[(held-out indices, ensembles)]`` (kept)."""
+        if self.folds_ is None:
+            rng = np.random.default_rng([self.seed_, 39, 2])
+            fold_of = np.full(len(self.fitted_), -1)
+            for k in range(self.primitives_.count):
+                own = rng.permutation(self.primitives_.members(k))
+                fold_of[own] = np.arange(len(own)) % CV_FOLDS
+            codes = np.asarray(self.run_.latents, dtype=np.float64)
+            n = min(int(self.n_samples), CV_SAMPLES)
+            self.folds_ = []
+            for f in range(CV_FOLDS):
+                held = np.flatnonzero(fold_of == f)
+                keep = [np.setdiff1d(self.primitives_.members(k), held) for k in range(self.primitives_.count)]
+                keep = [kept if len(kept) else self.primitives_.members(k) for k, kept in enumerate(keep)]
+                if held.size:
+                    self.folds_.append((held, self._ensembles([codes[i] for i in keep], n, [self.seed_, 39, 3, f])[1]))
+        return self.folds_
+
+    def _cross_validate(self, rule: Observation) -> dict:
+        """The K-fold choice of ``r`` (given and not) and ``T`` for ``rule`` (module docstring)."""
+        fitted, lengths = self.fitted_, self.fitted_lengths_
+        observed = rule.masks(lengths, fitted.shape[1])[0]
+        valid = valid_mask(lengths, fitted.shape[1])
+        truth = self.primitives_.assignment
+        noises = [float(self.noise)] if self.noise != "auto" else list(NOISE_GRID)
+        temps = [float(self.temperature)] if self.temperature != "auto" else list(TEMPERATURE_GRID)
+        everyone = list(range(self.primitives_.count))
+        scores = {"given": {}, "posterior": {}}
+        best_given, best_free = (np.inf, None), (np.inf, None, None)
+        for r in noises:
+            means = np.full((len(fitted), self.primitives_.count, self.ensembles_[0].mean.shape[0]), np.nan)
+            evidence = np.full((len(fitted), self.primitives_.count), -np.inf)
+            for held, ensembles in self._folds():
+                seen = np.where(observed[held, :, None], fitted[held], 0.0)
+                means[held], evidence[held] = self._condition(
+                    ensembles, seen, observed[held], [everyone] * len(held), r
+                )
+            scored = truth >= 0
+            given = self._fold_error(
+                np.eye(len(everyone))[truth[scored]], means[scored], observed[scored], valid[scored]
+            )
+            scores["given"][f"{r:g}"] = given
+            best_given = min(best_given, (given, r), key=lambda x: x[0])
+            logloss = {
+                t: -np.log(self._posterior(evidence[scored], t)[np.arange(scored.sum()), truth[scored]] + 1e-300).mean()
+                for t in temps
+            }
+            t = min(logloss, key=logloss.get)
+            free = self._fold_error(
+                self._posterior(evidence[scored], t), means[scored], observed[scored], valid[scored]
+            )
+            scores["posterior"][f"{r:g}"] = {"temperature": t, "log_loss": float(logloss[t]), "mse": free}
+            best_free = min(best_free, (free, r, t), key=lambda x: x[0])
+        return {"noise_given": best_given[1], "noise": best_free[1], "temperature": best_free[2], "cv": scores}
+
+    def _fold_error(self, weights: np.ndarray, means: np.ndarray, observed: np.ndarray, valid: np.ndarray) -> float:
+        """Mean unobserved MSE of the weighted held-out predictions (after the continuity correction)."""
+        idx = np.flatnonzero(valid.any(axis=1))
+        truth = self.fitted_[np.flatnonzero(self.primitives_.assignment >= 0)][idx]
+        seen = np.where(observed[idx, :, None], truth, 0.0)
+        out, _ = self._mix(means[idx], weights[idx], truth.shape)
+        out = continuity_correction(out, seen, observed[idx], valid[idx])
+        errors = unobserved_mse(out, truth, observed[idx], valid[idx].sum(axis=1))
+        errors = errors[np.isfinite(errors)]
+        return float(errors.mean()) if errors.size else 0.0
+
+    # -- online -----------------------------------------------------------------------------
+    def predict_online(
+        self,
+        motor,
+        lengths=None,
+        labels=None,
+        *,
+        start_step: int = 1,
+        prediction_after: int | None = None,
+        progress: bool | None = None,
+    ) -> OnlineResult:
+        """The prediction after each arriving step ``start_step..T``: the priors filtered a step at
+        a time (module docstring), with the ``r`` and ``T`` chosen for a prefix of
+        ``prediction_after`` steps (default T) before the first step arrives (not counted in the
+        latency); equal after step ``t`` to ``forecast`` of that prefix with the same ``r`` and ``T``.
+
+        Returns
+        -------
+        OnlineResult
+            ``codes`` the top primitive's conditioned code after each step; ``latency`` the seconds
+            of each step's update, posterior, mixture and correction for the whole batch;
+            ``prediction`` after step ``prediction_after``, physical units.
+        """
+        truth = check_motor(motor)
+        n, length, joints = truth.shape
+        steps, keep = online_steps(start_step, prediction_after, length)
+        choice = self.choice(Observation.build(int(keep)))
+        ids = self._given_ids(labels, n)
+        r = choice["noise_given"] if ids is not None else choice["noise"]
+        lengths = check_lengths(lengths, n, length)
+        valid = valid_mask(lengths, length)
+        wanted = sorted(set(ids.tolist())) if ids is not None else range(self.primitives_.count)
+        groups = {int(v): np.flatnonzero(lengths == v) for v in np.unique(lengths)}
+        filters = {(v, k): SequentialGaussian(self.ensembles_[k], len(g), r) for v, g in groups.items() for k in wanted}
+        d = self.ensembles_[0].mean.shape[0]
+
+        def arrive(t: int) -> tuple[np.ndarray, np.ndarray]:  # (n, P, D) means, (n, P) evidence after step t
+            means, evidence = np.zeros((n, self.primitives_.count, d)), np.full((n, self.primitives_.count), -np.inf)
+            for (v, k), f in filters.items():
+                if t <= v:
+                    f.observe(np.arange((t - 1) * joints, t * joints), truth[groups[v], t - 1])
+                means[groups[v], k], evidence[groups[v], k] = f.means, f.evidence
+            return means, evidence
+
+        for t in range(1, int(start_step)):
+            arrive(t)
+        codes = np.empty((n, len(steps), self.run_.latents.shape[1]), dtype=np.float32)
+        errors, latency, kept = np.empty((n, len(steps))), np.empty(len(steps)), None
+        with progress_bar(len(steps), "online prior", enabled=progress) as advance:
+            for s, t in enumerate(steps):
+                t0 = time.perf_counter()
+                means, evidence = arrive(int(t))
+                weights = (
+                    np.eye(self.primitives_.count)[ids]
+                    if ids is not None
+                    else self._posterior(evidence, choice["temperature"])
+                )
+                out, codes[:, s] = self._mix(means, weights, truth.shape)
+                mask = np.arange(length)[None, :] < np.minimum(lengths, t)[:, None]
+                if self.continuity:
+                    out = continuity_correction(out, np.where(mask[..., None], truth, 0.0), mask, valid)
+                latency[s] = time.perf_counter() - t0
+                errors[:, s] = unobserved_mse(out, truth, mask, lengths)
+                if t == keep:
+                    kept = out
+                advance()
+        return OnlineResult(
+            steps=steps,
+            codes=codes,
+            start_codes=codes[:, 0].copy(),
+            errors=errors,
+            latency=latency,
+            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32),
+            iterations=0,
+            init=PRIOR,
+            latent_lr=float("nan"),
+        )

@@ -1,0 +1,127 @@
+"""The primitives of a run: which of its fitted codes make each one, and their names (issue 39).
+
+A primitive is either a label of the fitted demonstrations (when the user has labels) or a
+cluster of the fitted codes found without labels, by the paper's affine low-rank subspace
+clustering (:func:`~primspace.predict.scene_clusters.cluster_codes`). :class:`Primitives`
+keeps the assignment of every fitted code and a name per primitive, and turns what a user
+asks for (a name such as ``"push"``, or an id) into a primitive, with one line naming
+those available when it names none.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from primspace.errors import UserError
+
+__all__ = ["Primitives", "primitives_from_labels", "primitives_from_clusters", "PRIMITIVE_SOURCES"]
+
+#: Where the primitives come from.
+PRIMITIVE_SOURCES = ("labels", "clusters")
+
+
+@dataclass
+class Primitives:
+    """The fitted codes grouped into primitives.
+
+    Attributes
+    ----------
+    assignment : ndarray (m,) int
+        The primitive of each fitted code (the run's order), ``0..P-1``; -1: none.
+    names : list of str
+        Each primitive's name (a label name, the label as text, or ``"cluster k"``).
+    labels : list of int or None
+        The label each primitive stands for (itself for labels; a cluster's majority label).
+    source : str
+        ``labels`` or ``clusters``.
+    """
+
+    assignment: np.ndarray
+    names: list
+    labels: list
+    source: str
+
+    @property
+    def count(self) -> int:
+        return len(self.names)
+
+    def members(self, k: int) -> np.ndarray:
+        """The fitted codes' indices of primitive ``k``."""
+        return np.flatnonzero(self.assignment == k)
+
+    def available(self) -> str:
+        """The primitives a user may name, for an error line."""
+        return ", ".join(f"{k} ({name})" for k, name in enumerate(self.names))
+
+    def resolve(self, primitive) -> int:
+        """``primitive`` (a name, or an id as int or digits) as an id, or one UserError listing them."""
+        if isinstance(primitive, str):
+            if primitive in self.names:
+                return self.names.index(primitive)
+            if primitive.strip().isdigit():
+                primitive = int(primitive)
+            else:
+                raise UserError(f"unknown primitive {primitive!r}: the run's primitives are {self.available()}")
+        if isinstance(primitive, (bool, np.bool_)) or not isinstance(primitive, (int, np.integer)):
+            raise UserError(f"a primitive is a name or an id, got {primitive!r}: {self.available()}")
+        if not 0 <= int(primitive) < self.count:
+            raise UserError(f"primitive {int(primitive)} is out of range: the run's primitives are {self.available()}")
+        return int(primitive)
+
+    def for_labels(self, labels) -> np.ndarray:
+        """The primitive that stands for each of ``labels`` (n,) (for clusters: the largest cluster
+        whose majority label it is), or one UserError naming a label that none stands for."""
+        labels = np.asarray(labels, dtype=np.int64)
+        sizes = np.bincount(self.assignment[self.assignment >= 0], minlength=self.count)
+        table = {}
+        for k, label in enumerate(self.labels):
+            if label is not None and (label not in table or sizes[k] > sizes[table[label]]):
+                table[label] = k
+        missing = sorted(set(labels.tolist()) - set(table))
+        if missing:
+            raise UserError(f"label(s) {missing} stand for no primitive of the run: {self.available()}")
+        return np.array([table[int(v)] for v in labels], dtype=np.int64)
+
+    def summary(self) -> dict:
+        """What ``result.json`` records."""
+        return {
+            "source": self.source,
+            "names": list(self.names),
+            "labels": [None if v is None else int(v) for v in self.labels],
+            "sizes": [int((self.assignment == k).sum()) for k in range(self.count)],
+        }
+
+
+def _name(label: int, label_names) -> str:
+    return label_names[label] if label_names is not None and 0 <= label < len(label_names) else str(label)
+
+
+def primitives_from_labels(labels, label_names=None) -> Primitives:
+    """One primitive per label present (``labels`` (m,) int; -1: none), in label order."""
+    if labels is None:
+        raise UserError(
+            "the fitted data has no labels: choose the primitives as clusters of the codes (primitives='clusters')"
+        )
+    labels = np.asarray(labels, dtype=np.int64)
+    present = [int(v) for v in np.unique(labels[labels >= 0])]
+    if not present:
+        raise UserError("the fitted data's labels are all -1 (none): choose primitives='clusters'")
+    ids = np.array([present.index(int(v)) if v >= 0 else -1 for v in labels], dtype=np.int64)
+    return Primitives(ids, [_name(v, label_names) for v in present], present, "labels")
+
+
+def primitives_from_clusters(codes, n_clusters: int, labels=None, label_names=None, random_state: int = 0):
+    """The fitted ``codes`` clustered into ``n_clusters`` affine subspaces (labels, when given,
+    only name them: a cluster is called by its members' majority label, ``"cluster k"`` without)."""
+    from primspace.predict.scene_clusters import cluster_codes
+
+    found = cluster_codes(codes, n_clusters, labels, label_names, random_state=random_state)
+    names = [f"cluster {k}" if n is None else str(n) for k, n in enumerate(found.names)]
+    seen: dict = {}
+    for k, n in enumerate(names):  # two clusters of one majority label get distinct names
+        seen[n] = seen.get(n, 0) + 1
+        if seen[n] > 1:
+            names[k] = f"{n} ({seen[n]})"
+    return Primitives(found.labels.astype(np.int64), names, list(found.majority), "clusters")
