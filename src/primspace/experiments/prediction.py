@@ -30,7 +30,7 @@ from primspace.experiments.runs import focus_runs, phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 from primspace.experiments.prediction_table import predict_figure, predict_table
-from primspace.predict.grid import LABELS_DIAGNOSTIC, PEERS
+from primspace.predict.grid import GIVEN_ROWS, LABELS_DIAGNOSTIC, PEERS
 
 __all__ = [
     "PREDICT_FRACTIONS",
@@ -99,7 +99,7 @@ def run_predict_point(
     """One seed: every row (:func:`~primspace.predict.grid.grid_predictors`) at every fraction; mean
     unobserved MSE (and success) over the run's evaluation samples (at most ``max_samples``:
     :func:`predicted_subset`)."""
-    from primspace.predict.grid import GIVEN_ROWS, grid_forecasts, grid_predictors, posterior_accuracy
+    from primspace.predict.grid import grid_forecasts, grid_predictors, posterior_accuracy
     from primspace.predict.metrics import finite_mean, unobserved_mse
     from primspace.train import TrainConfig, configure_process, load_run
     from primspace.train.observe import Observation
@@ -186,10 +186,12 @@ def run_predict(
         grid = exp.grid(run_predict_point, points, "prediction")
     by_seed = {str(s): grid.results[p.key] for s, p in zip(seeds, points) if p.key in grid.results}
     results = {
+        "version": PREDICT_VERSION,
         "latent_dim": q,
         "fractions": [float(f) for f in fractions],
         "starts": list(starts),
         "peers": list(PEERS),
+        "given_rows": list(GIVEN_ROWS),
         "epochs": int(epochs),
         "judged": judge,
         "by_seed": by_seed,
