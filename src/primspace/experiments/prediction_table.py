@@ -9,16 +9,19 @@ __all__ = ["predict_table", "predict_figure", "mean_std_count"]
 
 
 def predict_table(by_seed: dict) -> dict:
-    """{method: {fraction: {"mse": [mean, std, n], "success": [mean, std, n] or absent}}} over seeds."""
+    """{method: {fraction: {"mse": [mean, std, n], "success": [mean, std, n], "accuracy": [mean, std, n]}}}
+    over seeds ("success" where judged, "accuracy" (the posterior's top-1) where the row has one; absent otherwise)."""
     table: dict = {}
     for result in by_seed.values():
         for method, fractions in result["methods"].items():
             for key, entry in fractions.items():
-                cell = table.setdefault(method, {}).setdefault(key, {"mse": [], "success": []})
+                cell = table.setdefault(method, {}).setdefault(key, {"mse": [], "success": [], "accuracy": []})
                 if entry.get("mse") is not None:
                     cell["mse"].append(entry["mse"])
                 if "success" in entry:
                     cell["success"].append(entry["success"]["overall"])
+                if entry.get("accuracy") is not None:
+                    cell["accuracy"].append(entry["accuracy"])
     return {
         m: {k: {name: mean_std_count(v) for name, v in cell.items() if v} for k, cell in fr.items()}
         for m, fr in table.items()

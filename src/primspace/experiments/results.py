@@ -57,6 +57,7 @@ __all__ = [
     "tuning_table",
     "projection_lead",
     "scene_table",
+    "cell_text",
 ]
 
 META_FILE = "experiment.json"
@@ -427,11 +428,9 @@ def predict_error_table(results: dict) -> tuple[list[str], list[list]]:
         columns += [f"success, {float(f):.0%}" for f in fractions + (["1"] if judged else [])]
     rows = []
     for method, cells in table.items():
-        row = [method] + [_cell_text(cells.get(f, {}).get("mse")) for f in fractions]
+        row = [method] + [cell_text(cells.get(f, {}).get("mse")) for f in fractions]
         if results.get("judged"):
-            row += [
-                _cell_text(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])
-            ]
+            row += [cell_text(cells.get(f, {}).get("success"), digits=2) for f in fractions + (["1"] if judged else [])]
         rows.append(row)
     return columns, rows
 
@@ -452,13 +451,13 @@ def scene_table(results: dict) -> tuple[list[str], list[list]]:
             if cell:
                 rows.append(
                     [name, method, f"{cell['n'][0]:g}"]
-                    + ([_cell_text(cell.get("success"), digits=2)] if judged else [])
-                    + [_cell_text(cell.get("mse"))]
+                    + ([cell_text(cell.get("success"), digits=2)] if judged else [])
+                    + [cell_text(cell.get("mse"))]
                 )
     return columns, rows
 
 
-def _cell_text(cell, digits: int = 4) -> str:
+def cell_text(cell, digits: int = 4) -> str:
     """``[mean, std, n]`` as "mean ± std" (n > 1) or "mean"; "–" for none."""
     if not cell:
         return "–"

@@ -171,9 +171,12 @@ def _seeds_run(p: dict) -> list[int]:
 
 
 def _predict(p: dict) -> dict:
-    return {
-        k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table", "failures")
-    } | {"seeds": _seeds_run(p)}
+    """The predict results kept (the grid's version and its rows given the primitive where the results say them)."""
+    return (
+        {k: p.get(k) for k in ("latent_dim", "fractions", "starts", "peers", "epochs", "judged", "table", "failures")}
+        | {k: p[k] for k in ("version", "given_rows") if k in p}
+        | {"seeds": _seeds_run(p)}
+    )
 
 
 def _scene(p: dict) -> dict:

@@ -40,6 +40,7 @@ from primspace.experiments.results import (
     tuning_table,
 )
 from primspace.report.appendices import appendix_a, environment
+from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
 from primspace.report.page import HtmlReport
 
 __all__ = [
@@ -324,13 +325,25 @@ def prediction(out_dir: Path, report: HtmlReport) -> None:
             else "."
         )
     )
-    columns, rows = predict_error_table(results)
-    report.table(columns, rows)
+    _predict_tables(report, results)
     report.figure(
         figure_file(out_dir, "predict_errors"), "Error of the unobserved steps against the observed fraction."
     )
     if results["failures"]:
         _failures(report, results["failures"], "prediction point(s)")
+
+
+def _predict_tables(report: HtmlReport, results: dict) -> None:
+    """The prediction grid's table, or from version 4 on its two tasks with their verdicts
+    (:func:`primspace.report.predict_tables.task_tables`, as docs/predict.md shows them)."""
+    if not splits_tasks(results):
+        report.table(*predict_error_table(results))
+        return
+    report.paragraph(f"{TASKS_TEXT} {VERDICT_RULE}")
+    for task in task_tables(results):
+        report.subsection(task.title)
+        report.table(task.columns, task.rows)
+        report.paragraph(task.verdict)
 
 
 def scene_only(out_dir: Path, report: HtmlReport) -> None:

@@ -23,6 +23,7 @@ from primspace.experiments.composite.results import (
     recall_table,
 )
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
+from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
 from primspace.stats import wilson_interval
 
 __all__ = [
@@ -446,26 +447,27 @@ def render_scene(summary: dict) -> str:
 
 
 def render_predict(summary: dict) -> str:
-    """The prediction table of one summary (``primspace experiment predict``)."""
+    """The prediction table of one summary (``primspace experiment predict``); from grid version 4
+    on, two (:func:`primspace.report.predict_tables.task_tables`): with the primitive given and without it."""
     pr = summary["results"]["predict"]
     seeds = pr.get("seeds") or summary.get("preset", {}).get("seeds", [])  # summaries before 0.6.1: all of them
-    columns, rows = predict_error_table(pr)
     cpu = summary.get("cpu", {})
-    return "\n".join(
-        [
-            f"#### {summary['name']}",
-            "",
-            "```",
-            summary["command"].strip(),
-            "```",
-            "",
-            f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
-            f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
-            "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
-            + (
-                "; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."
-            ),
-            "",
-            table(columns, [[str(c) for c in row] for row in rows]),
-        ]
-    )
+    head = [
+        f"#### {summary['name']}",
+        "",
+        "```",
+        summary["command"].strip(),
+        "```",
+        "",
+        f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
+        f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
+        "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
+        + ("; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."),
+    ]
+    if not splits_tasks(pr):
+        columns, rows = predict_error_table(pr)
+        return "\n".join(head + ["", table(columns, [[str(c) for c in row] for row in rows])])
+    head[-1] += " " + TASKS_TEXT + " " + VERDICT_RULE
+    for task in task_tables(pr):
+        head += ["", f"##### {task.title}", "", table(task.columns, task.rows), "", task.verdict]
+    return "\n".join(head)
