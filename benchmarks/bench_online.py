@@ -84,10 +84,12 @@ def primitives(n_per: int, *, seed: int, K: int = 3, images: bool = False) -> Mo
     return MotionDataset(motor, images=frames, labels=labels)
 
 
-def _fit(images: bool, args) -> tuple:
+def _fit(images: bool, args, K: int = 3) -> tuple:
+    """The paper-sized decoder fitted on ``args.train_samples`` of ``K`` primitives (the first
+    ``args.samples`` of as many held out): ``(run, held, train)``."""
     n_train = args.train_samples if not images else args.image_train_samples
-    train = primitives(math.ceil(n_train / 3), seed=0, images=images)
-    held = primitives(math.ceil(args.samples / 3), seed=100, images=images).subset(np.arange(args.samples))
+    train = primitives(math.ceil(n_train / K), seed=0, K=K, images=images)
+    held = primitives(math.ceil(args.samples / K), seed=100, K=K, images=images).subset(np.arange(args.samples))
     mc = ModelConfig(latent_dim=Q, layer_sizes=(32, 12), image_size=(H, W) if images else None)
     tc = TrainConfig(
         epochs=args.image_fit_epochs if images else args.fit_epochs,
