@@ -691,6 +691,7 @@ def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_p
 def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     """`experiment predict`: every start and peer at every fraction, judged on simulator data, resumable."""
     from primspace.experiments.prediction import PEERS, PREDICT_VERSION, run_predict
+    from primspace.predict.grid import PRIOR_ROWS
 
     exp = finished[0]
     results = run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)
@@ -702,7 +703,11 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
         "mixture (no continuity)",
         "mixture (labels; diagnostic)",
         *PEERS,
+        *PRIOR_ROWS,
     }
+    assert (
+        0 <= table["prior (posterior)"]["0.5"]["accuracy"][0] <= 1 and "accuracy" not in table["prior (labels)"]["0.5"]
+    )
     for method, cells in table.items():
         assert set(cells) >= {"0.25", "0.5"}, method
         assert all(np.isfinite(cells[k]["mse"][0]) and cells[k]["mse"][2] == 1 for k in ("0.25", "0.5"))

@@ -7,7 +7,7 @@ import pytest
 
 from primspace.errors import UserError
 from primspace.predict import unobserved_mse
-from primspace.predict.code_prior import DecodedGaussian, SequentialGaussian, choose_prior, fit_gaussian
+from primspace.predict.code_prior import DecodedGaussian, SequentialGaussian, StepGains, choose_prior, fit_gaussian
 from primspace.predict.primitives import primitives_from_clusters, primitives_from_labels
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
@@ -151,9 +151,9 @@ def test_the_sequential_filter_equals_the_batch_update():
     rng = np.random.default_rng(2)
     ens = DecodedGaussian(rng.standard_normal((30, 15)), 12)
     x = rng.standard_normal((4, 9))
-    seq = SequentialGaussian(ens, 4, 0.05)
+    seq = SequentialGaussian(StepGains(ens, 0.05, 3, 4), 4)
     for t in range(3):
-        seq.observe(np.arange(3 * t, 3 * t + 3), x[:, 3 * t : 3 * t + 3])
+        seq.observe(t, x[:, 3 * t : 3 * t + 3])
     mask = np.zeros(15, bool)
     mask[:9] = True
     means, evidence = ens.conditioned(mask, 0.05).update(x)
@@ -168,3 +168,26 @@ def test_online_equals_the_offline_prefix(posterior, trained, eval_set):
     offline = posterior.forecast(scaled, Observation.build(int(t)))
     np.testing.assert_allclose(trained.scaler.transform(online.prediction), offline.motor, atol=1e-4)
     assert online.errors.shape == (len(eval_set), eval_set.length) and (online.latency > 0).all()
+
+
+def test_a_blend_has_the_moments_of_the_mixture():
+    rng = np.random.default_rng(3)
+    data, model = rng.standard_normal((20, 6)) + 1.0, rng.standard_normal((40, 6))
+    a, b = DecodedGaussian(data, 4), DecodedGaussian(model, 4)
+    mixed = DecodedGaussian.blend(a, b, 0.3)
+    cov = lambda g: g.deviations.T @ g.deviations  # noqa: E731
+    np.testing.assert_allclose(mixed.mean, 0.3 * a.mean + 0.7 * b.mean)
+    gap = np.outer(a.mean - b.mean, a.mean - b.mean)
+    np.testing.assert_allclose(cov(mixed), 0.3 * cov(a) + 0.7 * cov(b) + 0.21 * gap, atol=1e-12)
+    assert DecodedGaussian.blend(a, b, 1.0) is a and DecodedGaussian.blend(None, b, 0.7) is b
+
+
+def test_the_blend_of_one_predicts_from_the_fitted_demonstrations_alone(trained, train_set, eval_set):
+    """blend=1: the fitted pairs' own Gaussian; its prediction does not depend on the draws."""
+    scaled, rule = trained.scaler.transform(eval_set.motor), Observation.build(0.5)
+    fixed = dict(given=True, noise=1e-3, temperature=1.0, blend=1.0)
+    one = _fit(trained, train_set, **fixed).forecast(scaled, rule, eval_set.labels)
+    other = _fit(trained, train_set, random_state=5, **fixed).forecast(scaled, rule, eval_set.labels)
+    np.testing.assert_allclose(one.motor, other.motor)
+    draws = _fit(trained, train_set, **{**fixed, "blend": 0.0}).forecast(scaled, rule, eval_set.labels)
+    assert not np.allclose(one.motor, draws.motor)

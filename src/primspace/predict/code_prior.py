@@ -23,7 +23,9 @@ with noise ``r`` per entry is the ensemble Kalman update (the same as ProMP cond
 with the decoded ensemble's moments in place of ProMP's basis functions),
 ``μ + Σ_{·o} (Σ_oo + r I)⁻¹ (x_o - μ_o)``, and the evidence of the observed entries is
 ``log N(x_o; μ_o, Σ_oo + r I)``. Both are computed per observation mask for a batch of
-motions at once, in the smaller of the observed space and the ensemble's space.
+motions at once, in the smaller of the observed space and the ensemble's space. The same
+holds for the fitted demonstrations paired with their codes (their moments: the data's own
+Gaussian), and for a blend of the two (:meth:`DecodedGaussian.blend`).
 """
 
 from __future__ import annotations
@@ -43,6 +45,8 @@ __all__ = [
     "DecodedGaussian",
     "ConditionedGaussian",
     "SequentialGaussian",
+    "StepGains",
+    "condition_primitives",
 ]
 
 #: The prior families and settings :func:`choose_prior` tries (name, setting).
@@ -176,6 +180,26 @@ class DecodedGaussian:
         self.mean = members.mean(axis=0)
         self.deviations = (members - self.mean) / math.sqrt(len(members) - 1)  # Σ = AᵀA
 
+    @classmethod
+    def from_moments(cls, mean: np.ndarray, deviations: np.ndarray, n_motion: int) -> "DecodedGaussian":
+        """The Gaussian of ``mean`` (D,) and ``deviations`` (M, D) (``Σ = AᵀA``)."""
+        out = cls.__new__(cls)
+        out.n_motion, out.mean, out.deviations = int(n_motion), np.asarray(mean), np.asarray(deviations)
+        return out
+
+    @classmethod
+    def blend(cls, data: "DecodedGaussian | None", model: "DecodedGaussian", weight: float) -> "DecodedGaussian":
+        """The moments of the mixture ``weight · data + (1 - weight) · model`` (``model`` alone when
+        ``data`` is None): its mean, and deviations ``[√w A_data; √(1-w) A_model; √(w(1-w)) (μ_data - μ_model)]``."""
+        w = float(weight) if data is not None else 0.0
+        if w <= 0.0:
+            return model
+        if w >= 1.0:
+            return data
+        gap = np.sqrt(w * (1.0 - w)) * (data.mean - model.mean)[None]
+        deviations = np.concatenate([np.sqrt(w) * data.deviations, np.sqrt(1.0 - w) * model.deviations, gap])
+        return cls.from_moments(w * data.mean + (1.0 - w) * model.mean, deviations, model.n_motion)
+
     def conditioned(self, mask: np.ndarray, r: float) -> "ConditionedGaussian":
         """The conditioning on the motion's entries where ``mask`` (T·J,) is set, noise ``r`` per entry."""
         return ConditionedGaussian(self, np.asarray(mask, dtype=bool), float(r))
@@ -228,33 +252,67 @@ class ConditionedGaussian:
         return means, evidence
 
 
-class SequentialGaussian:
-    """:class:`DecodedGaussian` conditioned one step at a time (online): the covariance, shared
-    by motions observed on the same entries, and a mean and log evidence per motion.
+def condition_primitives(ensembles, seen: np.ndarray, mask: np.ndarray, wanted, r: float):
+    """Conditioned means (n, P, D) and log evidences (n, P) of the Gaussians ``ensembles[k]`` for
+    ``k`` in ``wanted[i]`` (the primitives asked of motion ``i``) on ``seen`` (n, T, J) where ``mask`` (n, T); NaN elsewhere."""
+    n, _, j = seen.shape
+    flat, flat_mask = seen.reshape(n, -1), np.repeat(mask, j, axis=1)
+    d = ensembles[0].mean.shape[0]
+    means = np.full((n, len(ensembles), d), np.nan)
+    evidence = np.full((n, len(ensembles)), -np.inf)
+    rows, inverse = np.unique(flat_mask, axis=0, return_inverse=True)
+    for g, row in enumerate(rows):
+        members = np.flatnonzero(inverse.reshape(-1) == g)
+        for k in sorted({k for i in members for k in wanted[i]}):
+            take = members[[k in wanted[i] for i in members]]
+            cond = ensembles[k].conditioned(row, r)
+            means[take, k], evidence[take, k] = cond.update(flat[take][:, row])
+    return means, evidence
 
-    After the entries of steps ``1..t`` have been observed, :attr:`means` and :attr:`evidence`
-    equal :meth:`ConditionedGaussian.update` on those entries (the Kalman filter's sequential
-    form of the same Gaussian conditioning; tested). A step costs ``D² J`` for the covariance
-    and ``D J`` per motion."""
 
-    def __init__(self, prior: DecodedGaussian, n: int, r: float):
+class StepGains:
+    """The Kalman gains of :class:`DecodedGaussian` observed one step (``joints`` entries) at a time,
+    steps ``1..steps`` in order, noise ``r``: the covariance recursion never reads the observed
+    values, so it is computed once, before any motion arrives (``D² J`` per step), and a step then
+    costs ``D J`` per motion (:class:`SequentialGaussian`)."""
+
+    def __init__(self, prior: DecodedGaussian, r: float, joints: int, steps: int):
         if not r > 0:
             raise UserError(f"the observation noise must be > 0, got {r}")
+        self.prior, self.joints = prior, int(joints)
         a = prior.deviations
-        self.cov = a.T @ a
-        self.means = np.tile(prior.mean, (int(n), 1))
-        self.evidence = np.zeros(int(n))
-        self.r = float(r)
+        cov = a.T @ a
+        eye = float(r) * np.eye(self.joints)
+        self.chols, self.gains, self.logdets = [], [], []
+        for t in range(int(steps)):
+            index = np.arange(t * self.joints, (t + 1) * self.joints)
+            chol = np.linalg.cholesky(cov[np.ix_(index, index)] + eye)
+            gain_t = np.linalg.solve(chol.T, np.linalg.solve(chol, cov[index]))  # S⁻¹ Σ_o·, (J, D)
+            cov -= cov[:, index] @ gain_t
+            self.chols.append(chol)
+            self.gains.append(gain_t)
+            self.logdets.append(2.0 * np.log(np.diag(chol)).sum())
 
-    def observe(self, index: np.ndarray, values: np.ndarray) -> None:
-        """Condition on the entries ``index`` (k,) of every motion, their ``values`` (n, k)."""
-        index = np.asarray(index)
-        s = self.cov[np.ix_(index, index)] + self.r * np.eye(len(index))
-        chol = np.linalg.cholesky(s)
-        residual = np.asarray(values, dtype=np.float64) - self.means[:, index]
-        white = np.linalg.solve(chol, residual.T)  # L⁻¹ (x - μ), (k, n)
-        logdet = 2.0 * np.log(np.diag(chol)).sum()
-        self.evidence += -0.5 * ((white**2).sum(axis=0) + logdet + len(index) * math.log(2 * math.pi))
-        gain_t = np.linalg.solve(chol.T, np.linalg.solve(chol, self.cov[index]))  # S⁻¹ Σ_o·, (k, D)
-        self.means += residual @ gain_t
-        self.cov -= self.cov[:, index] @ gain_t
+
+class SequentialGaussian:
+    """:class:`DecodedGaussian` conditioned one step at a time (online): a mean and log evidence
+    per motion, updated with the gains of :class:`StepGains`.
+
+    After steps ``1..t`` have been observed, :attr:`means` and :attr:`evidence` equal
+    :meth:`ConditionedGaussian.update` on their entries (the Kalman filter's sequential form of
+    the same Gaussian conditioning; tested)."""
+
+    def __init__(self, gains: StepGains, n: int):
+        self.gains = gains
+        self.means = np.tile(gains.prior.mean, (int(n), 1))
+        self.evidence = np.zeros(int(n))
+
+    def observe(self, t: int, values: np.ndarray) -> None:
+        """Condition on step ``t`` (0-based) of every motion, its ``values`` (n, J)."""
+        from scipy.linalg import solve_triangular
+
+        g, j = self.gains, self.gains.joints
+        residual = np.asarray(values, dtype=np.float64) - self.means[:, t * j : (t + 1) * j]
+        white = solve_triangular(g.chols[t], residual.T, lower=True)
+        self.evidence += -0.5 * ((white**2).sum(axis=0) + g.logdets[t] + j * math.log(2 * math.pi))
+        self.means += residual @ g.gains[t]

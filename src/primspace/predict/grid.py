@@ -20,6 +20,7 @@ from primspace.predict.metrics import finite_mean, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
 from primspace.predict.prior import PriorPredictor
+from primspace.predict.prior_map import PriorMapPredictor
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import fitted_samples
@@ -54,10 +55,10 @@ MIXTURE_ROWS = (
 #: The priors' rows (issue 39): given the test motion's primitive (the fitted labels' priors);
 #: not given, the posterior over the fitted labels' priors; not given and without any label, the
 #: posterior over clusters of the fitted codes (as many as the labels).
-PRIOR_ROWS = ("prior (labels)", "prior (posterior)", "prior (clusters)")
+PRIOR_ROWS = ("prior (labels)", "prior (posterior)", "prior (clusters)", "prior MAP (labels)")
 #: The rows given the test motion's primitive (the task with the primitive given; the others are label-free
 #: at test time).
-GIVEN_ROWS = ("prior (labels)", "promp (labels)", "mean motion (labels)", LABELS_DIAGNOSTIC)
+GIVEN_ROWS = ("prior (labels)", "prior MAP (labels)", "promp (labels)", "mean motion (labels)", LABELS_DIAGNOSTIC)
 
 
 def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
@@ -66,7 +67,8 @@ def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
     scaled, lengths = run.scaler.transform(fitted.motor), fitted.valid_lengths
     by_label = PriorPredictor(run, given=True, label_names=names).fit(scaled, fitted.labels, lengths)
     clusters = PriorPredictor(run, primitives="clusters", label_names=names).fit(scaled, fitted.labels, lengths)
-    return {PRIOR_ROWS[0]: by_label, PRIOR_ROWS[1]: by_label.asked(), PRIOR_ROWS[2]: clusters}
+    refined = PriorMapPredictor(run, prior=by_label, given=True).fit(scaled, fitted.labels, lengths)
+    return {PRIOR_ROWS[0]: by_label, PRIOR_ROWS[1]: by_label.asked(), PRIOR_ROWS[2]: clusters, PRIOR_ROWS[3]: refined}
 
 
 def posterior_accuracy(forecast: Forecast, labels) -> float | None:

@@ -43,7 +43,14 @@ import numpy as np
 from primspace.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
-from primspace.predict.code_prior import DecodedGaussian, SequentialGaussian, choose_prior, fit_gaussian
+from primspace.predict.code_prior import (
+    DecodedGaussian,
+    SequentialGaussian,
+    StepGains,
+    choose_prior,
+    condition_primitives,
+    fit_gaussian,
+)
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.online import OnlineResult, online_steps
 from primspace.predict.primitives import PRIMITIVE_SOURCES, primitives_from_clusters, primitives_from_labels
@@ -51,7 +58,7 @@ from primspace.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
 
-__all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "CV_SAMPLES"]
+__all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "BLEND_GRID", "CV_SAMPLES"]
 
 #: The name of the prior predictor among the predictors of :func:`primspace.predict.predict`.
 PRIOR = "prior"
@@ -59,6 +66,8 @@ PRIOR = "prior"
 NOISE_GRID = (1e-5, 1e-4, 1e-3, 1e-2)
 #: Temperatures of the evidence tried by the K-fold choice (1: the evidence as it is).
 TEMPERATURE_GRID = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0)
+#: Weights of the fitted pairs' Gaussian against the decoded draws' tried by the K-fold choice.
+BLEND_GRID = (0.0, 0.5, 0.9, 1.0)
 #: Draws per primitive of each fold's priors in the K-fold choice (at most ``n_samples``).
 CV_SAMPLES = 500
 #: Folds of the choice of ``r`` and ``T``.
@@ -90,6 +99,9 @@ class PriorPredictor(Predictor):
         Codes drawn and decoded per primitive.
     noise, temperature : "auto" or float
         ``r`` and ``T``; auto: chosen per observation rule by K-fold prediction.
+    blend : "auto" or float in [0, 1]
+        The weight of the fitted demonstrations' own Gaussian (paired with their codes) against
+        the decoded draws' (0: the draws alone); auto: chosen per rule by K-fold prediction.
     continuity : bool
     random_state : int, optional
         Seed of the draws and folds (default: the run's seed).
@@ -108,6 +120,7 @@ class PriorPredictor(Predictor):
         n_samples: int = 2000,
         noise="auto",
         temperature="auto",
+        blend="auto",
         continuity: bool = True,
         random_state: int | None = None,
         progress: bool | None = False,
@@ -122,6 +135,7 @@ class PriorPredictor(Predictor):
         self.n_samples = n_samples
         self.noise = noise
         self.temperature = temperature
+        self.blend = blend
         self.continuity = continuity
         self.random_state = random_state
         self.progress = progress
@@ -157,9 +171,29 @@ class PriorPredictor(Predictor):
         ):
             # each primitive's prior in code space (GaussianCode), and its draws decoded
             self.gaussians_, self.ensembles_ = self._ensembles(groups, int(self.n_samples), [self.seed_, 39])
+        members = [self.primitives_.members(k) for k in range(self.primitives_.count)]
+        self.pairs_ = self._pairs(members)  # the fitted demonstrations with their codes, per primitive
+        self.blends_: dict = {}
         self.choices_: dict = {}
         self.folds_ = None
         return self
+
+    def _pairs(self, members: list) -> list:
+        """Per primitive, the Gaussian of its fitted demonstrations (scaled, flattened) paired with
+        their codes, the fitted codes' indices ``members[k]`` (None for fewer than two)."""
+        flat = self.fitted_.reshape(len(self.fitted_), -1)
+        codes = np.asarray(self.run_.latents, dtype=np.float64)
+        return [
+            DecodedGaussian(np.concatenate([flat[m], codes[m]], axis=1), flat.shape[1]) if len(m) > 1 else None
+            for m in members
+        ]
+
+    def blended(self, weight: float) -> list[DecodedGaussian]:
+        """Each primitive's Gaussian: ``weight`` of its fitted pairs and ``1 - weight`` of its decoded
+        draws (:meth:`~primspace.predict.code_prior.DecodedGaussian.blend`; kept per weight)."""
+        if weight not in self.blends_:
+            self.blends_[weight] = [DecodedGaussian.blend(d, m, weight) for d, m in zip(self.pairs_, self.ensembles_)]
+        return self.blends_[weight]
 
     def _check_params(self) -> None:
         if self.primitives not in PRIMITIVE_SOURCES:
@@ -170,6 +204,8 @@ class PriorPredictor(Predictor):
             value = getattr(self, name)
             if value != "auto" and not (isinstance(value, (int, float)) and float(value) > 0):
                 raise UserError(f"{name} must be 'auto' or a number > 0, got {value!r}")
+        if self.blend != "auto" and not (isinstance(self.blend, (int, float)) and 0.0 <= float(self.blend) <= 1.0):
+            raise UserError(f"blend must be 'auto' or a number in [0, 1], got {self.blend!r}")
 
     def _primitives(self, codes: np.ndarray, labels):
         if self.primitives == "labels":
@@ -206,24 +242,6 @@ class PriorPredictor(Predictor):
         return other
 
     # -- conditioning ---------------------------------------------------------------------
-    @staticmethod
-    def _condition(ensembles, seen: np.ndarray, mask: np.ndarray, wanted, r: float):
-        """Conditioned means (n, P, D) and log evidences (n, P) of the primitives ``wanted[i]``
-        (a list of ids per motion) on ``seen`` (n, T, J) where ``mask`` (n, T); NaN elsewhere."""
-        n, _, j = seen.shape
-        flat, flat_mask = seen.reshape(n, -1), np.repeat(mask, j, axis=1)
-        d = ensembles[0].mean.shape[0]
-        means = np.full((n, len(ensembles), d), np.nan)
-        evidence = np.full((n, len(ensembles)), -np.inf)
-        rows, inverse = np.unique(flat_mask, axis=0, return_inverse=True)
-        for g, row in enumerate(rows):
-            members = np.flatnonzero(inverse.reshape(-1) == g)
-            for k in sorted({k for i in members for k in wanted[i]}):
-                take = members[[k in wanted[i] for i in members]]
-                cond = ensembles[k].conditioned(row, r)
-                means[take, k], evidence[take, k] = cond.update(flat[take][:, row])
-        return means, evidence
-
     def _posterior(self, evidence: np.ndarray, temperature: float) -> np.ndarray:
         """(n, P) posterior over primitives from the evidences and the fitted codes' shares."""
         logits = evidence / temperature + np.log(self.shares_)[None]
@@ -243,9 +261,9 @@ class PriorPredictor(Predictor):
         seen = np.where(mask[..., None], motor, 0.0)
         ids = self._given_ids(labels, n)
         choice = self.choice(rule)
-        r = choice["noise_given"] if ids is not None else choice["noise"]
+        r, weight = self._setting(choice, ids is not None)
         wanted = [[int(k)] for k in ids] if ids is not None else [list(range(self.primitives_.count))] * n
-        means, evidence = self._condition(self.ensembles_, seen, mask, wanted, r)
+        means, evidence = condition_primitives(self.blended(weight), seen, mask, wanted, r)
         if ids is not None:
             weights = np.eye(self.primitives_.count)[ids]
         else:
@@ -255,6 +273,11 @@ class PriorPredictor(Predictor):
             out = continuity_correction(out, seen, mask, valid_mask(check_lengths(lengths, n, steps), steps))
         details = {"prior": self.summary(choice), "posterior": weights.tolist()}
         return Forecast(out, codes, details)
+
+    @staticmethod
+    def _setting(choice: dict, given: bool) -> tuple[float, float]:
+        """The noise and blend of the task (given the primitive, or not)."""
+        return (choice["noise_given"], choice["blend_given"]) if given else (choice["noise"], choice["blend"])
 
     def _given_ids(self, labels, n: int):
         """Each motion's primitive when it is given (None: the posterior decides)."""
@@ -290,21 +313,28 @@ class PriorPredictor(Predictor):
 
     # -- choices of r and T ------------------------------------------------------------------
     def choice(self, rule: Observation) -> dict:
-        """``noise_given``, ``noise``, ``temperature`` (and the K-fold scores ``cv``) for ``rule``:
-        the given values, or chosen on first use (module docstring)."""
+        """``noise_given``, ``blend_given``, ``noise``, ``blend``, ``temperature`` (and the K-fold
+        scores ``cv``) for ``rule``: the given values, or chosen on first use (module docstring)."""
         if rule.key not in self.choices_:
-            fixed = {"noise": self.noise, "temperature": self.temperature}
+            fixed = {"noise": self.noise, "temperature": self.temperature, "blend": self.blend}
             if all(v != "auto" for v in fixed.values()):
-                r = float(self.noise)
-                self.choices_[rule.key] = {"noise_given": r, "noise": r, "temperature": float(self.temperature)}
+                r, w = float(self.noise), float(self.blend)
+                self.choices_[rule.key] = {
+                    "noise_given": r,
+                    "blend_given": w,
+                    "noise": r,
+                    "blend": w,
+                    "temperature": float(self.temperature),
+                }
             else:
-                with stage("prior: choosing its noise and temperature by K-fold prediction", enabled=self.progress):
+                with stage("prior: choosing its settings by K-fold prediction", enabled=self.progress):
                     self.choices_[rule.key] = self._cross_validate(rule)
         return self.choices_[rule.key]
 
     def _folds(self) -> list:
         """K folds of the fitted demonstrations (within each primitive), each with the priors
-        fitted, drawn and decoded without it: ``[(held-out indices, ensembles)]`` (kept)."""
+        fitted, drawn and decoded, and the fitted pairs, without it:
+        ``[(held-out indices, draws, pairs)]`` (kept)."""
         if self.folds_ is None:
             rng = np.random.default_rng([self.seed_, 39, 2])
             fold_of = np.full(len(self.fitted_), -1)
@@ -319,45 +349,60 @@ class PriorPredictor(Predictor):
                 keep = [np.setdiff1d(self.primitives_.members(k), held) for k in range(self.primitives_.count)]
                 keep = [kept if len(kept) else self.primitives_.members(k) for k, kept in enumerate(keep)]
                 if held.size:
-                    self.folds_.append((held, self._ensembles([codes[i] for i in keep], n, [self.seed_, 39, 3, f])[1]))
+                    draws = self._ensembles([codes[i] for i in keep], n, [self.seed_, 39, 3, f])[1]
+                    self.folds_.append((held, draws, self._pairs(keep)))
         return self.folds_
 
+    def _grid(self, name: str, grid) -> list[float]:
+        value = getattr(self, name)
+        return list(grid) if value == "auto" else [float(value)]
+
+    def _fold_predictions(self, observed: np.ndarray, r: float, weight: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every fitted demonstration's conditioned means (m, P, D) and evidences (m, P), each
+        predicted by the fold that left it out."""
+        fitted, count = self.fitted_, self.primitives_.count
+        means = np.full((len(fitted), count, self.ensembles_[0].mean.shape[0]), np.nan)
+        evidence = np.full((len(fitted), count), -np.inf)
+        for held, draws, pairs in self._folds():
+            ensembles = [DecodedGaussian.blend(d, m, weight) for d, m in zip(pairs, draws)]
+            seen = np.where(observed[held, :, None], fitted[held], 0.0)
+            means[held], evidence[held] = condition_primitives(
+                ensembles, seen, observed[held], [range(count)] * len(held), r
+            )
+        return means, evidence
+
     def _cross_validate(self, rule: Observation) -> dict:
-        """The K-fold choice of ``r`` (given and not) and ``T`` for ``rule`` (module docstring)."""
-        fitted, lengths = self.fitted_, self.fitted_lengths_
-        observed = rule.masks(lengths, fitted.shape[1])[0]
-        valid = valid_mask(lengths, fitted.shape[1])
-        truth = self.primitives_.assignment
-        noises = [float(self.noise)] if self.noise != "auto" else list(NOISE_GRID)
-        temps = [float(self.temperature)] if self.temperature != "auto" else list(TEMPERATURE_GRID)
-        everyone = list(range(self.primitives_.count))
-        scores = {"given": {}, "posterior": {}}
-        best_given, best_free = (np.inf, None), (np.inf, None, None)
-        for r in noises:
-            means = np.full((len(fitted), self.primitives_.count, self.ensembles_[0].mean.shape[0]), np.nan)
-            evidence = np.full((len(fitted), self.primitives_.count), -np.inf)
-            for held, ensembles in self._folds():
-                seen = np.where(observed[held, :, None], fitted[held], 0.0)
-                means[held], evidence[held] = self._condition(
-                    ensembles, seen, observed[held], [everyone] * len(held), r
-                )
-            scored = truth >= 0
-            given = self._fold_error(
-                np.eye(len(everyone))[truth[scored]], means[scored], observed[scored], valid[scored]
-            )
-            scores["given"][f"{r:g}"] = given
-            best_given = min(best_given, (given, r), key=lambda x: x[0])
-            logloss = {
-                t: -np.log(self._posterior(evidence[scored], t)[np.arange(scored.sum()), truth[scored]] + 1e-300).mean()
-                for t in temps
-            }
-            t = min(logloss, key=logloss.get)
-            free = self._fold_error(
-                self._posterior(evidence[scored], t), means[scored], observed[scored], valid[scored]
-            )
-            scores["posterior"][f"{r:g}"] = {"temperature": t, "log_loss": float(logloss[t]), "mse": free}
-            best_free = min(best_free, (free, r, t), key=lambda x: x[0])
-        return {"noise_given": best_given[1], "noise": best_free[1], "temperature": best_free[2], "cv": scores}
+        """The K-fold choice of ``r`` and the blend (given and not) and ``T`` for ``rule`` (module docstring)."""
+        lengths = self.fitted_lengths_
+        observed = rule.masks(lengths, self.fitted_.shape[1])[0]
+        valid = valid_mask(lengths, self.fitted_.shape[1])
+        scored = self.primitives_.assignment >= 0
+        truth = self.primitives_.assignment[scored]
+        temps = self._grid("temperature", TEMPERATURE_GRID)
+        scores: dict = {"given": {}, "posterior": {}}
+        best_given, best_free = (np.inf,), (np.inf,)
+        for weight in self._grid("blend", BLEND_GRID):
+            for r in self._grid("noise", NOISE_GRID):
+                means, evidence = self._fold_predictions(observed, r, weight)
+                key = f"blend {weight:g}, noise {r:g}"
+                args = (means[scored], observed[scored], valid[scored])
+                given = self._fold_error(np.eye(self.primitives_.count)[truth], *args)
+                scores["given"][key] = given
+                best_given = min(best_given, (given, r, weight), key=lambda x: x[0])
+                rows = np.arange(len(truth))
+                logloss = {t: -np.log(self._posterior(evidence[scored], t)[rows, truth] + 1e-300).mean() for t in temps}
+                t = min(logloss, key=logloss.get)
+                free = self._fold_error(self._posterior(evidence[scored], t), *args)
+                scores["posterior"][key] = {"temperature": t, "log_loss": float(logloss[t]), "mse": free}
+                best_free = min(best_free, (free, r, weight, t), key=lambda x: x[0])
+        return {
+            "noise_given": best_given[1],
+            "blend_given": best_given[2],
+            "noise": best_free[1],
+            "blend": best_free[2],
+            "temperature": best_free[3],
+            "cv": scores,
+        }
 
     def _fold_error(self, weights: np.ndarray, means: np.ndarray, observed: np.ndarray, valid: np.ndarray) -> float:
         """Mean unobserved MSE of the weighted held-out predictions (after the continuity correction)."""
@@ -398,19 +443,20 @@ class PriorPredictor(Predictor):
         steps, keep = online_steps(start_step, prediction_after, length)
         choice = self.choice(Observation.build(int(keep)))
         ids = self._given_ids(labels, n)
-        r = choice["noise_given"] if ids is not None else choice["noise"]
+        r, weight = self._setting(choice, ids is not None)
         lengths = check_lengths(lengths, n, length)
         valid = valid_mask(lengths, length)
         wanted = sorted(set(ids.tolist())) if ids is not None else range(self.primitives_.count)
         groups = {int(v): np.flatnonzero(lengths == v) for v in np.unique(lengths)}
-        filters = {(v, k): SequentialGaussian(self.ensembles_[k], len(g), r) for v, g in groups.items() for k in wanted}
+        gains = {k: StepGains(self.blended(weight)[k], r, joints, length) for k in wanted}  # before the stream
+        filters = {(v, k): SequentialGaussian(gains[k], len(g)) for v, g in groups.items() for k in wanted}
         d = self.ensembles_[0].mean.shape[0]
 
         def arrive(t: int) -> tuple[np.ndarray, np.ndarray]:  # (n, P, D) means, (n, P) evidence after step t
             means, evidence = np.zeros((n, self.primitives_.count, d)), np.full((n, self.primitives_.count), -np.inf)
             for (v, k), f in filters.items():
                 if t <= v:
-                    f.observe(np.arange((t - 1) * joints, t * joints), truth[groups[v], t - 1])
+                    f.observe(t - 1, truth[groups[v], t - 1])
                 means[groups[v], k], evidence[groups[v], k] = f.means, f.evidence
             return means, evidence
 
