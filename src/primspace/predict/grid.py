@@ -19,6 +19,7 @@ from primspace.predict.base import Forecast, Predictor
 from primspace.predict.metrics import finite_mean, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.train.observe import Observation
@@ -55,10 +56,24 @@ MIXTURE_ROWS = (
 #: The priors' rows (issue 39): given the test motion's primitive (the fitted labels' priors);
 #: not given, the posterior over the fitted labels' priors; not given and without any label, the
 #: posterior over clusters of the fitted codes (as many as the labels).
-PRIOR_ROWS = ("prior (labels)", "prior (posterior)", "prior (clusters)", "prior MAP (labels)")
+PRIOR_ROWS = (
+    "prior (labels)",
+    "prior (posterior)",
+    "prior (clusters)",
+    "prior MAP (labels)",
+    "encoder (labels)",
+    "encoder (posterior)",
+)
 #: The rows given the test motion's primitive (the task with the primitive given; the others are label-free
 #: at test time).
-GIVEN_ROWS = ("prior (labels)", "prior MAP (labels)", "promp (labels)", "mean motion (labels)", LABELS_DIAGNOSTIC)
+GIVEN_ROWS = (
+    "prior (labels)",
+    "prior MAP (labels)",
+    "encoder (labels)",
+    "promp (labels)",
+    "mean motion (labels)",
+    LABELS_DIAGNOSTIC,
+)
 
 
 def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
@@ -68,7 +83,11 @@ def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
     by_label = PriorPredictor(run, given=True, label_names=names).fit(scaled, fitted.labels, lengths)
     clusters = PriorPredictor(run, primitives="clusters", label_names=names).fit(scaled, fitted.labels, lengths)
     refined = PriorMapPredictor(run, prior=by_label, given=True).fit(scaled, fitted.labels, lengths)
-    return {PRIOR_ROWS[0]: by_label, PRIOR_ROWS[1]: by_label.asked(), PRIOR_ROWS[2]: clusters, PRIOR_ROWS[3]: refined}
+    encoders = [
+        EncoderPredictor(run, prior=by_label.asked(), given=g).fit(scaled, fitted.labels, lengths)
+        for g in (True, False)
+    ]
+    return dict(zip(PRIOR_ROWS, (by_label, by_label.asked(), clusters, refined, *encoders)))
 
 
 def posterior_accuracy(forecast: Forecast, labels) -> float | None:
