@@ -175,9 +175,10 @@ def test_predict_scene_command_refuses_with_exit_2(run_cli, scene_files, tmp_pat
     assert not out.exists()
 
 
-def test_primitive_without_scene_is_refused(run_cli, scene_files, tmp_path):
-    res = run_cli("predict", scene_files / "run", scene_files / "data.h5", "--primitive", "0", "--out", tmp_path / "o")
-    assert_user_error(res, "go with --scene")
+def test_primitive_without_scene_is_the_priors_and_refused_with_another_predictor(run_cli, scene_files, tmp_path):
+    """Issue 39: without --scene, --primitive asks the prior predictor (tests/test_predict_primitive.py)."""
+    args = ("predict", scene_files / "run", scene_files / "data.h5", "--primitive", "0", "--init", "zero")
+    assert_user_error(run_cli(*args, "--out", tmp_path / "o"), "only the prior predictor takes --primitive")
     assert not (tmp_path / "o").exists()
 
 

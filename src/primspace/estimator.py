@@ -184,6 +184,9 @@ class AutoDecoder(BaseEstimator):
         epochs: int | None = None,
         continuity: bool = True,
         fitted_data: MotionDataset | None = None,
+        primitive=None,
+        primitives: str = "labels",
+        n_clusters: int | None = None,
         **overrides,
     ):
         """The rest of each motion of ``X`` from its observed beginning (issue 25; docs/predict.md).
@@ -193,7 +196,11 @@ class AutoDecoder(BaseEstimator):
         gradient inference, :func:`primspace.predict.predict`); the decoder's whole
         sequence is the prediction. ``continuity``: the residual at the last observed step
         decays to zero at the end. ``fitted_data``: the data set the model was fitted on
-        (default: the one given to :meth:`fit`, else the run's data file).
+        (default: the one given to :meth:`fit`, else the run's data file). ``primitive``
+        (a name such as ``"push"`` or an id), ``primitives`` (``"labels"`` or ``"clusters"``) and
+        ``n_clusters``: the prior predictor (``init="prior"``), told the primitive of every motion
+        or, without one, weighing its primitives by their posterior
+        (:func:`primspace.predict.predict`; ``prediction_.details`` holds it).
 
         Returns
         -------
@@ -213,6 +220,9 @@ class AutoDecoder(BaseEstimator):
             fitted_data=fitted_data,
             continuity=continuity,
             progress=self.progress,
+            primitive=primitive,
+            primitives=primitives,
+            n_clusters=n_clusters,
             **overrides,
         )
         return self.prediction_.motor, self.prediction_.frames

@@ -61,6 +61,8 @@ _PARAMETER_FLAGS = (
     (re.compile(r"\bout_dir\b"), "--out"),
     (re.compile(r"\bfitted_data=MotionDataset\.load\(PATH\)"), "--fitted-data PATH"),  # train.rundata
     (re.compile(r"\bfitted_data=(?= )"), "--fitted-data FILE"),
+    (re.compile(r"\bprimitives='clusters'"), "--primitives clusters"),  # the prior (predict.primitives)
+    (re.compile(r"\bneed n_clusters\b"), "need --primitives K"),
 )
 
 

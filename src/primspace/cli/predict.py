@@ -1,5 +1,6 @@
-"""Prediction command: predict (the rest of each motion from its observed beginning, or with ``--scene`` a
-whole motion from the first frame and the primitive named; docs/predict.md)."""
+"""Prediction command: predict (the rest of each motion from its observed beginning, with ``--primitive``
+as that primitive, or with ``--scene`` a whole motion from the first frame and the primitive named;
+docs/predict.md)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from primspace.errors import UserError
 #: The mark ``predict`` writes into its data file and figure (primspace.outputs).
 PREDICT_MARK = "primspace predict"
 #: The files of a ``primspace predict`` output directory (result.json last: it says the output is complete).
-PREDICT_FILES = ("predicted.h5", "prediction.png", "result.json")
+PREDICT_FILES = ("predicted.h5", "prediction.png", "posterior.png", "result.json")
 _SHOWN = 4
 
 
@@ -98,7 +99,11 @@ def predict_command(
     run: Path = typer.Argument(..., help="A fitted run directory (its weights are frozen)."),
     file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file with the motions to predict."),
     out: Path = typer.Option(
-        ..., "--out", "-o", help="The folder to write (predicted.h5, result.json, prediction.png)."
+        ...,
+        "--out",
+        "-o",
+        help="The folder to write (predicted.h5, result.json, prediction.png; posterior.png with the prior "
+        "and no --primitive).",
     ),
     observe: Optional[str] = typer.Option(
         None,
@@ -115,8 +120,9 @@ def predict_command(
         None,
         "--init",
         help="The predictor: mixture (the default and the best: the "
-        "posterior over the fitted codes, no gradient), or a start of gradient inference: "
-        "zero, random, projection, pca, calibrated, nearest.",
+        "posterior over the fitted codes, no gradient), prior (a prior in code space per "
+        "primitive: given --primitive, or weighted by the posterior over primitives), or a start "
+        "of gradient inference: zero, random, projection, pca, calibrated, nearest.",
     ),
     continuity: bool = typer.Option(
         True,
@@ -130,7 +136,8 @@ def predict_command(
     fitted: Optional[Path] = typer.Option(
         None,
         "--fitted-data",
-        help="The data file the run was fitted on (default: the run's own), read by mixture, nearest and calibrated.",
+        help="The data file the run was fitted on (default: the run's own), read by mixture, prior, nearest and "
+        "calibrated.",
     ),
     latent_lr: Optional[float] = typer.Option(
         None, "--latent-lr", help="Gradient starts: the codes' learning rate (default: the run's)."
@@ -157,17 +164,24 @@ def predict_command(
     primitive: Optional[str] = typer.Option(
         None,
         "--primitive",
-        help="With --scene: the primitive to perform, a label "
-        "name of the fitted data (push) or a cluster id (clusters numbered by "
-        "their first fitted demonstration; result.json lists their majority labels).",
+        help="The primitive of every motion, a name (push) or an id: the prior "
+        "predictor (--init prior) predicts each motion as it; without it the prior weighs its "
+        "primitives by their posterior. With --scene: the primitive to perform, a label name "
+        "of the fitted data or a cluster id (result.json lists their majority labels).",
     ),
-    clusters: Optional[int] = typer.Option(
+    primitives: Optional[str] = typer.Option(
         None,
         "--primitives",
         "-k",
-        help="With --scene: the number of primitives K, "
-        "the clusters of the fitted codes (default: the number of distinct labels of "
-        "the fitted data).",
+        help="The prior's primitives: labels (of the fitted data, the default), "
+        "clusters (of the fitted codes, as many as the labels) or a number K of clusters. With "
+        "--scene: the number of clusters K (default: the number of distinct labels).",
+    ),
+    clusters: Optional[int] = typer.Option(
+        None, "--clusters", hidden=True, help="The number of clusters K of --primitives clusters (as --primitives K)."
+    ),
+    prior_samples: Optional[int] = typer.Option(
+        None, "--prior-samples", help="The prior: codes drawn and decoded per primitive (default 2000)."
     ),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
@@ -178,7 +192,9 @@ def predict_command(
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
 
-    motor, frames = _amounts(scene, primitive, clusters, observe, observe_frames, init, online)
+    source, clusters = parse_primitives(primitives, clusters, scene)
+    motor, frames = _amounts(scene, primitive, observe, observe_frames, init, online)
+    prior = _prior_options(scene, init, primitive, source, clusters, prior_samples)
     check_outside_inputs(out, (file, indices, run, fitted))
     _check_ignored(iterations, online, fitted, init, scene)
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
@@ -191,8 +207,7 @@ def predict_command(
             run,
             dataset,
             scene,
-            primitive,
-            clusters,
+            prior,
             motor,
             frames,
             init,
@@ -204,19 +219,23 @@ def predict_command(
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
+        if prediction.details.get("posterior") is not None:
+            _write_posterior(tmp, prediction, dataset)
     typer.echo(_summary_line(out, result, prediction, online, judged))
 
 
-def _predict(run, dataset, scene: bool, primitive, clusters, motor, frames, init, continuity: bool, online, common):
-    """The prediction (scene mode or from the observed beginning) and what result.json records of the command."""
-    from primspace.predict import DEFAULT_PREDICTOR, predict
+def _predict(run, dataset, scene: bool, prior: dict, motor, frames, init, continuity: bool, online, common):
+    """The prediction (scene mode or from the observed beginning) and what result.json records of the command;
+    ``prior``: the prior's options (:func:`_prior_options`), empty for another predictor."""
+    from primspace.predict import DEFAULT_PREDICTOR, PRIOR, predict
 
     if scene:
         from primspace.predict.scene import predict_scene
 
+        primitive, clusters = prior["primitive"], prior["n_clusters"]
         prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
         return prediction, {"scene": True, "primitive": primitive, "clusters": clusters}
-    init = init or DEFAULT_PREDICTOR
+    init = PRIOR if prior else init or DEFAULT_PREDICTOR
     prediction = predict(
         run,
         dataset,
@@ -226,6 +245,7 @@ def _predict(run, dataset, scene: bool, primitive, clusters, motor, frames, init
         continuity=continuity,
         online=online,
         progress=None,
+        **prior,
         **common,
     )
     return prediction, {
@@ -234,6 +254,7 @@ def _predict(run, dataset, scene: bool, primitive, clusters, motor, frames, init
         "init": init,
         "continuity": continuity,
         "online": online,
+        **prior,
     }
 
 
@@ -247,33 +268,87 @@ def _inputs(file: Path, indices: Path | None, fitted: Path | None) -> tuple:
     return dataset, idx, MotionDataset.load(fitted) if fitted is not None else None
 
 
-def _amounts(scene: bool, primitive, clusters, observe, observe_frames, init, online: bool) -> tuple:
+def _amounts(scene: bool, primitive, observe, observe_frames, init, online: bool) -> tuple:
     """``--observe`` and ``--observe-frames`` parsed (motor None under ``--scene``), after the ``--scene`` checks."""
     from primspace.train.observe import FIRST, NOTHING
 
-    _check_scene_flags(scene, primitive, clusters, observe, observe_frames, init, online)
+    _check_scene_flags(scene, primitive, observe, observe_frames, init, online)
     motor = None if scene else parse_amount("0.25" if observe is None else observe, "--observe", (NOTHING,))
     frames = None if observe_frames is None else parse_amount(observe_frames, "--observe-frames", (FIRST, NOTHING))
     return motor, frames
 
 
+def parse_primitives(primitives: str | None, clusters: int | None, scene: bool = False) -> tuple[str, int | None]:
+    """``--primitives labels|clusters|K`` and ``--clusters K`` as (where the primitives come from, the
+    number of clusters or None); one line for a value that is none of these or contradicts the other."""
+    k = clusters
+    if primitives is None:
+        source = "clusters" if clusters is not None else "labels"
+    elif primitives.strip().isdigit():
+        source, k = "clusters", int(primitives)
+        if clusters is not None and clusters != k:
+            raise UserError(f"--primitives {primitives} and --clusters {clusters}: give the number of clusters once")
+    elif primitives.strip() in ("labels", "clusters"):
+        source = primitives.strip()
+        if source == "labels" and clusters is not None:
+            raise UserError("--clusters counts clusters of the fitted codes: give --primitives clusters, not labels")
+    else:
+        raise UserError(f"--primitives {primitives!r}: give labels, clusters or a number of clusters K")
+    if k is not None and k < 1:
+        raise UserError(f"--primitives {k}: the number of clusters must be at least 1")
+    if scene and source == "labels" and primitives is not None:
+        raise UserError("--scene finds clusters of the fitted codes: give --primitives K (or leave it out)")
+    return source, k
+
+
+def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_samples) -> dict:
+    """The keywords of :func:`primspace.predict.predict` for the prior (empty: another predictor):
+    the prior when ``--init prior`` or when a primitive is asked for and ``--init`` is not given;
+    one line when ``--init`` names another predictor (only the prior takes a primitive)."""
+    from primspace.predict import PRIOR
+
+    if scene:
+        if prior_samples is not None:
+            raise UserError("--prior-samples goes with the prior predictor (--init prior), not with --scene")
+        return {"primitive": primitive, "n_clusters": clusters}
+    asked = [
+        name
+        for name, given in (
+            ("--primitive", primitive is not None),
+            ("--primitives", source != "labels"),
+            ("--prior-samples", prior_samples is not None),
+        )
+        if given
+    ]
+    if init != PRIOR and not (init is None and asked):
+        if asked:
+            raise UserError(
+                f"only the prior predictor takes {', '.join(asked)}: give --init prior (or no --init), not --init {init}"
+            )
+        return {}
+    if prior_samples is not None and prior_samples < 2:
+        raise UserError(f"--prior-samples {prior_samples}: must be at least 2")
+    return {"primitive": primitive, "primitives": source, "n_clusters": clusters, "prior_samples": prior_samples}
+
+
 def _check_ignored(iterations, online: bool, fitted, init, scene: bool) -> None:
     """One line for an option that would be ignored (issue 38: they were, without a word)."""
-    from primspace.predict import DEFAULT_PREDICTOR
+    from primspace.predict import DEFAULT_PREDICTOR, PRIOR
     from primspace.train.starts import STARTS_FROM_FITTED
 
     if iterations is not None and not online:
         raise UserError("--iterations goes with --online (the iterations per arriving step)")
     start = init or DEFAULT_PREDICTOR
-    if fitted is not None and not scene and init is not None and start not in STARTS_FROM_FITTED + (DEFAULT_PREDICTOR,):
-        raise UserError(f"--fitted-data is read by mixture, nearest and calibrated; --init {start} does not read it")
+    readers = STARTS_FROM_FITTED + (DEFAULT_PREDICTOR, PRIOR)
+    if fitted is not None and not scene and init is not None and start not in readers:
+        raise UserError(
+            f"--fitted-data is read by mixture, nearest and calibrated, and by prior; --init {start} does not read it"
+        )
 
 
-def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames, init, online: bool) -> None:
-    """One line for flags that do not go with (or without) ``--scene``."""
+def _check_scene_flags(scene: bool, primitive, observe, observe_frames, init, online: bool) -> None:
+    """One line for flags that do not go with ``--scene``, and ``--scene`` without ``--primitive``."""
     if not scene:
-        if primitive is not None or clusters is not None:
-            raise UserError("--primitive and --primitives go with --scene (the scene-only mode)")
         return
     given = [
         name
@@ -291,6 +366,26 @@ def _check_scene_flags(scene: bool, primitive, clusters, observe, observe_frames
         raise UserError("--scene needs --primitive K: the cluster id of the primitive to perform")
 
 
+def _write_posterior(tmp: Path, prediction, dataset) -> None:
+    """posterior.png: the prior's posterior over primitives against the observed fraction of the
+    predicted motions (the fitted prior asked again, :func:`~primspace.predict.posterior.posterior_by_fraction`)."""
+    from primspace.plots import plot_posterior, save_figure
+    from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
+
+    data = dataset.subset(prediction.indices)
+    curve = posterior_by_fraction(prediction.predictor, data, POSTERIOR_FRACTIONS)
+    source = prediction.details["prior"]["primitives"]["source"]
+    fig = plot_posterior(
+        POSTERIOR_FRACTIONS,
+        curve,
+        prediction.details["primitives"],
+        labels=data.labels,
+        label_names=data.label_names,
+        title=f"the prior's posterior over its primitives ({source})",
+    )
+    save_figure(fig, tmp / "posterior.png", writer=PREDICT_MARK)
+
+
 def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
     """What ``primspace predict`` prints when it is done."""
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
@@ -302,6 +397,10 @@ def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dic
         s = prediction.details["scene"]
         name = f" ({s['name']})" if s["name"] else ""
         line += f"; primitive {s['primitive']}{name} of {s['n_clusters']} clusters, subspace rank {s['rank']}"
+    if prediction.details.get("primitive") is not None:
+        line += f"; every motion as primitive {prediction.details['primitive']}"
+    if prediction.details.get("posterior_accuracy") is not None:
+        line += f"; the posterior's top primitive is the label's for {prediction.details['posterior_accuracy']:.0%}"
     if online:
         o = prediction.details["online"]
         line += f"; online, {o['iterations']} iterations per step: {o['latency_ms_mean']:.1f} ms per step"

@@ -10,6 +10,7 @@ name the paper's figure they reproduce in their docstring.
 - :mod:`~primspace.plots.clustering`: affinity and predicted labels, τ sweeps, accuracy per R².
 - :mod:`~primspace.plots.training`: loss curves, the convergence figures, the latent PCA.
 - :mod:`~primspace.plots.prediction`: observed, predicted and recorded joints; errors per observed fraction.
+- :mod:`~primspace.plots.posterior`: the prior's posterior over primitives per observed fraction.
 - :mod:`~primspace.plots.animation`: one motion as an animated GIF (Pillow), size-bounded.
 """
 
@@ -20,6 +21,7 @@ matplotlib.use("Agg")  # headless: never needs a display; before any pyplot impo
 from primspace.plots.animation import animation_frames, draw_animation, save_gif  # noqa: E402
 from primspace.plots.base import INIT_COLORS, save_figure  # noqa: E402
 from primspace.plots.clustering import plot_accuracy_vs_r2, plot_clustering, plot_tau_sweep  # noqa: E402
+from primspace.plots.posterior import plot_posterior  # noqa: E402
 from primspace.plots.prediction import plot_prediction_errors, plot_predictions  # noqa: E402
 from primspace.plots.samples import (  # noqa: E402
     plot_image_strips,
@@ -40,6 +42,7 @@ __all__ = [
     "reconstruction_title",
     "plot_predictions",
     "plot_prediction_errors",
+    "plot_posterior",
     "plot_clustering",
     "plot_tau_sweep",
     "plot_accuracy_vs_r2",

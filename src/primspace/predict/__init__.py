@@ -8,7 +8,8 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
 * :class:`GradientPredictor`: gradient inference of the code from a start, offline and online;
 * :class:`PriorPredictor`: a prior in code space per primitive (a label or a cluster of the fitted
   codes), drawn, decoded and conditioned on the observed steps, given the primitive or weighted by
-  the posterior over primitives (:mod:`primspace.predict.prior`), offline and online;
+  the posterior over primitives (:mod:`primspace.predict.prior`), offline and online; ``predict(...,
+  primitive="push")`` asks it for every motion as that primitive (:mod:`primspace.predict.posterior`);
 * :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the whole motion from the first frame and
   joints, the primitive given (a cluster id or a label name);
 * the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
@@ -34,6 +35,7 @@ from primspace.predict.grid import grid_predictions
 from primspace.predict.metrics import finite_mean, frame_errors, observed_prefix, unobserved_mse
 from primspace.predict.mixture import MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
 from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.scene import ScenePredictor, predict_scene
 
@@ -55,6 +57,8 @@ __all__ = [
     "continuity_correction",
     "PriorPredictor",
     "PRIOR",
+    "posterior_by_fraction",
+    "POSTERIOR_FRACTIONS",
     "ScenePredictor",
     "predict_scene",
     "ProMPPeer",

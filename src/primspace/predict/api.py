@@ -42,6 +42,9 @@ from primspace.predict.candidates import continuity_correction
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS, GradientPredictor
 from primspace.predict.metrics import frame_errors, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor
+from primspace.predict.posterior import prior_details
+from primspace.predict.primitives import PRIMITIVE_SOURCES
+from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.train.api import as_run, reconstruct
 from primspace.train.checks import select
 from primspace.train.observe import Observation
@@ -53,14 +56,16 @@ __all__ = [
     "predict",
     "make_predictor",
     "fit_predictor",
+    "predictor_for",
     "DEFAULT_PREDICT_EPOCHS",
     "MIXTURE",
+    "PRIOR",
     "PREDICT_STARTS",
     "DEFAULT_PREDICTOR",
 ]
 
-#: What :func:`predict` accepts as ``init``: the gradient starts and the mixture.
-PREDICT_STARTS = INFER_STARTS + (MIXTURE,)
+#: What :func:`predict` accepts as ``init``: the gradient starts, the mixture and the prior.
+PREDICT_STARTS = INFER_STARTS + (MIXTURE, PRIOR)
 #: The predictor of :func:`predict` and ``primspace predict`` when none is named: the best we
 #: have measured (docs/predict.md: below every gradient start on the demo, LASA and real recordings).
 DEFAULT_PREDICTOR = MIXTURE
@@ -88,8 +93,17 @@ class Prediction:
     observation : dict
         The rule: ``{"motor": ..., "frames": ...}``.
     init : str
-        The start of the inference.
+        The start of the inference (``mixture``, ``prior`` or a gradient start).
     epochs : int
+    details : dict
+        What the predictor adds to ``result.json``: for the prior (:class:`~primspace.predict.prior.PriorPredictor`)
+        ``prior`` (its choices and primitives), ``primitive`` (the one asked, or None) and, when
+        none was asked, ``posterior`` (n, P) per sample over ``primitives`` (names), ``top_primitive``
+        per sample and ``posterior_accuracy`` (the share whose top primitive stands for their
+        label; None without labels).
+    predictor : Predictor or None
+        The fitted predictor (offline predictions), to ask again
+        (:func:`~primspace.predict.posterior.posterior_by_fraction`).
     """
 
     codes: np.ndarray
@@ -104,6 +118,7 @@ class Prediction:
     epochs: int = 0
     continuity: bool = False
     details: dict = field(default_factory=dict)
+    predictor: Predictor | None = field(default=None, repr=False, compare=False)
 
     def summary(self) -> dict:
         """Mean errors over the samples (NaN samples skipped) and the rule, for ``result.json``."""
@@ -150,17 +165,55 @@ def make_predictor(
     continuity: bool = True,
     condition: bool = True,
     progress: bool | None = None,
+    primitive=None,
+    primitives: str = "labels",
+    n_clusters: int | None = None,
+    prior_samples: int | None = None,
     **overrides,
 ) -> Predictor:
     """The predictor named ``init``: ``mixture`` (:class:`~primspace.predict.mixture.MixturePredictor`,
-    ``condition``) or a gradient start (:class:`~primspace.predict.gradient.GradientPredictor`,
-    ``epochs`` and train-config ``overrides``); both with the continuity correction when ``continuity``."""
+    ``condition``), ``prior`` (:class:`~primspace.predict.prior.PriorPredictor`: ``primitive``,
+    ``primitives``, ``n_clusters``, ``prior_samples`` draws per primitive, ``seed`` of ``overrides``)
+    or a gradient start (:class:`~primspace.predict.gradient.GradientPredictor`, ``epochs`` and
+    train-config ``overrides``); each with the continuity correction when ``continuity``. A
+    primitive (or ``primitives``, ``n_clusters``) asks for the prior (:func:`predictor_for`)."""
+    init = predictor_for(init, primitive=primitive, primitives=primitives, n_clusters=n_clusters)
     if init not in PREDICT_STARTS:
         raise UserError(f"unknown start {init!r}: choose one of {', '.join(PREDICT_STARTS)}")
     if init == MIXTURE:
         return MixturePredictor(run, condition=condition, continuity=continuity, progress=progress)
+    if init == PRIOR:
+        extra = {} if prior_samples is None else {"n_samples": prior_samples}
+        return PriorPredictor(
+            run,
+            primitive=primitive,
+            primitives=primitives,
+            n_clusters=n_clusters,
+            continuity=continuity,
+            random_state=overrides.get("seed"),
+            progress=progress,
+            **extra,
+        )
     return GradientPredictor(
         run, init, epochs=epochs, continuity=continuity, overrides=overrides or None, progress=progress
+    )
+
+
+def predictor_for(init, *, primitive=None, primitives: str = "labels", n_clusters: int | None = None):
+    """The predictor to build: ``init``, or ``prior`` when a primitive is asked for (``primitive``, or
+    ``primitives`` other than ``labels``, or ``n_clusters``) and ``init`` is left at its default
+    (None or :data:`DEFAULT_PREDICTOR`); one UserError when ``init`` names another predictor:
+    only the prior takes a primitive."""
+    if primitives not in PRIMITIVE_SOURCES:
+        raise UserError(f"primitives must be one of {', '.join(PRIMITIVE_SOURCES)}, got {primitives!r}")
+    asked = [name for name, value in (("primitive", primitive), ("n_clusters", n_clusters)) if value is not None]
+    asked += ["primitives"] if primitives != "labels" else []
+    if not asked:
+        return init
+    if init in (None, DEFAULT_PREDICTOR, PRIOR):
+        return PRIOR
+    raise UserError(
+        f"only the prior predictor (init='prior') takes a primitive: init={init!r} does not (given {', '.join(asked)})"
     )
 
 
@@ -194,6 +247,10 @@ def predict(
     condition: bool = True,
     online: int | None = None,
     progress: bool | None = None,
+    primitive=None,
+    primitives: str = "labels",
+    n_clusters: int | None = None,
+    prior_samples: int | None = None,
     **overrides,
 ) -> Prediction:
     """Predict the rest of each motion of ``dataset`` from its observed part, and score it.
@@ -215,7 +272,10 @@ def predict(
         conditioned on the observed entries, whichever the leave-one-out prediction of the
         fitted demonstrations prefers), or a start of gradient inference (``zero``,
         ``random``, ``projection``, ``pca``, ``calibrated``, ``nearest``) followed by
-        ``epochs`` of inference on the observed entries.
+        ``epochs`` of inference on the observed entries, or ``prior``
+        (:class:`~primspace.predict.prior.PriorPredictor`: a prior in code space per primitive,
+        conditioned on the observed entries; without ``primitive``, weighted by the posterior
+        over primitives).
     epochs : int
         Inference epochs of a gradient start (0: the start decoded as it is).
     indices : array-like of int, optional
@@ -238,8 +298,21 @@ def predict(
         the largest observed prefix). ``details`` then holds the latency per step and the
         error of the remaining steps after each.
     progress : bool, optional
+    primitive : str or int, optional
+        The primitive of every motion, a name (a label name of the fitted data, ``"push"``) or an
+        id (``Prediction.details["prior"]["primitives"]`` lists them): the prior predictor, whatever
+        ``init`` unless it names another predictor (then one UserError: only the prior takes a
+        primitive). None: the prior weighs its primitives by their posterior.
+    primitives : {"labels", "clusters"}
+        The prior's primitives: the fitted data's labels, or clusters of the fitted codes (asks for
+        the prior as ``primitive`` does).
+    n_clusters : int, optional
+        The number of clusters with ``primitives="clusters"`` (default: the number of labels).
+    prior_samples : int, optional
+        Codes the prior draws and decodes per primitive (default 2000).
     **overrides
-        Train-config overrides of a gradient inference (``latent_lr``, ``batch_size``, ``seed`` ...).
+        Train-config overrides of a gradient inference (``latent_lr``, ``batch_size``, ``seed`` ...);
+        the prior reads ``seed``.
 
     Returns
     -------
@@ -253,7 +326,8 @@ def predict(
     ------
     UserError
         ``observe`` of 0 or above 1, frames asked of data without frames, an unknown
-        start, and what :func:`~primspace.train.infer` refuses.
+        start, a primitive the run does not have (the line lists those it has), and what
+        :func:`~primspace.train.infer` refuses.
     """
     parent = as_run(run)
     if observe is None and observe_frames is None:
@@ -262,26 +336,31 @@ def predict(
             "with everything observed there is nothing to predict"
         )
     observation = Observation.build(observe, observe_frames)
+    asked = dict(primitive=primitive, primitives=primitives, n_clusters=n_clusters)
     predictor = make_predictor(
         parent,
-        init or parent.init,
+        predictor_for(init, **asked) or parent.init,
         epochs=epochs,
         continuity=continuity,
         condition=condition,
         progress=progress,
+        prior_samples=prior_samples,
+        **asked,
         **overrides,
     )
     data, idx = select(dataset, indices)
     head = parent.model_config.has_images
     observation.check(data, use_images=head and data.has_images, has_image_head=head)  # before any fitting
     motor_observed, frames_observed = observation.masks(data.valid_lengths, data.length)
+    fitted = None
     if online is not None:
         codes, scaled, details = _online(predictor, parent, data, observation, online, fitted_data, progress)
-        init_used = predictor.start or parent.init if isinstance(predictor, GradientPredictor) else MIXTURE
     else:
-        forecast = run_predictor(fit_predictor(predictor, parent, fitted_data), parent, data, observation)
+        fitted = fit_predictor(predictor, parent, fitted_data)
+        forecast = run_predictor(fitted, parent, data, observation)
         codes, scaled, details = forecast.codes, forecast.motor, forecast.details
-        init_used = getattr(predictor, "start_", MIXTURE)
+        if isinstance(fitted, PriorPredictor):
+            details = prior_details(fitted, forecast.details, data.labels)
     scaled = np.clip(scaled, -1.0, 1.0)  # within each joint's recorded range (the scaler maps it onto [-1, 1])
     predicted_frames = None
     if frames and parent.model_config.has_images:
@@ -302,11 +381,19 @@ def predict(
         indices=idx,
         errors=errors,
         observation=observation.to_dict(),
-        init=init_used,
+        init=_predictor_name(predictor, parent),
         epochs=int(epochs_run),
         continuity=continuity,
         details=details,
+        predictor=fitted,
     )
+
+
+def _predictor_name(predictor: Predictor, run: TrainedRun) -> str:
+    """The name ``Prediction.init`` records: the gradient start, ``prior`` or ``mixture``."""
+    if isinstance(predictor, GradientPredictor):
+        return getattr(predictor, "start_", None) or predictor.start or run.init
+    return PRIOR if isinstance(predictor, PriorPredictor) else MIXTURE
 
 
 def run_predictor(predictor: Predictor, run: TrainedRun, data: MotionDataset, observation: Observation):
@@ -336,7 +423,7 @@ def _online(
     seen = int(observation.masks(data.valid_lengths, data.length)[0].sum(axis=1).max())
     predictor = fit_predictor(predictor, parent, fitted_data)
     scaled_truth = parent.scaler.transform(data.motor)
-    if isinstance(predictor, MixturePredictor):  # no gradient: the prefix's posterior, updated a step at a time
+    if isinstance(predictor, (MixturePredictor, PriorPredictor)):  # no gradient: updated a step at a time
         result = predictor.predict_online(scaled_truth, data.valid_lengths, prediction_after=seen, progress=progress)
         codes = result.codes[:, result.column(seen)]
         scaled = parent.scaler.transform(result.prediction)
@@ -358,4 +445,7 @@ def _online(
             "remaining_error": [None if not np.isfinite(e) else float(e) for e in result.mean_error],
         }
     }
+    if isinstance(predictor, PriorPredictor):
+        details["prior"] = predictor.summary()
+        details["primitive"] = details["prior"]["primitive"]
     return codes.astype(np.float32), scaled, details
