@@ -115,7 +115,7 @@ def fit_gaussian(codes: np.ndarray, family: tuple, pooled_var: float | None = No
         from sklearn.decomposition import FactorAnalysis
 
         rank = max(1, min(int(setting), m - 1, d))
-        cov = FactorAnalysis(n_components=rank, random_state=0).fit(codes).get_covariance()
+        cov = FactorAnalysis(n_components=rank, svd_method="lapack").fit(codes).get_covariance()
     elif name == "subspace":
         _, s, vt = np.linalg.svd(centred, full_matrices=False)
         var = s**2 / (m - 1)

@@ -20,6 +20,7 @@ from primspace.predict.metrics import finite_mean, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
 from primspace.predict.encoder import EncoderPredictor
+from primspace.predict.posterior import top1_accuracy
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.train.observe import Observation
@@ -92,11 +93,9 @@ def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
 
 def posterior_accuracy(forecast: Forecast, labels) -> float | None:
     """Share of motions whose most probable primitive stands for their label (None without a posterior)."""
-    if labels is None or "posterior" not in forecast.details:
+    if "posterior" not in forecast.details:
         return None
-    stands_for = np.asarray([-2 if v is None else v for v in forecast.details["prior"]["primitives"]["labels"]])
-    top = np.asarray(forecast.details["posterior"]).argmax(axis=1)
-    return float(np.mean(stands_for[top] == np.asarray(labels)))
+    return top1_accuracy(forecast.details["posterior"], forecast.details["prior"]["primitives"]["labels"], labels)
 
 
 def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int) -> dict[str, Predictor]:

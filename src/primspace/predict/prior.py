@@ -380,7 +380,7 @@ class PriorPredictor(Predictor):
         truth = self.primitives_.assignment[scored]
         temps = self._grid("temperature", TEMPERATURE_GRID)
         scores: dict = {"given": {}, "posterior": {}}
-        best_given, best_free = (np.inf,), (np.inf,)
+        best_given, best_free = (np.inf,), (np.inf, np.inf)
         for weight in self._grid("blend", BLEND_GRID):
             for r in self._grid("noise", NOISE_GRID):
                 means, evidence = self._fold_predictions(observed, r, weight)
@@ -394,13 +394,14 @@ class PriorPredictor(Predictor):
                 t = min(logloss, key=logloss.get)
                 free = self._fold_error(self._posterior(evidence[scored], t), *args)
                 scores["posterior"][key] = {"temperature": t, "log_loss": float(logloss[t]), "mse": free}
-                best_free = min(best_free, (free, r, weight, t), key=lambda x: x[0])
+                # nothing left to predict (every step observed): the log-loss decides
+                best_free = min(best_free, (free, float(logloss[t]), r, weight, t), key=lambda x: x[:2])
         return {
             "noise_given": best_given[1],
             "blend_given": best_given[2],
-            "noise": best_free[1],
-            "blend": best_free[2],
-            "temperature": best_free[3],
+            "noise": best_free[2],
+            "blend": best_free[3],
+            "temperature": best_free[4],
             "cv": scores,
         }
 
