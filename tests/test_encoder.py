@@ -16,13 +16,18 @@ from primspace.train.observe import Observation
 from test_observe import eval_set, train_set, trained  # noqa: F401
 
 NAMES = ["reach", "push", "lift"]
+#: An encoder trained enough to recover codes (the test of its accuracy).
 SMALL = dict(n_train=2048, steps=1000, hidden=128, batch_size=128)
+#: A tiny one, for the tests of what the forecast does with the codes it finds.
+TINY = dict(n_train=256, steps=50, hidden=32, batch_size=64)
 
 
 @pytest.fixture(scope="module")
 def prior(trained, train_set):
+    """The priors, their noise, temperature and blend fixed (no K-fold choice: tested in test_prior.py)."""
     scaled = trained.scaler.transform(train_set.motor)
-    return PriorPredictor(trained, n_samples=300, label_names=NAMES).fit(scaled, train_set.labels)
+    fixed = dict(noise=1e-3, temperature=10.0, blend=0.5)
+    return PriorPredictor(trained, n_samples=200, label_names=NAMES, **fixed).fit(scaled, train_set.labels)
 
 
 def _fit(trained, train_set, prior, **kw):
@@ -32,12 +37,12 @@ def _fit(trained, train_set, prior, **kw):
 
 @pytest.fixture(scope="module")
 def given(trained, train_set, prior):
-    return _fit(trained, train_set, prior, given=True)
+    return _fit(trained, train_set, prior, given=True, **TINY)
 
 
 @pytest.fixture(scope="module")
 def free(trained, train_set, prior):
-    return _fit(trained, train_set, prior)
+    return _fit(trained, train_set, prior, **TINY)
 
 
 @pytest.mark.parametrize("primitive_given", [True, False])

@@ -692,9 +692,11 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     """`experiment predict`: every start and peer at every fraction, judged on simulator data, resumable."""
     from primspace.experiments.prediction import PEERS, PREDICT_VERSION, run_predict
     from primspace.predict.grid import PRIOR_ROWS
+    from test_predict_pinned import CHEAP_PRIORS  # the priors' rows small and fast: they are only there
 
     exp = finished[0]
-    results = run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)
+    args = dict(fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2, prior_settings=CHEAP_PRIORS)
+    results = run_predict(exp, **args)
     table = results["table"]
     assert set(table) == {
         "zero",
@@ -715,6 +717,6 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     assert table["mean motion (labels)"]["0.5"]["mse"][0] > 0
     assert_figure(exp.figure("predict_errors"))
     assert "Predicting the rest of a motion" in build_report(exp.path).read_text()
-    assert run_predict(exp, fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2)["table"] == table
+    assert run_predict(exp, **args)["table"] == table
     points = list((exp.path / "runs" / f"predict{PREDICT_VERSION}").iterdir())
     assert points and all(p.name.endswith("-e2") for p in points)  # other epochs than the grid's: other points

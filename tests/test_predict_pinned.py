@@ -19,6 +19,13 @@ from test_train import SMALL, primitives
 
 PINNED = Path(__file__).with_suffix(".json")
 FRACTIONS = (0.1, 0.25, 0.5)
+#: The priors' rows, small and fast (their numbers are not pinned, only that they exist): few draws,
+#: fixed noise, temperature and blend (no K-fold choice), a short MAP and tiny encoders.
+CHEAP_PRIORS = {
+    "prior": dict(n_samples=200, noise=1e-3, temperature=10.0, blend=0.5),
+    "map": dict(iterations=5),
+    "encoder": dict(n_train=256, steps=20, hidden=16, batch_size=64),
+}
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +47,7 @@ def grid_numbers(run, train, test) -> dict:
     """{row: {fraction: mean unobserved MSE}} of every predictor on ``test``."""
     from primspace.predict import grid_predictions
 
-    return grid_predictions(run, train, test, FRACTIONS, epochs=5, online_iterations=2)
+    return grid_predictions(run, train, test, FRACTIONS, epochs=5, online_iterations=2, prior_settings=CHEAP_PRIORS)
 
 
 def test_the_prediction_grid_keeps_its_numbers(case):
@@ -50,3 +57,11 @@ def test_the_prediction_grid_keeps_its_numbers(case):
     for row, cells in pinned.items():
         for key, value in cells.items():
             assert numbers[row][key] == pytest.approx(value, rel=1e-6, abs=1e-12), (row, key)
+
+
+def test_the_priors_settings_name_their_kinds():
+    from primspace.errors import UserError
+    from primspace.predict.grid import grid_predictors
+
+    with pytest.raises(UserError, match="prior_settings takes prior, map, encoder, got 'mixture'"):
+        grid_predictors(None, None, (), 1, prior_settings={"mixture": {}})

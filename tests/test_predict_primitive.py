@@ -21,7 +21,18 @@ from test_train import SMALL, primitives
 NAMES = ["reach", "push", "lift"]
 FAST = dict(batch_size=12, threads=1)
 #: Draws per primitive: small and fast (users get 2000).
-SAMPLES = 100
+SAMPLES = 50
+#: Draws per primitive of each fold of the prior's K-fold choice (users get 500).
+CV_SAMPLES = 20
+
+
+@pytest.fixture(scope="module", autouse=True)
+def fewer_fold_draws():
+    """The K-fold choice of the prior's noise, temperature and blend on fewer draws per fold: these
+    tests ask what the primitive does to the prediction, not what the choice picks (test_prior.py)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("primspace.predict.prior.CV_SAMPLES", CV_SAMPLES)
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -16,12 +16,14 @@ from primspace.train.observe import Observation
 from test_observe import eval_set, train_set, trained  # noqa: F401
 
 NAMES = ["reach", "push", "lift"]
+#: Fixed noise, temperature and blend: no K-fold choice (for the tests that do not test it).
+FIXED = dict(noise=1e-3, temperature=10.0, blend=0.5)
 
 
 def _fit(trained, train_set, **kw):
     scaled = trained.scaler.transform(train_set.motor)
     kw.setdefault("label_names", NAMES)
-    return PriorPredictor(trained, n_samples=300, **kw).fit(scaled, train_set.labels)
+    return PriorPredictor(trained, **{"n_samples": 200, **kw}).fit(scaled, train_set.labels)
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +32,10 @@ def posterior(trained, train_set):
 
 
 @pytest.fixture(scope="module")
-def given(trained, train_set):
-    return _fit(trained, train_set, given=True)
+def given(posterior):
+    """The same fitted priors given each motion's label, sharing the K-fold folds and choices."""
+    posterior._folds()  # drawn and decoded once, before the copy, for both
+    return posterior.asked(given=True)
 
 
 def _errors(forecast, scaled, rule, n, steps):
@@ -65,8 +69,8 @@ def test_the_posterior_finds_the_primitive_and_is_calibrated(posterior, trained,
 
 def test_a_primitive_by_name_or_id_predicts_every_motion_as_it(trained, train_set, eval_set):
     scaled, rule = trained.scaler.transform(eval_set.motor), Observation.build(0.25)
-    by_name = _fit(trained, train_set, primitive="push").forecast(scaled, rule)
-    by_id = _fit(trained, train_set, primitive=1).forecast(scaled, rule)
+    by_name = _fit(trained, train_set, primitive="push", **FIXED).forecast(scaled, rule)
+    by_id = _fit(trained, train_set, primitive=1, **FIXED).forecast(scaled, rule)
     np.testing.assert_allclose(by_name.motor, by_id.motor)
     assert (np.asarray(by_name.details["posterior"]).argmax(axis=1) == 1).all()
     assert by_name.details["prior"]["primitive"] == "push"
@@ -185,7 +189,7 @@ def test_a_blend_has_the_moments_of_the_mixture():
 def test_the_blend_of_one_predicts_from_the_fitted_demonstrations_alone(trained, train_set, eval_set):
     """blend=1: the fitted pairs' own Gaussian; its prediction does not depend on the draws."""
     scaled, rule = trained.scaler.transform(eval_set.motor), Observation.build(0.5)
-    fixed = dict(given=True, noise=1e-3, temperature=1.0, blend=1.0)
+    fixed = dict(given=True, noise=1e-3, temperature=1.0, blend=1.0, n_samples=50)
     one = _fit(trained, train_set, **fixed).forecast(scaled, rule, eval_set.labels)
     other = _fit(trained, train_set, random_state=5, **fixed).forecast(scaled, rule, eval_set.labels)
     np.testing.assert_allclose(one.motor, other.motor)

@@ -20,11 +20,13 @@ from primspace.train.observe import Observation
 from test_observe import eval_set, train_set, trained  # noqa: F401
 
 NAMES = ["reach", "push", "lift"]
+#: The prior's draws, and its noise, temperature and blend fixed (no K-fold choice: tested in test_prior.py).
+PRIOR = dict(n_samples=200, label_names=NAMES, noise=1e-3, temperature=10.0, blend=0.5)
 
 
 def _prior(trained, train_set, **kw):
     scaled = trained.scaler.transform(train_set.motor)
-    return PriorPredictor(trained, n_samples=300, label_names=NAMES, **kw).fit(scaled, train_set.labels)
+    return PriorPredictor(trained, **PRIOR, **kw).fit(scaled, train_set.labels)
 
 
 @pytest.fixture(scope="module")
@@ -107,7 +109,7 @@ def test_the_primitive_given_beats_another(given_prior, trained, train_set, eval
 def test_the_same_seed_gives_the_same_numbers(trained, train_set, eval_set):
     """Two predictors fitted afresh (the prior cloned and fitted inside) agree to the bit."""
     scaled, rule = trained.scaler.transform(eval_set.motor), Observation.build(0.5)
-    prior = PriorPredictor(trained, n_samples=300, label_names=NAMES, random_state=5)
+    prior = PriorPredictor(trained, **PRIOR, random_state=5)
     runs = [
         _map(trained, train_set, prior, given=True, iterations=50, start="best_member").forecast(
             scaled, rule, eval_set.labels

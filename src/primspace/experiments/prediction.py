@@ -95,10 +95,11 @@ def run_predict_point(
     epochs: int,
     judge: bool,
     max_samples: int | None = None,
+    prior_settings: dict | None = None,
 ) -> dict:
-    """One seed: every row (:func:`~primspace.predict.grid.grid_predictors`) at every fraction; mean
-    unobserved MSE (and success) over the run's evaluation samples (at most ``max_samples``:
-    :func:`predicted_subset`)."""
+    """One seed: every row (:func:`~primspace.predict.grid.grid_predictors`, ``prior_settings`` its
+    keywords of the priors' rows; None: their defaults) at every fraction; mean unobserved MSE (and
+    success) over the run's evaluation samples (at most ``max_samples``: :func:`predicted_subset`)."""
     from primspace.predict.grid import grid_forecasts, grid_predictors, posterior_accuracy
     from primspace.predict.metrics import finite_mean, unobserved_mse
     from primspace.train import TrainConfig, configure_process, load_run
@@ -112,7 +113,7 @@ def run_predict_point(
     )
     test = data.subset(test_idx)
     truth = fit.scaler.transform(test.motor)
-    rows = grid_predictors(fit, data, tuple(starts), epochs)
+    rows = grid_predictors(fit, data, tuple(starts), epochs, prior_settings=prior_settings)
     table: dict = {}
     for f in tuple(fractions) + ((1.0,) if judge else ()):
         key = f"{f:g}"
@@ -156,9 +157,13 @@ def run_predict(
     starts=PREDICT_STARTS_GRID,
     epochs: int = PREDICT_EPOCHS,
     seeds=None,
+    prior_settings: dict | None = None,
 ) -> dict:
     """The prediction grid over the intra runs' seeds (runs intra first if needed); ``seeds``:
-    only those of them (the results then hold those seeds only)."""
+    only those of them (the results then hold those seeds only); ``prior_settings``: keywords of
+    the priors' rows (:func:`~primspace.predict.grid.grid_predictors`; None, as the command runs
+    it: their defaults). The points' keys do not say them: points computed with other settings
+    are reused as they are."""
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
     seeds_run = projection_seeds(intra, q)
@@ -178,6 +183,7 @@ def run_predict(
                 int(epochs),
                 judge,
                 PREDICT_MAX_SAMPLES,
+                *(() if prior_settings is None else (prior_settings,)),
             ),
         )
         for s in seeds

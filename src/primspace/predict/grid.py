@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
+from primspace.errors import UserError
 from primspace.predict.api import fit_predictor, make_predictor, predict, run_predictor
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.metrics import finite_mean, unobserved_mse
@@ -36,6 +37,7 @@ __all__ = [
     "LABELS_DIAGNOSTIC",
     "MIXTURE_ROWS",
     "PRIOR_ROWS",
+    "PRIOR_SETTINGS",
     "GIVEN_ROWS",
     "posterior_accuracy",
 ]
@@ -77,30 +79,54 @@ GIVEN_ROWS = (
 )
 
 
-def _prior_rows(run: TrainedRun, fitted: MotionDataset) -> dict[str, Predictor]:
-    """The priors' rows, fitted (the two over the fitted labels share their draws)."""
+#: The kinds of the priors' rows whose constructors ``prior_settings`` may set (the predictor classes).
+PRIOR_SETTINGS = {"prior": PriorPredictor, "map": PriorMapPredictor, "encoder": EncoderPredictor}
+
+
+def _check_prior_settings(prior_settings: dict | None) -> dict:
+    """``prior_settings`` as ``{kind: {keyword: value}}`` (empty when None); unknown kinds refused."""
+    settings = dict(prior_settings or {})
+    unknown = sorted(set(settings) - set(PRIOR_SETTINGS))
+    if unknown:
+        raise UserError(f"prior_settings takes {', '.join(PRIOR_SETTINGS)}, got {', '.join(map(repr, unknown))}")
+    return {kind: dict(settings.get(kind) or {}) for kind in PRIOR_SETTINGS}
+
+
+def _prior_rows(run: TrainedRun, fitted: MotionDataset, prior_settings: dict | None = None) -> dict[str, Predictor]:
+    """The priors' rows, fitted (the two over the fitted labels share their draws); ``prior_settings``:
+    keywords of their constructors by kind (:data:`PRIOR_SETTINGS`; default: none, the predictors' own)."""
+    kw = _check_prior_settings(prior_settings)
     names = fitted.label_names
     scaled, lengths = run.scaler.transform(fitted.motor), fitted.valid_lengths
-    by_label = PriorPredictor(run, given=True, label_names=names).fit(scaled, fitted.labels, lengths)
-    clusters = PriorPredictor(run, primitives="clusters", label_names=names).fit(scaled, fitted.labels, lengths)
-    refined = PriorMapPredictor(run, prior=by_label, given=True).fit(scaled, fitted.labels, lengths)
+    by_label = PriorPredictor(run, given=True, label_names=names, **kw["prior"]).fit(scaled, fitted.labels, lengths)
+    clusters = PriorPredictor(run, primitives="clusters", label_names=names, **kw["prior"]).fit(
+        scaled, fitted.labels, lengths
+    )
+    refined = PriorMapPredictor(run, prior=by_label, given=True, **kw["map"]).fit(scaled, fitted.labels, lengths)
     encoders = [
-        EncoderPredictor(run, prior=by_label.asked(), given=g).fit(scaled, fitted.labels, lengths)
+        EncoderPredictor(run, prior=by_label.asked(), given=g, **kw["encoder"]).fit(scaled, fitted.labels, lengths)
         for g in (True, False)
     ]
     return dict(zip(PRIOR_ROWS, (by_label, by_label.asked(), clusters, refined, *encoders)))
 
 
 def posterior_accuracy(forecast: Forecast, labels) -> float | None:
-    """Share of motions whose most probable primitive stands for their label (None without a posterior)."""
-    if "posterior" not in forecast.details:
+    """Share of motions whose most probable primitive stands for their label (None without a posterior
+    over the prior's primitives: the encoder given the primitive records its one-hot, not the prior)."""
+    if "posterior" not in forecast.details or "prior" not in forecast.details:
         return None
     return top1_accuracy(forecast.details["posterior"], forecast.details["prior"]["primitives"]["labels"], labels)
 
 
-def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int) -> dict[str, Predictor]:
+def grid_predictors(
+    run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int, *, prior_settings: dict | None = None
+) -> dict[str, Predictor]:
     """Every row, fitted once on ``run``'s fitted demonstrations (read from ``fitted_data``, the
-    data set it was fitted on): ``starts`` (gradient starts and ``mixture``: all its rows), then the peers."""
+    data set it was fitted on): ``starts`` (gradient starts and ``mixture``: all its rows), then the
+    peers, then (with labels) the priors' rows; ``prior_settings``: keywords of the priors' rows'
+    constructors by kind, ``{"prior": {...}, "map": {...}, "encoder": {...}}`` (:data:`PRIOR_SETTINGS`;
+    default: the predictors' own, as the experiment runs them; tests pass smaller ones)."""
+    _check_prior_settings(prior_settings)
     fitted = fitted_samples(run, fitted_data)
     rows: dict[str, Predictor] = {}
     candidates = code_mixture(run) if MIXTURE in starts else None
@@ -125,7 +151,7 @@ def grid_predictors(run: TrainedRun, fitted_data: MotionDataset, starts, epochs:
     for predictor in rows.values():
         fit_predictor(predictor, run, fitted_data)
     if fitted.labels is not None:
-        rows.update(_prior_rows(run, fitted))
+        rows.update(_prior_rows(run, fitted, prior_settings))
     return rows
 
 
@@ -155,10 +181,12 @@ def grid_predictions(
     starts=("zero", "projection", "calibrated", "nearest", MIXTURE),
     epochs: int,
     online_iterations: int | None = None,
+    prior_settings: dict | None = None,
 ) -> dict:
     """``{row: {fraction: mean unobserved MSE}}`` of every row (and, with ``online_iterations``,
-    the online gradient start ``projection`` and the online mixture) on ``test``."""
-    rows = grid_predictors(run, fitted_data, starts, epochs)
+    the online gradient start ``projection`` and the online mixture) on ``test``; ``prior_settings``
+    as :func:`grid_predictors`'s."""
+    rows = grid_predictors(run, fitted_data, starts, epochs, prior_settings=prior_settings)
     scaled, lengths = run.scaler.transform(test.motor), test.valid_lengths
     table: dict = {}
     for f in fractions:
