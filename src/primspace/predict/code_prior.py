@@ -1,9 +1,10 @@
 """A Gaussian prior in code space per primitive, chosen by held-out likelihood, and its decoded moments (issue 39).
 
-The paper observes that the codes of one primitive lie near a common affine subspace
-(*Clustering*: "samples belonging to the same primitive lie near a low-dimensional
-affine subspace"). :func:`choose_prior` turns a primitive's fitted codes into a
-distribution. Three families are tried, each a Gaussian ``N(μ, C)`` over the codes:
+The paper: "Specific motions within each primitive are determined by location of the
+object in space. Hence, each primitive is a low-dimensional manifold in trajectory space",
+and for the codes, "we assume that data points **z**_i belong to the union of K
+low-dimensional subspaces with errors" (*Clustering*), affine ones in its affine subspace
+clustering. :func:`choose_prior` turns a primitive's fitted codes into a distribution. Three families are tried, each a Gaussian ``N(μ, C)`` over the codes:
 
 * ``shrunk``: the full covariance shrunk towards a multiple of the identity,
   ``(1 - s) S + s (tr S / d) I`` (scikit-learn's ``ShrunkCovariance``);
