@@ -279,6 +279,11 @@ class PriorPredictor(Predictor):
         """The noise and blend of the task (given the primitive, or not)."""
         return (choice["noise_given"], choice["blend_given"]) if given else (choice["noise"], choice["blend"])
 
+    @property
+    def told_primitive(self) -> bool:
+        """Whether each motion's primitive is given (``primitive=`` one for all, or ``given``: its label)."""
+        return self.primitive_ is not None or bool(self.given)
+
     def _given_ids(self, labels, n: int):
         """Each motion's primitive when it is given (None: the posterior decides)."""
         if self.primitive_ is not None:
@@ -318,14 +323,8 @@ class PriorPredictor(Predictor):
         if rule.key not in self.choices_:
             fixed = {"noise": self.noise, "temperature": self.temperature, "blend": self.blend}
             if all(v != "auto" for v in fixed.values()):
-                r, w = float(self.noise), float(self.blend)
-                self.choices_[rule.key] = {
-                    "noise_given": r,
-                    "blend_given": w,
-                    "noise": r,
-                    "blend": w,
-                    "temperature": float(self.temperature),
-                }
+                r, w, t = float(self.noise), float(self.blend), float(self.temperature)
+                self.choices_[rule.key] = dict(noise_given=r, blend_given=w, noise=r, blend=w, temperature=t)
             else:
                 with stage("prior: choosing its settings by K-fold prediction", enabled=self.progress):
                     self.choices_[rule.key] = self._cross_validate(rule)

@@ -280,9 +280,8 @@ class PriorMapPredictor(Predictor):
         rule = observation_rule(observed, lengths, (n, steps))
         mask = observed_mask(observed, lengths, (n, steps))
         seen = np.where(mask[..., None], motor, 0.0)
-        given = self.prior_.primitive_ is not None or bool(self.prior_.given)  # as the prior reads it
         choice = self.prior_.choice(rule)
-        r = choice["noise_given"] if given else choice["noise"]
+        r = choice["noise_given"] if self.prior_.told_primitive else choice["noise"]
         ids = np.asarray(inner.details["posterior"]).argmax(axis=1)
         means, precisions = prior_terms(self.prior_.gaussians_, ids)
         terms = (seen, mask, means, precisions, r)
