@@ -8,7 +8,10 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
 * :class:`GradientPredictor`: gradient inference of the code from a start, offline and online;
 * :class:`PriorPredictor`: a prior in code space per primitive (a label or a cluster of the fitted
   codes), drawn, decoded and conditioned on the observed steps, given the primitive or weighted by
-  the posterior over primitives (:mod:`primspace.predict.prior`), offline and online; ``predict(...,
+  the posterior over primitives (:mod:`primspace.predict.prior`), offline and online;
+* :class:`PriorMapPredictor` and :class:`EncoderPredictor`: the code under that prior by MAP through
+  the frozen decoder, or by an encoder trained on the decoder's own samples (measured: neither
+  beats the prior's conditioning on the simulated presets; docs/predict.md); ``predict(...,
   primitive="push")`` asks it for every motion as that primitive (:mod:`primspace.predict.posterior`);
 * :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the whole motion from the first frame and
   joints, the primitive given (a cluster id or a label name);
@@ -35,7 +38,9 @@ from primspace.predict.grid import grid_predictions
 from primspace.predict.metrics import finite_mean, frame_errors, observed_prefix, unobserved_mse
 from primspace.predict.mixture import MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
+from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.scene import ScenePredictor, predict_scene
 
@@ -58,6 +63,8 @@ __all__ = [
     "PriorPredictor",
     "PRIOR",
     "posterior_by_fraction",
+    "PriorMapPredictor",
+    "EncoderPredictor",
     "POSTERIOR_FRACTIONS",
     "ScenePredictor",
     "predict_scene",
