@@ -53,9 +53,29 @@ if success["recorded"] is None or success["recorded"]["overall"] != 1.0:
 for name in ("data", "appendix_a", "intra_latent"):  # what the report's Data, Appendix A and latent figures read
     if not (out / f"results/{name}.json").exists():
         problems.append(f"results/{name}.json: not written (the report reads it, it computes nothing)")
+# the demo's numbers, pinned (tests/test_demo_pinned.py runs the same preset; CI deselects it there
+# and checks the shipped demo's own results here instead of training the demo twice)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from conftest import pinned_for_this_cpu  # noqa: E402
+from test_demo_pinned import PINNED_BY_CPU, _flat, _numbers  # noqa: E402
+
+import pytest  # noqa: E402
+
+clustering = json.loads((out / "results/clustering.json").read_text())
+got = _flat(_numbers(intra, clustering, success))
+pinned = _flat(pinned_for_this_cpu(PINNED_BY_CPU, "demo numbers", vendor=True))
+unpinned = set() if any("calibrated" in k for k in pinned) else {k for k in got if "calibrated" in k}
+if got.keys() - unpinned != pinned.keys():
+    problems.append(f"results: the pinned demo numbers' keys differ: {sorted(got.keys() ^ pinned.keys())[:5]}")
+off = [k for k in pinned if got.get(k) != pytest.approx(pinned[k], rel=1e-6, abs=1e-12)]
+if off:
+    problems.append(f"results: {len(off)} demo numbers differ from tests/test_demo_pinned.json, e.g. {off[:3]}")
 if not re.search(r"paper's qualitative result .*: (HOLDS|DOES NOT HOLD)", summary):
     problems.append("demo summary: no verdict on the paper's qualitative result")
 if problems:
     print("\n".join(problems))
     sys.exit(1)
-print(f"demo check: report with {len(pngs)} figures, {len(gifs)} animations, {expected} intra runs, recorded motions all pass; ok")
+print(
+    f"demo check: report with {len(pngs)} figures, {len(gifs)} animations, {expected} intra runs, recorded motions all pass, "
+    f"{len(pinned)} pinned numbers equal; ok"
+)

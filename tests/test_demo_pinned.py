@@ -5,8 +5,10 @@ the calibrated start (0.5),
 q = 8 and 40, 400 + 250 epochs, motor only) through intra, clustering and success with
 two workers, and compares every number the demo's summary and report rest on with the
 values recorded before the reshape (commit 05271bd, CPU, torch 2.13.0; an AVX-512 CPU:
-other CPU classes in ``test_demo_pinned.json``, ``conftest.cpu_class``). About 100 s on 2
-cores; the CI also runs ``make demo``, which prints the same numbers.
+other CPU classes in ``test_demo_pinned.json``, ``conftest.cpu_class``). About 190 s on 2
+cores. CI deselects it (``.ci/run``) and compares the same numbers, with this module's
+``_numbers`` and ``_flat``, on the results of the ``make demo`` it runs anyway
+(``.ci/check_demo.py``): the demo is trained once there, not twice.
 
 If a deliberate change alters results, re-run the affected results (docs/reproduce.md)
 and record the new values here in the same commit, saying why. (Recorded changes: the
