@@ -14,6 +14,7 @@ trajectories by inverse kinematics and rendered headless on the CPU:
 - :mod:`primspace.sim.shards`     the shard layout of a generation into a file
 - :mod:`primspace.sim.generate`   sharded parallel generation into HDF5 (or memory)
 - :mod:`primspace.sim.success`    the objective success judge of a joint trajectory
+- :mod:`primspace.sim.execute`    step-by-step execution with the block moved during it
 
 Importing this package chooses the OpenGL platform before anything imports ``mujoco``:
 ``MUJOCO_GL`` keeps a value the user set; otherwise it is ``egl`` when libEGL can be

@@ -22,7 +22,7 @@ the block, after the block has moved.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 
@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 
 from primspace.sim.scene import Scene  # noqa: E402
 
-__all__ = ["Rollout", "replay", "geom_interval", "pusher_front"]
+__all__ = ["Rollout", "BlockPusher", "replay", "geom_interval", "pusher_front"]
 
 _CAPSULE = int(mujoco.mjtGeom.mjGEOM_CAPSULE)
 _BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
@@ -111,6 +111,10 @@ class Rollout:
         Signed distance of the hand and wrist meshes to the block.
     table_distance : ndarray, shape (T,)
         Signed distance of the fingers, hand and wrist to the table top (negative: below it).
+    external : ndarray, shape (T,), bool
+        True at a step before which the block was moved by something other than the robot
+        (:meth:`BlockPusher.move_block`, a perturbation); the step's ``block`` is then
+        where it was put (plus any push of that step). Default: all False.
     """
 
     tcp: np.ndarray
@@ -122,6 +126,13 @@ class Rollout:
     finger_side: np.ndarray
     arm_distance: np.ndarray
     table_distance: np.ndarray
+    external: np.ndarray | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        if self.external is None:
+            self.external = np.zeros(len(self.tcp), dtype=bool)
+        else:
+            self.external = np.asarray(self.external, dtype=bool)
 
     @property
     def contact_distance(self) -> np.ndarray:
@@ -139,6 +150,9 @@ def replay(
     scene: Scene, joints: np.ndarray, block_xy, size: float, push_axis: int | None = None, push_sign: int = 1
 ) -> Rollout:
     """Run a joint trajectory through the scene's kinematics.
+
+    Every step is one :meth:`BlockPusher.step`; :class:`primspace.sim.execute.Executor`
+    runs the same steps one at a time (and may move the block between them).
 
     Parameters
     ----------
@@ -159,41 +173,132 @@ def replay(
     Rollout
     """
     joints = np.asarray(joints, dtype=float)
-    t_len = len(joints)
-    scene.set_block(float(block_xy[0]), float(block_xy[1]), float(size))
-    half = 0.5 * size
-    block = np.array([block_xy[0], block_xy[1], half], dtype=float)
-    fingers = scene.left_finger_geoms + scene.right_finger_geoms
-    out = {
-        "tcp": np.empty((t_len, 3)),
-        "rotation": np.empty((t_len, 3, 3)),
-        "block": np.empty((t_len, 3)),
-        "finger_distance": np.empty((t_len, 2)),
-        "finger_side": np.empty((t_len, 2)),
-        "arm_distance": np.empty(t_len),
-        "table_distance": np.empty(t_len),
-    }
-    behind = False  # was the pusher at or behind the block's trailing face at the last step?
-    for t in range(t_len):
-        scene.set_joints(joints[t])
-        if push_axis is not None:
-            front = pusher_front(scene, fingers, push_axis, push_sign, block - half, block + half)
+    pusher = BlockPusher(scene, block_xy, size, len(joints), push_axis, push_sign)
+    for q in joints:
+        pusher.step(q)
+    return pusher.rollout()
+
+
+class BlockPusher:
+    """The kinematic block model and the measurements of :func:`replay`, one step at a time.
+
+    Each :meth:`step` sets the arm's joints, lets the fingers push the block (the model in
+    the module docstring), places the block and records the step; :meth:`move_block`
+    moves the block between two steps by something other than the robot (an *external*
+    move, flagged in :attr:`Rollout.external` at the next step). The scene is the
+    pusher's from its construction until its last step (the block's size is set in the
+    scene's model).
+
+    Parameters
+    ----------
+    scene : Scene
+    block_xy : (float, float)
+        Where the block starts (its centre; it rests on the table).
+    size : float
+        Block edge (m).
+    steps : int
+        The most steps that can be recorded (T).
+    push_axis : {None, 0, 1}
+        The axis along which the fingers may push the block (None: it stays put).
+    push_sign : {1, -1}
+        The direction of that push.
+
+    Attributes
+    ----------
+    t : int
+        The number of steps recorded.
+    block : ndarray, shape (3,)
+        The block's centre now (m).
+    """
+
+    def __init__(
+        self, scene: Scene, block_xy, size: float, steps: int, push_axis: int | None = None, push_sign: int = 1
+    ) -> None:
+        scene.set_block(float(block_xy[0]), float(block_xy[1]), float(size))
+        self.scene, self.size, self.steps = scene, size, int(steps)
+        self.push_axis, self.push_sign = push_axis, push_sign
+        self.half = 0.5 * size
+        self.block = np.array([block_xy[0], block_xy[1], self.half], dtype=float)
+        self.t = 0
+        self._fingers = scene.left_finger_geoms + scene.right_finger_geoms
+        n = self.steps
+        self._out = {
+            "tcp": np.empty((n, 3)),
+            "rotation": np.empty((n, 3, 3)),
+            "fingers": np.empty((n, 2)),
+            "block": np.empty((n, 3)),
+            "finger_distance": np.empty((n, 2)),
+            "finger_side": np.empty((n, 2)),
+            "arm_distance": np.empty(n),
+            "table_distance": np.empty(n),
+            "external": np.zeros(n, dtype=bool),
+        }
+        self._behind = False  # was the pusher at or behind the block's trailing face at the last step?
+        self._moved = False  # was the block moved externally since the last step?
+
+    def step(self, q: np.ndarray) -> None:
+        """Record the next step: the arm at joints ``q`` (9 values), the block pushed by it.
+
+        Raises
+        ------
+        IndexError
+            When all ``steps`` are recorded.
+        """
+        t = self.t
+        if t >= self.steps:
+            raise IndexError(f"all {self.steps} steps are recorded")
+        scene, block = self.scene, self.block
+        scene.set_joints(q)
+        if self.push_axis is not None:
+            front = self._front()
             if front is None:
-                behind = False
+                self._behind = False
             else:
-                # how far the pusher has passed the trailing face (block - sign * half)
-                gap = push_sign * (front - (block[push_axis] - push_sign * half))
-                if gap > 0 and behind:  # a push from behind; never from above or inside
-                    block[push_axis] = front + push_sign * half
+                gap = self._gap(front)
+                if gap > 0 and self._behind:  # a push from behind; never from above or inside
+                    block[self.push_axis] = front + self.push_sign * self.half
                     gap = 0.0
-                behind = gap <= _FACE_TOLERANCE
+                self._behind = gap <= _FACE_TOLERANCE
         scene.data.mocap_pos[scene.block_mocap] = block
-        _record(scene, out, t, block)
-    return Rollout(fingers=joints[:, 7:9].copy(), size=float(size), **out)
+        _record(scene, self._out, t, block)
+        self._out["fingers"][t] = q[7:9]
+        self._out["external"][t] = self._moved
+        self._moved = False
+        self.t = t + 1
+
+    def move_block(self, dx: float, dy: float) -> None:
+        """Move the block by ``(dx, dy)`` on the table (m), not by the robot.
+
+        The next step is flagged external. Whether the fingers are behind the block's
+        trailing face is judged again at the moved block (with the arm where the last step
+        left it), so a block put onto or in front of the fingers is not pushed by them.
+        """
+        self.block[0] += dx
+        self.block[1] += dy
+        self.scene.data.mocap_pos[self.scene.block_mocap] = self.block
+        self._moved = True
+        if self.push_axis is not None and self.t > 0:
+            front = self._front()
+            self._behind = front is not None and self._gap(front) <= _FACE_TOLERANCE
+
+    def rollout(self) -> Rollout:
+        """The :class:`Rollout` of the steps recorded so far (copies)."""
+        n = self.t
+        return Rollout(size=float(self.size), **{k: v[:n].copy() for k, v in self._out.items()})
+
+    def _front(self) -> float | None:
+        """The pusher's leading coordinate at the block's face (None: no finger overlaps it)."""
+        block, half = self.block, self.half
+        return pusher_front(self.scene, self._fingers, self.push_axis, self.push_sign, block - half, block + half)
+
+    def _gap(self, front: float) -> float:
+        """How far the pusher has passed the trailing face (``block - sign * half``)."""
+        sign = self.push_sign
+        return sign * (front - (self.block[self.push_axis] - sign * self.half))
 
 
 def _record(scene: Scene, out: dict, t: int, block: np.ndarray) -> None:
-    """Step ``t`` of :func:`replay` (joints and block already set): TCP, block and distances."""
+    """Step ``t`` of :class:`BlockPusher` (joints and block already set): TCP, block and distances."""
     m, d = scene.model, scene.data
     fingers = scene.left_finger_geoms + scene.right_finger_geoms
     tip_geoms = (scene.left_finger_geoms[0], scene.right_finger_geoms[0])

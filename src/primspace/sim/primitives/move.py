@@ -33,9 +33,11 @@ class MoveBlock(Primitive):
     0.90; hold.
 
     **Criteria.** ``on_target``: the block ends within 10 mm of its target x; while the
-    block moves: ``centred`` (TCP within 10 mm of the block's centre line; an off-centre
-    push would turn it) and ``height`` (TCP within 10 mm of ``h``; a push high on the
-    block would tip it over); in the hold window: ``held`` (closer finger at most 10 mm
+    robot moves the block (steps where its x changes, except a step flagged
+    :attr:`~primspace.sim.rollout.Rollout.external`: moved by something else):
+    ``centred`` (TCP within 10 mm of the block's centre line; an off-centre push would
+    turn it) and ``height`` (TCP within 10 mm of ``h``; a push high on the block would
+    tip it over); in the hold window: ``held`` (closer finger at most 10 mm
     from the block: the hand has not left the block it delivered; 10 mm is the judge's
     rule for "left the block", as for touch_right).
     """
@@ -66,7 +68,9 @@ class MoveBlock(Primitive):
             miss,
             f"the block ends {mm(miss)} from its target x = {target} m (at most {mm(tol.position)})",
         )
-        moving = np.r_[False, np.abs(np.diff(r.block[:, 0])) > 1e-9]
+        # the robot moves the block at a step where its x changes, unless it was moved
+        # externally before that step (a perturbation; Rollout.external)
+        moving = np.r_[False, np.abs(np.diff(r.block[:, 0])) > 1e-9] & ~r.external
         if moving.any():
             off = float(np.abs(seen.offset[moving, 1]).max())
             dz = float(np.abs(r.tcp[moving, 2] - seen.z_grip).max())
