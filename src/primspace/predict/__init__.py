@@ -15,7 +15,9 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
   primitive="push")`` asks it for every motion as that primitive (:mod:`primspace.predict.posterior`);
 * :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the whole motion from the first frame and
   joints, the primitive given (a cluster id or a label name);
-* the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
+* the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion;
+  and the scene-only peers (:mod:`primspace.predict.scene_peers`): a contextual ProMP from the first
+  frame's features, the demonstration of the nearest first frame.
 
 :func:`predict` runs one on a data set and scores it (:func:`~primspace.predict.metrics.unobserved_mse`,
 the one error); :func:`grid_predictions` runs the experiment's rows on one split.
@@ -43,6 +45,7 @@ from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fracti
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.scene import ScenePredictor, predict_scene
+from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
 
 __all__ = [
     "Predictor",
@@ -71,6 +74,8 @@ __all__ = [
     "ProMPPeer",
     "NearestPeer",
     "MeanMotionPeer",
+    "ContextualProMPPeer",
+    "NearestFramePeer",
     "best_noise",
     "unobserved_mse",
     "frame_errors",
