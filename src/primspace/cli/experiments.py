@@ -268,6 +268,15 @@ _experiment_command(
     "scene_table",
 )
 _experiment_command(
+    "act",
+    "Act from the scene and in closed loop in MuJoCo (see the block, do the primitive; the block moved 2-4 cm at "
+    "30 % of the motion): the scene policy against the contextual ProMP, the nearest first frame and the mean motion "
+    "(scene only), and against its own open loop and ProMP re-conditioned on the executed joints (closed loop), "
+    "over seeds (runs intra if needed; needs simulated data with frames; docs/act.md).",
+    ("act:run_act",),
+    "act:act_table",
+)
+_experiment_command(
     "all",
     "Every experiment in turn (intra, clustering, success, inter), then the report.",
     ("intra:run_intra", "clustering:run_clustering", "success:run_success", "inter:run_inter"),

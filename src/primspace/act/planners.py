@@ -1,0 +1,110 @@
+"""What makes the plan at a step of an episode (:func:`primspace.act.episode.run_episode`).
+
+A planner answers ``plan(step, frame, executed)``: the whole motion ``(T, J)`` (scaled units)
+given the camera ``frame`` seen after executing step ``step`` and the ``executed`` steps
+``0..step`` (scaled). :meth:`due` says at which steps the episode asks it again (always at
+step 0); between two plans the arm follows the last one.
+
+* :class:`PolicyPlanner`: the scene policy (:class:`~primspace.predict.scene_policy.ScenePolicy`)
+  asked with the current frame every ``every`` steps (closed loop) or only at step 0 (open
+  loop: the first plan replayed); each plan continues from the last executed step.
+* :class:`ProMPPlanner`: the peer that cannot see: a ProMP of the primitive
+  (:class:`~primspace.predict.peers.ProMPPeer`, given the label) conditioned on every
+  executed step, every ``every`` steps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from primspace.errors import UserError
+
+__all__ = ["PolicyPlanner", "ProMPPlanner", "PLANNERS", "check_every"]
+
+#: The planners of ``primspace act`` and the act experiment, by the name their rows carry.
+PLANNERS = ("closed loop", "open loop", "ProMP re-conditioned")
+
+
+def check_every(every) -> int | None:
+    """``every`` as a positive int, or None (never re-plan); one UserError otherwise."""
+    if every is None:
+        return None
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise UserError(f"the re-planning interval must be a whole number of steps >= 1, got {every!r}")
+    return int(every)
+
+
+class _Planner:
+    def __init__(self, every: int | None):
+        self.every = check_every(every)
+
+    def due(self, step: int) -> bool:
+        """Whether a plan is made after executing ``step``."""
+        return step == 0 or (self.every is not None and step % self.every == 0)
+
+
+class PolicyPlanner(_Planner):
+    """The scene policy: the plan from the first frame, corrected when a later frame surprises it.
+
+    At step 0 the belief is the first frame's features and the plan is made from it. At a later
+    due step the frame is compared with what the policy predicted for it
+    (:meth:`~primspace.predict.scene_policy.ScenePolicy.correct`): a surprise corrects the belief
+    and a new plan continues from the executed joints; otherwise the plan stands.
+    :attr:`corrections` lists the steps of the corrections.
+
+    Parameters
+    ----------
+    policy : ScenePolicy
+        Fitted, with maps at the steps it will be asked from (its ``steps``).
+    primitive : int
+        The primitive's id in ``policy.primitives_``.
+    every : int or None
+        Re-plan every this many steps; None: open loop.
+    """
+
+    def __init__(self, policy, primitive: int, every: int | None = 6):
+        super().__init__(every)
+        self.policy, self.primitive = policy, int(primitive)
+        self.belief, self.current, self.corrections = None, None, []
+
+    def plan(self, step: int, frame: np.ndarray, executed: np.ndarray) -> np.ndarray:
+        seen = self.policy.see(np.asarray(frame)[None])[0]
+        if self.current is None:
+            self.belief = seen
+        else:
+            corrected = self.policy.correct(self.primitive, step, self.belief, seen)
+            if corrected is None:
+                return self.current
+            self.belief = corrected
+            self.corrections.append(int(step))
+        self.current = self.policy.replan(self.primitive, self.belief, executed)
+        return self.current
+
+
+class ProMPPlanner(_Planner):
+    """A fitted :class:`~primspace.predict.peers.ProMPPeer` (per label) conditioned on the executed
+    steps; the frame is not read.
+
+    Parameters
+    ----------
+    promp : ProMPPeer
+    label : int
+        The primitive's label.
+    length : int
+        Steps of a motion.
+    every : int or None
+    """
+
+    def __init__(self, promp, label: int, length: int, every: int | None = 6):
+        super().__init__(every)
+        self.promp, self.label, self.length = promp, int(label), int(length)
+
+    def plan(self, step: int, frame: np.ndarray, executed: np.ndarray) -> np.ndarray:
+        executed = np.asarray(executed, dtype=np.float64)
+        length, joints = self.length, executed.shape[1]
+        seen = np.zeros((1, length, joints))
+        seen[0, : len(executed)] = executed
+        observed = (np.arange(length) < len(executed))[None]
+        out = self.promp.predict(seen, observed, np.array([self.label]))[0]
+        out[: len(executed)] = executed
+        return out

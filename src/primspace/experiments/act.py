@@ -1,0 +1,288 @@
+"""Acting from the scene, in open and closed loop (issue 40; docs/act.md): ``experiment act``.
+
+For each seed, the intra experiment's projection fit at the focus q (θ frozen; the split:
+its fitted demonstrations and evaluation samples, at most
+:data:`~primspace.experiments.prediction.PREDICT_MAX_SAMPLES`, stratified by label). Every
+evaluation sample is a scene: its block (position and size), its first joints, its first
+camera frame, and its primitive (the label, given).
+
+**Scene only** (the first frame and the first joints; the primitive given): each row's motion
+is scored by the MSE of the steps after the first (scaled units) and by the simulator's judge:
+
+* ``scene policy`` (ours, :class:`~primspace.predict.scene_policy.ScenePolicy`, the block's
+  colour moments to the motion, per primitive) and ``scene policy (code)`` (the same map to
+  the run's codes, decoded);
+* ``contextual ProMP (pixels)`` (the issue's peer: ridge from the PCA of the first frame's
+  pixels to the ProMP weights of the primitive) and ``contextual ProMP (blob)`` (the same
+  with our features: what the features alone buy);
+* ``nearest first frame`` (the demonstration of the primitive with the nearest first frame,
+  replayed), ``mean motion (labels)``;
+* ``reproduction (whole motion)``: the run's codes inferred from the whole motion, decoded
+  (the ceiling of anything decoded by this run).
+
+**Closed loop** (:mod:`primspace.act`): the block is moved by a seeded 2-4 cm at 30 % of the
+motion (:class:`~primspace.sim.execute.Perturbation`; one draw per sample and seed, the same
+for every row) and each planner executes in MuJoCo: ``closed loop`` (the scene policy asked
+every :data:`ACT_EVERY` steps with the current frame), ``open loop`` (its first plan replayed),
+``ProMP re-conditioned`` (a ProMP of the primitive conditioned on every executed step, every
+:data:`ACT_EVERY` steps; it does not see), and ``closed loop (no move)``: the closed loop
+without the perturbation.
+"""
+
+from __future__ import annotations
+
+
+import numpy as np
+
+from primspace.data import MotionDataset
+from primspace.errors import UserError
+from primspace.experiments.intra import run_intra
+from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, judgeable, predicted_subset, projection_seeds
+from primspace.experiments.prediction_table import mean_std_count
+from primspace.experiments.runs import focus_runs, phase_dir
+from primspace.experiments.sweep import GridPoint
+from primspace.experiments.workspace import ExperimentDir
+from primspace.predict.metrics import finite_mean
+
+__all__ = ["ACT_EVERY", "ACT_VERSION", "SCENE_ROWS", "LOOP_ROWS", "run_act", "run_act_point", "act_summary"]
+
+#: Steps between two plans in closed loop (61-step motions: 10 re-plans).
+ACT_EVERY = 6
+#: Bumped when a grid point's content changes: points of another version are not reused.
+ACT_VERSION = 1
+POLICY, POLICY_CODE = "scene policy", "scene policy (code)"
+PROMP_PIXELS, PROMP_BLOB = "contextual ProMP (pixels)", "contextual ProMP (blob)"
+NEAREST, MEAN_MOTION, REPRODUCTION = "nearest first frame", "mean motion (labels)", "reproduction (whole motion)"
+#: The scene-only rows, in order.
+SCENE_ROWS = (POLICY, POLICY_CODE, PROMP_PIXELS, PROMP_BLOB, NEAREST, MEAN_MOTION, REPRODUCTION)
+CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL = "closed loop", "open loop", "ProMP re-conditioned", "closed loop (no move)"
+#: The closed-loop rows (the first three with the block moved), in order.
+LOOP_ROWS = (CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL)
+ALL = "all"
+
+_NO_FRAMES = "experiment act reads camera frames: its data has none (simulate with images)"
+
+
+def _first_step(n: int, length: int) -> np.ndarray:
+    return np.repeat((np.arange(length) < 1)[None], n, axis=0)
+
+
+def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.ndarray, infer_dir: str) -> dict:
+    """{row: motor (n, T, J) physical} of the scene-only rows."""
+    from primspace.predict.peers import MeanMotionPeer
+    from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
+    from primspace.predict.scene_policy import ScenePolicy
+    from primspace.train import load_run, reconstruct
+
+    scaler = fit.scaler
+    motor, truth = scaler.transform(fitted.motor), scaler.transform(test.motor)
+    args = (motor, fitted.labels, fitted.lengths, fitted.images)
+    query = (truth, _first_step(len(test), truth.shape[1]), test.labels, test.lengths, test.images)
+    predictors = {
+        POLICY: ScenePolicy(label_names=fitted.label_names, random_state=int(fit.train_config.seed)),
+        POLICY_CODE: ScenePolicy(fit, space="code", label_names=fitted.label_names),
+        PROMP_PIXELS: ContextualProMPPeer(features="pca"),
+        PROMP_BLOB: ContextualProMPPeer(features="blob"),
+        NEAREST: NearestFramePeer(),
+        MEAN_MOTION: MeanMotionPeer(),
+    }
+    out = {}
+    for name, predictor in predictors.items():
+        scaled = predictor.fit(*args).predict(*query)
+        out[name] = scaler.inverse_transform(scaled.astype(np.float32))
+    inferred = load_run(infer_dir)
+    where = {int(i): k for k, i in enumerate(inferred.indices)}
+    out[REPRODUCTION] = reconstruct(inferred, inferred.latents[[where[int(i)] for i in test_idx]], images=False)[0]
+    return out
+
+
+def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | None) -> dict:
+    """{label name or "all": {"n", "success", "mse"}}."""
+    names = np.array([test.label_names[int(label)] for label in test.labels])
+    out = {}
+    for name in [n for n in test.label_names if n in set(names)] + [ALL]:
+        own = np.ones(len(names), bool) if name == ALL else names == name
+        entry = {"n": int(own.sum()), "success": float(success[own].mean())}
+        if mse is not None:
+            entry["mse"] = finite_mean(mse[own])
+        out[name] = entry
+    return out
+
+
+def _loop_rows(fit, fitted: MotionDataset, test: MotionDataset, every: int, seed: int) -> tuple[dict, dict]:
+    """{row: success (n,) bool} of the closed-loop rows, and the latencies (ms) of the closed loop's plans."""
+    from primspace.act import PolicyPlanner, ProMPPlanner, run_episode
+    from primspace.act.episode import BlockMove
+    from primspace.predict.peers import ProMPPeer
+    from primspace.predict.scene_policy import ScenePolicy
+    from primspace.sim.execute import Executor, Perturbation
+    from primspace.sim.scene import Scene
+
+    scaler, length = fit.scaler, test.motor.shape[1]
+    motor = scaler.transform(fitted.motor)
+    steps = tuple(range(0, length - 1, every))
+    policy = ScenePolicy(steps=steps, label_names=fitted.label_names, random_state=int(fit.train_config.seed))
+    policy.fit(motor, fitted.labels, fitted.lengths, fitted.images)
+    promp = ProMPPeer().fit(motor, fitted.labels, fitted.lengths)
+    perturbation, scene = Perturbation(), Scene()
+    success = {row: np.zeros(len(test), bool) for row in LOOP_ROWS}
+    latencies = []
+    for i in range(len(test)):
+        label, (x, y, size) = int(test.labels[i]), test.params[i]
+        rng = np.random.default_rng([int(seed), 40, i])
+        _, dx, dy = perturbation.draw(rng, x, y, size)
+        move = BlockMove(perturbation.step_index(length), dx, dy)
+        k = int(policy.primitives_.for_labels(np.array([label]))[0])
+        planners = {
+            CLOSED: (PolicyPlanner(policy, k, every), move),
+            OPEN: (PolicyPlanner(policy, k, None), move),
+            PROMP_LOOP: (ProMPPlanner(promp, label, length, every), move),
+            CLOSED_STILL: (PolicyPlanner(policy, k, every), None),
+        }
+        for row, (planner, moved) in planners.items():
+            with Executor(label, x, y, size, length, scene=scene) as executor:
+                episode = run_episode(planner, executor, test.motor[i, 0], scaler, length, moved)
+            success[row][i] = episode.success
+            if row == CLOSED:
+                latencies.extend(episode.latencies_ms)
+    lat = np.asarray(latencies)
+    return success, {"median": float(np.median(lat)), "p95": float(np.percentile(lat, 95)), "max": float(lat.max())}
+
+
+def run_act_point(data_path: str, fit_dir: str, infer_dir: str, every: int, max_samples: int | None) -> dict:
+    """One seed: the scene-only rows and the closed-loop rows on the run's evaluation samples."""
+    from primspace.predict.metrics import unobserved_mse
+    from primspace.sim.success import evaluate_dataset
+    from primspace.train import TrainConfig, configure_process, load_run
+
+    configure_process(TrainConfig(device="cpu", threads=1))
+    data = MotionDataset.load(data_path)
+    fit, eval_idx = load_run(fit_dir), load_run(infer_dir).indices
+    seed = int(fit.train_config.seed)
+    test_idx = predicted_subset(eval_idx, data.labels[eval_idx], max_samples, seed)
+    fitted, test = data.subset(fit.indices).load_images(), data.subset(test_idx).load_images()
+    rows = _scene_rows(fit, fitted, test, test_idx, infer_dir)
+    truth, first = fit.scaler.transform(test.motor), _first_step(len(test), test.motor.shape[1])
+    plain = test.without_images()
+    scene = {}
+    for name, motor in rows.items():
+        success = np.array([r.success for r in evaluate_dataset(plain, motor)], dtype=float)
+        mse = unobserved_mse(fit.scaler.transform(motor), truth, first, test.lengths)
+        scene[name] = _per_primitive(test, success, mse)
+    loop, latency = _loop_rows(fit, fitted, test, int(every), seed)
+    return {
+        "scene": scene,
+        "loop": {row: _per_primitive(test, ok.astype(float), None) for row, ok in loop.items()},
+        "latency_ms": latency,
+        "n_fitted": int(len(fit.indices)),
+        "n_test": int(len(test_idx)),
+        "has_image_head": bool(fit.model_config.has_images),
+    }
+
+
+def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
+    """The act grid over the intra runs' seeds at the focus q (runs intra first if needed).
+
+    Raises
+    ------
+    UserError
+        When the data has no frames or cannot be judged (one line).
+    """
+    data = exp.dataset()
+    if not data.has_images:
+        raise UserError(_NO_FRAMES)
+    if not judgeable(data):
+        raise UserError("experiment act executes motions in the simulator: its data must be simulated")
+    intra = exp.read_results("intra") or run_intra(exp)
+    q, _, _ = focus_runs(exp, intra)
+    seeds = projection_seeds(intra, q)
+    if not seeds:
+        raise UserError(f"experiment act uses the intra projection runs at q = {q}, and there are none")
+    points = [
+        GridPoint(
+            f"act{ACT_VERSION}/projection-q{q}-s{s}-k{int(every)}",
+            (
+                str(exp.data_path),
+                str(phase_dir(exp.path, "projection", q, s, "fit")),
+                str(phase_dir(exp.path, "projection", q, s, "infer")),
+                int(every),
+                PREDICT_MAX_SAMPLES,
+            ),
+        )
+        for s in seeds
+    ]
+    with exp.stage("act"):
+        grid = exp.grid(run_act_point, points, "act")
+    by_seed = {str(s): grid.results[p.key] for s, p in zip(seeds, points) if p.key in grid.results}
+    results = {
+        "latent_dim": q,
+        "every": int(every),
+        "perturbation": {"at": 0.3, "distance_m": [0.02, 0.04]},
+        "scene_rows": list(SCENE_ROWS),
+        "loop_rows": list(LOOP_ROWS),
+        "by_seed": by_seed,
+        "failures": grid.failures,
+        "table": act_summary(by_seed),
+    }
+    exp.write_results("act", results)
+    return results
+
+
+def act_summary(by_seed: dict) -> dict:
+    """{"scene" | "loop": {row: {primitive or "all": {metric: [mean, std, seeds]}}}} over seeds,
+    and the closed loop's latency."""
+    table: dict = {"scene": {}, "loop": {}}
+    for result in by_seed.values():
+        for part in ("scene", "loop"):
+            for row, primitives in result[part].items():
+                for name, entry in primitives.items():
+                    cell = table[part].setdefault(row, {}).setdefault(name, {})
+                    for key, value in entry.items():
+                        if value is not None:
+                            cell.setdefault(key, []).append(value)
+    out = {
+        part: {
+            r: {p: {k: mean_std_count(v) for k, v in c.items()} for p, c in prims.items()} for r, prims in rows.items()
+        }
+        for part, rows in table.items()
+    }
+    lat = [r["latency_ms"]["median"] for r in by_seed.values()]
+    out["latency_ms"] = mean_std_count(lat) if lat else None
+    return out
+
+
+def _wide(part: dict, rows: list, metric: str) -> tuple[list[str], list[list]]:
+    """Rows ``rows`` of ``part`` by primitive (columns, then "all"): ``metric`` mean ± std over seeds."""
+    from primspace.experiments.results import cell_text
+
+    names = [p for p in dict.fromkeys(p for r in rows if r in part for p in part[r]) if p != ALL] + [ALL]
+    out = []
+    for row in [r for r in rows if r in part]:
+        out.append([row] + [cell_text(part[row].get(p, {}).get(metric), digits=2) for p in names])
+    return ["method"] + names, out
+
+
+def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
+    """The act experiment's tables as ``(title, columns, rows)``: scene-only success, scene-only
+    MSE after the first step, closed-loop success (mean ± std over seeds, ddof 1)."""
+    table = results["table"]
+    scene_rows, loop_rows = results.get("scene_rows", list(SCENE_ROWS)), results.get("loop_rows", list(LOOP_ROWS))
+    seeds = len(results["by_seed"])
+    return [
+        (f"Scene only: success ({seeds} seeds)", *_wide(table["scene"], scene_rows, "success")),
+        (
+            f"Scene only: MSE of the steps after the first, scaled ({seeds} seeds)",
+            *_wide(table["scene"], scene_rows, "mse"),
+        ),
+        (f"Block moved at 30 %: success ({seeds} seeds)", *_wide(table["loop"], loop_rows, "success")),
+    ]
+
+
+def act_table(results: dict) -> tuple[list[str], list[list]]:
+    """The scene-only and closed-loop success over all primitives, one row per method."""
+    from primspace.experiments.results import cell_text
+
+    table = results["table"]
+    rows = [[f"scene only: {r}", cell_text(table["scene"][r][ALL].get("success"), digits=2)] for r in table["scene"]]
+    rows += [[f"moved at 30 %: {r}", cell_text(table["loop"][r][ALL].get("success"), digits=2)] for r in table["loop"]]
+    return ["method", "success (all primitives)"], rows
