@@ -149,8 +149,9 @@ def _loop_rows(fit, fitted: MotionDataset, test: MotionDataset, every: int, seed
     return success, {"median": float(np.median(lat)), "p95": float(np.percentile(lat, 95)), "max": float(lat.max())}
 
 
-def run_act_point(data_path: str, fit_dir: str, infer_dir: str, every: int, max_samples: int | None) -> dict:
-    """One seed: the scene-only rows and the closed-loop rows on the run's evaluation samples."""
+def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: int, max_samples: int | None) -> dict:
+    """One seed (the grid point's directory ``run_dir`` unused): the scene-only rows and the
+    closed-loop rows on the run's evaluation samples."""
     from primspace.predict.metrics import unobserved_mse
     from primspace.sim.success import evaluate_dataset
     from primspace.train import TrainConfig, configure_process, load_run
