@@ -50,9 +50,9 @@ class Episode:
     verdict : SuccessResult
         The judge's criteria (:mod:`primspace.sim.success`).
     plan_steps : list of int
-        The steps after which a plan was made.
+        The steps after which the planner was asked (it may keep its plan).
     latencies_ms : list of float
-        The wall time of each plan.
+        The wall time of each ask.
     frames : ndarray (T, H, W, 3) uint8 or None
         The camera after each executed step (``record_frames``).
     move : BlockMove or None
@@ -72,9 +72,8 @@ class Episode:
         lat = np.asarray(self.latencies_ms, dtype=float)
         return {
             "success": bool(self.success),
-            "failed": list(getattr(self.verdict, "failed", []) or []),
-            "plans": len(self.plan_steps),
-            "plan_steps": [int(s) for s in self.plan_steps],
+            "reason": str(self.verdict.reason),
+            "looks": [int(s) for s in self.plan_steps],
             "latency_ms": {
                 "median": float(np.median(lat)) if lat.size else None,
                 "max": float(lat.max()) if lat.size else None,

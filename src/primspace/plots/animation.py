@@ -71,6 +71,7 @@ def animation_frames(
     title: str = "",
     max_frames: int = MAX_FRAMES,
     max_size: tuple[int, int] = MAX_SIZE,
+    panel_titles: Sequence[str] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Draw the animation's frames as RGB arrays.
 
@@ -92,6 +93,9 @@ def animation_frames(
         At most this many frames (:func:`frame_steps`).
     max_size : (int, int)
         At most this many pixels (height, width).
+    panel_titles : list of str, optional
+        The panels' titles, in order (default: "recorded", "generated", "simulator replay"); the
+        first two also name the solid and dashed joint traces.
 
     Returns
     -------
@@ -107,17 +111,30 @@ def animation_frames(
         for label, a in (("recorded", images), ("generated", generated_images), ("simulator replay", replay_images))
         if a is not None
     ]
+    if panel_titles is not None:
+        if len(panel_titles) != len(panels):
+            raise ValueError(f"{len(panel_titles)} panel titles for {len(panels)} panels")
+        panels = [(str(t), a) for t, (_, a) in zip(panel_titles, panels)]
     for label, frames in panels:
         if frames.ndim != 4 or len(frames) != len(motor):
             raise ValueError(f"{label} frames must have shape ({len(motor)}, H, W, 3), got {frames.shape}")
-    fig, artists, cursor = _figure(motor, generated_motor, panels, joint_names, dt, title, max_size)
+    fig, artists, cursor = _figure(
+        motor,
+        generated_motor,
+        panels,
+        joint_names,
+        dt,
+        title,
+        max_size,
+        None if panel_titles is None else panel_titles[:2],
+    )
     try:
         return _blit(fig, artists, panels, cursor, steps, dt), steps
     finally:
         plt.close(fig)
 
 
-def _figure(motor, generated_motor, panels, joint_names, dt, title, max_size):
+def _figure(motor, generated_motor, panels, joint_names, dt, title, max_size, panels_named=None):
     """The figure with its static parts; the panels' images and the cursor are animated."""
     width_in = _PANEL_IN * len(panels) + _TRACE_IN
     dpi = min(_DPI, max_size[1] / width_in, max_size[0] / _HEIGHT_IN)
@@ -147,7 +164,8 @@ def _figure(motor, generated_motor, panels, joint_names, dt, title, max_size):
         trace.plot(time, motor[:, j], color=colors[j], lw=1.0, label=names[j])
         if generated_motor is not None:
             trace.plot(time, np.asarray(generated_motor)[:, j], color=colors[j], lw=1.0, ls="--")
-    trace.set_title("joints: recorded —, generated --" if generated_motor is not None else "joints", fontsize=7)
+    names = ("recorded", "generated") if panels_named is None else panels_named
+    trace.set_title(f"joints: {names[0]} —, {names[1]} --" if generated_motor is not None else "joints", fontsize=7)
     trace.set_xlabel("time [s]" if dt else "step", fontsize=6, labelpad=1)
     trace.tick_params(labelsize=6, pad=1)
     trace.set_xlim(time[0], time[-1] if len(time) > 1 else time[0] + 1)

@@ -1,0 +1,202 @@
+"""``primspace act``: one scene, the primitive asked for, executed in MuJoCo (docs/act.md).
+
+The run's fitted demonstrations (its data file, or ``data=``) with their camera frames fit the
+scene policy (:class:`~primspace.predict.scene_policy.ScenePolicy`) and a ProMP of each
+primitive. A scene is a data file's sample (``FILE:INDEX``: its block and its first joints)
+or a block given as ``x,y,size`` in metres (the first joints: the mean first step of the
+primitive's fitted demonstrations). Three planners execute it: the closed loop (the policy
+asked every ``every`` steps with the camera frame), the open loop (its first plan replayed)
+and ProMP re-conditioned on the executed joints; with ``perturb`` the block is moved by a
+seeded 2-4 cm at 30 % of the motion, the same move for all three.
+
+Outputs (written to a temporary directory, then renamed): ``executed.h5`` (the three executed
+motions with their camera frames, as a data set), ``act.gif`` (the closed loop's camera
+beside the open loop's, the joints traced) and ``result.json`` (last: the output is complete).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from primspace.act.episode import BlockMove, run_episode
+from primspace.act.planners import PolicyPlanner, ProMPPlanner, check_every
+from primspace.errors import UserError
+
+__all__ = ["ACT_FILES", "ACT_MARK", "ActScene", "parse_scene", "fit_planners", "act"]
+
+#: The mark ``act`` writes into its outputs (primspace.outputs).
+ACT_MARK = "primspace act"
+#: The files of an ``act`` output directory (result.json last).
+ACT_FILES = ("executed.h5", "act.gif", "result.json")
+
+
+@dataclass(frozen=True)
+class ActScene:
+    """Where the block is and how the arm starts."""
+
+    block_x: float
+    block_y: float
+    size: float
+    first_joints: np.ndarray
+    source: str
+
+    def to_dict(self) -> dict:
+        return {"block_x": self.block_x, "block_y": self.block_y, "size": self.size, "source": self.source}
+
+
+def parse_scene(text: str, fitted, primitive_rows: np.ndarray) -> ActScene:
+    """``FILE:INDEX`` or ``x,y,size`` as a scene (module docstring); one UserError otherwise."""
+    from primspace.data import MotionDataset
+    from primspace.sim.execute import check_block
+
+    text = text.strip()
+    parts = text.split(",")
+    if len(parts) == 3:
+        try:
+            x, y, size = (float(p) for p in parts)
+        except ValueError:
+            raise UserError(f"--scene {text!r}: give x,y,size in metres (e.g. 0.5,0.0,0.05) or FILE:INDEX") from None
+        x, y, size = check_block(x, y, size)
+        first = np.asarray(fitted.motor[primitive_rows, 0], dtype=np.float64).mean(axis=0)
+        return ActScene(x, y, size, first, "given")
+    path, _, index = text.rpartition(":")
+    if not path or not index.strip().lstrip("-").isdigit():
+        raise UserError(f"--scene {text!r}: give FILE:INDEX (a data file's sample) or x,y,size in metres")
+    data = MotionDataset.load(path)
+    i = int(index)
+    if not 0 <= i < len(data):
+        raise UserError(f"--scene {path}: sample {i} is outside 0..{len(data) - 1}")
+    if data.params is None or data.params.shape[1] < 3:
+        raise UserError(
+            f"--scene {path}: the file has no block params (block_x, block_y, block_size) to place the block"
+        )
+    x, y, size = check_block(*(float(v) for v in data.params[i, :3]))
+    return ActScene(x, y, size, np.asarray(data.motor[i, 0], dtype=np.float64), f"{path}:{i}")
+
+
+def fit_planners(run, fitted, every: int):
+    """The scene policy (maps at steps ``0, every, 2·every, ...``) and the ProMP peer, fitted on
+    ``fitted`` (the run's fitted demonstrations, with frames), scaled by the run's scaler."""
+    from primspace.predict.peers import ProMPPeer
+    from primspace.predict.scene_policy import ScenePolicy
+
+    motor = run.scaler.transform(fitted.motor)
+    length = motor.shape[1]
+    policy = ScenePolicy(
+        steps=tuple(range(0, length - 1, every)),
+        label_names=fitted.label_names,
+        random_state=int(run.train_config.seed),
+    ).fit(motor, fitted.labels, fitted.lengths, fitted.images)
+    return policy, ProMPPeer().fit(motor, fitted.labels, fitted.lengths)
+
+
+def _fitted(run, data):
+    """The run's fitted demonstrations with their frames; one UserError when they cannot act."""
+    from primspace.data import MotionDataset
+    from primspace.sim.success import check_judgeable
+    from primspace.train.starts import fitted_samples
+
+    fitted = fitted_samples(run, None if data is None else MotionDataset.load(data))
+    if not fitted.has_images:
+        raise UserError(
+            "act learns from the fitted demonstrations' camera frames, and the run's data has none "
+            "(simulate with images, or give --data with frames)"
+        )
+    check_judgeable(fitted.without_images())
+    return fitted.load_images()
+
+
+def act(run, primitive, scene: str, perturb: bool = False, every: int = 6, seed: int = 0, data=None) -> dict:
+    """Execute the scene with the three planners (module docstring): ``{"scene", "primitive",
+    "move", "episodes": {planner: Episode}, "policy"}``."""
+    from primspace.sim.execute import Executor, Perturbation
+    from primspace.sim.scene import Scene
+    from primspace.train.api import as_run
+
+    run = as_run(run)
+    every = check_every(every)
+    fitted = _fitted(run, data)
+    policy, promp = fit_planners(run, fitted, every)
+    k = policy.primitives_.resolve(primitive)
+    label = int(policy.primitives_.labels[k])
+    where = parse_scene(scene, fitted, policy.primitives_.members(k))
+    length = fitted.motor.shape[1]
+    move = None
+    if perturb:
+        perturbation = Perturbation()
+        _, dx, dy = perturbation.draw(np.random.default_rng([int(seed), 40]), where.block_x, where.block_y, where.size)
+        move = BlockMove(perturbation.step_index(length), dx, dy)
+    planners = {
+        "closed loop": PolicyPlanner(policy, k, every),
+        "open loop": PolicyPlanner(policy, k, None),
+        "ProMP re-conditioned": ProMPPlanner(promp, label, length, every),
+    }
+    shared = Scene()
+    episodes = {}
+    for name, planner in planners.items():
+        with Executor(label, where.block_x, where.block_y, where.size, length, scene=shared) as executor:
+            episodes[name] = run_episode(planner, executor, where.first_joints, run.scaler, length, move, True)
+    return {
+        "scene": where,
+        "primitive": policy.primitives_.names[k],
+        "label": label,
+        "move": move,
+        "episodes": episodes,
+        "corrections": planners["closed loop"].corrections,
+        "policy": policy.summary(),
+        "fitted": fitted,
+    }
+
+
+def write_outputs(tmp: Path, outcome: dict, command: dict) -> dict:
+    """executed.h5, act.gif and result.json of :func:`act`'s ``outcome`` into ``tmp``; the result's dict."""
+    from primspace.data import MotionDataset
+    from primspace.plots import draw_animation
+
+    episodes, fitted, where = outcome["episodes"], outcome["fitted"], outcome["scene"]
+    names = list(episodes)
+    executed = MotionDataset(
+        motor=np.stack([e.motor for e in episodes.values()]).astype(np.float32),
+        images=np.stack([e.frames for e in episodes.values()]),
+        labels=np.full(len(names), outcome["label"], dtype=np.int64),
+        params=np.tile([where.block_x, where.block_y, where.size], (len(names), 1)).astype(np.float32),
+        source_ids=np.array(names),
+        joint_names=fitted.joint_names,
+        label_names=fitted.label_names,
+        param_names=fitted.param_names,
+        dt=fitted.dt,
+    )
+    executed.save(tmp / "executed.h5", writer=ACT_MARK)
+    closed, open_ = episodes["closed loop"], episodes["open loop"]
+    verdict = ", ".join(f"{n}: {'success' if e.success else 'failure'}" for n, e in episodes.items())
+    moved = outcome["move"]
+    how = "" if moved is None else f"; block moved {100 * np.hypot(moved.dx, moved.dy):.1f} cm at step {moved.step}"
+    draw_animation(
+        tmp / "act.gif",
+        closed.motor,
+        open_.motor,
+        images=closed.frames,
+        replay_images=open_.frames,
+        panel_titles=("closed loop", "open loop"),
+        joint_names=fitted.joint_names,
+        dt=fitted.dt,
+        title=f"{outcome['primitive']}{how} — {verdict}",
+        writer=ACT_MARK,
+    )
+    result = {
+        "writer": ACT_MARK,
+        "command": command,
+        "primitive": outcome["primitive"],
+        "scene": where.to_dict(),
+        "move": None if moved is None else moved.to_dict(),
+        "every": command.get("every"),
+        "corrections": outcome["corrections"],
+        "episodes": {n: e.summary() for n, e in episodes.items()},
+        "policy": outcome["policy"],
+    }
+    (tmp / "result.json").write_text(json.dumps(result, indent=2))
+    return result

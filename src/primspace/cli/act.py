@@ -1,0 +1,58 @@
+"""Acting command: act (a scene executed in MuJoCo by the scene policy in closed loop, beside its open
+loop and ProMP re-conditioned; docs/act.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from primspace.cli.app import app
+from primspace.cli.options import threads_option
+
+
+@app.command("act")
+def act_command(
+    run: Path = typer.Argument(..., help="A trained run (fit) on simulated demonstrations with camera frames."),
+    primitive: str = typer.Option(..., "--primitive", help="The primitive to do: a label name (push) or id."),
+    scene: str = typer.Option(
+        ..., "--scene", help="FILE:INDEX (a data file's sample: its block and first joints) or x,y,size in metres."
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="The output directory (executed.h5, act.gif, result.json)."),
+    perturb: bool = typer.Option(
+        False, "--perturb", help="Move the block by 2-4 cm at 30 % of the motion (seeded by --seed)."
+    ),
+    every: int = typer.Option(6, "--every", help="Steps between two looks of the closed loop (camera and joints)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the perturbation."),
+    data: Optional[Path] = typer.Option(
+        None, "--data", help="The run's fitted demonstrations with frames (default: the run's data file)."
+    ),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier act output."),
+    threads: Optional[int] = threads_option(),
+) -> None:
+    """Execute the primitive in the scene in MuJoCo: planned from the camera, re-planned in closed loop when a frame
+    surprises the plan; the open loop and ProMP re-conditioned on the executed joints run the same scene."""
+    from primspace.act.command import ACT_FILES, ACT_MARK, act, write_outputs
+    from primspace.cluster.outputs import OutputKind, atomic_directory
+    from primspace.files import check_outside_inputs
+    from primspace.train import TrainConfig, configure_process
+
+    inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])
+    check_outside_inputs(out, inputs)
+    configure_process(TrainConfig(threads=threads).validate())
+    kind = OutputKind(ACT_MARK, ACT_FILES, frozenset({"writer", "episodes", "scene"}))
+    outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
+    command = {
+        "run": str(run),
+        "primitive": primitive,
+        "scene": scene,
+        "perturb": perturb,
+        "every": every,
+        "seed": seed,
+    }
+    with atomic_directory(out, overwrite, kind) as tmp:
+        result = write_outputs(tmp, outcome, command)
+    line = ", ".join(f"{name} {'succeeds' if e['success'] else 'fails'}" for name, e in result["episodes"].items())
+    lat = result["episodes"]["closed loop"]["latency_ms"]["median"]
+    typer.echo(f"wrote {out}: {result['primitive']}: {line}; a plan takes {lat:.2f} ms (median)")
