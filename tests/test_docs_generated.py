@@ -17,9 +17,7 @@ def test_committed_docs_equal_what_the_summaries_give(capsys):
 
 
 def test_a_stale_block_is_found_and_rewritten(tmp_path):
-    for target in ("README.md", "docs/results.md", "docs/predict.md", "docs/sequences.md"):
-        (tmp_path / target).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / target).write_text((ROOT / target).read_text(encoding="utf-8"), encoding="utf-8")
+    _copy_targets(tmp_path)
     readme = tmp_path / "README.md"
     readme.write_text(
         readme.read_text().replace("<!-- generated: glance -->\n", "<!-- generated: glance -->\nhand-typed 0.99\n")
@@ -32,6 +30,62 @@ def test_a_stale_block_is_found_and_rewritten(tmp_path):
     assert main(["--root", str(tmp_path)]) == 0
     assert "hand-typed" not in readme.read_text()
     assert main(["--root", str(tmp_path), "--check"]) == 0
+
+
+def _copy_targets(root: Path) -> None:
+    """Every file with generated blocks, copied from the repository into ``root``."""
+    from primspace.report.markdown import TARGETS
+
+    for target in dict.fromkeys(TARGETS.values()):
+        (root / target).parent.mkdir(parents=True, exist_ok=True)
+        (root / target).write_text((ROOT / target).read_text(encoding="utf-8"), encoding="utf-8")
+
+
+def test_without_an_act_summary_docs_act_says_so():
+    from primspace.report.markdown import NO_ACT, TARGETS, blocks, load_summaries
+
+    assert NO_ACT == "No act summary is committed yet."
+    assert TARGETS["act"] == Path("docs") / "act.md"
+    assert blocks({})["act"] == NO_ACT
+    if not any("act" in s["results"] for s in load_summaries(ROOT).values()):
+        assert (
+            f"<!-- generated: act -->\n{NO_ACT}\n<!-- end generated: act -->" in (ROOT / "docs" / "act.md").read_text()
+        )
+
+
+def test_the_act_tables_are_written_into_docs_act_md(tmp_path):
+    """A summary of an experiment directory with act results (built from a fake results
+    dict) gives docs/act.md its three tables and the latency line."""
+    from test_report_layers import ACT_LOOP_ROWS, ACT_SCENE_ROWS, act_experiment_dir
+
+    from primspace.experiments.summary import summarize, write_summary
+    from primspace.report.markdown import NO_ACT, blocks
+
+    summary = summarize(act_experiment_dir(tmp_path / "exp"), "act-test", "primspace experiment act --out exp")
+    text = blocks({"act-test": summary})["act"]
+    assert text.startswith("#### act-test\n\n```\nprimspace experiment act --out exp\n```")
+    assert "q = 40, seeds 0, 1 (7 scenes each); the block moved 2-4 cm at 30 % of the motion" in text
+    assert "re-asked every 6 steps; mean ± std over seeds (ddof 1)." in text
+    for title in (
+        "**Scene only: success (2 seeds)**",
+        "**Scene only: MSE of the steps after the first, scaled (2 seeds)**",
+        "**Block moved at 30 %: success (2 seeds)**",
+    ):
+        assert title in text
+    assert "| method | push | pull | all |" in text
+    for row in ACT_SCENE_ROWS + ACT_LOOP_ROWS:
+        assert f"| {row} | " in text, row
+    assert "| scene policy | 0.55 ± 0.07 |" in text and "median 0.85 ± 0.07 ms" in text
+
+    root = tmp_path / "repo"
+    _copy_targets(root)
+    (root / "docs" / "results").mkdir()
+    write_summary(root / "docs" / "results" / "act-test.json", summary)
+    assert main(["--root", str(root)]) == 0
+    act_md = (root / "docs" / "act.md").read_text()
+    assert text in act_md and NO_ACT not in act_md
+    assert act_md.startswith((ROOT / "docs" / "act.md").read_text().split("<!-- generated: act -->")[0])
+    assert main(["--root", str(root), "--check"]) == 0
 
 
 def test_blocks_are_replaced_between_their_markers_only():

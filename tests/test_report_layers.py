@@ -30,6 +30,7 @@ READERS = {
     "primspace.experiments.claim_verdicts",
     "primspace.experiments.summary",
     "primspace.experiments.composite.results",
+    "primspace.experiments.act_results",
 }
 
 
@@ -265,3 +266,105 @@ def test_a_results_file_that_is_a_link_is_refused(tmp_path):
     (tmp_path / "results" / "intra.json").symlink_to(secret)
     with pytest.raises(UserError, match="not a regular file"):
         read_results(tmp_path, "intra")
+
+
+# ------------------------------------------------- the act experiment's results (issue 40)
+
+ACT_SCENE_ROWS = ["scene policy", "contextual ProMP (pixels)"]
+ACT_LOOP_ROWS = ["closed loop", "open loop"]
+
+
+def fake_act_results() -> dict:
+    """An act results dict as ``run_act`` writes it: 2 seeds, two rows of each part, push and pull."""
+    from primspace.experiments.act import act_summary
+
+    def entry(n, success, mse=None):
+        return {"n": n, "success": success} | ({} if mse is None else {"mse": mse})
+
+    by_seed = {}
+    for seed, shift in (("0", 0.0), ("1", 0.1)):
+
+        def part(rows, mse):
+            return {
+                row: {
+                    "push": entry(3, 0.5 + shift - 0.2 * i, 0.01 * (i + 1) if mse else None),
+                    "pull": entry(4, 0.25 + shift, 0.02 * (i + 1) if mse else None),
+                    "all": entry(7, 0.4 + shift - 0.1 * i, 0.015 * (i + 1) if mse else None),
+                }
+                for i, row in enumerate(rows)
+            }
+
+        by_seed[seed] = {
+            "scene": part(ACT_SCENE_ROWS, True),
+            "loop": part(ACT_LOOP_ROWS, False),
+            "latency_ms": {"median": 0.8 + shift, "p95": 1.5 + shift, "max": 3.0 + shift},
+            "n_fitted": 21,
+            "n_test": 7,
+            "has_image_head": False,
+        }
+    return {
+        "latent_dim": 40,
+        "every": 6,
+        "perturbation": {"at": 0.3, "distance_m": [0.02, 0.04]},
+        "scene_rows": ACT_SCENE_ROWS,
+        "loop_rows": ACT_LOOP_ROWS,
+        "by_seed": by_seed,
+        "failures": {},
+        "table": act_summary(by_seed),
+    }
+
+
+def act_experiment_dir(path: Path) -> Path:
+    """An experiment directory (:func:`_old_experiment_dir`) with act results and an act animation."""
+    out = _old_experiment_dir(path)
+    (out / "results" / "act.json").write_text(json.dumps(fake_act_results()))
+    (out / "figures").mkdir()
+    (out / "figures" / "act.gif").write_bytes(b"GIF89a\x01\x00\x01\x00\x00\x00\x00;")
+    return out
+
+
+def test_the_act_tables_are_read_without_an_experiment():
+    from primspace.experiments.act import act_tables as from_experiment
+    from primspace.experiments.act_results import act_tables
+
+    results = fake_act_results()
+    tables = act_tables(results)
+    assert tables == from_experiment(results)
+    assert [t[0] for t in tables] == [
+        "Scene only: success (2 seeds)",
+        "Scene only: MSE of the steps after the first, scaled (2 seeds)",
+        "Block moved at 30 %: success (2 seeds)",
+    ]
+    title, columns, rows = tables[0]
+    assert columns == ["method", "push", "pull", "all"]
+    assert [r[0] for r in rows] == ACT_SCENE_ROWS
+    assert rows[0][1] == "0.55 ± 0.07"  # push: 0.5 and 0.6, std ddof 1
+
+
+def test_the_summary_keeps_the_act_results_small(tmp_path):
+    from primspace.experiments.act_results import act_tables
+    from primspace.experiments.summary import _round, summarize
+
+    out = act_experiment_dir(tmp_path / "exp")
+    results = fake_act_results()
+    kept = summarize(out, "act-test", "primspace experiment act --out exp")["results"]["act"]
+    assert kept["table"] == _round(results["table"])
+    assert kept["scene_rows"] == ACT_SCENE_ROWS and kept["loop_rows"] == ACT_LOOP_ROWS
+    assert kept["seeds"] == [0, 1] and kept["every"] == 6 and kept["latent_dim"] == 40
+    seed = kept["by_seed"]["0"]
+    assert seed["latency_ms"] == results["by_seed"]["0"]["latency_ms"] and seed["n_test"] == 7
+    assert seed["scene"]["scene policy"] == {"n": 7, "success": 0.4, "mse": 0.015}  # "all" only
+    assert "push" not in json.dumps(kept["by_seed"])
+    assert act_tables(kept) == act_tables(results)
+
+
+def test_the_report_has_the_act_section_with_its_tables_and_animation(tmp_path):
+    from primspace.report import build_report
+
+    html = build_report(act_experiment_dir(tmp_path / "exp")).read_text()
+    assert "Acting from the scene and in closed loop" in html
+    for text in ACT_SCENE_ROWS + ACT_LOOP_ROWS + ["Block moved at 30 %: success (2 seeds)", "0.55 ± 0.07"]:
+        assert text in html, text
+    assert "every 6 steps" in html and "2-4 cm at 30 % of the motion" in html and "ddof 1" in html
+    assert "median 0.85 ± 0.07 ms over seeds (p95 up to 1.6 ms, max up to 3.1 ms)" in html
+    assert "data:image/gif" in html

@@ -36,6 +36,7 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
+from primspace.experiments.act_results import ALL, act_table, act_tables
 from primspace.experiments.intra import run_intra
 from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, judgeable, predicted_subset, projection_seeds
 from primspace.experiments.prediction_table import mean_std_count
@@ -44,12 +45,22 @@ from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 from primspace.predict.metrics import finite_mean
 
-__all__ = ["ACT_EVERY", "ACT_VERSION", "SCENE_ROWS", "LOOP_ROWS", "run_act", "run_act_point", "act_summary"]
+__all__ = [
+    "ACT_EVERY",
+    "ACT_VERSION",
+    "SCENE_ROWS",
+    "LOOP_ROWS",
+    "run_act",
+    "run_act_point",
+    "act_summary",
+    "act_tables",
+    "act_table",
+]
 
 #: Steps between two plans in closed loop (61-step motions: 10 re-plans).
 ACT_EVERY = 6
 #: Bumped when a grid point's content changes: points of another version are not reused.
-ACT_VERSION = 1
+ACT_VERSION = 2
 POLICY, POLICY_CODE = "scene policy", "scene policy (code)"
 PROMP_PIXELS, PROMP_BLOB = "contextual ProMP (pixels)", "contextual ProMP (blob)"
 NEAREST, MEAN_MOTION, REPRODUCTION = "nearest first frame", "mean motion (labels)", "reproduction (whole motion)"
@@ -58,7 +69,6 @@ SCENE_ROWS = (POLICY, POLICY_CODE, PROMP_PIXELS, PROMP_BLOB, NEAREST, MEAN_MOTIO
 CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL = "closed loop", "open loop", "ProMP re-conditioned", "closed loop (no move)"
 #: The closed-loop rows (the first three with the block moved), in order.
 LOOP_ROWS = (CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL)
-ALL = "all"
 
 _NO_FRAMES = "experiment act reads camera frames: its data has none (simulate with images)"
 
@@ -171,9 +181,17 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
         mse = unobserved_mse(fit.scaler.transform(motor), truth, first, test.lengths)
         scene[name] = _per_primitive(test, success, mse)
     loop, latency = _loop_rows(fit, fitted, test, int(every), seed)
+    rescued = ~loop[OPEN]  # the episodes the open loop's replay fails under the move
     return {
         "scene": scene,
         "loop": {row: _per_primitive(test, ok.astype(float), None) for row, ok in loop.items()},
+        "where_open_fails": {
+            row: _per_primitive(test.subset(np.flatnonzero(rescued)), ok[rescued].astype(float), None)
+            for row, ok in loop.items()
+            if row != OPEN and rescued.any()
+        },
+        "per_sample": {row: ok.astype(int).tolist() for row, ok in loop.items()},
+        "test_indices": [int(i) for i in test_idx],
         "latency_ms": latency,
         "n_fitted": int(len(fit.indices)),
         "n_test": int(len(test_idx)),
@@ -232,10 +250,10 @@ def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
 def act_summary(by_seed: dict) -> dict:
     """{"scene" | "loop": {row: {primitive or "all": {metric: [mean, std, seeds]}}}} over seeds,
     and the closed loop's latency."""
-    table: dict = {"scene": {}, "loop": {}}
+    table: dict = {"scene": {}, "loop": {}, "where_open_fails": {}}
     for result in by_seed.values():
-        for part in ("scene", "loop"):
-            for row, primitives in result[part].items():
+        for part in table:
+            for row, primitives in result.get(part, {}).items():
                 for name, entry in primitives.items():
                     cell = table[part].setdefault(row, {}).setdefault(name, {})
                     for key, value in entry.items():
@@ -250,40 +268,3 @@ def act_summary(by_seed: dict) -> dict:
     lat = [r["latency_ms"]["median"] for r in by_seed.values()]
     out["latency_ms"] = mean_std_count(lat) if lat else None
     return out
-
-
-def _wide(part: dict, rows: list, metric: str) -> tuple[list[str], list[list]]:
-    """Rows ``rows`` of ``part`` by primitive (columns, then "all"): ``metric`` mean ± std over seeds."""
-    from primspace.experiments.results import cell_text
-
-    names = [p for p in dict.fromkeys(p for r in rows if r in part for p in part[r]) if p != ALL] + [ALL]
-    out = []
-    for row in [r for r in rows if r in part]:
-        out.append([row] + [cell_text(part[row].get(p, {}).get(metric), digits=2) for p in names])
-    return ["method"] + names, out
-
-
-def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
-    """The act experiment's tables as ``(title, columns, rows)``: scene-only success, scene-only
-    MSE after the first step, closed-loop success (mean ± std over seeds, ddof 1)."""
-    table = results["table"]
-    scene_rows, loop_rows = results.get("scene_rows", list(SCENE_ROWS)), results.get("loop_rows", list(LOOP_ROWS))
-    seeds = len(results["by_seed"])
-    return [
-        (f"Scene only: success ({seeds} seeds)", *_wide(table["scene"], scene_rows, "success")),
-        (
-            f"Scene only: MSE of the steps after the first, scaled ({seeds} seeds)",
-            *_wide(table["scene"], scene_rows, "mse"),
-        ),
-        (f"Block moved at 30 %: success ({seeds} seeds)", *_wide(table["loop"], loop_rows, "success")),
-    ]
-
-
-def act_table(results: dict) -> tuple[list[str], list[list]]:
-    """The scene-only and closed-loop success over all primitives, one row per method."""
-    from primspace.experiments.results import cell_text
-
-    table = results["table"]
-    rows = [[f"scene only: {r}", cell_text(table["scene"][r][ALL].get("success"), digits=2)] for r in table["scene"]]
-    rows += [[f"moved at 30 %: {r}", cell_text(table["loop"][r][ALL].get("success"), digits=2)] for r in table["loop"]]
-    return ["method", "success (all primitives)"], rows

@@ -20,6 +20,7 @@ import platform
 from pathlib import Path
 
 from primspace.errors import UserError
+from primspace.experiments.act_results import ALL
 from primspace.experiments.results import read_meta, read_results
 
 __all__ = [
@@ -185,6 +186,21 @@ def _scene(p: dict) -> dict:
     }
 
 
+def _act(a: dict) -> dict:
+    """The act results kept: the settings, the table over seeds, the rows' order, and per seed
+    its sizes, its plan latency and each row's entry over all primitives (not per primitive)."""
+    keep = ("latent_dim", "every", "perturbation", "scene_rows", "loop_rows", "table", "failures")
+    small = ("latency_ms", "n_fitted", "n_test", "has_image_head")
+    return {k: a.get(k) for k in keep} | {
+        "by_seed": {
+            seed: {k: r.get(k) for k in small}
+            | {part: {row: e.get(ALL) for row, e in r.get(part, {}).items()} for part in ("scene", "loop")}
+            for seed, r in a.get("by_seed", {}).items()
+        },
+        "seeds": _seeds_run(a),
+    }
+
+
 def _composite(c: dict) -> dict:
     keep = (
         "init",
@@ -222,6 +238,7 @@ _REDUCERS = {
     "predict": _predict,
     "scene": _scene,
     "composite": _composite,
+    "act": _act,
 }
 
 
@@ -269,7 +286,7 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
         that ran into the directory, :func:`recorded_versions`), ``cpu`` (:func:`cpu_class` of this machine: run it where the
         runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
         ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict, scene,
-        composite: those run).
+        composite, act: those run).
     """
     if not isinstance(name, str) or not name.strip() or any(c in name for c in "\n\r\x00"):
         raise UserError(f"the summary's name is a heading on one line, not empty: got {name!r}")

@@ -30,6 +30,7 @@ SECTIONS: tuple[tuple[Callable[[Path, HtmlReport], None], str], ...] = (
     (sections.tuning, "tune"),
     (sections.prediction, "predict"),
     (sections.scene_only, "scene"),
+    (sections.act, "act"),
     (sections.composite, "composite"),
     (sections.latent_figures, "intra"),
     (sections.animations, "intra_animation"),

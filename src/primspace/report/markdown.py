@@ -1,11 +1,11 @@
-"""The numbers of README, docs/results.md, docs/predict.md and docs/sequences.md, written
-from the stored summaries.
+"""The numbers of README, docs/results.md, docs/predict.md, docs/sequences.md and docs/act.md,
+written from the stored summaries.
 
 ``python -m primspace.report.markdown`` (``make docs``) reads every ``docs/results/*.json``
 (experiment summaries, :mod:`primspace.experiments.summary`) and rewrites the generated
 blocks of README.md (the results at a glance), docs/results.md (the tables per summary),
-docs/predict.md (prediction, scene) and docs/sequences.md (composite segmentation): the
-text between ``<!-- generated: NAME -->`` and ``<!-- end generated: NAME -->``.
+docs/predict.md (prediction, scene), docs/sequences.md (composite segmentation) and
+docs/act.md (acting from the scene and in closed loop, :func:`render_act`): the text between ``<!-- generated: NAME -->`` and ``<!-- end generated: NAME -->``.
 ``--check`` writes nothing and exits 1 when a block differs from what it would write
 (tests/test_docs_generated.py runs it). Everything else in those files is prose, written
 by hand around the blocks.
@@ -29,6 +29,7 @@ import re
 import sys
 from pathlib import Path
 
+from primspace.experiments.act_results import act_latency_text, act_tables
 from primspace.experiments.claims import check_claims
 from primspace.experiments.results import projection_lead
 from primspace.experiments.summary import read_summary
@@ -54,6 +55,8 @@ __all__ = [
     "render_composite",
     "render_scene",
     "render_predict",
+    "render_act",
+    "NO_ACT",
     "glance",
     "blocks",
     "replace_blocks",
@@ -75,7 +78,11 @@ TARGETS = {
     "predict": Path("docs") / "predict.md",
     "scene": Path("docs") / "predict.md",
     "composite": Path("docs") / "sequences.md",
+    "act": Path("docs") / "act.md",
 }
+
+#: The act block while no stored summary holds act results.
+NO_ACT = "No act summary is committed yet."
 
 #: The order summaries are shown in (others follow, by name); README's table shows these only.
 ORDER = ("paper", "paper-q10-20", "paper-q10", "paper-images", "demo", "lasa")
@@ -156,6 +163,29 @@ def _tuned_cell(summary: dict) -> str:
     return " / ".join(leads) + f" (q = {tune['latent_dim']})"
 
 
+def render_act(summary: dict) -> str:
+    """The act tables of one summary (``primspace experiment act``): scene-only success and error,
+    success with the block moved, and the closed loop's latency."""
+    act = summary["results"]["act"]
+    seeds = act.get("seeds") or sorted(int(s) for s in act.get("by_seed", {}))
+    move = act.get("perturbation") or {}
+    (lo, hi), at = move.get("distance_m", [0.02, 0.04]), move.get("at", 0.3)
+    n_test = sorted({r.get("n_test") for r in act.get("by_seed", {}).values() if r.get("n_test") is not None})
+    lines = [f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", ""]
+    lines.append(
+        f"q = {act['latent_dim']}, seeds {', '.join(map(str, seeds))}"
+        + (f" ({' or '.join(map(str, n_test))} scenes each)" if n_test else "")
+        + f"; the block moved {100 * lo:g}-{100 * hi:g} cm at {100 * at:g} % of the motion, the closed loop "
+        f"re-asked every {act['every']} steps; mean ± std over seeds (ddof 1)."
+    )
+    for title, columns, rows in act_tables(act):
+        lines += ["", f"**{title}**", "", table(columns, [[str(c) for c in row] for row in rows])]
+    lines += ["", act_latency_text(act)]
+    if act.get("failures"):
+        lines += ["", f"{len(act['failures'])} point(s) failed: {', '.join(act['failures'])}."]
+    return "\n".join(lines)
+
+
 def load_summaries(root: Path) -> dict[str, dict]:
     """The stored summaries by name, in :data:`ORDER`."""
     found = {s["name"]: s for s in (read_summary(p) for p in sorted((root / SUMMARY_DIR).glob("*.json")))}
@@ -175,12 +205,14 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
     scene = "\n\n".join(render_scene(s) for s in summaries.values() if "scene" in s["results"])
     composite = "\n\n".join(render_composite(s) for s in summaries.values() if "composite" in s["results"])
+    act = "\n\n".join(render_act(s) for s in summaries.values() if "act" in s["results"])
     return {
         "glance": glance(summaries),
         "results": results,
         "predict": predicted or "No stored prediction summaries yet (docs/results/).",
         "scene": scene or "No stored scene-only summaries yet (docs/results/).",
         "composite": composite or "No stored composite summaries yet (docs/results/).",
+        "act": act or NO_ACT,
     }
 
 

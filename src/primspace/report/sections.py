@@ -5,8 +5,8 @@ A section reads ``OUT/experiment.json``, ``OUT/results/*.json`` and the PNGs and
 :mod:`primspace.experiments.claims`, which import no experiment) and computes nothing:
 no model is loaded, no data set is read, nothing is drawn or sampled. A section whose
 results are absent adds nothing, or a note saying what is missing.
-The closing sections (Appendix A, the environment) live in :mod:`primspace.report.appendices`
-and are importable from here.
+The closing sections (Appendix A, the environment) live in :mod:`primspace.report.appendices`,
+the act experiment's in :mod:`primspace.report.act_section`; both are importable from here.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from primspace.experiments.results import (
     success_table,
     tuning_table,
 )
+from primspace.report.act_section import act
 from primspace.report.appendices import appendix_a, environment
 from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
 from primspace.report.page import HtmlReport
@@ -54,6 +55,7 @@ __all__ = [
     "tuning",
     "latent_figures",
     "animations",
+    "act",
     "appendix_a",
     "environment",
 ]
