@@ -30,7 +30,8 @@ def _wide(part: dict, rows: list, metric: str) -> tuple[list[str], list[list]]:
 
 def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
     """The act experiment's tables as ``(title, columns, rows)``: scene-only success, scene-only
-    MSE after the first step, closed-loop success (mean ± std over seeds, ddof 1)."""
+    MSE after the first step, closed-loop success, and (where recorded) closed-loop success on the
+    episodes whose open loop fails (mean ± std over seeds, ddof 1)."""
     table = results["table"]
     scene_rows = results.get("scene_rows") or list(table["scene"])
     loop_rows = results.get("loop_rows") or list(table["loop"])
@@ -42,7 +43,16 @@ def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
             *_wide(table["scene"], scene_rows, "mse"),
         ),
         (f"Block moved at 30 %: success ({seeds} seeds)", *_wide(table["loop"], loop_rows, "success")),
-    ]
+    ] + (
+        [
+            (
+                f"Block moved at 30 %, the episodes whose open-loop replay fails: success ({seeds} seeds)",
+                *_wide(table["where_open_fails"], loop_rows, "success"),
+            )
+        ]
+        if table.get("where_open_fails")
+        else []
+    )
 
 
 def act_table(results: dict) -> tuple[list[str], list[list]]:
