@@ -26,7 +26,16 @@ from primspace.act.episode import BlockMove, run_episode
 from primspace.act.planners import PolicyPlanner, ProMPPlanner, check_every
 from primspace.errors import UserError
 
-__all__ = ["ACT_FILES", "ACT_MARK", "ActScene", "parse_scene", "fit_planners", "act"]
+__all__ = [
+    "ACT_FILES",
+    "ACT_MARK",
+    "ActScene",
+    "parse_scene",
+    "fit_planners",
+    "act",
+    "write_outputs",
+    "write_animation",
+]
 
 #: The mark ``act`` writes into its outputs (primspace.outputs).
 ACT_MARK = "primspace act"
@@ -155,7 +164,6 @@ def act(run, primitive, scene: str, perturb: bool = False, every: int = 6, seed:
 def write_outputs(tmp: Path, outcome: dict, command: dict) -> dict:
     """executed.h5, act.gif and result.json of :func:`act`'s ``outcome`` into ``tmp``; the result's dict."""
     from primspace.data import MotionDataset
-    from primspace.plots import draw_animation
 
     episodes, fitted, where = outcome["episodes"], outcome["fitted"], outcome["scene"]
     names = list(episodes)
@@ -171,22 +179,8 @@ def write_outputs(tmp: Path, outcome: dict, command: dict) -> dict:
         dt=fitted.dt,
     )
     executed.save(tmp / "executed.h5", writer=ACT_MARK)
-    closed, open_ = episodes["closed loop"], episodes["open loop"]
-    verdict = ", ".join(f"{n}: {'success' if e.success else 'failure'}" for n, e in episodes.items())
+    write_animation(tmp / "act.gif", outcome)
     moved = outcome["move"]
-    how = "" if moved is None else f"; block moved {100 * np.hypot(moved.dx, moved.dy):.1f} cm at step {moved.step}"
-    draw_animation(
-        tmp / "act.gif",
-        closed.motor,
-        open_.motor,
-        images=closed.frames,
-        replay_images=open_.frames,
-        panel_titles=("closed loop", "open loop"),
-        joint_names=fitted.joint_names,
-        dt=fitted.dt,
-        title=f"{outcome['primitive']}{how} — {verdict}",
-        writer=ACT_MARK,
-    )
     result = {
         "writer": ACT_MARK,
         "command": command,
@@ -200,3 +194,28 @@ def write_outputs(tmp: Path, outcome: dict, command: dict) -> dict:
     }
     (tmp / "result.json").write_text(json.dumps(result, indent=2))
     return result
+
+
+def write_animation(path, outcome: dict, overwrite: bool = True) -> Path:
+    """The closed loop's camera beside the open loop's, the joints traced (solid: closed loop,
+    dashed: open loop), titled with the primitive, the move and each planner's verdict."""
+    from primspace.plots import draw_animation
+
+    episodes, fitted = outcome["episodes"], outcome["fitted"]
+    closed, open_ = episodes["closed loop"], episodes["open loop"]
+    verdict = ", ".join(f"{n}: {'success' if e.success else 'failure'}" for n, e in episodes.items())
+    moved = outcome["move"]
+    how = "" if moved is None else f"; block moved {100 * np.hypot(moved.dx, moved.dy):.1f} cm at step {moved.step}"
+    return draw_animation(
+        path,
+        closed.motor,
+        open_.motor,
+        images=closed.frames,
+        replay_images=open_.frames,
+        panel_titles=("closed loop", "open loop"),
+        joint_names=fitted.joint_names,
+        dt=fitted.dt,
+        title=f"{outcome['primitive']}{how} — {verdict}",
+        writer=ACT_MARK,
+        overwrite=overwrite,
+    )

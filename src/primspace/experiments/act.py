@@ -243,8 +243,31 @@ def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
         "failures": grid.failures,
         "table": act_summary(by_seed),
     }
+    if by_seed:
+        _animate(exp, q, seeds[0], int(every))
     exp.write_results("act", results)
     return results
+
+
+def _animate(exp: ExperimentDir, q: int, seed: int, every: int) -> None:
+    """figures/act_push.gif: ``primspace act`` on the first evaluation push of ``seed`` with the block
+    moved (the report's animation of a perturbed push); skipped when the data has no push."""
+    from primspace.act.command import act, write_animation
+    from primspace.train import load_run
+
+    path = exp.path / "figures" / "act_push.gif"
+    data = exp.dataset()
+    names = list(data.label_names or [])
+    if path.exists() or "push" not in names:
+        return
+    fit_dir = phase_dir(exp.path, "projection", q, seed, "fit")
+    eval_idx = load_run(phase_dir(exp.path, "projection", q, seed, "infer")).indices
+    pushes = [int(i) for i in eval_idx if int(data.labels[i]) == names.index("push")]
+    if not pushes:
+        return
+    outcome = act(fit_dir, "push", f"{exp.data_path}:{pushes[0]}", perturb=True, every=every, seed=seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_animation(path, outcome)
 
 
 def act_summary(by_seed: dict) -> dict:
