@@ -220,7 +220,7 @@ def test_bad_settings_are_user_errors(sim, kwargs, fragment):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="bug: ScenePolicy._check (scene_policy.py:179) tests isinstance(threshold, (int, float)), so a NumPy "
+    reason="bug: ScenePolicy._check (predict/scene_policy.py, the threshold line) tests isinstance(threshold, (int, float)), so a NumPy "
     "scalar threshold (np.float32(4.0), np.int64(4)) is refused as 'not a number > 0' (horizon accepts np.integer)",
 )
 @pytest.mark.parametrize("threshold", [np.float32(4.0), np.int64(4)])
@@ -233,7 +233,7 @@ def test_a_numpy_scalar_threshold_is_accepted(sim, threshold):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="bug: ScenePolicy._check (scene_policy.py:179) accepts threshold=True (bool is an int) as 1.0, "
+    reason="bug: ScenePolicy._check (predict/scene_policy.py, the threshold line) accepts threshold=True (bool is an int) as 1.0, "
     "where horizon=True is refused",
 )
 def test_a_bool_threshold_is_refused(sim):
