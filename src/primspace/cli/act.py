@@ -34,7 +34,7 @@ def act_command(
     """Execute the primitive in the scene in MuJoCo: planned from the camera, re-planned in closed loop when a frame
     surprises the plan; the open loop and ProMP re-conditioned on the executed joints run the same scene."""
     from primspace.act.command import ACT_FILES, ACT_MARK, act, write_outputs
-    from primspace.cluster.outputs import OutputKind, atomic_directory
+    from primspace.cluster.outputs import OutputKind, atomic_directory, check_output_directory
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
 
@@ -42,6 +42,7 @@ def act_command(
     check_outside_inputs(out, inputs)
     configure_process(TrainConfig(threads=threads).validate())
     kind = OutputKind(ACT_MARK, ACT_FILES, frozenset({"writer", "episodes", "scene"}))
+    check_output_directory(out, overwrite, kind)  # before minutes of fitting and executing
     outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
     command = {
         "run": str(run),
