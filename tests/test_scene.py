@@ -1,5 +1,7 @@
 """The scene only (issue 25, item 4): the first frame and joints, the primitive named as a
-cluster of the fitted codes, the code searched in its affine subspace; `primspace predict --scene`."""
+cluster of the fitted codes, the code searched in its affine subspace (``predict_scene``,
+``ScenePredictor``: Python only). Since issue 40 `primspace predict --scene` runs the scene
+policy (tests/test_predict_scene_policy.py); the command's checks before it predicts are here."""
 
 import json
 
@@ -119,48 +121,26 @@ def scene_files(image_set, tmp_path_factory):
     image_set.save(root / "data.h5")
     data = MotionDataset.load(root / "data.h5")
     fit(data, root / "run", model_config=SMALL, train_config=TrainConfig(epochs=2, **FAST), progress=False)
-    fit(
-        data,
-        root / "motor_run",
-        model_config=SMALL,
-        train_config=TrainConfig(epochs=1, **FAST),
-        images=False,
-        progress=False,
-    )
     image_set.without_images().save(root / "no_frames.h5")
     return root
 
 
-def test_predict_scene_command_writes_the_three_files(run_cli, scene_files, tmp_path):
+def test_predict_scene_command_runs_the_scene_policy_not_the_subspace_search(run_cli, scene_files, tmp_path):
+    """Issue 40: the subspace search (``predict_scene``) is no longer behind the command."""
     out = tmp_path / "scene"
-    res = run_cli(
-        "predict",
-        scene_files / "run",
-        scene_files / "data.h5",
-        "--scene",
-        "--primitive",
-        "1",
-        "--epochs",
-        "3",
-        "--out",
-        out,
-    )
+    res = run_cli("predict", scene_files / "run", scene_files / "data.h5", "--scene", "--primitive", "1", "--out", out)
     assert res.code == 0, res.err
-    assert "primitive 1" in res.out and "subspace rank" in res.out
+    assert "subspace rank" not in res.out
     result = json.loads((out / "result.json").read_text())
-    assert result["mode"] == "scene" and result["init"] == "scene" and result["scene"]["primitive"] == 1
-    assert sum(result["scene"]["cluster_sizes"]) == 9 and result["scene"]["n_clusters"] == 3
-    assert result["scene"]["rank"] >= 0 and result["command"]["scene"] is True and result["mean"]["motor_mse"] > 0
-    assert MotionDataset.load(out / "predicted.h5").motor.shape == (9, 12, 3)
-    assert (out / "prediction.png").stat().st_size > 1000
+    assert result["mode"] == result["init"] == "scene policy" and "scene" not in result
+    assert result["primitive"] == 1 and result["command"]["scene"] is True
 
 
 @pytest.mark.parametrize(
     "run_name, data_name, flags, match",
     [
-        ("run", "data.h5", ["--primitive", "3"], "choose 0..2"),
+        ("run", "data.h5", ["--primitive", "3"], "primitive 3 is out of range"),
         ("run", "no_frames.h5", ["--primitive", "0"], "has no frames"),
-        ("motor_run", "data.h5", ["--primitive", "0"], "image head"),
         ("run", "data.h5", ["--primitive", "0", "--observe", "0.5"], "do not give --observe"),
         ("run", "data.h5", ["--primitive", "0", "--init", "zero"], "do not give --init"),
         ("run", "data.h5", [], "--scene needs --primitive"),

@@ -1,6 +1,11 @@
 """Prediction command: predict (the rest of each motion from its observed beginning, with ``--primitive``
 as that primitive, or with ``--scene`` a whole motion from the first frame and the primitive named;
-docs/predict.md)."""
+docs/predict.md).
+
+``--scene`` runs the scene policy (:func:`primspace.predict.scene_policy.predict_from_scene`: the
+block's colour in the first frame to the motion, per primitive), the best scene mode measured
+(docs/predict.md). The older scene mode, the code searched in a cluster's affine subspace
+(:func:`primspace.predict.scene.predict_scene`), stays in Python and is not reachable from here."""
 
 from __future__ import annotations
 
@@ -136,13 +141,15 @@ def predict_command(
     fitted: Optional[Path] = typer.Option(
         None,
         "--fitted-data",
-        help="The data file the run was fitted on (default: the run's own), read by mixture, prior, nearest and "
-        "calibrated.",
+        help="The data file the run was fitted on (default: the run's own), read by mixture, prior, nearest, "
+        "calibrated and --scene (the scene policy learns from its frames).",
     ),
     latent_lr: Optional[float] = typer.Option(
         None, "--latent-lr", help="Gradient starts: the codes' learning rate (default: the run's)."
     ),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of a random start (default: the run's)."),
+    seed: Optional[int] = typer.Option(
+        None, "--seed", help="Seed of a random start, or of the scene policy (default: the run's)."
+    ),
     threads: Optional[int] = threads_option(),
     online: bool = typer.Option(
         False,
@@ -157,17 +164,19 @@ def predict_command(
     scene: bool = typer.Option(
         False,
         "--scene",
-        help="The scene only: the first frame and the first joints, and the "
-        "primitive to perform (--primitive), searched in its cluster's affine subspace of the "
-        "fitted codes. Not with --observe, --observe-frames, --init, --online.",
+        help="The scene only: the whole motion from the first frame and the first joints, as the "
+        "primitive to perform (--primitive), by the scene policy (the block's colour in the first "
+        "frame to the motion, fitted on the run's fitted demonstrations and their frames; the best "
+        "scene mode measured; the older subspace search is predict_scene in Python). Not with --observe, "
+        "--observe-frames, --init, --online, --latent-lr; --epochs is not read.",
     ),
     primitive: Optional[str] = typer.Option(
         None,
         "--primitive",
         help="The primitive of every motion, a name (push) or an id: the prior "
         "predictor (--init prior) predicts each motion as it; without it the prior weighs its "
-        "primitives by their posterior. With --scene: the primitive to perform, a label name "
-        "of the fitted data or a cluster id (result.json lists their majority labels).",
+        "primitives by their posterior. With --scene: the primitive to perform, a name (a label "
+        "name, or 'cluster 2') or an id of --primitives (result.json lists them).",
     ),
     primitives: Optional[str] = typer.Option(
         None,
@@ -175,7 +184,7 @@ def predict_command(
         "-k",
         help="The prior's primitives: labels (of the fitted data, the default), "
         "clusters (of the fitted codes, as many as the labels) or a number K of clusters. With "
-        "--scene: the number of clusters K (default: the number of distinct labels).",
+        "--scene the same; default: labels when the fitted data has labels, else clusters (give K).",
     ),
     clusters: Optional[int] = typer.Option(
         None, "--clusters", hidden=True, help="The number of clusters K of --primitives clusters (as --primitives K)."
@@ -187,13 +196,15 @@ def predict_command(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
 ) -> None:
     """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded
-    (with --scene: from the first frame and joints, inside the named primitive's cluster of fitted codes)."""
+    (with --scene: the whole motion from the first frame and joints, as the named primitive, by the scene policy)."""
     from primspace.cluster.outputs import OutputKind, atomic_directory
     from primspace.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
 
     source, clusters = parse_primitives(primitives, clusters, scene)
     motor, frames = _amounts(scene, primitive, observe, observe_frames, init, online)
+    if scene and latent_lr is not None:
+        raise UserError("--latent-lr goes with gradient inference, not with --scene (the scene policy has no codes)")
     prior = _prior_options(scene, init, primitive, source, clusters, prior_samples)
     check_outside_inputs(out, (file, indices, run, fitted))
     _check_ignored(iterations, online, fitted, init, scene)
@@ -215,7 +226,7 @@ def predict_command(
             (5 if iterations is None else iterations) if online else None,
             common,
         )
-        command = {"run": str(run), "data": str(file), **command, "epochs": epochs}
+        command = {"run": str(run), "data": str(file), "epochs": epochs, **command}
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
@@ -230,11 +241,20 @@ def _predict(run, dataset, scene: bool, prior: dict, motor, frames, init, contin
     from primspace.predict import DEFAULT_PREDICTOR, PRIOR, predict
 
     if scene:
-        from primspace.predict.scene import predict_scene
+        from primspace.predict.scene_policy import SCENE_POLICY, predict_from_scene
 
-        primitive, clusters = prior["primitive"], prior["n_clusters"]
-        prediction = predict_scene(run, dataset, primitive, n_clusters=clusters, **common)
-        return prediction, {"scene": True, "primitive": primitive, "clusters": clusters}
+        prediction = predict_from_scene(
+            run,
+            dataset,
+            prior["primitive"],
+            primitives=prior["primitives"],
+            n_clusters=prior["n_clusters"],
+            indices=common["indices"],
+            fitted_data=common["fitted_data"],
+            random_state=common.get("seed"),
+        )
+        source = prediction.details["policy"]["source"]
+        return prediction, {"scene": True, "mode": SCENE_POLICY, **prior, "primitives": source, "epochs": None}
     init = PRIOR if prior else init or DEFAULT_PREDICTOR
     prediction = predict(
         run,
@@ -278,9 +298,13 @@ def _amounts(scene: bool, primitive, observe, observe_frames, init, online: bool
     return motor, frames
 
 
-def parse_primitives(primitives: str | None, clusters: int | None, scene: bool = False) -> tuple[str, int | None]:
+def parse_primitives(
+    primitives: str | None, clusters: int | None, scene: bool = False
+) -> tuple[str | None, int | None]:
     """``--primitives labels|clusters|K`` and ``--clusters K`` as (where the primitives come from, the
-    number of clusters or None); one line for a value that is none of these or contradicts the other."""
+    number of clusters or None); one line for a value that is none of these or contradicts the other.
+    With ``scene`` and neither given the source is None: labels when the fitted data has labels, else
+    clusters (:func:`~primspace.predict.scene_policy.predict_from_scene` decides)."""
     k = clusters
     if primitives is None:
         source = "clusters" if clusters is not None else "labels"
@@ -296,8 +320,8 @@ def parse_primitives(primitives: str | None, clusters: int | None, scene: bool =
         raise UserError(f"--primitives {primitives!r}: give labels, clusters or a number of clusters K")
     if k is not None and k < 1:
         raise UserError(f"--primitives {k}: the number of clusters must be at least 1")
-    if scene and source == "labels" and primitives is not None:
-        raise UserError("--scene finds clusters of the fitted codes: give --primitives K (or leave it out)")
+    if scene and primitives is None and clusters is None:
+        return None, None
     return source, k
 
 
@@ -310,7 +334,7 @@ def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_sa
     if scene:
         if prior_samples is not None:
             raise UserError("--prior-samples goes with the prior predictor (--init prior), not with --scene")
-        return {"primitive": primitive, "n_clusters": clusters}
+        return {"primitive": primitive, "primitives": source, "n_clusters": clusters}
     asked = [
         name
         for name, given in (
@@ -363,7 +387,10 @@ def _check_scene_flags(scene: bool, primitive, observe, observe_frames, init, on
     if given:
         raise UserError(f"--scene observes the first frame and the first joints only: do not give {', '.join(given)}")
     if primitive is None:
-        raise UserError("--scene needs --primitive K: the cluster id of the primitive to perform")
+        raise UserError(
+            "--scene needs --primitive P: the primitive to perform, a label name or an id (or 'cluster k' "
+            "with --primitives clusters)"
+        )
 
 
 def _write_posterior(tmp: Path, prediction, dataset) -> None:
@@ -388,16 +415,17 @@ def _write_posterior(tmp: Path, prediction, dataset) -> None:
 
 def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
     """What ``primspace predict`` prints when it is done."""
+    from primspace.predict.scene_policy import SCENE_POLICY
+
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     means = means or "every valid step was observed, no step left to score"
     line = (
         f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
     )
-    if "scene" in prediction.details:
-        s = prediction.details["scene"]
-        name = f" ({s['name']})" if s["name"] else ""
-        line += f"; primitive {s['primitive']}{name} of {s['n_clusters']} clusters, subspace rank {s['rank']}"
-    if prediction.details.get("primitive") is not None:
+    if prediction.details.get("mode") == SCENE_POLICY:
+        d = prediction.details
+        line += f"; every motion as primitive {d['primitive']} ({d['name']}) of the {d['policy']['source']}"
+    elif prediction.details.get("primitive") is not None:
         line += f"; every motion as primitive {prediction.details['primitive']}"
     if prediction.details.get("posterior_accuracy") is not None:
         line += f"; the posterior's top primitive is the label's for {prediction.details['posterior_accuracy']:.0%}"

@@ -13,8 +13,12 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
   the frozen decoder, or by an encoder trained on the decoder's own samples (measured: neither
   beats the prior's conditioning on the simulated presets; docs/predict.md); ``predict(...,
   primitive="push")`` asks it for every motion as that primitive (:mod:`primspace.predict.posterior`);
-* :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the whole motion from the first frame and
-  joints, the primitive given (a cluster id or a label name);
+* :class:`ScenePolicy` (:mod:`primspace.predict.scene_policy`): the whole motion from the first frame
+  and joints, the primitive given (a label or a cluster of the fitted codes), a Gaussian process per
+  primitive from the block's colour in the frame; :func:`predict_from_scene` runs it on a data set, the
+  default scene mode (``primspace predict --scene``; the best measured, docs/predict.md);
+* :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the older scene mode, the code searched in
+  the primitive's cluster subspace (:func:`predict_scene`; Python only, no longer behind the CLI);
 * the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion;
   and the scene-only peers (:mod:`primspace.predict.scene_peers`): a contextual ProMP from the first
   frame's features, the demonstration of the nearest first frame.
@@ -45,6 +49,7 @@ from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fracti
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.scene import ScenePredictor, predict_scene
+from primspace.predict.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
 from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
 
 __all__ = [
@@ -69,6 +74,9 @@ __all__ = [
     "PriorMapPredictor",
     "EncoderPredictor",
     "POSTERIOR_FRACTIONS",
+    "ScenePolicy",
+    "predict_from_scene",
+    "SCENE_POLICY",
     "ScenePredictor",
     "predict_scene",
     "ProMPPeer",
