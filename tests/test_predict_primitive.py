@@ -244,8 +244,7 @@ def test_the_primitives_option_parses_labels_clusters_and_a_number():
         parse_primitives("3", 4)
     with pytest.raises(UserError, match="at least 1"):
         parse_primitives("0", None)
-    with pytest.raises(UserError, match="--scene finds clusters"):
-        parse_primitives("labels", None, scene=True)
+    assert parse_primitives("labels", None, scene=True) == ("labels", None)  # the scene policy groups by labels
     assert parse_primitives("4", None, scene=True) == ("clusters", 4)
 
 

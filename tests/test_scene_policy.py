@@ -218,11 +218,6 @@ def test_bad_settings_are_user_errors(sim, kwargs, fragment):
         policy.fit(sim["motor"][fitted], sim["data"].labels[fitted], None, sim["frames"][fitted])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: ScenePolicy._check (predict/scene_policy.py, the threshold line) tests isinstance(threshold, (int, float)), so a NumPy "
-    "scalar threshold (np.float32(4.0), np.int64(4)) is refused as 'not a number > 0' (horizon accepts np.integer)",
-)
 @pytest.mark.parametrize("threshold", [np.float32(4.0), np.int64(4)])
 def test_a_numpy_scalar_threshold_is_accepted(sim, threshold):
     fitted = sim["fitted"]
@@ -231,11 +226,6 @@ def test_a_numpy_scalar_threshold_is_accepted(sim, threshold):
     assert policy.summary()["threshold"] == 4.0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: ScenePolicy._check (predict/scene_policy.py, the threshold line) accepts threshold=True (bool is an int) as 1.0, "
-    "where horizon=True is refused",
-)
 def test_a_bool_threshold_is_refused(sim):
     fitted = sim["fitted"]
     with pytest.raises(UserError, match="threshold"):

@@ -242,7 +242,8 @@ class ScenePolicy(Predictor):
             raise UserError(f"steps must lie in 0..{length - 1}, got {list(np.atleast_1d(self.steps))}")
         if self.space == "code" and self.run is None:
             raise UserError("space='code' predicts the run's codes: give the run")
-        if not (isinstance(self.threshold, (int, float)) and self.threshold > 0):
+        threshold = self.threshold
+        if isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.number)) or not threshold > 0:
             raise UserError(f"threshold must be a number > 0, got {self.threshold!r}")
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
             raise UserError(f"horizon must be a whole number of steps >= 1, got {self.horizon!r}")
