@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.act.episode import BlockMove, run_episode
-from primspace.act.planners import PolicyPlanner, ProMPPlanner, check_every
+from primspace.act.planners import DEFAULT_EVERY, PolicyPlanner, ProMPPlanner, check_every
 from primspace.errors import UserError
 
 __all__ = [
@@ -119,7 +119,9 @@ def _fitted(run, data):
     return fitted.load_images()
 
 
-def act(run, primitive, scene: str, perturb: bool = False, every: int = 6, seed: int = 0, data=None) -> dict:
+def act(
+    run, primitive, scene: str, perturb: bool = False, every: int = DEFAULT_EVERY, seed: int = 0, data=None
+) -> dict:
     """Execute the scene with the three planners (module docstring): ``{"scene", "primitive",
     "move", "episodes": {planner: Episode}, "policy"}``."""
     from primspace.sim.execute import Executor, Perturbation

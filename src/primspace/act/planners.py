@@ -19,7 +19,11 @@ import numpy as np
 
 from primspace.errors import UserError
 
-__all__ = ["PolicyPlanner", "ProMPPlanner", "PLANNERS", "check_every"]
+__all__ = ["PolicyPlanner", "ProMPPlanner", "PLANNERS", "DEFAULT_EVERY", "check_every"]
+
+#: Steps between two looks of the closed loop (61-step motions: 20 looks); chosen with the scene
+#: policy's threshold and horizon on seed 0's first 70 evaluation samples of the paper preset (docs/act.md).
+DEFAULT_EVERY = 3
 
 #: The planners of ``primspace act`` and the act experiment, by the name their rows carry.
 PLANNERS = ("closed loop", "open loop", "ProMP re-conditioned")
@@ -62,7 +66,7 @@ class PolicyPlanner(_Planner):
         Re-plan every this many steps; None: open loop.
     """
 
-    def __init__(self, policy, primitive: int, every: int | None = 6):
+    def __init__(self, policy, primitive: int, every: int | None = DEFAULT_EVERY):
         super().__init__(every)
         self.policy, self.primitive = policy, int(primitive)
         self.belief, self.current, self.corrections = None, None, []
@@ -95,7 +99,7 @@ class ProMPPlanner(_Planner):
     every : int or None
     """
 
-    def __init__(self, promp, label: int, length: int, every: int | None = 6):
+    def __init__(self, promp, label: int, length: int, every: int | None = DEFAULT_EVERY):
         super().__init__(every)
         self.promp, self.label, self.length = promp, int(label), int(length)
 

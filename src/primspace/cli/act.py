@@ -8,6 +8,7 @@ from typing import Optional
 
 import typer
 
+from primspace.act.planners import DEFAULT_EVERY
 from primspace.cli.app import app
 from primspace.cli.options import threads_option
 
@@ -23,7 +24,9 @@ def act_command(
     perturb: bool = typer.Option(
         False, "--perturb", help="Move the block by 2-4 cm at 30 % of the motion (seeded by --seed)."
     ),
-    every: int = typer.Option(6, "--every", help="Steps between two looks of the closed loop (camera and joints)."),
+    every: int = typer.Option(
+        DEFAULT_EVERY, "--every", help="Steps between two looks of the closed loop (camera and joints)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Seed of the perturbation."),
     data: Optional[Path] = typer.Option(
         None, "--data", help="The run's fitted demonstrations with frames (default: the run's data file)."

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from primspace.act.planners import DEFAULT_EVERY
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments.act_results import ALL, act_table, act_tables
@@ -57,10 +58,10 @@ __all__ = [
     "act_table",
 ]
 
-#: Steps between two plans in closed loop (61-step motions: 10 re-plans).
-ACT_EVERY = 6
+#: Steps between two looks in closed loop (:data:`primspace.act.planners.DEFAULT_EVERY`).
+ACT_EVERY = DEFAULT_EVERY
 #: Bumped when a grid point's content changes: points of another version are not reused.
-ACT_VERSION = 2
+ACT_VERSION = 3
 POLICY, POLICY_CODE = "scene policy", "scene policy (code)"
 PROMP_PIXELS, PROMP_BLOB = "contextual ProMP (pixels)", "contextual ProMP (blob)"
 NEAREST, MEAN_MOTION, REPRODUCTION = "nearest first frame", "mean motion (labels)", "reproduction (whole motion)"

@@ -25,12 +25,14 @@ with the real one and internal state is corrected based on the error." The inter
 the belief about the first frame's features (where the block was put, how big it is). For
 every later step of :attr:`steps` a second Gaussian process per primitive predicts the
 features the camera will see at that step from the belief (the arm comes into view, the
-fingers cover the block, a push moves it), fitted on the demonstrations' frames; its residual
-spread on them (root mean square per feature, floored at :data:`SURPRISE_FLOOR`) is the
-scale of a surprise. At a planning step the error between the features seen and those
-predicted is the surprise; when one feature's error exceeds :attr:`threshold` times its scale
-the belief is corrected by the error (:meth:`correct`) and the motion is planned again from
-it; otherwise the plan stands.
+fingers cover the block, a push moves it), fitted on the demonstrations' frames; its
+leave-one-out residual spread on them (root mean square per feature, exact for a Gaussian
+process, floored at :data:`SURPRISE_FLOOR`) is the scale of a surprise. At a planning step
+the error between the features seen and those predicted is the surprise; when one feature's
+error exceeds :attr:`threshold` times its scale the belief is corrected by the error
+(:meth:`correct`) and the motion is planned again from it; otherwise the plan stands. A frame
+in which less than :data:`VISIBLE` of the believed block's colour mass is seen (the fingers
+cover it) is not compared: the centroid of a covered block is not where the block is.
 
 A new plan's steps after the last executed one are moved to continue from it: the residual
 at the last executed step decays linearly to zero over :attr:`horizon` steps.
@@ -54,7 +56,7 @@ from primspace.data.images import as_view
 from primspace.errors import UserError
 from primspace.predict.api import Prediction
 from primspace.predict.base import Forecast, Predictor
-from primspace.predict.frame_features import frame_features
+from primspace.predict.frame_features import ColourBlob, frame_features
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.primitives import (
     PRIMITIVE_SOURCES,
@@ -81,6 +83,8 @@ __all__ = [
 POLICY_SPACES = ("motion", "code")
 #: ``Prediction.init`` / ``result.json``'s ``mode`` of a scene policy's plan.
 SCENE_POLICY = "scene policy"
+#: The share of the believed block mass that must be seen for a frame to be compared (below: hidden).
+VISIBLE = 0.6
 #: The smallest scale of a feature's surprise (mass in weighted pixels, column and row in pixels).
 SURPRISE_FLOOR = 0.25
 
@@ -109,6 +113,16 @@ class _Map:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         return self.gp.predict((np.atleast_2d(x) - self.x_mean) / self.x_std) * self.y_std + self.y_mean
+
+    def held_out_residuals(self) -> np.ndarray:
+        """(n, d) leave-one-out residuals of the fitted targets, original units: for a Gaussian
+        process with kernel matrix ``K`` (noise included), ``[K⁻¹y]_i / [K⁻¹]_ii`` (exact, no refit)."""
+        from scipy.linalg import solve_triangular
+
+        inverse_l = solve_triangular(self.gp.L_, np.eye(len(self.gp.L_)), lower=True)
+        diagonal = (inverse_l**2).sum(axis=0)  # diag of K⁻¹ = L⁻ᵀ L⁻¹
+        alpha = self.gp.alpha_.reshape(len(diagonal), -1)
+        return alpha / diagonal[:, None] * self.y_std
 
 
 class ScenePolicy(Predictor):
@@ -153,8 +167,8 @@ class ScenePolicy(Predictor):
         features="blob",
         space="motion",
         steps=(0,),
-        threshold: float = 4.0,
-        horizon: int = 6,
+        threshold: float = 3.0,
+        horizon: int = 4,
         primitive=None,
         label_names=None,
         random_state=0,
@@ -202,7 +216,7 @@ class ScenePolicy(Predictor):
             for k in range(self.primitives_.count):
                 rows = self.primitives_.members(k)
                 self.expected_[t, k] = _Map(first[rows], seen[rows], make)
-                residual = seen[rows] - self.expected_[t, k](first[rows])
+                residual = self.expected_[t, k].held_out_residuals()
                 self.scales_[t, k] = np.maximum(np.sqrt((residual**2).mean(axis=0)), SURPRISE_FLOOR)
         self.shape_ = motor.shape[1:]
         return self
@@ -298,8 +312,18 @@ class ScenePolicy(Predictor):
             return np.zeros_like(np.asarray(seen, dtype=np.float64))
         return (np.asarray(seen) - self.expected_[key](belief)[0]) / self.scales_[key]
 
+    def hidden(self, belief: np.ndarray, seen: np.ndarray) -> bool:
+        """Whether the block is mostly hidden in ``seen``: with the colour features, its mass below
+        :data:`VISIBLE` of the belief's (a centroid of a covered block is not where the block is)."""
+        if not isinstance(self.extractor_, ColourBlob):
+            return False
+        return float(seen[0]) < VISIBLE * float(np.asarray(belief)[0])
+
     def correct(self, primitive: int, step: int, belief: np.ndarray, seen: np.ndarray) -> np.ndarray | None:
-        """The corrected belief (d,) when the surprise of ``seen`` at ``step`` exceeds the threshold, else None."""
+        """The corrected belief (d,) when the surprise of ``seen`` at ``step`` exceeds the threshold and
+        the block is not hidden (:meth:`hidden`), else None."""
+        if self.hidden(belief, seen):
+            return None
         error = self.surprise(primitive, step, belief, seen)
         if np.abs(error).max() <= float(self.threshold):
             return None
