@@ -16,11 +16,13 @@ from test_train import SMALL
 
 from primspace.act import PLANNERS, PolicyPlanner, run_episode
 from primspace.act.episode import BlockMove
+from primspace.act.planners import DEFAULT_EVERY
 from primspace.data import MotionDataset
 from primspace.train import TrainConfig, fit
 
 EVERY = 6
 LOOKS = [0, 6, 12, 18, 24]  # 0, every, 2 every, ... before the last step (30)
+CLI_LOOKS = list(range(0, 30, DEFAULT_EVERY))  # primspace act's default --every
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -123,10 +125,10 @@ def test_act_writes_the_three_episodes_the_animation_and_the_result(run_cli, fil
     assert list(result["episodes"]) == list(PLANNERS)
     for name, e in result["episodes"].items():
         assert isinstance(e["success"], bool) and isinstance(e["reason"], str)
-        assert e["looks"] == ([0] if name == "open loop" else LOOKS), name
+        assert e["looks"] == ([0] if name == "open loop" else CLI_LOOKS), name
         assert e["latency_ms"]["median"] > 0 and e["latency_ms"]["max"] >= e["latency_ms"]["median"]
         assert e["move"] == move
-    assert isinstance(result["corrections"], list) and set(result["corrections"]) <= set(LOOKS) - {0}
+    assert isinstance(result["corrections"], list) and set(result["corrections"]) <= set(CLI_LOOKS) - {0}
 
 
 def _without_latency(result: dict) -> dict:
