@@ -15,6 +15,8 @@ steps of ``motor`` only: the unobserved ones are set to zero before anything loo
 * :class:`NearestPeer`: the fitted demonstration nearest on the observed steps, whole.
 * :class:`MeanMotionPeer`: the mean motion of the sample's primitive (or of all).
 * :func:`best_noise`: the ProMP's observation noise chosen *on the answer*.
+* :class:`LabelledPeer`: what the peers share (the checks, label groups; the scene peers of
+  :mod:`primspace.predict.scene_peers` derive from it too), and :func:`phase`.
 
 The error of a prediction is :func:`primspace.predict.metrics.unobserved_mse`, for the
 peers and primspace's predictors alike.
@@ -31,7 +33,7 @@ from primspace.errors import UserError
 from primspace.predict.base import Predictor, observed_mask
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 
-__all__ = ["ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise"]
+__all__ = ["ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise", "LabelledPeer", "phase"]
 
 _PROMP_MISSING = "the ProMP peer needs the movement-primitives package: pip install 'primspace[predict]'"
 
@@ -45,13 +47,23 @@ def _promp_class():
     return ProMP
 
 
-def _phase(length: int) -> np.ndarray:
+def phase(length: int) -> np.ndarray:
     """Phase in [0, 1] over ``length`` valid steps (a fresh array: the package divides in place)."""
     return np.linspace(0.0, 1.0, int(length))
 
 
-class _Peer(Predictor):
-    """What the peers share: checking the fitted and the queried data, label groups."""
+class LabelledPeer(Predictor):
+    """What the peers share: checking the fitted and the queried data, label groups.
+
+    A subclass's ``fit`` checks its data with ``_fit_data`` and ends with ``_fitted``;
+    its ``predict`` checks the query with ``_query``. ``per_label`` (a peer per primitive)
+    makes the labels needed in both.
+
+    Attributes
+    ----------
+    fitted_labels_ : list of int
+        The labels of the fitted demonstrations (empty when none were given).
+    """
 
     per_label: bool = True
 
@@ -77,29 +89,43 @@ class _Peer(Predictor):
             return {None: np.arange(n)}
         return {int(lab): np.flatnonzero(labels == lab) for lab in np.unique(labels)}
 
-    def _fitted(self, motor: np.ndarray) -> None:
+    def _fitted(self, motor: np.ndarray, labels) -> None:
         """Mark the peer fitted (the last thing ``fit`` does)."""
         self.n_steps_, self.n_joints_ = motor.shape[1], motor.shape[2]
+        self.fitted_labels_ = [] if labels is None else np.unique(labels).tolist()
 
-    def _query(self, motor, observed, labels, lengths, same_steps: bool = True):
-        """Checked query data; the unobserved steps of ``motor`` are zeroed (never read)."""
+    def _check_fitted(self) -> None:
         if not hasattr(self, "n_joints_"):
             raise UserError(f"{type(self).__name__}: call fit before predict")
-        motor = check_motor(motor)
-        n, steps, joints = motor.shape
+
+    def _query_labels(self, labels, n: int):
+        """The checked labels of ``n`` queried samples (needed when ``per_label``)."""
+        labels = check_labels(labels, n)
+        if self.per_label and labels is None:
+            raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
+        return labels
+
+    def _query_shape(self, shape, observed, labels, lengths, same_steps: bool):
+        """Checked ``observed``, labels and lengths of a query of ``shape`` ``(n, T, J)`` (peer fitted)."""
+        n, steps, joints = shape
         if joints != self.n_joints_:
             raise UserError(f"motor has {joints} joints but the peer was fitted on {self.n_joints_}")
         if same_steps and steps != self.n_steps_:
             raise UserError(f"motor has T = {steps} steps but the peer was fitted on T = {self.n_steps_}")
         lengths = check_lengths(lengths, n, steps)
         observed = observed_mask(observed, lengths, (n, steps))
-        labels = check_labels(labels, n)
+        labels = self._query_labels(labels, n)
         if self.per_label:
-            if labels is None:
-                raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
-            unknown = sorted(set(labels.tolist()) - set(self._fitted_labels()))
+            unknown = sorted(set(labels.tolist()) - set(self.fitted_labels_))
             if unknown:
                 raise UserError(f"label(s) {unknown} have no fitted demonstration")
+        return observed, labels, lengths
+
+    def _query(self, motor, observed, labels, lengths, same_steps: bool = True):
+        """Checked query data; the unobserved steps of ``motor`` are zeroed (never read)."""
+        self._check_fitted()
+        motor = check_motor(motor)
+        observed, labels, lengths = self._query_shape(motor.shape, observed, labels, lengths, same_steps)
         seen = np.where(observed[..., None], motor, 0.0)
         if not np.all(np.isfinite(seen)):
             raise UserError("motor contains NaN or inf on observed steps")
@@ -109,7 +135,7 @@ class _Peer(Predictor):
         return int(labels[i]) if self.per_label else None
 
 
-class ProMPPeer(_Peer):
+class ProMPPeer(LabelledPeer):
     """ProMP conditioning (``movement-primitives``): one ProMP per primitive, or one for all.
 
     Fitting: the package's ``ProMP(J, n_basis).imitate`` (its EM) on each group's
@@ -161,15 +187,12 @@ class ProMPPeer(_Peer):
         self.promps_ = {}
         for key, idx in self._groups(labels, len(motor)).items():
             promp = promp_cls(motor.shape[2], self.n_basis)
-            promp.imitate([_phase(lengths[i]) for i in idx], [motor[i, : lengths[i]] for i in idx], n_iter=self.n_iter)
+            promp.imitate([phase(lengths[i]) for i in idx], [motor[i, : lengths[i]] for i in idx], n_iter=self.n_iter)
             if self.ridge:
                 promp.weight_cov = promp.weight_cov + self.ridge * np.eye(promp.n_weights)
             self.promps_[key] = promp
-        self._fitted(motor)
+        self._fitted(motor, labels)
         return self
-
-    def _fitted_labels(self):
-        return [k for k in self.promps_ if k is not None]
 
     def conditioned(self, key, steps_y: np.ndarray, phases: np.ndarray, noise: float | None = None):
         """The package ProMP of group ``key`` conditioned on positions ``steps_y`` at ``phases``.
@@ -214,10 +237,10 @@ class ProMPPeer(_Peer):
             raise UserError("the ProMP peer needs at least 2 valid steps per test sample")
         out = np.empty_like(seen)
         for i in range(len(seen)):
-            phase = _phase(lengths[i])
+            phases = phase(lengths[i])
             steps = np.flatnonzero(observed[i])
-            promp = self.conditioned(self._key(labels, i), seen[i, steps], phase[steps], noise)
-            mean = promp.mean_trajectory(_phase(lengths[i]))
+            promp = self.conditioned(self._key(labels, i), seen[i, steps], phases[steps], noise)
+            mean = promp.mean_trajectory(phase(lengths[i]))
             out[i, : lengths[i]] = mean
             out[i, lengths[i] :] = mean[-1]
         return out
@@ -233,7 +256,7 @@ def _check_noise(noise) -> float:
     return value
 
 
-class NearestPeer(_Peer):
+class NearestPeer(LabelledPeer):
     """The fitted demonstration nearest to the test sample on its observed steps, whole.
 
     Distance: the mean squared difference (over joints and the observed steps that are
@@ -254,11 +277,8 @@ class NearestPeer(_Peer):
         """Keep the demonstrations (valid steps and labels); returns self."""
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         self.motor_, self.labels_, self.lengths_ = motor.copy(), labels, lengths
-        self._fitted(motor)
+        self._fitted(motor, labels)
         return self
-
-    def _fitted_labels(self):
-        return [] if self.labels_ is None else np.unique(self.labels_).tolist()
 
     def neighbours(self, motor, observed, labels=None, lengths=None) -> np.ndarray:
         """Index (into the fitted demonstrations) of each test sample's nearest one."""
@@ -282,7 +302,7 @@ class NearestPeer(_Peer):
         return self.motor_[self.neighbours(motor, observed, labels, lengths)].copy()
 
 
-class MeanMotionPeer(_Peer):
+class MeanMotionPeer(LabelledPeer):
     """The mean motion of the test sample's primitive (or of all), its observed steps ignored.
 
     The mean at a step is over the fitted demonstrations valid at that step; a step none
@@ -309,11 +329,8 @@ class MeanMotionPeer(_Peer):
             mean = total / np.maximum(count, 1)[:, None]
             last = np.maximum.accumulate(np.where(count > 0, np.arange(steps), 0))
             self.means_[key] = mean[last]
-        self._fitted(motor)
+        self._fitted(motor, labels)
         return self
-
-    def _fitted_labels(self):
-        return [k for k in self.means_ if k is not None]
 
     def predict(self, motor, observed, labels=None, lengths=None, frames=None) -> np.ndarray:
         """The mean motion of each test sample's label (or of all), ``(n, T, J)``."""

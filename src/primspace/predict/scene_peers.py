@@ -25,9 +25,8 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from primspace.errors import UserError
-from primspace.predict.base import Predictor, observed_mask
 from primspace.predict.frame_features import frame_features
-from primspace.predict.metrics import check_labels, check_lengths, check_motor, valid_mask
+from primspace.predict.peers import LabelledPeer, phase
 
 __all__ = ["ContextualProMPPeer", "NearestFramePeer", "RIDGE_ALPHAS"]
 
@@ -52,68 +51,28 @@ def _first_frames(frames, n: int | None = None) -> np.ndarray:
     return arr
 
 
-def _phase(length: int) -> np.ndarray:
-    """Phase in [0, 1] over ``length`` valid steps (a fresh array: the package divides in place)."""
-    return np.linspace(0.0, 1.0, int(length))
-
-
-class _ScenePeer(Predictor):
-    """What the scene peers share: the checks of the fitted and queried data, label groups."""
-
-    per_label: bool = True
-
-    @property
-    def needs_labels(self) -> bool:
-        """A peer per primitive is given the test sample's label."""
-        return self.per_label
+class _ScenePeer(LabelledPeer):
+    """What the scene peers add to the peers' checks: the first frames, and no motor step read."""
 
     def _fit_data(self, motor, labels, lengths, frames):
-        motor = check_motor(motor)
-        n, steps, _ = motor.shape
-        lengths = check_lengths(lengths, n, steps)
-        labels = check_labels(labels, n)
-        if self.per_label and labels is None:
-            raise UserError(f"{type(self).__name__}(per_label=True) needs the labels of the fitted demonstrations")
-        if not np.all(np.isfinite(motor[valid_mask(lengths, steps)])):
-            raise UserError("motor contains NaN or inf on valid steps")
-        return motor, labels, lengths, _first_frames(frames, n)
-
-    def _groups(self, labels, n: int) -> dict:
-        """Fitted label (or None for all) -> the indices of its demonstrations."""
-        if not self.per_label:
-            return {None: np.arange(n)}
-        return {int(lab): np.flatnonzero(labels == lab) for lab in np.unique(labels)}
+        motor, labels, lengths = super()._fit_data(motor, labels, lengths)
+        return motor, labels, lengths, _first_frames(frames, len(motor))
 
     def _query(self, motor, observed, labels, lengths, frames, same_steps: bool):
         """Checked query: ``(n, T)``, labels, lengths and first frames; no motor step is read."""
-        if not hasattr(self, "n_joints_"):
-            raise UserError(f"{type(self).__name__}: call fit before predict")
+        self._check_fitted()
         shape = np.shape(motor)
         if len(shape) != 3 or 0 in shape:
             raise UserError(f"motor must be a non-empty (n, T, J) array, got shape {shape}")
-        n, steps, joints = shape
-        if joints != self.n_joints_:
-            raise UserError(f"motor has {joints} joints but the peer was fitted on {self.n_joints_}")
-        if same_steps and steps != self.n_steps_:
-            raise UserError(f"motor has T = {steps} steps but the peer was fitted on T = {self.n_steps_}")
-        lengths = check_lengths(lengths, n, steps)
-        observed_mask(observed, lengths, (n, steps))  # checked, not read: the scene alone predicts
-        labels = check_labels(labels, n)
-        if self.per_label:
-            if labels is None:
-                raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
-            unknown = sorted(set(labels.tolist()) - set(self.fitted_labels_))
-            if unknown:
-                raise UserError(f"label(s) {unknown} have no fitted demonstration")
-        return (n, steps), labels, lengths, _first_frames(frames, n)
+        # observed is checked, not read: the scene alone predicts
+        _, labels, lengths = self._query_shape(shape, observed, labels, lengths, same_steps)
+        return shape[:2], labels, lengths, _first_frames(frames, shape[0])
 
-    def _key(self, labels, i: int):
-        return int(labels[i]) if self.per_label else None
-
-    def _fitted(self, motor: np.ndarray, labels) -> None:
-        """Mark the peer fitted (the last thing ``fit`` does)."""
-        self.n_steps_, self.n_joints_ = motor.shape[1], motor.shape[2]
-        self.fitted_labels_ = [] if labels is None else np.unique(labels).tolist()
+    def _scenes(self, frames, labels) -> tuple[np.ndarray, np.ndarray | None, int]:
+        """The first frames of the queried scenes, their checked labels and their number (peer fitted)."""
+        self._check_fitted()
+        first = _first_frames(frames)
+        return first, self._query_labels(labels, len(first)), len(first)
 
 
 def _standardiser(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -200,8 +159,8 @@ class ContextualProMPPeer(_ScenePeer):
         for key, idx in self._groups(labels, len(motor)).items():
             promp = ProMP(motor.shape[2], self.n_basis)
             demos = [motor[i, : lengths[i]] for i in idx]
-            promp.imitate([_phase(lengths[i]) for i in idx], demos, n_iter=self.n_iter)
-            weights = np.stack([promp.weights(_phase(len(y)), y, lmbda=WEIGHT_RIDGE) for y in demos])
+            promp.imitate([phase(lengths[i]) for i in idx], demos, n_iter=self.n_iter)
+            weights = np.stack([promp.weights(phase(len(y)), y, lmbda=WEIGHT_RIDGE) for y in demos])
             self.promps_[key] = promp
             self.regressions_[key], self.alphas_[key] = self._regression(rows[idx], weights - promp.weight_mean)
         self._fitted(motor, labels)
@@ -230,13 +189,7 @@ class ContextualProMPPeer(_ScenePeer):
         labels : array-like of int, optional
             Their primitives (needed when ``per_label``).
         """
-        if not hasattr(self, "n_joints_"):
-            raise UserError(f"{type(self).__name__}: call fit before predict")
-        first = _first_frames(frames)
-        n = len(first)
-        labels = check_labels(labels, n)
-        if self.per_label and labels is None:
-            raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
+        first, labels, n = self._scenes(frames, labels)
         rows = np.asarray(self.features_.transform(first), dtype=np.float64)
         out = np.empty((n, self.n_joints_ * self.n_basis))
         for i in range(n):
@@ -268,7 +221,7 @@ class ContextualProMPPeer(_ScenePeer):
         weights = self.weights(first, labels)
         out = np.empty((n, steps, self.n_joints_))
         for i in range(n):
-            motion = self.promps_[self._key(labels, i)].trajectory_from_weights(_phase(lengths[i]), weights[i])
+            motion = self.promps_[self._key(labels, i)].trajectory_from_weights(phase(lengths[i]), weights[i])
             out[i, : lengths[i]] = motion
             out[i, lengths[i] :] = motion[-1]
         return out
@@ -326,18 +279,11 @@ class NearestFramePeer(_ScenePeer):
 
         Parameters
         ----------
-        frames : array-like, shape (n, T, H, W, 3) or (n, H, W, 3), uint8
-            The scenes; only the first frame of each is read.
-        labels : array-like of int, optional
-            Their primitives (needed when ``per_label``).
+        frames, labels
+            As for :meth:`ContextualProMPPeer.weights`: the scenes (only the first frame of each
+            is read) and their primitives (needed when ``per_label``).
         """
-        if not hasattr(self, "n_joints_"):
-            raise UserError(f"{type(self).__name__}: call fit before predict")
-        first = _first_frames(frames)
-        n = len(first)
-        labels = check_labels(labels, n)
-        if self.per_label and labels is None:
-            raise UserError(f"{type(self).__name__}(per_label=True) needs the test samples' labels")
+        first, labels, n = self._scenes(frames, labels)
         rows = self._rows(first)
         chosen = np.empty(n, dtype=np.int64)
         for i in range(n):
