@@ -18,10 +18,22 @@ Measures, on the CPU and (when present) on a CUDA GPU, in one process:
    ``--vision-frames K`` (the preset's CPU runs use 8; omit for every frame). The elapsed
    time and epochs done are printed every 30 s, so a time-boxed run still reports how far
    it got.
+6. ``--device cpu|cuda`` (issue 41; the modes above are then not run): per training path
+   (``--paths eager``; ``captured`` and ``packed`` print "not built yet" and are skipped) the
+   four cases fit / infer x motor only / images at K = 8 drawn frames (``--k-frames``), each in
+   a fresh process on the paper's sizes (q = 40, layers 32/12, T = 61, J = 9; fit 343 samples
+   at batch 32, infer 1372 at batch 256): samples/s over ``--epochs`` timed epochs after one
+   warm-up epoch, the share of the same run's fp32 matmul rate (counted FLOPs per sample as
+   in 2. x samples/s over the 2048^3 rate), peak memory (RSS on the CPU, the allocator's
+   peak on a GPU) and the paper's schedule per run and per grid (12 runs, ``--workers`` at a
+   time) extrapolated from the epoch times; ``--profile`` adds torch.profiler's operators of
+   one fit epoch (CPU), motor only and with images, grouped into matmul / conv, elementwise,
+   autograd engine and optimizer.
 
 Usage::
 
     flock /tmp/primspace-bench.lock python benchmarks/bench_train.py [--samples 1715] [--demo] [--no-cpu]
+    OMP_NUM_THREADS=1 python benchmarks/bench_train.py --device cpu --threads 1 --epochs 3 --profile --json OUT
 """
 
 from __future__ import annotations
@@ -253,6 +265,216 @@ def run_schedule(device: str, vision_frames: int | None, workdir: Path, fit_epoc
     }
 
 
+# ---------------------------------------------------------------- issue 41: per device, per path, per case
+CASES = ("fit-motor", "fit-images", "infer-motor", "infer-images")
+PATHS = ("eager", "captured", "packed")
+BUILT_PATHS = ("eager",)
+GRID_RUNS = 12  # 4 inits x 3 seeds
+MATMUL = ("addmm", "mm", "bmm", "baddbmm", "matmul", "linear", "conv", "convolution")
+
+
+def _case_setup(case: str, k_frames: int):
+    """The data, model and train configs of one case (the paper's sizes and batches)."""
+    phase, what = case.split("-")
+    images = what == "images"
+    data = synthetic(PAPER_FIT_SAMPLES + (PAPER_INFER_SAMPLES if phase == "infer" else 0), (H, W) if images else None)
+    cfg = ModelConfig(
+        latent_dim=Q, image_size=(H, W) if images else None, n_joints=J, length=T, layer_sizes=(32, 12), taus=(2.0, 8.0)
+    )
+    return phase, images, data, cfg
+
+
+def case_flops_per_sample(cfg: ModelConfig, *, frozen: bool, images: bool, k_frames: int, batch: int = 8) -> float:
+    """Counted FLOPs (matmuls, batched matmuls, convolutions) of one forward + backward step
+    per sample, images decoded at ``k_frames`` drawn steps (the docs' definition)."""
+    model = MTRNNDecoder(cfg)
+    model.requires_grad_(not frozen)
+    z = torch.randn(batch, cfg.latent_dim, requires_grad=True)
+    steps = torch.stack([torch.randperm(T)[:k_frames] for _ in range(batch)]) if images else None
+    with FlopCounterMode(display=False) as counter:
+        out = model(z, images=images, frame_steps=steps)
+        loss = out.motor.square().mean() + (out.images.square().mean() if out.images is not None else 0)
+        loss.backward()
+    return counter.get_total_flops() / batch
+
+
+def run_case(case: str, device: str, threads: int, epochs: int, k_frames: int) -> dict:
+    """One case in a fresh process: one warm-up epoch, then ``epochs`` timed epochs."""
+    import resource
+
+    phase, images, data, cfg = _case_setup(case, k_frames)
+    tc = TrainConfig(
+        epochs=1 + epochs if phase == "fit" else 1,
+        batch_size=32,
+        device=device,
+        final_lr_fraction=0.1,
+        vision_frames=k_frames if images else None,
+        log_initial=False,
+        threads=threads if device == "cpu" else None,
+    )
+    configure_process(tc)
+    if device == "cuda":
+        torch.cuda.reset_peak_memory_stats()
+    fitted = data.subset(np.arange(PAPER_FIT_SAMPLES))
+    with tempfile.TemporaryDirectory(prefix="bench_train_case_") as tmp:
+        run = fit(fitted, Path(tmp) / "fit", model_config=cfg, train_config=tc, overwrite=True, progress=False)
+        if phase == "infer":
+            inferred = data.subset(np.arange(PAPER_FIT_SAMPLES, len(data)))
+            run = infer(
+                Path(tmp) / "fit",
+                inferred,
+                Path(tmp) / "infer",
+                epochs=1 + epochs,
+                batch_size=256,  # the presets' infer batch
+                overwrite=True,
+                progress=False,
+            )
+    n = PAPER_FIT_SAMPLES if phase == "fit" else PAPER_INFER_SAMPLES
+    seconds = [h["seconds"] for h in run.history[1:]]  # the first epoch is the warm-up
+    median = statistics.median(seconds)
+    if device == "cuda":
+        peak = torch.cuda.max_memory_allocated() / 2**20
+    else:
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
+    flops = case_flops_per_sample(cfg, frozen=phase == "infer", images=images, k_frames=k_frames)
+    return {
+        "case": case,
+        "samples": n,
+        "batch": 32 if phase == "fit" else 256,
+        "epoch_s": seconds,
+        "samples_per_s": n / median,
+        "flops_per_sample": flops,
+        "peak_mib": peak,
+    }
+
+
+def _in_child(fn, *fn_args):
+    """Run ``fn`` in a fresh (spawned) process: its peak memory is its own."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as pool:
+        return pool.submit(fn, *fn_args).result()
+
+
+def _category(name: str) -> str:
+    low = name.lower()
+    if low.startswith("autograd::") or "backward0" in low or "backward1" in low or low.startswith("torch::autograd"):
+        return "autograd overhead"
+    op = low.split("::")[-1]
+    if low.startswith("aten::") and (op in MATMUL or "conv" in op or "mkldnn" in op):
+        return "matmul / conv"
+    if low.startswith("aten::"):
+        return "elementwise and other aten"
+    if low.startswith("optimizer."):
+        return "optimizer (python)"
+    return "other (python, profiler)"
+
+
+def profile_fit_epoch(images: bool, threads: int, k_frames: int, top: int) -> dict:
+    """Profile one fit epoch (after a warm-up fit) on the CPU with torch.profiler."""
+    from torch.profiler import ProfilerActivity, profile
+
+    _, _, data, cfg = _case_setup("fit-images" if images else "fit-motor", k_frames)
+    tc = TrainConfig(
+        epochs=1,
+        batch_size=32,
+        device="cpu",
+        final_lr_fraction=0.1,
+        vision_frames=k_frames if images else None,
+        log_initial=False,
+        threads=threads,
+    )
+    configure_process(tc)
+    warm = fit(data, None, model_config=cfg, train_config=tc, progress=False)
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        run = fit(data, None, model_config=cfg, train_config=tc, progress=False)
+    events = [e for e in prof.key_averages() if e.self_cpu_time_total > 0]
+    total = sum(e.self_cpu_time_total for e in events)
+    shares: dict[str, float] = {}
+    for e in events:
+        shares[_category(e.key)] = shares.get(_category(e.key), 0.0) + e.self_cpu_time_total / total
+    rows = sorted(events, key=lambda e: -e.self_cpu_time_total)[:top]
+    return {
+        "images": images,
+        "epoch_s_unprofiled": warm.history[-1]["seconds"],
+        "epoch_s_profiled": run.history[-1]["seconds"],
+        "self_cpu_total_s": total / 1e6,
+        "shares": shares,
+        "top": [
+            {
+                "op": e.key,
+                "self_cpu_s": e.self_cpu_time_total / 1e6,
+                "share": e.self_cpu_time_total / total,
+                "calls": e.count,
+                "category": _category(e.key),
+            }
+            for e in rows
+        ],
+    }
+
+
+def bench_issue41(args) -> dict:
+    """Per device and path, the four cases; the paper's schedule per run and per grid."""
+    device = args.device
+    if device == "cuda" and not torch.cuda.is_available():
+        print("no GPU: CUDA is not available on this machine, --device cuda skipped")
+        return {}
+    threads = args.threads or 1
+    torch.set_num_threads(threads)
+    workers = args.workers or max(1, (os.cpu_count() or 1) // threads)
+    rate = matmul_rate(torch.device(device))
+    where = f"{threads} thread(s)" if device == "cpu" else torch.cuda.get_device_name()
+    print(f"\n=== {device} ({where}): dense fp32 matmul 2048^3 in this run: {rate / 1e9:.1f} GFLOP/s")
+    out = {"device": device, "threads": threads, "workers": workers, "matmul_flops": rate, "paths": {}}
+    for path in args.paths:
+        if path not in BUILT_PATHS:
+            print(f"[{path}] not built yet: skipped")
+            continue
+        rows = {}
+        for case in args.cases:
+            r = _in_child(run_case, case, device, threads, args.epochs, args.k_frames)
+            r["fraction_of_matmul"] = r["flops_per_sample"] * r["samples_per_s"] / rate
+            rows[case] = r
+            print(
+                f"[{path}] {case:>12}: {r['samples_per_s']:8.1f} samples/s (median of {len(r['epoch_s'])} epochs, "
+                f"{statistics.median(r['epoch_s']):.2f} s each), {r['flops_per_sample'] / 1e6:.1f} MFLOP/sample, "
+                f"{r['fraction_of_matmul']:.1%} of the matmul rate, peak {r['peak_mib']:.0f} MiB",
+                flush=True,
+            )
+        schedules = {}
+        for what in ("motor", "images"):
+            f, i = rows.get(f"fit-{what}"), rows.get(f"infer-{what}")
+            if f is None or i is None:
+                continue
+            run_s = PAPER_FIT_EPOCHS * PAPER_FIT_SAMPLES / f["samples_per_s"]
+            run_s += PAPER_INFER_EPOCHS * PAPER_INFER_SAMPLES / i["samples_per_s"]
+            grid_s = -(-GRID_RUNS // workers) * run_s  # waves of `workers` runs, each at the measured pace
+            schedules[what] = {"run_min": run_s / 60, "grid_min": grid_s / 60}
+            print(
+                f"[{path}] paper schedule, {what}: {run_s / 60:.1f} min per run, {grid_s / 60:.1f} min per grid "
+                f"({GRID_RUNS} runs, {workers} at a time) -- extrapolated from the epoch times, not run"
+            )
+        out["paths"][path] = {"cases": rows, "schedule": schedules}
+    if args.profile and device == "cpu":
+        out["profile"] = {}
+        for images in (False, True):
+            p = _in_child(profile_fit_epoch, images, threads, args.k_frames, args.top)
+            label = "images" if images else "motor"
+            out["profile"][label] = p
+            print(
+                f"\nprofile, one fit epoch, {label} ({p['epoch_s_unprofiled']:.2f} s unprofiled, "
+                f"{p['epoch_s_profiled']:.2f} s profiled, {p['self_cpu_total_s']:.2f} s self CPU):"
+            )
+            for k, v in sorted(p["shares"].items(), key=lambda kv: -kv[1]):
+                print(f"  {k:>28}: {v:.1%}")
+            for e in p["top"]:
+                print(
+                    f"  {e['op']:>48} {e['self_cpu_s']:7.3f} s {e['share']:6.1%} {e['calls']:7d} calls  {e['category']}"
+                )
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1715)
@@ -273,7 +495,27 @@ def main() -> None:
     )
     parser.add_argument("--no-epochs", action="store_true", help="skip the epoch measurements (with --schedule)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    issue41 = parser.add_argument_group("issue 41 (per device, path and case; chosen by --device)")
+    issue41.add_argument("--device", choices=("cpu", "cuda"), default=None, help="measure the four cases here")
+    issue41.add_argument(
+        "--paths", nargs="+", choices=PATHS, default=["eager"], help="training paths (captured, packed: not built yet)"
+    )
+    issue41.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    issue41.add_argument("--k-frames", type=int, default=8, help="K drawn frames of the image cases")
+    issue41.add_argument("--workers", type=int, default=None, help="parallel runs of a grid (default: CPUs / threads)")
+    issue41.add_argument("--profile", action="store_true", help="also profile one fit epoch (CPU, torch.profiler)")
+    issue41.add_argument("--top", type=int, default=12, help="operators listed by the profile")
     args = parser.parse_args()
+    if args.device is not None:
+        if args.epochs < 1:
+            parser.error("--epochs must be at least 1")
+        print(f"torch {torch.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+        figures = bench_issue41(args)
+        print(f"\nload average at the end: {os.getloadavg()[0]:.2f}")
+        if args.json and figures:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(figures, indent=2))
+        return
     if args.threads:
         torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
