@@ -1,7 +1,7 @@
 """See the block, do the primitive: a motion from what the camera sees (issue 40; docs/act.md).
 
-The paper leaves this as future work: "visual perception information is not used to
-initialize encodings". Given the primitive (its label) and a camera frame, the policy
+The paper leaves this as future work: "Another point is visual perception information is not
+used to initialize encodings." Given the primitive (its label) and a camera frame, the policy
 returns the whole motion; in closed loop (:mod:`primspace.act`) it is asked again every few
 steps with the frame of that step and the joints executed so far.
 
@@ -39,8 +39,8 @@ at the last executed step decays linearly to zero over :attr:`horizon` steps.
 
 **The default scene mode.** :func:`predict_from_scene` fits the policy on a run's fitted
 demonstrations and predicts a data set's motions from their first frames and first joints:
-it is what ``primspace predict --scene`` runs. Measured on the paper preset (docs/predict.md)
-it succeeds 0.97 in the simulator where the code searched in a cluster's affine subspace
+it is what ``primspace predict --scene`` runs. Measured on the paper preset (docs/act.md, three
+seeds) it succeeds 0.98 ± 0.004 in the simulator where the code searched in a cluster's affine subspace
 (:func:`primspace.predict.scene.predict_scene`, kept in Python) succeeds 0. The primitives are
 the fitted labels or, without labels, clusters of the run's fitted codes (``primitives=``).
 """
@@ -383,9 +383,9 @@ def predict_from_scene(
     random_state: int | None = None,
 ) -> Prediction:
     """Each sample's whole motion from its first frame and first joints, as primitive ``primitive``,
-    by the scene policy: the default of ``primspace predict --scene`` (docs/predict.md: it succeeds
-    0.97 in the simulator where the code searched in a cluster's subspace,
-    :func:`~primspace.predict.scene.predict_scene`, succeeds 0).
+    by the scene policy: the default of ``primspace predict --scene`` (docs/act.md: on the paper
+    preset it succeeds 0.98 ± 0.004 in the simulator over three seeds, where the code searched in a
+    cluster's subspace, :func:`~primspace.predict.scene.predict_scene`, succeeds 0).
 
     Parameters
     ----------
