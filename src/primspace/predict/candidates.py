@@ -202,9 +202,12 @@ def condition_ensemble(members: np.ndarray, weights: np.ndarray, x: np.ndarray, 
     return mu + a.T @ np.linalg.solve(gram, ao @ (x[mask] - mu[mask]))
 
 
-def continuity_correction(predicted: np.ndarray, scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray):
+def continuity_correction(
+    predicted: np.ndarray, scaled: np.ndarray, observed: np.ndarray, valid: np.ndarray, horizon: int | None = None
+):
     """Add the residual at each sample's last observed step, decaying linearly to zero at its
-    last valid step, to the unobserved steps (scaled units; observed steps unchanged).
+    last valid step (or ``horizon`` steps after the observed one), to the unobserved steps
+    (scaled units; observed steps unchanged).
 
     ``predicted``, ``scaled`` (n, T, J); ``observed``, ``valid`` (n, T) bool (a prefix).
     """
@@ -216,7 +219,7 @@ def continuity_correction(predicted: np.ndarray, scaled: np.ndarray, observed: n
         if not seen.size or not end.size or seen[-1] >= end[-1]:
             continue
         s, e = seen[-1], end[-1]
-        ramp = np.clip(1.0 - (t - s) / (e - s), 0.0, 1.0)
+        ramp = np.clip(1.0 - (t - s) / (e - s if horizon is None else float(horizon)), 0.0, 1.0)
         rest = (t > s) & valid[i]
         out[i, rest] += ramp[rest, None] * (scaled[i, s] - out[i, s])
     return out

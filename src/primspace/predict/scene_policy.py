@@ -56,6 +56,7 @@ from primspace.data.images import as_view
 from primspace.errors import UserError
 from primspace.predict.api import Prediction
 from primspace.predict.base import Forecast, Predictor
+from primspace.predict.candidates import continuity_correction
 from primspace.predict.frame_features import ColourBlob, frame_features
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.primitives import (
@@ -475,10 +476,10 @@ def continue_from(plan: np.ndarray, executed: np.ndarray, horizon: int) -> np.nd
     """``plan`` (T, J) with ``executed`` (s+1, J) as its first steps, and the next ``horizon`` steps
     moved towards the plan from the last executed joints (the residual at step ``s`` decaying
     linearly to zero at ``s + horizon``)."""
-    out = np.array(plan, dtype=np.float64, copy=True)
-    s = len(executed) - 1
-    out[: s + 1] = executed
-    t = np.arange(len(out))
-    ramp = np.clip(1.0 - (t - s) / float(horizon), 0.0, 1.0) * (t > s)
-    out += ramp[:, None] * (executed[-1] - plan[s])[None]
+    plan = np.asarray(plan, dtype=np.float64)
+    observed = (np.arange(len(plan)) < len(executed))[None]
+    seen = plan.copy()
+    seen[: len(executed)] = executed
+    out = continuity_correction(plan[None], seen[None], observed, np.ones_like(observed), horizon)[0]
+    out[: len(executed)] = executed
     return out
