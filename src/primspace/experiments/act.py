@@ -78,8 +78,9 @@ def _first_step(n: int, length: int) -> np.ndarray:
     return np.repeat((np.arange(length) < 1)[None], n, axis=0)
 
 
-def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.ndarray, infer_dir: str) -> dict:
-    """{row: motor (n, T, J) physical} of the scene-only rows."""
+def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.ndarray, infer_dir: str, policy) -> dict:
+    """{row: motor (n, T, J) physical} of the scene-only rows; ``policy``: the closed loop's, fitted
+    (its first frame's map is the scene-only plan)."""
     from primspace.predict.peers import MeanMotionPeer
     from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
     from primspace.predict.scene_policy import ScenePolicy
@@ -89,15 +90,14 @@ def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.nd
     motor, truth = scaler.transform(fitted.motor), scaler.transform(test.motor)
     args = (motor, fitted.labels, fitted.lengths, fitted.images)
     query = (truth, _first_step(len(test), truth.shape[1]), test.labels, test.lengths, test.images)
+    out = {POLICY: scaler.inverse_transform(policy.predict(*query).astype(np.float32))}
     predictors = {
-        POLICY: ScenePolicy(label_names=fitted.label_names, random_state=int(fit.train_config.seed)),
         POLICY_CODE: ScenePolicy(fit, space="code", label_names=fitted.label_names),
         PROMP_PIXELS: ContextualProMPPeer(features="pca"),
         PROMP_BLOB: ContextualProMPPeer(features="blob"),
         NEAREST: NearestFramePeer(),
         MEAN_MOTION: MeanMotionPeer(),
     }
-    out = {}
     for name, predictor in predictors.items():
         scaled = predictor.fit(*args).predict(*query)
         out[name] = scaler.inverse_transform(scaled.astype(np.float32))
@@ -120,21 +120,15 @@ def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | N
     return out
 
 
-def _loop_rows(fit, fitted: MotionDataset, test: MotionDataset, every: int, seed: int) -> tuple[dict, dict]:
-    """{row: success (n,) bool} of the closed-loop rows, and the latencies (ms) of the closed loop's plans."""
+def _loop_rows(fit, test: MotionDataset, every: int, seed: int, policy, promp) -> tuple[dict, dict]:
+    """{row: success (n,) bool} of the closed-loop rows, and the latencies (ms) of the closed loop's
+    plans; ``policy`` and ``promp`` fitted by :func:`primspace.act.command.fit_planners`."""
     from primspace.act import PolicyPlanner, ProMPPlanner, run_episode
     from primspace.act.episode import BlockMove
-    from primspace.predict.peers import ProMPPeer
-    from primspace.predict.scene_policy import ScenePolicy
     from primspace.sim.execute import Executor, Perturbation
     from primspace.sim.scene import Scene
 
     scaler, length = fit.scaler, test.motor.shape[1]
-    motor = scaler.transform(fitted.motor)
-    steps = tuple(range(0, length - 1, every))
-    policy = ScenePolicy(steps=steps, label_names=fitted.label_names, random_state=int(fit.train_config.seed))
-    policy.fit(motor, fitted.labels, fitted.lengths, fitted.images)
-    promp = ProMPPeer().fit(motor, fitted.labels, fitted.lengths)
     perturbation, scene = Perturbation(), Scene()
     success = {row: np.zeros(len(test), bool) for row in LOOP_ROWS}
     latencies = []
@@ -173,7 +167,10 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
     seed = int(fit.train_config.seed)
     test_idx = predicted_subset(eval_idx, data.labels[eval_idx], max_samples, seed)
     fitted, test = data.subset(fit.indices).load_images(), data.subset(test_idx).load_images()
-    rows = _scene_rows(fit, fitted, test, test_idx, infer_dir)
+    from primspace.act.command import fit_planners
+
+    policy, promp = fit_planners(fit, fitted, int(every))  # once: the scene-only row and the loops
+    rows = _scene_rows(fit, fitted, test, test_idx, infer_dir, policy)
     truth, first = fit.scaler.transform(test.motor), _first_step(len(test), test.motor.shape[1])
     plain = test.without_images()
     scene = {}
@@ -181,7 +178,7 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
         success = np.array([r.success for r in evaluate_dataset(plain, motor)], dtype=float)
         mse = unobserved_mse(fit.scaler.transform(motor), truth, first, test.lengths)
         scene[name] = _per_primitive(test, success, mse)
-    loop, latency = _loop_rows(fit, fitted, test, int(every), seed)
+    loop, latency = _loop_rows(fit, test, int(every), seed, policy, promp)
     rescued = ~loop[OPEN]  # the episodes the open loop's replay fails under the move
     return {
         "scene": scene,
