@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from primspace.act.episode import BlockMove, run_episode
-from primspace.act.planners import DEFAULT_EVERY, PolicyPlanner, ProMPPlanner, check_every
+from primspace.act.planners import DEFAULT_EVERY, PLANNERS, PolicyPlanner, ProMPPlanner, check_every
+
+CLOSED, OPEN, PROMP = PLANNERS
 from primspace.errors import UserError
 
 __all__ = [
@@ -142,9 +144,9 @@ def act(
         _, dx, dy = perturbation.draw(np.random.default_rng([int(seed), 40]), where.block_x, where.block_y, where.size)
         move = BlockMove(perturbation.step_index(length), dx, dy)
     planners = {
-        "closed loop": PolicyPlanner(policy, k, every),
-        "open loop": PolicyPlanner(policy, k, None),
-        "ProMP re-conditioned": ProMPPlanner(promp, label, length, every),
+        CLOSED: PolicyPlanner(policy, k, every),
+        OPEN: PolicyPlanner(policy, k, None),
+        PROMP: ProMPPlanner(promp, label, length, every),
     }
     shared = Scene()
     episodes = {}
@@ -157,7 +159,7 @@ def act(
         "label": label,
         "move": move,
         "episodes": episodes,
-        "corrections": planners["closed loop"].corrections,
+        "corrections": planners[CLOSED].corrections,
         "policy": policy.summary(),
         "fitted": fitted,
     }
@@ -204,7 +206,7 @@ def write_animation(path, outcome: dict, overwrite: bool = True) -> Path:
     from primspace.plots import draw_animation
 
     episodes, fitted = outcome["episodes"], outcome["fitted"]
-    closed, open_ = episodes["closed loop"], episodes["open loop"]
+    closed, open_ = episodes[CLOSED], episodes[OPEN]
     verdict = ", ".join(f"{n}: {'success' if e.success else 'failure'}" for n, e in episodes.items())
     moved = outcome["move"]
     how = "" if moved is None else f"; block moved {100 * np.hypot(moved.dx, moved.dy):.1f} cm at step {moved.step}"
@@ -214,7 +216,7 @@ def write_animation(path, outcome: dict, overwrite: bool = True) -> Path:
         open_.motor,
         images=closed.frames,
         replay_images=open_.frames,
-        panel_titles=("closed loop", "open loop"),
+        panel_titles=(CLOSED, OPEN),
         joint_names=fitted.joint_names,
         dt=fitted.dt,
         title=f"{outcome['primitive']}{how} — {verdict}",

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.act.planners import DEFAULT_EVERY
+from primspace.act.planners import DEFAULT_EVERY, PLANNERS
 from primspace.data import MotionDataset
 from primspace.errors import UserError
 from primspace.experiments.act_results import ALL, act_table, act_tables
@@ -67,7 +67,8 @@ PROMP_PIXELS, PROMP_BLOB = "contextual ProMP (pixels)", "contextual ProMP (blob)
 NEAREST, MEAN_MOTION, REPRODUCTION = "nearest first frame", "mean motion (labels)", "reproduction (whole motion)"
 #: The scene-only rows, in order.
 SCENE_ROWS = (POLICY, POLICY_CODE, PROMP_PIXELS, PROMP_BLOB, NEAREST, MEAN_MOTION, REPRODUCTION)
-CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL = "closed loop", "open loop", "ProMP re-conditioned", "closed loop (no move)"
+CLOSED, OPEN, PROMP_LOOP = PLANNERS
+CLOSED_STILL = f"{CLOSED} (no move)"
 #: The closed-loop rows (the first three with the block moved), in order.
 LOOP_ROWS = (CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL)
 
