@@ -13,6 +13,7 @@ import contextlib
 import itertools
 import math
 import time
+from dataclasses import dataclass
 
 import torch
 
@@ -30,6 +31,7 @@ from primspace.train.streaming import FrameStream, should_stream
 
 __all__ = [
     "Session",
+    "Epoch",
     "evaluate_loop",
     "epoch_values",
     "local_parts",
@@ -107,6 +109,18 @@ def opened_stream(tc: TrainConfig, data: MotionDataset, use_images: bool, device
             stream.close()
 
 
+@dataclass
+class Epoch:
+    """One epoch's draws (:meth:`Session.begin_epoch`): per batch its rows and this
+    process's parts (:func:`local_parts`), the streamed frames in order, the loss sums
+    its steps add to (one row per micro-batch) and the precision of the loss."""
+
+    batches: list
+    frames: object
+    sums: torch.Tensor
+    autocast: object
+
+
 class Session:
     """One run's training loop: θ (unless ``theta_opt`` is None: frozen) and the codes.
 
@@ -169,6 +183,7 @@ class Session:
         self.epoch = 0
         self.n = len(table)
         self._last_checkpoint = 0
+        self._calibrated = False  # the calibration map fitted at this session's last epoch
         self._checkpoint_time = time.monotonic()
 
     @property
@@ -197,53 +212,91 @@ class Session:
         try:
             self._run(ckpt, progress if self.world.is_main else False, label)
         finally:
-            if self.sink is not None:
-                self.sink.close()
-                self.sink = None
-            if self.stream is not None:
-                self.stream.close()
-            if self.store is not None:
-                self.store.close()  # the writer's lock: the run is over, however it ended
+            self.close()
+
+    def close(self) -> None:
+        """Close the logger, the frame stream and the run directory (its writer's lock)."""
+        if self.sink is not None:
+            self.sink.close()
+            self.sink = None
+        if self.stream is not None:
+            self.stream.close()
+        if self.store is not None:
+            self.store.close()  # the writer's lock: the run is over, however it ended
 
     def _run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
-        tc = self.tc
+        self.start(ckpt)
+        fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
+        with progress_bar(self.tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
+            if self.epoch:
+                advance(self.epoch)
+            while self.epoch < self.tc.epochs:
+                t0 = time.perf_counter()
+                values = self.end_epoch(self._train_epoch(), time.perf_counter() - t0)
+                advance(loss=values["loss"], sps=values["samples_per_s"])
+        self.finish()
+
+    def start(self, ckpt: dict | None) -> None:
+        """From ``ckpt`` (a checkpoint dict), or from the start: the run directory begun,
+        epoch 0 logged (``tc.log_initial``) and checkpointed."""
         if ckpt is not None:
             self._restore(ckpt)
             self.sink = open_logger(self.log_to, self.epoch + 1)  # the epochs after the checkpoint: logged anew
-        else:
-            if self.store is not None:
-                self.store.begin(self.config, self.initial_codes.numpy())
-            self.sink = open_logger(self.log_to, 0)
-            if tc.log_initial:
-                t0 = time.perf_counter()
-                self.model.eval()
-                sums = evaluate_loop(self.model, self.table, self.tensors, tc, self.device, self.world, self.stream)
-                self._log(0, epoch_values(sums, self.n, self.use_images), time.perf_counter() - t0)
+            return
+        if self.store is not None:
+            self.store.begin(self.config, self.initial_codes.numpy())
+        self.sink = open_logger(self.log_to, 0)
+        if self.tc.log_initial:
+            t0 = time.perf_counter()
+            self.model.eval()
+            sums = evaluate_loop(self.model, self.table, self.tensors, self.tc, self.device, self.world, self.stream)
+            self._log(0, epoch_values(sums, self.n, self.use_images), time.perf_counter() - t0)
+        self._checkpoint()
+
+    def begin_epoch(self) -> "Epoch":
+        """The next epoch's learning rates set and its draws made (:class:`Epoch`)."""
+        tc = self.tc
+        factor = lr_factor(self.epoch, tc.epochs, tc.final_lr_fraction)
+        self.table.lr = tc.latent_lr * factor
+        if self.theta_opt is not None:
+            for group in self.theta_opt.param_groups:
+                group["lr"] = tc.lr * factor
+        self.model.train(self.theta_opt is not None)
+        order = torch.randperm(self.n, generator=self.generator).to(self.device)
+        plan = [
+            (order[start : start + tc.batch_size], self._draw_frames(min(tc.batch_size, self.n - start)))
+            for start in range(0, self.n, tc.batch_size)
+        ]  # the epoch's draws, as one process makes them
+        work = local_parts(plan, self.world, join=self.net is not self.model)
+        sums = torch.zeros(self.world.micro_batches, 3, dtype=torch.float64, device=self.device)
+        batches = [(idx, parts) for (idx, _), parts in zip(plan, work)]
+        return Epoch(batches, frame_batches(work, self.stream), sums, autocast_for(tc, self.device))
+
+    def end_epoch(self, sums: torch.Tensor, seconds: float) -> dict:
+        """Log the finished epoch from its ``[loss, motor, vision]`` sums (checked finite) and
+        checkpoint when due; returns the logged line."""
+        tc = self.tc
+        values = epoch_values(sums, self.n, self.use_images)
+        self._check_finite(values)
+        self.epoch += 1
+        self._log(self.epoch, values, seconds)
+        due = tc.checkpoint_every is not None and self.epoch % tc.checkpoint_every == 0
+        if self.epoch == tc.epochs and self.calibrate is not None:
+            self.calibration = self.calibrate(self.table.numpy())
+            self._calibrated = True
+        if due or self.epoch == tc.epochs or time.monotonic() - self._checkpoint_time >= tc.checkpoint_seconds:
             self._checkpoint()
-        calibrated = False
-        fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
-        with progress_bar(tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
-            if self.epoch:
-                advance(self.epoch)
-            while self.epoch < tc.epochs:
-                t0 = time.perf_counter()
-                values = epoch_values(self._train_epoch(), self.n, self.use_images)
-                seconds = time.perf_counter() - t0
-                self._check_finite(values)
-                self.epoch += 1
-                self._log(self.epoch, values, seconds)
-                due = tc.checkpoint_every is not None and self.epoch % tc.checkpoint_every == 0
-                if self.epoch == tc.epochs and self.calibrate is not None:
-                    self.calibration = self.calibrate(self.table.numpy())
-                    calibrated = True
-                if due or self.epoch == tc.epochs or time.monotonic() - self._checkpoint_time >= tc.checkpoint_seconds:
-                    self._checkpoint()
-                advance(loss=values["loss"], sps=self.n / max(seconds, 1e-9))
-        if self.calibrate is not None and not calibrated:  # a finished fit: its map as this version fits it
-            fresh = self.calibrate(self.table.numpy())
-            if not fresh.same_map(self.calibration):  # none yet (primspace 0.4), or fitted another way
-                self.calibration = fresh
-                self._checkpoint()
+        return self.history[-1]
+
+    def finish(self) -> None:
+        """After the last epoch: a fit resumed from a finished checkpoint gets its calibration map
+        as this version fits it (none yet, primspace 0.4, or fitted another way)."""
+        if self.calibrate is None or self._calibrated:
+            return
+        fresh = self.calibrate(self.table.numpy())
+        if not fresh.same_map(self.calibration):
+            self.calibration = fresh
+            self._checkpoint()
 
     def _check_finite(self, values: dict) -> None:
         bad = [k for k, v in values.items() if v is not None and not math.isfinite(v)]
@@ -262,25 +315,11 @@ class Session:
             )
 
     def _train_epoch(self) -> torch.Tensor:
-        tc = self.tc
-        factor = lr_factor(self.epoch, tc.epochs, tc.final_lr_fraction)
-        self.table.lr = tc.latent_lr * factor
-        if self.theta_opt is not None:
-            for group in self.theta_opt.param_groups:
-                group["lr"] = tc.lr * factor
-        self.model.train(self.theta_opt is not None)
-        order = torch.randperm(self.n, generator=self.generator).to(self.device)
-        plan = [
-            (order[start : start + tc.batch_size], self._draw_frames(min(tc.batch_size, self.n - start)))
-            for start in range(0, self.n, tc.batch_size)
-        ]  # the epoch's draws, as one process makes them
-        work = local_parts(plan, self.world, join=self.net is not self.model)
-        frames = frame_batches(work, self.stream)
-        sums = torch.zeros(self.world.micro_batches, 3, dtype=torch.float64, device=self.device)
-        autocast = autocast_for(tc, self.device)
-        for (idx, _), parts in zip(plan, work):
-            self._step(idx, parts, frames, sums, autocast)
-        return self.world.sum(sums.sum(0))
+        """One epoch of steps; its ``[loss, motor, vision]`` sums over the samples (every process's)."""
+        epoch = self.begin_epoch()
+        for idx, parts in epoch.batches:
+            self._step(idx, parts, epoch.frames, epoch.sums, epoch.autocast)
+        return self.world.sum(epoch.sums.sum(0))
 
     def _step(self, idx: torch.Tensor, parts: list, frames, sums: torch.Tensor, autocast) -> None:
         """One batch: θ steps on the gradient of its mean loss (its parts' gradients summed,
