@@ -194,6 +194,10 @@ class ImageDecoder(nn.Module):
         Input channels of each deconvolution (the last one outputs 3).
     """
 
+    #: Compute the deconvolutions in NHWC (False under ``torch.func.vmap``, which cannot
+    #: query that layout: :mod:`primspace.train.packed`).
+    channels_last = True
+
     def __init__(self, in_features: int, image_size: tuple[int, int], channels: tuple[int, ...]) -> None:
         super().__init__()
         check_image_size(image_size, channels)
@@ -212,7 +216,8 @@ class ImageDecoder(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``(N, in_features)`` -> ``(N, H, W, 3)`` in [0, 1]."""
         y = F.relu(self.fc(x)).view(-1, self.channels[0], *self.base)
-        y = y.contiguous(memory_format=torch.channels_last)
+        if self.channels_last:
+            y = y.contiguous(memory_format=torch.channels_last)
         last = len(self.deconvs) - 1
         for i, deconv in enumerate(self.deconvs):
             y = deconv(y)

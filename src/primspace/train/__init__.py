@@ -63,8 +63,8 @@ _HOME = {
     "infer": "api",
     "reconstruct": "api",
     "evaluate": "api",
-    "as_run": "api",
-    "uses_images": "api",
+    "as_run": "sessions",
+    "uses_images": "sessions",
     "load_run": "rundir",
     "write_run": "rundir",
     "check_run_data": "rundata",
@@ -89,7 +89,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # for type checkers and IDEs
     from primspace.data.indices import read_indices  # noqa: F401
-    from primspace.train.api import as_run, evaluate, fit, infer, reconstruct, uses_images  # noqa: F401
+    from primspace.train.api import evaluate, fit, infer, reconstruct  # noqa: F401
     from primspace.train.config import (  # noqa: F401
         TrainConfig,
         TrainingDivergedError,
@@ -98,5 +98,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs
         resolve_device,
     )
     from primspace.train.run import TrainedRun  # noqa: F401
+    from primspace.train.sessions import as_run, uses_images  # noqa: F401
     from primspace.train.rundata import check_run_data, load_fitted_data  # noqa: F401
     from primspace.train.rundir import load_run, write_run  # noqa: F401

@@ -15,7 +15,6 @@ import contextlib
 import copy
 import os
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,37 +22,23 @@ import torch
 
 from primspace.data import JointScaler, MotionDataset
 from primspace.errors import UserError
-from primspace.calibration import CodeCalibration
-from primspace.latent import CALIBRATABLE, INFER_STARTS, LatentInitializer, LatentTable
+from primspace.latent import LatentTable
 from primspace.model import ModelConfig, MTRNNDecoder
-from primspace.train.config import TrainConfig, resolve_device, thread_limit
-from primspace.train.logger import check_log_to
-from primspace.train.distributed import current_world
-from primspace.train.loop import Session, epoch_values, evaluate_loop, opened_stream
+from primspace.train.config import TrainConfig, resolve_device
+from primspace.train.loop import epoch_values, evaluate_loop, opened_stream
 from primspace.train.loss import DataTensors
-from primspace.train.checks import (
-    check_calibrated,
-    check_data_fits,
-    check_init,
-    check_initial_latents,
-    check_scaler,
-    check_something_to_train,
-    fit_model_config,
-    run_name,
-    select,
-)
-from primspace.train.observe import Observation, observation_record
+from primspace.train.checks import select
 from primspace.train.run import TrainedRun
-from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
-from primspace.train.checkpoint import unpack_checkpoint
-from primspace.train.rundir import (
-    load_run,
-    open_run_dir,
-    run_config,
-    run_from_state,
-)
+from primspace.train.sessions import as_run, fit_session, infer_session, run_session, uses_images
 
-__all__ = ["fit", "infer", "reconstruct", "evaluate", "uses_images", "as_run"]
+__all__ = [
+    "fit",
+    "infer",
+    "reconstruct",
+    "evaluate",
+    "uses_images",
+    "as_run",
+]
 
 
 def fit(
@@ -143,60 +128,22 @@ def fit(
     TrainingDivergedError
         The loss became NaN/inf (the last good checkpoint is kept).
     """
-    tc = (train_config or TrainConfig()).validate()
-    check_init(init)
-    data, _ = select(dataset, indices)
-    parent = None if weights_from is None else as_run(weights_from)
-    check_calibrated(init, parent)
-    check_scaler(scaler, parent, data)
-    mc = fit_model_config(model_config, parent, data, images)
-    use_images = uses_images(mc, data, tc, images, where=None if parent is None else run_name(parent))
-    check_something_to_train(tc, use_images)
-    initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
-    config = run_config("fit", init, mc, tc, data, use_images, parent=_run_path(parent))
-    config["scaler"] = None if scaler is None else scaler.to_dict()
-    world = current_world(tc.micro_batches)
-    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to, world)
-    device = world.device(resolve_device(tc.device, tc.amp))
-    seeds = derived_seeds(tc.seed)
-    if ckpt is not None:
-        parts = unpack_checkpoint(ckpt, out_dir)
-        scaler, initializer = parts.scaler, parts.initializer
-        model = _new_model(mc, seeds["model"], parts.model)
-        model.to(device)
-        theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
-        theta_opt.load_state_dict(parts.theta_optimizer)
-        table = LatentTable.from_state_dict(parts.latents, device)
-        scaled = scaler.transform(data.motor)
-    else:
-        scaler = parent.scaler if parent is not None else scaler or JointScaler().fit(data.motor)
-        model = _new_model(mc, seeds["model"], None if parent is None else parent.model.state_dict())
-        scaled = scaler.transform(data.motor)
-        initializer = run_initializer(init, parent, mc, scaled, seeds)
-        model.to(device)
-        theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
-        codes = initial_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
-        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
-    session = Session(
-        store=store,
-        config=config,
-        model=model,
-        theta_opt=theta_opt,
-        table=table,
+    session, ckpt = fit_session(
+        dataset,
+        out_dir,
+        model_config=model_config,
+        train_config=train_config,
+        init=init,
+        indices=indices,
+        resume=resume,
+        overwrite=overwrite,
+        weights_from=weights_from,
+        initial_latents=initial_latents,
+        images=images,
         scaler=scaler,
-        initializer=initializer,
-        data=data,
-        use_images=use_images,
-        tc=tc,
-        device=device,
-        shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"],
-        calibrate=_calibrator(initializer, scaled, mc.latent_dim),
         log_to=log_to,
     )
-    with thread_limit(tc.threads):  # torch's and BLAS's threads, put back after (no process-wide change)
-        session.run(ckpt, progress, label="fit")
-    return run_from_state(session.state(), session.history, None if store is None else store.path)
+    return run_session(session, ckpt, progress, "fit")
 
 
 def infer(
@@ -266,61 +213,24 @@ def infer(
     -------
     TrainedRun
     """
-    parent = as_run(run)
-    base = train_config or replace(parent.train_config, threads=TrainConfig.threads)  # not the fit's machine's
-    try:
-        tc = replace(base, epochs=epochs, **overrides).validate()
-    except TypeError as exc:
-        raise UserError(f"unknown train config override ({exc})") from None
-    init = init or parent.init
-    check_init(init, INFER_STARTS)
-    check_calibrated(init, parent)
-    observation = Observation.build(observe, observe_frames)
-    data, _ = select(dataset, indices)
-    mc = parent.model_config
-    initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
-    use_images = uses_images(mc, data, tc)
-    check_something_to_train(tc, use_images)
-    config = run_config("infer", init, mc, tc, data, use_images, parent=_run_path(parent))
-    config.update(observation_record(observation, data, use_images, mc.has_images))
-    world = current_world(tc.micro_batches)
-    store, ckpt = _open(out_dir, config, resume, overwrite, (dataset.path, _run_path(parent)), tc.epochs, log_to, world)
-    device = world.device(resolve_device(tc.device, tc.amp))
-    seeds = derived_seeds(tc.seed)
-    model = copy.deepcopy(parent.model)  # θ frozen, but the caller's model is never moved or changed
-    if ckpt is not None:
-        parts = unpack_checkpoint(ckpt, out_dir)
-        model.load_state_dict(parts.model)
-        initializer = parts.initializer
-        table = LatentTable.from_state_dict(parts.latents, device)
-    else:
-        scaled = parent.scaler.transform(data.motor)
-        initializer, codes = inference_start(
-            parent, init, data, scaled, observation, fitted_data, tc.seed, initial_latents
-        )
-        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
-    model.to(device).requires_grad_(False)
-    session = Session(
-        store=store,
-        config=config,
-        model=model,
-        theta_opt=None,
-        table=table,
-        scaler=parent.scaler,
-        initializer=initializer,
-        data=data,
-        use_images=use_images,
-        tc=tc,
-        device=device,
-        shuffle_seed=seeds["shuffle"],
-        frames_seed=seeds["frames"],
-        calibration=parent.calibration,
-        observation=observation,
+    session, ckpt = infer_session(
+        run,
+        dataset,
+        out_dir,
+        epochs=epochs,
+        init=init,
+        indices=indices,
+        train_config=train_config,
+        initial_latents=initial_latents,
+        resume=resume,
+        overwrite=overwrite,
+        observe=observe,
+        observe_frames=observe_frames,
+        fitted_data=fitted_data,
         log_to=log_to,
+        **overrides,
     )
-    with thread_limit(tc.threads):
-        session.run(ckpt, progress, label="infer")
-    return run_from_state(session.state(), session.history, None if store is None else store.path)
+    return run_session(session, ckpt, progress, "infer")
 
 
 @torch.no_grad()
@@ -415,68 +325,7 @@ def evaluate(
     return epoch_values(sums, len(data), use_images)
 
 
-def uses_images(
-    mc: ModelConfig, data: MotionDataset, tc: TrainConfig, images: bool | None = None, *, where: str | None = None
-) -> bool:
-    """Whether a run trains (or scores) the vision loss: the one rule.
-
-    Yes when the model has an image head, the data has images (and ``images`` is not
-    False), and ``vision_weight > 0``. ``images=True`` with a model without an image
-    head, or with data without images, is an error; so is data whose T, J or image size
-    differ from the model's.
-    """
-    if images and not mc.has_images:
-        raise UserError(f"{where + ': ' if where else ''}the model has no image head")
-    want = mc.has_images and (data.has_images if images is None else bool(images))
-    check_data_fits(data, mc, want)
-    return bool(want) and tc.vision_weight > 0
-
-
-def as_run(run: TrainedRun | str | os.PathLike) -> TrainedRun:
-    """A :class:`TrainedRun` as is, or the run read from its directory."""
-    if isinstance(run, TrainedRun):
-        return run
-    if isinstance(run, (str, os.PathLike)):
-        return load_run(run)
-    raise UserError(f"expected a TrainedRun or a run directory, got {type(run).__name__}")
-
-
 # --------------------------------------------------------------------------- helpers
-
-
-def _open(out_dir, config: dict, resume: bool, overwrite: bool, inputs: tuple, epochs: int, log_to=None, world=None):
-    """The run directory to write (None: in memory) and the checkpoint to resume from;
-    ``log_to`` checked (:func:`~primspace.train.logger.check_log_to`). With several
-    processes, process 0 checks and reads, and hands both to the others."""
-    if world is not None and world.distributed:
-        return world.from_main(lambda: _open(out_dir, config, resume, overwrite, inputs, epochs, log_to))
-    check_log_to(log_to, inputs)
-    if out_dir is None:
-        if resume:
-            raise UserError("resume=True needs the out_dir of the run to continue")
-        return None, None
-    return open_run_dir(Path(out_dir), config, resume, overwrite, inputs, epochs)
-
-
-def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: int):
-    """What fits a run's calibration map from its final codes (None: its initialiser has no data map)."""
-    if initializer.method not in CALIBRATABLE:
-        return None
-    return lambda codes: CodeCalibration(latent_dim).fit(initializer.transform(scaled), codes)
-
-
-def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDecoder:
-    """A decoder with weights drawn from ``seed`` (without touching the global RNG), then ``state`` loaded."""
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        model = MTRNNDecoder(mc)
-    if state is not None:
-        model.load_state_dict(state)
-    return model
-
-
-def _run_path(run: TrainedRun | None) -> str | None:
-    return None if run is None or run.run_dir is None else str(Path(run.run_dir).resolve())
 
 
 @contextlib.contextmanager
