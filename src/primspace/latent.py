@@ -322,16 +322,32 @@ class LatentTable:
         return self.codes.index_select(0, idx).requires_grad_(True)
 
     @torch.no_grad()
-    def step(self, idx: torch.Tensor, grad: torch.Tensor) -> None:
-        """One Adam step on rows ``idx`` (unique) with their gradient ``grad`` (B, q)."""
+    def step(
+        self, idx: torch.Tensor, grad: torch.Tensor, active: torch.Tensor | None = None, lr: torch.Tensor | None = None
+    ) -> None:
+        """One Adam step on rows ``idx`` (unique) with their gradient ``grad`` (B, q).
+
+        ``active`` (B,) bool: only those rows step, the others keep their code and Adam
+        state (a batch padded to a static size, :mod:`primspace.train.captured`); ``lr``: a
+        learning rate held in a tensor (read when the step runs, as a CUDA graph needs)
+        instead of :attr:`lr`.
+        """
         b1, b2 = self.betas
+        lr = self.lr if lr is None else lr
         m = self.exp_avg.index_select(0, idx).mul_(b1).add_(grad, alpha=1 - b1)
         v = self.exp_avg_sq.index_select(0, idx).mul_(b2).addcmul_(grad, grad, value=1 - b2)
-        s = self.steps.index_select(0, idx).add_(1)
+        before = self.steps.index_select(0, idx)
+        s = before + 1
         bias1 = 1 - torch.pow(b1, s)
         bias2_sqrt = torch.sqrt(1 - torch.pow(b2, s))
         denom = (v.sqrt() / bias2_sqrt.unsqueeze(1)).add_(self.eps)
-        update = (m / denom).mul_((self.lr / bias1).unsqueeze(1))
+        update = (m / denom).mul_((lr / bias1).unsqueeze(1))
+        if active is not None:
+            rows = active.unsqueeze(1)
+            m = torch.where(rows, m, self.exp_avg.index_select(0, idx))
+            v = torch.where(rows, v, self.exp_avg_sq.index_select(0, idx))
+            s = torch.where(active, s, before)
+            update = torch.where(rows, update, torch.zeros_like(update))
         self.exp_avg.index_copy_(0, idx, m)
         self.exp_avg_sq.index_copy_(0, idx, v)
         self.steps.index_copy_(0, idx, s)

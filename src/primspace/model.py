@@ -348,7 +348,13 @@ class MTRNNDecoder(nn.Module):
             cost, so a few steps cost a fraction of all T (the vision loss on K drawn
             frames, :class:`~primspace.train.TrainConfig` ``vision_frames``).
         """
-        fast = self.dynamics(z)
+        return self.decode(self.dynamics(z), images=images, frame_steps=frame_steps)
+
+    def decode(
+        self, fast: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None
+    ) -> DecoderOutput:
+        """The heads on the fastest layer's states ``fast`` (B, T, k_1) (:meth:`dynamics`);
+        ``images`` and ``frame_steps`` as in :meth:`forward`."""
         b, t, k = fast.shape
         flat = fast.reshape(b * t, k)
         motor = self.motor_head(flat).view(b, t, -1)

@@ -22,6 +22,7 @@ __all__ = [
     "TrainConfig",
     "TrainingDivergedError",
     "LOSS_REDUCTIONS",
+    "STEPS",
     "lr_factor",
     "resolve_device",
     "configure_process",
@@ -30,6 +31,8 @@ __all__ = [
 
 #: :attr:`TrainConfig.loss_reduction`'s values: primspace's per-element means, the paper's sums.
 LOSS_REDUCTIONS = ("mean", "sum")
+#: How a batch's step runs (TrainConfig.step).
+STEPS = ("eager", "compiled", "captured")
 
 
 class TrainingDivergedError(UserError):
@@ -142,6 +145,17 @@ class TrainConfig:
         Split each batch into this many parts, processed one after another with their
         gradients summed: the numbers of as many data-parallel processes, bit for bit on
         the CPU (:mod:`primspace.train.distributed`), at a part's peak memory.
+    step : {"eager", "compiled", "captured"}
+        How each batch's step runs (docs/performance.md, "Training at the speed of the
+        hardware"). ``"eager"`` (default): operation by operation, the numbers of every
+        earlier version bit for bit. ``"compiled"``: the recurrent loop
+        (:meth:`~primspace.model.MTRNNDecoder.dynamics`) through ``torch.compile``, its
+        cell fused (a compile of minutes the first time, cached on disk after). ``"captured"``:
+        every batch padded to ``batch_size`` with rows that weigh 0, and on CUDA the whole
+        step (forward, loss, backward, both optimisers, the codes' update) replayed as one
+        CUDA graph; on the CPU the same padded step without a graph
+        (:mod:`primspace.train.captured`). Both equal ``"eager"`` within float tolerance;
+        one process, frames in memory. May change on resume.
     """
 
     epochs: int = 100
@@ -166,6 +180,7 @@ class TrainConfig:
     frames_memory_gb: float | None = None
     loader_workers: int = 2
     micro_batches: int = 1
+    step: str = "eager"
 
     def validate(self) -> "TrainConfig":
         """This config, checked: one UserError naming the first field out of its range."""
@@ -218,6 +233,8 @@ class TrainConfig:
             raise UserError(f"loader_workers must be a whole number >= 0, got {self.loader_workers}")
         if not isinstance(self.micro_batches, int) or isinstance(self.micro_batches, bool) or self.micro_batches < 1:
             raise UserError(f"micro_batches must be a whole number >= 1, got {self.micro_batches}")
+        if self.step not in STEPS:
+            raise UserError(f"step must be one of {', '.join(STEPS)}, got {self.step!r}")
 
     def to_dict(self) -> dict:
         return asdict(self)

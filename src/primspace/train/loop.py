@@ -21,6 +21,7 @@ from primspace.data import JointScaler, MotionDataset
 from primspace.latent import LatentInitializer, LatentTable
 from primspace.model import MTRNNDecoder
 from primspace.progress import progress_bar
+from primspace.train.captured import CapturedStep, CompiledDecoder, check_single_process
 from primspace.train.config import TrainConfig, TrainingDivergedError, lr_factor
 from primspace.train.distributed import World, current_world, data_parallel, no_sync
 from primspace.train.logger import open_logger
@@ -185,6 +186,11 @@ class Session:
         self._last_checkpoint = 0
         self._calibrated = False  # the calibration map fitted at this session's last epoch
         self._checkpoint_time = time.monotonic()
+        # how a batch steps (TrainConfig.step): op by op, the recurrent loop compiled, or captured
+        self.captured = CapturedStep(self) if tc.step == "captured" else None
+        if tc.step == "compiled":
+            check_single_process(self, "step='compiled'")
+            self.net = CompiledDecoder(model)
 
     @property
     def name(self) -> str:
@@ -317,8 +323,11 @@ class Session:
     def _train_epoch(self) -> torch.Tensor:
         """One epoch of steps; its ``[loss, motor, vision]`` sums over the samples (every process's)."""
         epoch = self.begin_epoch()
-        for idx, parts in epoch.batches:
-            self._step(idx, parts, epoch.frames, epoch.sums, epoch.autocast)
+        if self.captured is not None:
+            self.captured.run(epoch)
+        else:
+            for idx, parts in epoch.batches:
+                self._step(idx, parts, epoch.frames, epoch.sums, epoch.autocast)
         return self.world.sum(epoch.sums.sum(0))
 
     def _step(self, idx: torch.Tensor, parts: list, frames, sums: torch.Tensor, autocast) -> None:

@@ -90,17 +90,32 @@ def _rows(mask: torch.Tensor | None, idx: torch.Tensor) -> torch.Tensor | None:
     return None if mask is None else mask.index_select(0, idx)
 
 
-def _mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+def _sample_mean(per_sample: torch.Tensor, weights: torch.Tensor | None) -> torch.Tensor:
+    """The mean over samples, or with ``weights`` (B,) their weighted mean (a padded row weighs 0)."""
+    if weights is None:
+        return per_sample.mean()
+    return (per_sample * weights).sum() / weights.sum()
+
+
+def _mse(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None, weights: torch.Tensor | None = None
+) -> torch.Tensor:
     """Mean squared error; with ``mask`` (B, K) over the first two axes, each sample's mean
-    over its valid entries, then the mean over samples."""
-    if mask is None:
+    over its valid entries, then the mean over samples (weighted by ``weights``)."""
+    if mask is None and weights is None:
         return F.mse_loss(pred, target)
     per_step = (pred - target).pow(2).flatten(2).mean(dim=2)
-    return ((per_step * mask).sum(dim=1) / mask.sum(dim=1).clamp_min(1.0)).mean()
+    if mask is None:
+        return _sample_mean(per_step.mean(dim=1), weights)
+    return _sample_mean((per_step * mask).sum(dim=1) / mask.sum(dim=1).clamp_min(1.0), weights)
 
 
 def _sse(
-    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None, scale: float = 1.0
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    mask: torch.Tensor | None,
+    scale: float = 1.0,
+    weights: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The paper's summed squared error (*Main Results*, ``Σ_i ‖d(θ, z_i) − o_i‖²``) and,
     detached, the per-element mean squared error that :func:`_mse` computes.
@@ -111,15 +126,17 @@ def _sse(
     """
     per_step = (pred - target).pow(2).flatten(2).sum(dim=2)  # (B, K): one sum per step
     valid = per_step if mask is None else per_step * mask
-    summed = valid.sum(dim=1).mean()
+    summed = _sample_mean(valid.sum(dim=1), weights)
     if scale != 1.0:
         summed = summed * scale
     with torch.no_grad():
         size = per_step.new_tensor(float(pred[0, 0].numel()))  # entries per step
-        if mask is None:
+        if mask is None and weights is None:
             mse = per_step.mean() / size
+        elif mask is None:
+            mse = _sample_mean(per_step.mean(dim=1), weights) / size
         else:
-            mse = (valid.sum(dim=1) / size / mask.sum(dim=1).clamp_min(1.0)).mean()
+            mse = _sample_mean(valid.sum(dim=1) / size / mask.sum(dim=1).clamp_min(1.0), weights)
     return summed, mse
 
 
@@ -141,6 +158,7 @@ def batch_loss(
     autocast,
     steps: torch.Tensor | None = None,
     frames: torch.Tensor | None = None,
+    weights: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The loss of one batch and the detached ``[loss, motor, vision]`` means.
 
@@ -151,7 +169,9 @@ def batch_loss(
     (every frame when None); a sum over them is scaled by ``T / K``, an unbiased estimate
     of the sum over all frames (each step is drawn with probability ``K / T``). ``frames``:
     the batch's stored frames (:func:`batch_frames`), given when they are streamed;
-    None: taken from ``tensors``. ``model`` may be wrapped (DDP).
+    None: taken from ``tensors``. ``model`` may be wrapped (DDP). ``weights`` (B,): the
+    means over samples become weighted means (a batch padded to a static size gives its
+    padded rows weight 0, :mod:`primspace.train.captured`); None: every sample weighs 1.
     """
     summed = tc.loss_reduction == "sum"
     use_images = tensors.use_images
@@ -159,9 +179,9 @@ def batch_loss(
     with autocast:
         out = model(z, images=use_images, frame_steps=steps if use_images else None)
     if summed:
-        motor_term, motor = _sse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask)
+        motor_term, motor = _sse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask, weights=weights)
     else:
-        motor = motor_term = _mse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask)
+        motor = motor_term = _mse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask, weights)
     if use_images:
         frame_mask = _rows(tensors.frame_steps(), idx)
         if steps is not None and frame_mask is not None:
@@ -170,16 +190,16 @@ def batch_loss(
         target = target.to(torch.float32).div_(255.0)
         if summed:
             scale = 1.0 if steps is None else tensors.motor.shape[1] / steps.shape[1]
-            vision_term, vision = _sse(out.images.float(), target, frame_mask, scale)
+            vision_term, vision = _sse(out.images.float(), target, frame_mask, scale, weights)
         else:
-            vision = vision_term = _mse(out.images.float(), target, frame_mask)
+            vision = vision_term = _mse(out.images.float(), target, frame_mask, weights)
         loss = tc.motor_weight * motor_term + tc.vision_weight * vision_term
     else:
         vision = torch.zeros((), device=motor.device)
         loss = tc.motor_weight * motor_term
     config = getattr(model, "module", model).config  # DDP holds the decoder as .module
     if tc.code_smoothness > 0 and config.code_window is not None:
-        loss = loss + tc.code_smoothness * code_variation(z, config, mask)
+        loss = loss + tc.code_smoothness * code_variation(z, config, mask, weights)
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
 
 
@@ -199,7 +219,9 @@ def code_step(
     return values
 
 
-def code_variation(z: torch.Tensor, config, mask: torch.Tensor | None) -> torch.Tensor:
+def code_variation(
+    z: torch.Tensor, config, mask: torch.Tensor | None, weights: torch.Tensor | None = None
+) -> torch.Tensor:
     """Mean over samples of ``Σ_k ‖z_{k+1} − z_k‖₂`` over each sample's valid windows
     (a window is valid when its first step is; :class:`~primspace.train.TrainConfig`
     ``code_smoothness``)."""
@@ -207,7 +229,7 @@ def code_variation(z: torch.Tensor, config, mask: torch.Tensor | None) -> torch.
     steps = torch.sqrt(codes.diff(dim=1).pow(2).sum(dim=2) + 1e-12)  # (B, K-1); smooth at 0
     if mask is not None:
         steps = steps * mask[:, :: config.code_window][:, 1:]
-    return steps.sum(dim=1).mean()
+    return _sample_mean(steps.sum(dim=1), weights)
 
 
 def autocast_for(tc: TrainConfig, device: torch.device):

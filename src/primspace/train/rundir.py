@@ -92,6 +92,7 @@ RESUMABLE_CHANGES = {
     "frames_memory_gb",
     "loader_workers",
     "micro_batches",
+    "step",
 }
 
 
