@@ -19,7 +19,8 @@ Measures, on the CPU and (when present) on a CUDA GPU, in one process:
    time and epochs done are printed every 30 s, so a time-boxed run still reports how far
    it got.
 6. ``--device cpu|cuda`` (issue 41; the modes above are then not run): per training path
-   (``--paths eager``; ``captured`` and ``packed`` print "not built yet" and are skipped) the
+   (``--paths eager compiled captured packed``: ``TrainConfig.step``, or ``--pack 1 4 16`` runs
+   trained packed, their step captured on a GPU) the
    four cases fit / infer x motor only / images at K = 8 drawn frames (``--k-frames``), each in
    a fresh process on the paper's sizes (q = 40, layers 32/12, T = 61, J = 9; fit 343 samples
    at batch 32, infer 1372 at batch 256): samples/s over ``--epochs`` timed epochs after one
@@ -267,8 +268,7 @@ def run_schedule(device: str, vision_frames: int | None, workdir: Path, fit_epoc
 
 # ---------------------------------------------------------------- issue 41: per device, per path, per case
 CASES = ("fit-motor", "fit-images", "infer-motor", "infer-images")
-PATHS = ("eager", "captured", "packed")
-BUILT_PATHS = ("eager",)
+PATHS = ("eager", "compiled", "captured", "packed")
 GRID_RUNS = 12  # 4 inits x 3 seeds
 MATMUL = ("addmm", "mm", "bmm", "baddbmm", "matmul", "linear", "conv", "convolution")
 
@@ -298,39 +298,54 @@ def case_flops_per_sample(cfg: ModelConfig, *, frozen: bool, images: bool, k_fra
     return counter.get_total_flops() / batch
 
 
-def run_case(case: str, device: str, threads: int, epochs: int, k_frames: int) -> dict:
-    """One case in a fresh process: one warm-up epoch, then ``epochs`` timed epochs."""
+def run_case(
+    case: str, device: str, threads: int, epochs: int, k_frames: int, path: str = "eager", pack: int = 1
+) -> dict:
+    """One case in a fresh process: one warm-up epoch (it holds a compile or a capture), then
+    ``epochs`` timed epochs. ``path``: ``TrainConfig.step`` (eager, compiled, captured), or
+    ``packed``: ``pack`` runs of different seeds trained packed (``primspace.train.packed``;
+    their step captured on a GPU), samples/s counting every run's samples."""
     import resource
 
+    from primspace.train.packed import fit_packed, infer_packed
+
     phase, images, data, cfg = _case_setup(case, k_frames)
-    tc = TrainConfig(
-        epochs=1 + epochs if phase == "fit" else 1,
-        batch_size=32,
-        device=device,
-        final_lr_fraction=0.1,
-        vision_frames=k_frames if images else None,
-        log_initial=False,
-        threads=threads if device == "cpu" else None,
-    )
-    configure_process(tc)
+    step = path if path != "packed" else ("captured" if device == "cuda" else "eager")
+    tcs = [
+        TrainConfig(
+            epochs=1 + epochs if phase == "fit" else 1,
+            batch_size=32,
+            device=device,
+            final_lr_fraction=0.1,
+            vision_frames=k_frames if images else None,
+            log_initial=False,
+            threads=threads if device == "cpu" else None,
+            step=step,
+            seed=seed,
+        )
+        for seed in range(pack)
+    ]
+    configure_process(tcs[0])
     if device == "cuda":
         torch.cuda.reset_peak_memory_stats()
     fitted = data.subset(np.arange(PAPER_FIT_SAMPLES))
     with tempfile.TemporaryDirectory(prefix="bench_train_case_") as tmp:
-        run = fit(fitted, Path(tmp) / "fit", model_config=cfg, train_config=tc, overwrite=True, progress=False)
+        fits = [
+            dict(dataset=fitted, out_dir=Path(tmp) / f"fit{r}", model_config=cfg, train_config=tc, overwrite=True)
+            for r, tc in enumerate(tcs)
+        ]
+        runs = fit_packed(fits, progress=False) if path == "packed" else [fit(**fits[0], progress=False)]
         if phase == "infer":
             inferred = data.subset(np.arange(PAPER_FIT_SAMPLES, len(data)))
-            run = infer(
-                Path(tmp) / "fit",
-                inferred,
-                Path(tmp) / "infer",
-                epochs=1 + epochs,
-                batch_size=256,  # the presets' infer batch
-                overwrite=True,
-                progress=False,
-            )
+            infers = [
+                dict(run=Path(tmp) / f"fit{r}", dataset=inferred, out_dir=Path(tmp) / f"infer{r}", epochs=1 + epochs)
+                for r in range(pack)
+            ]
+            for job in infers:
+                job.update(batch_size=256, overwrite=True, step=step)  # the presets' infer batch
+            runs = infer_packed(infers, progress=False) if path == "packed" else [infer(**infers[0], progress=False)]
     n = PAPER_FIT_SAMPLES if phase == "fit" else PAPER_INFER_SAMPLES
-    seconds = [h["seconds"] for h in run.history[1:]]  # the first epoch is the warm-up
+    seconds = [h["seconds"] for h in runs[0].history[1:]]  # the first epoch is the warm-up
     median = statistics.median(seconds)
     if device == "cuda":
         peak = torch.cuda.max_memory_allocated() / 2**20
@@ -339,10 +354,13 @@ def run_case(case: str, device: str, threads: int, epochs: int, k_frames: int) -
     flops = case_flops_per_sample(cfg, frozen=phase == "infer", images=images, k_frames=k_frames)
     return {
         "case": case,
+        "path": path,
+        "pack": pack,
         "samples": n,
         "batch": 32 if phase == "fit" else 256,
         "epoch_s": seconds,
-        "samples_per_s": n / median,
+        "warmup_s": runs[0].history[0]["seconds"],
+        "samples_per_s": pack * n / median,
         "flops_per_sample": flops,
         "peak_mib": peak,
     }
@@ -414,6 +432,44 @@ def profile_fit_epoch(images: bool, threads: int, k_frames: int, top: int) -> di
     }
 
 
+def _bench_path(path: str, pack: int, label: str, device: str, threads: int, workers: int, rate: float, args) -> dict:
+    """The cases of one path (and pack size), and the paper's schedule per run and per grid."""
+    rows = {}
+    for case in args.cases:
+        try:
+            r = _in_child(run_case, case, device, threads, args.epochs, args.k_frames, path, pack)
+        except Exception as exc:  # a path that fails on this machine is reported, the others still run
+            print(f"[{label}] {case}: failed: {type(exc).__name__}: {exc}", flush=True)
+            rows[case] = {"error": f"{type(exc).__name__}: {exc}"}
+            continue
+        r["fraction_of_matmul"] = r["flops_per_sample"] * r["samples_per_s"] / rate
+        rows[case] = r
+        print(
+            f"[{label}] {case:>12}: {r['samples_per_s']:8.1f} samples/s (median of {len(r['epoch_s'])} epochs, "
+            f"{statistics.median(r['epoch_s']):.2f} s each; warm-up {r['warmup_s']:.1f} s), "
+            f"{r['flops_per_sample'] / 1e6:.1f} MFLOP/sample, {r['fraction_of_matmul']:.1%} of the matmul rate, "
+            f"peak {r['peak_mib']:.0f} MiB",
+            flush=True,
+        )
+    schedules = {}
+    for what in ("motor", "images"):
+        f, i = rows.get(f"fit-{what}", {}), rows.get(f"infer-{what}", {})
+        if "samples_per_s" not in f or "samples_per_s" not in i:
+            continue
+        # one run's (or one pack's) schedule at the measured pace; a pack trains `pack` runs in that time
+        run_s = pack * (PAPER_FIT_EPOCHS * PAPER_FIT_SAMPLES / f["samples_per_s"])
+        run_s += pack * (PAPER_INFER_EPOCHS * PAPER_INFER_SAMPLES / i["samples_per_s"])
+        at_once = pack if path == "packed" else (workers if device == "cpu" else 1)
+        grid_s = -(-GRID_RUNS // at_once) * run_s
+        schedules[what] = {"run_min": run_s / 60 / pack if path == "packed" else run_s / 60, "grid_min": grid_s / 60}
+        print(
+            f"[{label}] paper schedule, {what}: {run_s / 60:.1f} min per {'pack' if path == 'packed' else 'run'}, "
+            f"{grid_s / 60:.1f} min per grid ({GRID_RUNS} runs, {at_once} at a time) -- extrapolated from the "
+            "epoch times, not run"
+        )
+    return {"cases": rows, "schedule": schedules}
+
+
 def bench_issue41(args) -> dict:
     """Per device and path, the four cases; the paper's schedule per run and per grid."""
     device = args.device
@@ -428,34 +484,9 @@ def bench_issue41(args) -> dict:
     print(f"\n=== {device} ({where}): dense fp32 matmul 2048^3 in this run: {rate / 1e9:.1f} GFLOP/s")
     out = {"device": device, "threads": threads, "workers": workers, "matmul_flops": rate, "paths": {}}
     for path in args.paths:
-        if path not in BUILT_PATHS:
-            print(f"[{path}] not built yet: skipped")
-            continue
-        rows = {}
-        for case in args.cases:
-            r = _in_child(run_case, case, device, threads, args.epochs, args.k_frames)
-            r["fraction_of_matmul"] = r["flops_per_sample"] * r["samples_per_s"] / rate
-            rows[case] = r
-            print(
-                f"[{path}] {case:>12}: {r['samples_per_s']:8.1f} samples/s (median of {len(r['epoch_s'])} epochs, "
-                f"{statistics.median(r['epoch_s']):.2f} s each), {r['flops_per_sample'] / 1e6:.1f} MFLOP/sample, "
-                f"{r['fraction_of_matmul']:.1%} of the matmul rate, peak {r['peak_mib']:.0f} MiB",
-                flush=True,
-            )
-        schedules = {}
-        for what in ("motor", "images"):
-            f, i = rows.get(f"fit-{what}"), rows.get(f"infer-{what}")
-            if f is None or i is None:
-                continue
-            run_s = PAPER_FIT_EPOCHS * PAPER_FIT_SAMPLES / f["samples_per_s"]
-            run_s += PAPER_INFER_EPOCHS * PAPER_INFER_SAMPLES / i["samples_per_s"]
-            grid_s = -(-GRID_RUNS // workers) * run_s  # waves of `workers` runs, each at the measured pace
-            schedules[what] = {"run_min": run_s / 60, "grid_min": grid_s / 60}
-            print(
-                f"[{path}] paper schedule, {what}: {run_s / 60:.1f} min per run, {grid_s / 60:.1f} min per grid "
-                f"({GRID_RUNS} runs, {workers} at a time) -- extrapolated from the epoch times, not run"
-            )
-        out["paths"][path] = {"cases": rows, "schedule": schedules}
+        for pack in args.pack if path == "packed" else [1]:
+            label = f"packed x{pack}" if path == "packed" else path
+            out["paths"][label] = _bench_path(path, pack, label, device, threads, workers, rate, args)
     if args.profile and device == "cpu":
         out["profile"] = {}
         for images in (False, True):
@@ -498,8 +529,9 @@ def main() -> None:
     issue41 = parser.add_argument_group("issue 41 (per device, path and case; chosen by --device)")
     issue41.add_argument("--device", choices=("cpu", "cuda"), default=None, help="measure the four cases here")
     issue41.add_argument(
-        "--paths", nargs="+", choices=PATHS, default=["eager"], help="training paths (captured, packed: not built yet)"
+        "--paths", nargs="+", choices=PATHS, default=["eager"], help="training paths (TrainConfig.step, or packed)"
     )
+    issue41.add_argument("--pack", nargs="+", type=int, default=[1, 4, 16], help="runs per pack of --paths packed")
     issue41.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
     issue41.add_argument("--k-frames", type=int, default=8, help="K drawn frames of the image cases")
     issue41.add_argument("--workers", type=int, default=None, help="parallel runs of a grid (default: CPUs / threads)")

@@ -29,7 +29,16 @@ import torch
 from primspace.errors import UserError
 from primspace.train.loss import batch_loss
 
-__all__ = ["CompiledDecoder", "CapturedStep", "StepGraph", "padded_rows", "check_single_process", "COMPILE_BACKEND"]
+__all__ = [
+    "CompiledDecoder",
+    "CapturedStep",
+    "StepGraph",
+    "padded_rows",
+    "check_single_process",
+    "tensor_rates",
+    "float_rates",
+    "COMPILE_BACKEND",
+]
 
 #: The ``torch.compile`` backend of ``step="compiled"`` (the tests on machines without a
 #: GPU trace with ``"eager"``: inductor's first compile takes minutes on two cores).
@@ -189,18 +198,25 @@ class CapturedStep:
         """The epoch's learning rates (set by ``begin_epoch``) into the tensors the step reads."""
         s = self.session
         self.code_lr.fill_(s.table.lr)
-        if s.theta_opt is None or self.graph is None:  # no graph: θ's float rate, read as the eager step reads it
-            return
-        self.theta_lr.fill_(s.theta_opt.param_groups[0]["lr"])
-        for group in s.theta_opt.param_groups:
-            group["lr"], group["capturable"] = self.theta_lr, True
-        for state in s.theta_opt.state.values():  # a resumed optimiser's step counts on the device
-            if "step" in state and state["step"].device != s.device:
-                state["step"] = state["step"].to(s.device, torch.float32)
+        if s.theta_opt is not None and self.graph is not None:  # no graph: θ's float rate, as the eager step reads it
+            tensor_rates(s.theta_opt, self.theta_lr, s.device)
 
     def _rates_out(self) -> None:
-        """Plain rates again, so the checkpoint's optimiser state loads anywhere."""
-        s = self.session
-        if s.theta_opt is not None and self.graph is not None:
-            for group in s.theta_opt.param_groups:
-                group["lr"], group["capturable"] = float(self.theta_lr), False
+        if self.session.theta_opt is not None and self.graph is not None:
+            float_rates(self.session.theta_opt, self.theta_lr)
+
+
+def tensor_rates(opt, lr: torch.Tensor, device) -> None:
+    """Make ``opt`` (Adam) capturable, its rate read from ``lr`` (filled with its current rate)."""
+    lr.fill_(opt.param_groups[0]["lr"])
+    for group in opt.param_groups:
+        group["lr"], group["capturable"] = lr, True
+    for state in opt.state.values():  # a resumed optimiser's step counts on the device
+        if "step" in state and state["step"].device != device:
+            state["step"] = state["step"].to(device, torch.float32)
+
+
+def float_rates(opt, lr: torch.Tensor) -> None:
+    """Undo :func:`tensor_rates`: plain rates again, so a checkpoint's optimiser state loads anywhere."""
+    for group in opt.param_groups:
+        group["lr"], group["capturable"] = float(lr), False

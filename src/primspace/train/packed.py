@@ -34,6 +34,7 @@ from torch.func import functional_call, vmap
 
 from primspace.errors import UserError
 from primspace.progress import progress_bar
+from primspace.train.captured import StepGraph, float_rates, padded_rows, tensor_rates
 from primspace.train.config import TrainingDivergedError, thread_limit
 from primspace.train.loop import Session
 from primspace.train.loss import DataTensors, batch_loss
@@ -106,40 +107,91 @@ class PackedStep:
         if self.base.image_head is not None:
             self.base.image_head.channels_last = False
         self.names = [name for name, _ in self.base.named_parameters()]
-        self.data = {
-            f: torch.stack([getattr(s.tensors, f) for s in sessions])
-            for f in _DATA_FIELDS
-            if getattr(sessions[0].tensors, f) is not None
-        }
-        self.tc = sessions[0].tc
+        # each data tensor once when every run trains on the same (an experiment's inits), else stacked
+        self.data, self.data_dims = {}, {}
+        for f in _DATA_FIELDS:
+            tensors = [getattr(s.tensors, f) for s in sessions]
+            if tensors[0] is None:
+                continue
+            shared = all(t is tensors[0] or torch.equal(t, tensors[0]) for t in tensors[1:])
+            self.data[f] = tensors[0] if shared else torch.stack(tensors)
+            self.data_dims[f] = None if shared else 0
+        first, runs, device = sessions[0], len(sessions), sessions[0].device
+        self.tc, self.n = first.tc, first.n
+        # static buffers, one row per run (primspace.train.captured): padded batches of one size
+        self.size = min(self.tc.batch_size, self.n)
+        self.idx = torch.arange(self.size, device=device).repeat(runs, 1)
+        self.weights = torch.zeros(runs, self.size, device=device)
+        self.active = torch.zeros(runs, self.size, dtype=torch.bool, device=device)
+        self.count = torch.zeros(runs, device=device)
+        k = None if first.frames is None else first.frames[0]
+        self.steps = None if k is None else torch.zeros(runs, self.size, k, dtype=torch.long, device=device)
+        self.values = torch.zeros(runs, 3, device=device)
+        self.code_lr = torch.zeros(runs, device=device)
+        self.theta_lr = torch.zeros(runs, device=device)
+        self.autocast = None
+        self.graph = None
+        self.optimizers = [s.theta_opt for s in sessions if s.theta_opt is not None]
+        if device.type == "cuda" and self.tc.step == "captured":
+            state = [t for s in sessions for t in (s.table.codes, s.table.exp_avg, s.table.exp_avg_sq, s.table.steps)]
+            state += [p for s in sessions for p in s.model.parameters() if p.requires_grad]
+            self.graph = StepGraph(self._compute, state, self.optimizers)
 
-    def _loss(self, params: dict, z: torch.Tensor, idx: torch.Tensor, steps, data: dict, autocast):
+    def _loss(self, params: dict, z, idx, steps, data: dict, weights):
         tensors = DataTensors(**{f: data.get(f) for f in _DATA_FIELDS})
         model = _Functional(self.base, params)
-        return batch_loss(model, z, idx, tensors, self.tc, autocast, steps)
+        return batch_loss(model, z, idx, tensors, self.tc, self.autocast, steps, None, weights)
 
-    def step(self, batches: list, sums: list[torch.Tensor], autocast) -> None:
+    def begin_epoch(self, autocast) -> None:
+        """The epoch's learning rates (set by each session's ``begin_epoch``) into the step's tensors."""
+        self.autocast = autocast
+        for r, s in enumerate(self.sessions):
+            self.code_lr[r] = s.table.lr
+            if s.theta_opt is not None and self.graph is not None:
+                tensor_rates(s.theta_opt, self.theta_lr[r], s.device)
+
+    def end_epoch(self) -> None:
+        if self.graph is not None:
+            for r, s in enumerate(self.sessions):
+                if s.theta_opt is not None:
+                    float_rates(s.theta_opt, self.theta_lr[r])
+
+    def step(self, batches: list, sums: list[torch.Tensor]) -> None:
         """One batch of every run: ``batches[r]`` is run r's ``(idx, parts)`` of
         :meth:`Session.begin_epoch` (one part), ``sums[r]`` its epoch's loss sums."""
-        for s in self.sessions:
-            if s.theta_opt is not None:
-                s.theta_opt.zero_grad(set_to_none=True)
         parts = [parts[0] for _, parts in batches]
-        zs = [s.table.batch(rows) for s, (_, rows, _) in zip(self.sessions, parts)]
+        for r, (_, rows, steps) in enumerate(parts):
+            b = rows.numel()
+            self.idx[r] = padded_rows(rows, self.n, self.size)
+            self.weights[r].zero_()[:b] = 1.0
+            self.active[r].zero_()[:b] = True
+            self.count[r] = b
+            if steps is not None:
+                self.steps[r].zero_()[:b] = steps
+        if self.graph is not None:
+            self.graph.replay()
+        else:
+            for opt in self.optimizers:
+                opt.zero_grad(set_to_none=True)
+            self._compute()
+        for r, (part, _, _) in enumerate(parts):
+            sums[r][part.micro] += self.values[r].double() * part.size
+
+    def _compute(self) -> None:
+        zs = [s.table.codes.index_select(0, self.idx[r]).requires_grad_(True) for r, s in enumerate(self.sessions)]
         own = [dict(s.model.named_parameters()) for s in self.sessions]
         params = {name: torch.stack([p[name] for p in own]) for name in self.names}
-        rows = torch.stack([r for _, r, _ in parts])
-        steps = None if parts[0][2] is None else torch.stack([st for _, _, st in parts])
-        in_dims = (0, 0, 0, None if steps is None else 0, 0, None)
-        loss, values = vmap(self._loss, in_dims=in_dims)(params, torch.stack(zs), rows, steps, self.data, autocast)
+        in_dims = (0, 0, 0, None if self.steps is None else 0, self.data_dims, 0)
+        loss, values = vmap(self._loss, in_dims=in_dims)(
+            params, torch.stack(zs), self.idx, self.steps, self.data, self.weights
+        )
         loss.sum().backward()  # each run's loss has weight 1 in the sum: its gradients are its own
         for r, s in enumerate(self.sessions):
-            part = parts[r][0]
-            grad = zs[r].grad.mul_(part.code_scale)  # each code on its own sample's loss (Session._step)
-            sums[r][part.micro] += values[r].double() * part.size
             if s.theta_opt is not None:
                 s.theta_opt.step()
-            s.table.step(batches[r][0], grad)
+            # the weighted mean scaled each code's gradient by 1/b: undone (Session._step)
+            s.table.step(self.idx[r], zs[r].grad.mul_(self.count[r]), self.active[r], self.code_lr[r])
+        self.values.copy_(values.detach())
 
 
 class _Functional:
@@ -196,8 +248,12 @@ def _train_group(group: list[Session], progress: bool | None, label: str) -> lis
         while group and group[0].epoch < epochs:
             t0 = time.perf_counter()
             plans = [s.begin_epoch() for s in group]
-            for batches in zip(*(p.batches for p in plans)):
-                step.step(list(batches), [p.sums for p in plans], plans[0].autocast)
+            step.begin_epoch(plans[0].autocast)
+            try:
+                for batches in zip(*(p.batches for p in plans)):
+                    step.step(list(batches), [p.sums for p in plans])
+            finally:
+                step.end_epoch()
             seconds = time.perf_counter() - t0
             going, lines = [], []
             for s, plan in zip(group, plans):
