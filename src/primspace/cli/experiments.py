@@ -31,7 +31,7 @@ class Backend(str, Enum):
     ray = "ray"
 
 
-def _experiment(preset: str | None, data, out, backend, address, workers, seed, overrides: dict):
+def _experiment(preset: str | None, data, out, backend, address, workers, seed, overrides: dict, pack: int = 1):
     from primspace.experiments.presets import DEFAULT_PRESET, resolve_preset
     from primspace.experiments.workspace import ExperimentDir
     from primspace.parallel import default_workers
@@ -39,6 +39,8 @@ def _experiment(preset: str | None, data, out, backend, address, workers, seed, 
     from primspace.cli.app import invocation
 
     check_workers(workers)
+    if pack < 1:
+        raise UserError(f"--pack {pack}: must be at least 1")
     chosen = resolve_preset(preset or DEFAULT_PRESET).with_overrides(**overrides)
     exp = ExperimentDir(
         out,
@@ -47,6 +49,7 @@ def _experiment(preset: str | None, data, out, backend, address, workers, seed, 
         backend=backend.value,
         address=address,
         workers=workers or default_workers(),
+        pack=pack,
         **({} if seed is None else {"seed": seed}),  # else ExperimentDir's default
     )
     if invocation() is not None:
@@ -153,6 +156,10 @@ _INITS_HELP = (
     "Override the initialisations compared (by inter too, for inter and all), e.g. zero,projection,calibrated."
 )
 _VISION_FRAMES_HELP = "Vision loss on K drawn frames per sequence and step (default: every frame)."
+_PACK_HELP = (
+    "Train up to N runs of the intra-primitive grid at once on one device, packed (primspace.train.packed; "
+    "within float tolerance of each run alone, not bit-identical). Default 1: each run alone."
+)
 
 
 def _experiment_command(
@@ -180,6 +187,7 @@ def _experiment_command(
             None, "--address", help="Ray cluster address (default: start a local Ray instance)."
         ),
         workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+        pack: int = typer.Option(1, "--pack", metavar="N", help=_PACK_HELP),
         seed: Optional[int] = typer.Option(
             None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."
         ),
@@ -203,7 +211,9 @@ def _experiment_command(
         overrides = _overrides(
             name, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads
         )
-        exp = _experiment(_preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides)
+        exp = _experiment(
+            _preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides, pack=pack
+        )
         _run_steps(exp, name, steps, table)
         _finish(exp, report or name == "all")
 

@@ -35,6 +35,7 @@ from primspace.experiments.runs import (
     intra_run_dir,
     load_codes,
     load_run_data,
+    pack_grid_runs,
     phase_dir,
     shared_fits_last,
 )
@@ -97,7 +98,7 @@ def run_intra(exp: ExperimentDir) -> dict:
     the latent figures, the Appendix A check, and the figures."""
     preset = exp.preset
     data = exp.dataset()
-    points, splits = [], {}
+    points, splits, packed = [], {}, []
     for seed in preset.seeds:
         train, evaluation = split_indices(data.labels, preset.train_fraction, seed)
         splits[str(seed)] = {"train": train.tolist(), "eval": evaluation.tolist()}
@@ -105,7 +106,10 @@ def run_intra(exp: ExperimentDir) -> dict:
             for init in preset.inits:
                 args = (str(exp.data_path), train.tolist(), evaluation.tolist(), init, q, seed, preset.to_dict())
                 points.append(GridPoint(intra_key(init, q, seed), args))
+                packed.append((intra_run_dir(exp.path, init, q, seed), init, q, seed, train, evaluation))
     with exp.stage("intra"):
+        if exp.pack > 1:  # the unfinished runs trained packed first: the grid then finds them finished
+            _pack_runs(exp, packed)
         grid = exp.grid(run_intra_point, shared_fits_last(points), "intra-primitive runs")
     _complete_final_losses(exp, grid.results)
     runs = [grid.results[p.key] | {"key": p.key} for p in points if p.key in grid.results]
@@ -123,6 +127,13 @@ def run_intra(exp: ExperimentDir) -> dict:
     figures.draw_intra(exp.path)
     write_animations(exp, results)
     return results
+
+
+def _pack_runs(exp: ExperimentDir, points: list[tuple]) -> None:
+    """The grid's unfinished fits and inferences trained packed, ``exp.pack`` at once
+    (:func:`~primspace.experiments.runs.pack_grid_runs`), on the data as the grid's points load it."""
+    data, use_images = load_run_data(str(exp.data_path), exp.preset)
+    pack_grid_runs(points, data, exp.preset, use_images, exp.pack, progress=exp.progress)
 
 
 def _complete_final_losses(exp: ExperimentDir, results: dict) -> None:

@@ -9,18 +9,26 @@ An inference start that needs a trained run (``calibrated``) has no fit of its o
 point infers with the fit of the init it calibrates (:data:`FIT_INIT_OF`), e.g.
 ``intra/calibrated-q40-s0/infer`` from ``intra/projection-q40-s0/fit``. Both points
 resume that fit under one lock, so whichever starts first trains it and the other waits.
+
+A grid point's runs are the keyword arguments of :func:`primspace.train.fit` and
+:func:`primspace.train.infer` that :func:`point_jobs` builds: :func:`fit_and_infer` runs
+them one after the other, and :func:`pack_grid_runs` trains the unfinished ones of many
+points packed on one device (:mod:`primspace.train.packed`) before the grid, which then
+finds them finished.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from primspace.data import MotionDataset
+from primspace.errors import UserError
 from primspace.experiments.presets import ExperimentPreset
-from primspace.experiments.sweep import run_dir_of
+from primspace.experiments.sweep import RESULT_FILE, run_dir_of
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = [
@@ -30,6 +38,7 @@ __all__ = [
     "intra_run_dir",
     "phase_dir",
     "fit_point_dir",
+    "fit_lock",
     "shared_fit",
     "shared_fits_last",
     "train_configs",
@@ -41,8 +50,12 @@ __all__ = [
     "initial_codes",
     "all_frame_losses",
     "psnr",
+    "point_jobs",
     "fit_and_infer",
+    "pack_grid_runs",
 ]
+
+log = logging.getLogger(__name__)
 
 
 #: Starts whose grid point infers with another init's fit.
@@ -86,13 +99,20 @@ def shared_fits_last(points: list) -> list:
     return sorted(points, key=lambda p: p.key.split("/", 1)[-1].split("-", 1)[0] in FIT_INIT_OF)
 
 
-def shared_fit(fit_dir: Path, **fit_args):
-    """:func:`primspace.train.fit` into ``fit_dir`` with ``resume=True``, holding a lock
-    beside it: grid points that share a fit (:data:`FIT_INIT_OF`) train it once."""
+def fit_lock(fit_dir: Path):
+    """The lock (a context manager) beside ``fit_dir`` that grid points sharing a fit
+    (:data:`FIT_INIT_OF`) hold while they resume it, so they train it once."""
     from primspace.files import exclusive_lock
+
+    return exclusive_lock(fit_dir.parent / f".{fit_dir.name}.lock")
+
+
+def shared_fit(fit_dir: Path, **fit_args):
+    """:func:`primspace.train.fit` into ``fit_dir`` with ``resume=True``, holding
+    :func:`fit_lock`: grid points that share a fit (:data:`FIT_INIT_OF`) train it once."""
     from primspace.train import fit
 
-    with exclusive_lock(fit_dir.parent / f".{fit_dir.name}.lock"):
+    with fit_lock(fit_dir):
         return fit(resume=True, out_dir=fit_dir, **fit_args)
 
 
@@ -206,6 +226,55 @@ def all_frame_losses(fitted, inferred, data: MotionDataset) -> dict | None:
     return out
 
 
+def point_jobs(
+    run_dir: Path,
+    data: MotionDataset,
+    preset: ExperimentPreset,
+    init: str,
+    latent_dim: int,
+    seed: int,
+    train_idx,
+    eval_idx,
+    use_images: bool,
+) -> tuple[dict, dict]:
+    """The keyword arguments of :func:`primspace.train.fit` and :func:`primspace.train.infer`
+    (``progress`` aside) of one grid point's two phases, each resuming its run directory:
+    fit θ and the codes on ``train_idx`` into the fit of :func:`fit_point_dir` (a calibrated
+    point's is its projection point's), then infer the codes of ``eval_idx`` with θ frozen
+    into ``run_dir/infer``. The one place these runs are defined (:func:`fit_and_infer`,
+    :func:`pack_grid_runs`).
+
+    Returns
+    -------
+    (dict, dict)
+        The fit's and the inference's arguments.
+    """
+    model_config, train_config = train_configs(preset, latent_dim, seed, preset.fit_epochs)
+    fit_dir = fit_point_dir(run_dir, init) / "fit"
+    fit_job = dict(
+        dataset=data,
+        out_dir=fit_dir,
+        resume=True,
+        model_config=model_config,
+        train_config=train_config,
+        init=fit_init(init),
+        indices=np.asarray(train_idx),
+        images=use_images,
+        scaler=experiment_scaler(data),
+    )
+    infer_job = dict(
+        run=fit_dir,
+        dataset=data,
+        out_dir=run_dir / "infer",
+        resume=True,
+        epochs=preset.infer_epochs,
+        init=init,
+        indices=np.asarray(eval_idx),
+        batch_size=preset.infer_batch_size,
+    )
+    return fit_job, infer_job
+
+
 def fit_and_infer(
     run_dir: Path,
     data: MotionDataset,
@@ -217,10 +286,11 @@ def fit_and_infer(
     eval_idx,
     use_images: bool,
 ):
-    """One grid point's two phases: fit θ and the codes on ``train_idx``, then infer the
-    codes of ``eval_idx`` with θ frozen, into ``run_dir/fit`` and ``run_dir/infer`` (each
-    resumes from its checkpoint when the point was interrupted). A calibrated point
-    infers with its projection point's fit (:func:`shared_fit`).
+    """One grid point's two phases (:func:`point_jobs`): fit θ and the codes on
+    ``train_idx``, then infer the codes of ``eval_idx`` with θ frozen, into ``run_dir/fit``
+    and ``run_dir/infer`` (each resumes from its checkpoint when the point was
+    interrupted). A calibrated point infers with its projection point's fit, resumed
+    under :func:`fit_lock`.
 
     Returns
     -------
@@ -229,33 +299,151 @@ def fit_and_infer(
     """
     import time
 
-    from primspace.train import configure_process, infer
+    from primspace.train import configure_process, fit, infer
 
     start = time.perf_counter()
-    model_config, train_config = train_configs(preset, latent_dim, seed, preset.fit_epochs)
-    configure_process(train_config)  # one thread per run (the preset's threads), as every backend
-    fit_dir = fit_point_dir(run_dir, init) / "fit"
-    fitted = shared_fit(
-        fit_dir,
-        dataset=data,
-        model_config=model_config,
-        train_config=train_config,
-        init=fit_init(init),
-        indices=np.asarray(train_idx),
-        images=use_images,
-        scaler=experiment_scaler(data),
-        progress=False,
-    )
+    fit_job, infer_job = point_jobs(run_dir, data, preset, init, latent_dim, seed, train_idx, eval_idx, use_images)
+    configure_process(fit_job["train_config"])  # one thread per run (the preset's threads), as every backend
+    with fit_lock(fit_job["out_dir"]):
+        fitted = fit(**fit_job, progress=False)
     fit_seconds = time.perf_counter() - start
-    inferred = infer(
-        fit_dir,
-        data,
-        run_dir / "infer",
-        epochs=preset.infer_epochs,
-        init=init,
-        indices=np.asarray(eval_idx),
-        resume=True,
-        progress=False,
-        batch_size=preset.infer_batch_size,
-    )
+    inferred = infer(**infer_job, progress=False)
     return fitted, inferred, fit_seconds
+
+
+# ------------------------------------------------------------------ runs packed
+
+
+def pack_grid_runs(
+    points: list[tuple],
+    data: MotionDataset,
+    preset: ExperimentPreset,
+    use_images: bool,
+    pack: int,
+    progress: bool | None = None,
+) -> dict[str, list[Path]]:
+    """Train the unfinished runs of grid points packed, up to ``pack`` at once on one device
+    (:mod:`primspace.train.packed`): first their fits (a fit that points share, once), then
+    the inferences whose fit is finished. Each run is :func:`point_jobs`'s, in its own run
+    directory, so the grid run afterwards (:func:`fit_and_infer`) resumes it and finds it
+    finished; a packed run is the run alone within float tolerance, not bit for bit.
+
+    Runs pack when :func:`~primspace.train.packed.pack_key` agrees (one latent size, one
+    number of samples). A point whose ``result.json`` exists, and a run that is finished or
+    whose checkpoint cannot be read, is left alone; a run that cannot start or a pack that
+    fails (e.g. a run diverged) is logged and left to the grid, which trains it alone and
+    records its failure as usual.
+
+    Parameters
+    ----------
+    points : list of tuple
+        ``(run_dir, init, latent_dim, seed, train_idx, eval_idx)`` of each grid point, as
+        :func:`fit_and_infer` takes them.
+    data, preset, use_images
+        As :func:`fit_and_infer` (:func:`load_run_data`).
+    pack : int
+        The most runs trained at once.
+
+    Returns
+    -------
+    dict
+        ``trained``: the run directories trained to their end here; ``left``: those left to the grid.
+    """
+    from primspace.train import configure_process
+    from primspace.train.sessions import fit_session, infer_session
+
+    jobs = [
+        (q, *point_jobs(run_dir, data, preset, init, q, seed, train_idx, eval_idx, use_images))
+        for run_dir, init, q, seed, train_idx, eval_idx in points
+        if not (run_dir / RESULT_FILE).exists()
+    ]
+    done: dict[str, list[Path]] = {"trained": [], "left": []}
+    if not jobs:
+        return done
+    configure_process(jobs[0][1]["train_config"])  # as fit_and_infer: the preset's threads
+    fits = {str(fit_job["out_dir"]): (q, fit_job) for q, fit_job, _ in jobs}  # a shared fit once
+    pending = [(q, job) for q, job in fits.values() if _unfinished(job["out_dir"], preset.fit_epochs)]
+    _train_in_packs(fit_session, pending, pack, progress, "fit", done)
+    pending = [
+        (q, infer_job)
+        for q, fit_job, infer_job in jobs
+        if _trained_epochs(fit_job["out_dir"]) == preset.fit_epochs
+        and _unfinished(infer_job["out_dir"], preset.infer_epochs)
+    ]
+    _train_in_packs(infer_session, pending, pack, progress, "infer", done)
+    return done
+
+
+def _trained_epochs(run_dir: Path) -> int | None:
+    """The epochs of the checkpoint in ``run_dir`` (0: none yet), None when it cannot be read."""
+    from primspace.train.checkpoint import read_checkpoint
+    from primspace.train.rundir import CHECKPOINT_NAME
+
+    try:
+        ckpt = read_checkpoint(Path(run_dir) / CHECKPOINT_NAME, "cpu")
+        return 0 if ckpt is None else int(ckpt["epoch"])
+    except (UserError, KeyError, TypeError, ValueError):
+        return None
+
+
+def _unfinished(run_dir: Path, epochs: int) -> bool:
+    """Whether the run in ``run_dir`` is to be trained (on to ``epochs``) packed."""
+    trained = _trained_epochs(run_dir)
+    return trained is not None and trained < epochs
+
+
+def _train_in_packs(build, jobs: list[tuple], pack: int, progress, label: str, done: dict) -> None:
+    """Build the session of each ``(latent_dim, job)`` (``build``: fit_session or
+    infer_session) and train them in packs of up to ``pack`` whose pack keys agree, one
+    latent size after the other (so that few sessions wait in memory); ``done`` gets their
+    run directories."""
+    from primspace.train.packed import pack_key
+
+    buckets: dict[tuple, list] = {}
+    try:
+        for q, job in sorted(jobs, key=lambda j: j[0]):
+            if any(key[0] != q for key in buckets):  # the next latent size: the last one's packs train now
+                for key in list(buckets):
+                    _train_pack(buckets.pop(key), progress, label, done)
+            try:
+                prepared = build(**job)
+            except UserError as exc:
+                log.warning("%s: not trained packed, left to the grid (%s)", job["out_dir"], exc)
+                done["left"].append(Path(job["out_dir"]))
+                continue
+            key = (q, pack_key(prepared[0]))
+            buckets.setdefault(key, []).append(prepared)
+            if len(buckets[key]) >= pack:
+                _train_pack(buckets.pop(key), progress, label, done)
+        for key in list(buckets):
+            _train_pack(buckets.pop(key), progress, label, done)
+    finally:
+        for bucket in buckets.values():  # an unexpected error: no run keeps its writer's lock
+            for session, _ in bucket:
+                session.close()
+
+
+def _train_pack(prepared: list[tuple], progress, label: str, done: dict) -> None:
+    """Train the sessions ``prepared`` (with their checkpoints) packed, one alone; a failure
+    is logged and its runs left to the grid."""
+    import torch
+
+    from primspace.train import TrainingDivergedError
+    from primspace.train.packed import train_packed
+    from primspace.train.sessions import run_session
+
+    sessions = [session for session, _ in prepared]
+    try:
+        if len(prepared) == 1:
+            run_session(*prepared[0], progress, label)  # alone, as the grid would train it
+        else:
+            train_packed(prepared, progress, label)
+    except (UserError, TrainingDivergedError, torch.cuda.OutOfMemoryError) as exc:
+        names = ", ".join(str(s.run_dir.path) for s in sessions)
+        log.warning("%s %d runs packed failed, left to the grid (%s): %s", label, len(sessions), exc, names)
+    finally:
+        for session in sessions:
+            session.close()  # train_packed closes them, except when it refuses them
+    for session in sessions:
+        finished = session.epoch >= session.tc.epochs
+        done["trained" if finished else "left"].append(session.run_dir.path)

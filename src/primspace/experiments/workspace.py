@@ -63,6 +63,10 @@ class ExperimentDir:
     progress : bool, optional
     seed : int
         Seed of the generated data.
+    pack : int
+        Train up to ``pack`` runs of the intra-primitive grid at once on one device
+        (:func:`primspace.experiments.runs.pack_grid_runs`) before the grid; 1: each run
+        alone. Not a setting of the results (not in the preset).
     """
 
     def __init__(
@@ -76,12 +80,14 @@ class ExperimentDir:
         address: str | None = None,
         progress: bool | None = None,
         seed: int = 0,
+        pack: int = 1,
     ) -> None:
         self.path = Path(path)
         self.preset = preset
         self.backend, self.workers, self.address = backend, workers, address
         self.progress = progress
         self.seed = seed
+        self.pack = pack
         if self.path.exists() and not self.path.is_dir():
             raise UserError(f"{self.path}: exists and is not a directory")
         data_path = Path(data).resolve() if data is not None else (self.path / "data.h5").resolve()
