@@ -216,10 +216,10 @@ def train_packed(
     is raised when they are done.
     """
     sessions = [s for s, _ in prepared]
-    _check_packable(sessions)
     errors = []
     with thread_limit(sessions[0].tc.threads):
         try:
+            _check_packable(sessions)  # inside: a refused pack still closes its sessions (their run directories' locks)
             for s, ckpt in prepared:
                 s.start(ckpt)
             for start in sorted({s.epoch for s in sessions}):
