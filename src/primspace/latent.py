@@ -301,10 +301,18 @@ class LatentTable:
     lr : float
         Learning rate of the codes.
     betas, eps : Adam's constants.
+    optimizer : {"adam", "sgd"}
+        ``"sgd"``: plain gradient descent instead, ``z_i ← z_i − lr ∇ℓ_i`` (the paper's "usual
+        batch gradient descend"; :class:`~primspace.train.TrainConfig` ``optimizer``).
     """
 
     def __init__(
-        self, codes: torch.Tensor, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8
+        self,
+        codes: torch.Tensor,
+        lr: float,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+        optimizer: str = "adam",
     ) -> None:
         self.codes = codes.detach().to(torch.float32).clone()
         self.exp_avg = torch.zeros_like(self.codes)
@@ -313,6 +321,9 @@ class LatentTable:
         self.lr = float(lr)
         self.betas = (float(betas[0]), float(betas[1]))
         self.eps = float(eps)
+        if optimizer not in ("adam", "sgd"):
+            raise ValueError(f"optimizer must be 'adam' or 'sgd', got {optimizer!r}")
+        self.optimizer = optimizer
 
     def __len__(self) -> int:
         return self.codes.shape[0]
@@ -332,8 +343,11 @@ class LatentTable:
         learning rate held in a tensor (read when the step runs, as a CUDA graph needs)
         instead of :attr:`lr`.
         """
-        b1, b2 = self.betas
         lr = self.lr if lr is None else lr
+        if self.optimizer == "sgd":
+            self._descend(idx, grad, active, lr)
+            return
+        b1, b2 = self.betas
         m = self.exp_avg.index_select(0, idx).mul_(b1).add_(grad, alpha=1 - b1)
         v = self.exp_avg_sq.index_select(0, idx).mul_(b2).addcmul_(grad, grad, value=1 - b2)
         before = self.steps.index_select(0, idx)
@@ -353,6 +367,16 @@ class LatentTable:
         self.steps.index_copy_(0, idx, s)
         self.codes.index_add_(0, idx, update, alpha=-1.0)
 
+    def _descend(self, idx: torch.Tensor, grad: torch.Tensor, active: torch.Tensor | None, lr) -> None:
+        """Plain gradient descent of rows ``idx`` (``steps`` still counts each row's steps)."""
+        update = grad * lr
+        steps = self.steps.index_select(0, idx) + 1
+        if active is not None:
+            update = torch.where(active.unsqueeze(1), update, torch.zeros_like(update))
+            steps = torch.where(active, steps, steps - 1)
+        self.steps.index_copy_(0, idx, steps)
+        self.codes.index_add_(0, idx, update, alpha=-1.0)
+
     def numpy(self) -> np.ndarray:
         """The codes as a float32 array (N, q) on the host."""
         return self.codes.detach().cpu().numpy().astype(np.float32, copy=True)
@@ -366,11 +390,13 @@ class LatentTable:
             "lr": self.lr,
             "betas": list(self.betas),
             "eps": self.eps,
+            "optimizer": self.optimizer,
         }
 
     @classmethod
     def from_state_dict(cls, state: dict, device: torch.device | str = "cpu") -> "LatentTable":
-        table = cls(state["codes"].to(device), state["lr"], tuple(state["betas"]), state["eps"])
+        optimizer = state.get("optimizer", "adam")  # tables saved before primspace 0.9: Adam
+        table = cls(state["codes"].to(device), state["lr"], tuple(state["betas"]), state["eps"], optimizer)
         table.exp_avg = state["exp_avg"].to(device, torch.float32).clone()
         table.exp_avg_sq = state["exp_avg_sq"].to(device, torch.float32).clone()
         table.steps = state["steps"].to(device, torch.float32).clone()

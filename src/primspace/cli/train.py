@@ -142,7 +142,7 @@ _TRAIN_FLAGS = (
     "threads",
     "checkpoint_every",
     "checkpoint_seconds",
-) + ("stream_frames", "frames_memory_gb", "loader_workers", "micro_batches")
+) + ("stream_frames", "frames_memory_gb", "loader_workers", "micro_batches", "step")
 
 #: The options of streaming and data-parallel training, shared by train and infer (docs/scale.md).
 _SCALE_HELP = {
@@ -153,6 +153,8 @@ _SCALE_HELP = {
     "loader_workers": "Processes that read and decode streamed frames (0: the training process).",
     "micro_batches": "Split each batch into this many parts computed one after another (less memory; the numbers "
     "of as many torchrun processes).",
+    "step": "How each batch steps: eager (op by op, the default), compiled (torch.compile of the recurrent loop) or "
+    "captured (padded batches; on CUDA the whole step as one CUDA graph). docs/performance.md.",
 }
 
 
@@ -168,6 +170,7 @@ def _scale_options(defaults: TrainConfig | None):
         "micro_batches": typer.Option(
             None if d is None else d.micro_batches, "--micro-batches", help=_SCALE_HELP["micro_batches"]
         ),
+        "step": typer.Option(None if d is None else d.step, "--step", help=_SCALE_HELP["step"]),
     }
 
 
@@ -261,6 +264,7 @@ def train_command(
     loader_workers: int = _TRAIN_SCALE["loader_workers"],
     frames_memory_gb: Optional[float] = _TRAIN_SCALE["frames_memory_gb"],
     micro_batches: int = _TRAIN_SCALE["micro_batches"],
+    step: str = _TRAIN_SCALE["step"],
 ) -> None:
     """Train the MTRNN decoder and one latent code per sample (theta and Z jointly).
 
@@ -327,6 +331,7 @@ def infer_command(
     frames_memory_gb: Optional[float] = _INFER_SCALE["frames_memory_gb"],
     loader_workers: Optional[int] = _INFER_SCALE["loader_workers"],
     micro_batches: Optional[int] = _INFER_SCALE["micro_batches"],
+    step: Optional[str] = _INFER_SCALE["step"],
 ) -> None:
     """Find latent codes for new samples with the trained weights frozen (under torchrun:
     each batch's samples split across the processes)."""
@@ -344,6 +349,7 @@ def infer_command(
         ("frames_memory_gb", frames_memory_gb),
         ("loader_workers", loader_workers),
         ("micro_batches", micro_batches),
+        ("step", step),
     ):
         if value is not None:
             overrides[name] = value

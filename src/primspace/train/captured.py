@@ -35,6 +35,7 @@ __all__ = [
     "StepGraph",
     "padded_rows",
     "check_single_process",
+    "check_graphable",
     "tensor_rates",
     "float_rates",
     "COMPILE_BACKEND",
@@ -49,6 +50,15 @@ def check_single_process(session, what: str) -> None:
     """One line when ``session`` trains on several processes, in micro-batches or from streamed frames."""
     if session.world.size > 1 or session.world.micro_batches > 1 or session.stream is not None:
         raise UserError(f"{session.name}: {what} trains in one process, in whole batches, with its frames in memory")
+
+
+def check_graphable(tc) -> None:
+    """One line for a step that cannot be a CUDA graph yet: θ's plain gradient descent (its
+    rate is a number inside ``torch.optim.SGD``, not a tensor the graph reads)."""
+    if tc.optimizer != "adam":
+        raise UserError(
+            f"step='captured' on CUDA needs optimizer='adam' (not built for {tc.optimizer!r}); use step='eager'"
+        )
 
 
 class CompiledDecoder:
@@ -151,6 +161,7 @@ class CapturedStep:
         self.autocast = None
         self.graph = None
         if device.type == "cuda":
+            check_graphable(session.tc)
             opts = [] if session.theta_opt is None else [session.theta_opt]
             state = [session.table.codes, session.table.exp_avg, session.table.exp_avg_sq, session.table.steps]
             state += [p for p in session.model.parameters() if p.requires_grad]

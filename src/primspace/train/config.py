@@ -23,6 +23,7 @@ __all__ = [
     "TrainingDivergedError",
     "LOSS_REDUCTIONS",
     "STEPS",
+    "OPTIMIZERS",
     "lr_factor",
     "resolve_device",
     "configure_process",
@@ -33,6 +34,8 @@ __all__ = [
 LOSS_REDUCTIONS = ("mean", "sum")
 #: How a batch's step runs (TrainConfig.step).
 STEPS = ("eager", "compiled", "captured")
+#: How θ and the codes step (TrainConfig.optimizer).
+OPTIMIZERS = ("adam", "sgd")
 
 
 class TrainingDivergedError(UserError):
@@ -50,9 +53,15 @@ class TrainConfig:
     batch_size : int
         Samples per mini-batch. Every code is updated once per epoch; θ once per batch.
     lr : float
-        Adam learning rate of the model weights θ.
+        Learning rate of the model weights θ.
     latent_lr : float
-        Learning rate of the codes (row-wise Adam, :class:`primspace.latent.LatentTable`).
+        Learning rate of the codes (row-wise, :class:`primspace.latent.LatentTable`).
+    optimizer : {"adam", "sgd"}
+        How θ and the codes step. ``"adam"`` (default): Adam for θ, a row-wise Adam for the
+        codes (each code's moments its own). ``"sgd"``: plain gradient descent of both, the
+        paper's setting (*Main Results*: "It is minimized with usual batch gradient
+        descend"), on the same mini-batches and cosine schedule; its rates are not Adam's
+        (choose them on a validation split: ``primspace experiment tune``).
     final_lr_fraction : float
         Both learning rates follow a cosine from their value in the first epoch to this
         fraction of it in the last (1.0: constant). Default 0.1, the experiment presets'
@@ -162,6 +171,7 @@ class TrainConfig:
     batch_size: int = 32
     lr: float = 1e-3
     latent_lr: float = 1e-2
+    optimizer: str = "adam"
     final_lr_fraction: float = 0.1
     motor_weight: float = 1.0
     vision_weight: float = 1.0
@@ -233,6 +243,8 @@ class TrainConfig:
             raise UserError(f"loader_workers must be a whole number >= 0, got {self.loader_workers}")
         if not isinstance(self.micro_batches, int) or isinstance(self.micro_batches, bool) or self.micro_batches < 1:
             raise UserError(f"micro_batches must be a whole number >= 1, got {self.micro_batches}")
+        if self.optimizer not in OPTIMIZERS:
+            raise UserError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got {self.optimizer!r}")
         if self.step not in STEPS:
             raise UserError(f"step must be one of {', '.join(STEPS)}, got {self.step!r}")
 

@@ -34,7 +34,7 @@ from torch.func import functional_call, vmap
 
 from primspace.errors import UserError
 from primspace.progress import progress_bar
-from primspace.train.captured import StepGraph, float_rates, padded_rows, tensor_rates
+from primspace.train.captured import StepGraph, check_graphable, float_rates, padded_rows, tensor_rates
 from primspace.train.config import TrainingDivergedError, thread_limit
 from primspace.train.loop import Session
 from primspace.train.loss import DataTensors, batch_loss
@@ -48,6 +48,7 @@ __all__ = ["PackedStep", "pack_key", "train_packed", "fit_packed", "infer_packed
 #: runs with one config, and the epochs and batches must line up.
 SHARED_FIELDS = (
     "epochs",
+    "optimizer",
     "batch_size",
     "vision_frames",
     "loss_reduction",
@@ -133,6 +134,7 @@ class PackedStep:
         self.graph = None
         self.optimizers = [s.theta_opt for s in sessions if s.theta_opt is not None]
         if device.type == "cuda" and self.tc.step == "captured":
+            check_graphable(self.tc)
             state = [t for s in sessions for t in (s.table.codes, s.table.exp_avg, s.table.exp_avg_sq, s.table.steps)]
             state += [p for s in sessions for p in s.model.parameters() if p.requires_grad]
             self.graph = StepGraph(self._compute, state, self.optimizers)

@@ -43,7 +43,7 @@ from primspace.train.run import TrainedRun
 from primspace.train.rundir import load_run, open_run_dir, run_config, run_from_state
 from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
 
-__all__ = ["fit_session", "infer_session", "run_session", "uses_images", "as_run"]
+__all__ = ["fit_session", "infer_session", "run_session", "theta_optimizer", "uses_images", "as_run"]
 
 
 def fit_session(
@@ -86,7 +86,7 @@ def fit_session(
         scaler, initializer = parts.scaler, parts.initializer
         model = _new_model(mc, seeds["model"], parts.model)
         model.to(device)
-        theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
+        theta_opt = theta_optimizer(model, tc)
         theta_opt.load_state_dict(parts.theta_optimizer)
         table = LatentTable.from_state_dict(parts.latents, device)
         scaled = scaler.transform(data.motor)
@@ -96,9 +96,9 @@ def fit_session(
         scaled = scaler.transform(data.motor)
         initializer = run_initializer(init, parent, mc, scaled, seeds)
         model.to(device)
-        theta_opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
+        theta_opt = theta_optimizer(model, tc)
         codes = initial_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
-        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
+        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr, optimizer=tc.optimizer)
     session = Session(
         store=store,
         config=config,
@@ -178,7 +178,7 @@ def infer_session(
         initializer, codes = inference_start(
             parent, init, data, scaled, observation, fitted_data, tc.seed, initial_latents
         )
-        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr)
+        table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr, optimizer=tc.optimizer)
     model.to(device).requires_grad_(False)
     session = Session(
         store=store,
@@ -199,6 +199,13 @@ def infer_session(
         log_to=log_to,
     )
     return session, ckpt
+
+
+def theta_optimizer(model: MTRNNDecoder, tc: TrainConfig) -> torch.optim.Optimizer:
+    """θ's optimiser of ``tc.optimizer``: Adam, or plain gradient descent (``torch.optim.SGD``, no momentum)."""
+    if tc.optimizer == "sgd":
+        return torch.optim.SGD(model.parameters(), lr=tc.lr)
+    return torch.optim.Adam(model.parameters(), lr=tc.lr)
 
 
 def uses_images(
