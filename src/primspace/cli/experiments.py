@@ -13,7 +13,7 @@ from primspace.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import check_workers, device_option, echo_table, int_list, name_list, threads_option
-from primspace.cli.train import LossReduction
+from primspace.cli.train import OPTIMIZER_HELP, LossReduction, Optimizer
 
 
 # ============================================================ experiments, report
@@ -100,7 +100,7 @@ def _fit_infer_epochs(text: str) -> tuple[int, int | None]:
 
 
 def _overrides(
-    name: str, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads
+    name: str, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads, optimizer=None
 ) -> dict:
     """The preset's fields that the options of ``primspace experiment NAME`` override (None: kept)."""
     overrides = {
@@ -115,6 +115,8 @@ def _overrides(
         "device": device,
         "threads": threads,
     }
+    if optimizer is not None:  # (optimizer, lr, latent_lr): how θ and the codes step, and their rates
+        overrides |= dict(zip(("optimizer", "lr", "latent_lr"), (optimizer[0] and optimizer[0].value, *optimizer[1:])))
     if epochs is not None:
         fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
         overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
@@ -204,12 +206,25 @@ def _experiment_command(
         loss_reduction: Optional[LossReduction] = typer.Option(
             None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."
         ),
+        optimizer: Optional[Optimizer] = typer.Option(None, "--optimizer", help="Override: " + OPTIMIZER_HELP),
+        lr: Optional[float] = typer.Option(None, "--lr", help="Override the learning rate of the weights."),
+        latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Override the learning rate of the codes."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
         device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
         threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
     ) -> None:
         overrides = _overrides(
-            name, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads
+            name,
+            latent_dims,
+            inits,
+            seeds,
+            epochs,
+            images,
+            vision_frames,
+            loss_reduction,
+            device,
+            threads,
+            (optimizer, lr, latent_lr),
         )
         exp = _experiment(
             _preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides, pack=pack

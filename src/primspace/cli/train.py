@@ -35,6 +35,19 @@ class LossReduction(str, Enum):
     sum = "sum"
 
 
+class Optimizer(str, Enum):
+    """``TrainConfig.optimizer``: Adam (primspace) or the paper's plain gradient descent."""
+
+    adam = "adam"
+    sgd = "sgd"
+
+
+OPTIMIZER_HELP = (
+    "adam: Adam for the weights, a row-wise Adam for the codes; sgd: plain gradient descent of both, the "
+    "paper's (its rates are not Adam's: choose --lr and --latent-lr on a validation split)."
+)
+
+
 class LogTarget(str, Enum):
     """What ``--log-to`` writes to (:mod:`primspace.train.logger`)."""
 
@@ -130,6 +143,7 @@ _TRAIN_FLAGS = (
     "batch_size",
     "lr",
     "latent_lr",
+    "optimizer",
     "final_lr_fraction",
     "motor_weight",
     "vision_weight",
@@ -227,6 +241,7 @@ def train_command(
         help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
     ),
     loss_reduction: LossReduction = typer.Option(_TC.loss_reduction, "--loss-reduction", help=_LOSS_REDUCTION_HELP),
+    optimizer: Optimizer = typer.Option(_TC.optimizer, "--optimizer", help=OPTIMIZER_HELP),
     code_window: Optional[int] = typer.Option(
         None,
         "--code-window",
@@ -273,7 +288,7 @@ def train_command(
     """
     from primspace.train import fit
 
-    given = dict(locals()) | {"loss_reduction": loss_reduction.value}
+    given = dict(locals()) | {"loss_reduction": loss_reduction.value, "optimizer": optimizer.value}
     log_to = _log_to(log_to, (file, indices, weights_from))
     mc = replace(
         _MC,

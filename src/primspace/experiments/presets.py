@@ -205,8 +205,9 @@ class ExperimentPreset:
     def with_overrides(self, **changes) -> "ExperimentPreset":
         """A copy with some fields changed (``None`` values are ignored), checked.
 
-        ``vision_frames``, ``loss_reduction``, ``device`` and ``threads`` are
-        :class:`~primspace.train.TrainConfig` fields: they replace those of the preset's ``train``.
+        ``vision_frames``, ``loss_reduction``, ``device``, ``threads``, ``optimizer``, ``lr`` and
+        ``latent_lr`` are :class:`~primspace.train.TrainConfig` fields: they replace those of the
+        preset's ``train``.
 
         Raises
         ------
@@ -221,6 +222,9 @@ class ExperimentPreset:
             "loss_reduction",
             "device",
             "threads",
+            "optimizer",
+            "lr",
+            "latent_lr",
         ):  # training settings: they go into the preset's TrainConfig
             if key in changes:
                 changes["train"] = replace(changes.get("train", self.train), **{key: changes.pop(key)})

@@ -12,7 +12,9 @@ tuning budget:
    codes are inferred with θ frozen. The evaluation part is never seen.
 2. **The same grid for every init** (:data:`TUNING_GRID`): the layer time constants
    and the latent learning rate (a third of, equal to, three times the preset's); epochs
-   are the preset's (the same maximum for all). Tuned at the preset's clustering q
+   are the preset's (the same maximum for all). A preset that trains by plain gradient
+   descent (``--optimizer sgd``, the paper's) is tuned over its two learning rates instead
+   (:data:`SGD_TUNING_GRID`). Tuned at the preset's clustering q
    (:attr:`ExperimentPreset.cluster_latent_dim`), applied at every q.
 3. **The choice**: the setting with the lowest validation loss after inference, mean over
    the seeds (ties keep the preset's setting).
@@ -38,7 +40,15 @@ from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["TUNED_INITS", "TUNING_GRID", "VALIDATION_FRACTION", "validation_split", "settings_of", "run_tune"]
+__all__ = [
+    "TUNED_INITS",
+    "TUNING_GRID",
+    "SGD_TUNING_GRID",
+    "VALIDATION_FRACTION",
+    "validation_split",
+    "settings_of",
+    "run_tune",
+]
 
 #: The inits tuned (the paper's three and our data-dependent baseline).
 TUNED_INITS = ("zero", "random", "projection", "pca")
@@ -46,6 +56,11 @@ TUNED_INITS = ("zero", "random", "projection", "pca")
 #: The grid every init is tuned over: layer time constants (fast, slow), and the latent
 #: learning rate as a factor of the preset's.
 TUNING_GRID = {"taus": ((2.0, 8.0), (4.0, 16.0)), "latent_lr_factor": (1 / 3, 1.0, 3.0)}
+
+#: The grid of a preset that trains by plain gradient descent (``train.optimizer = "sgd"``,
+#: the paper's): the two learning rates as factors of the preset's, the time constants
+#: the preset's. Plain gradient descent has no scale-free step, so its rates are what to tune.
+SGD_TUNING_GRID = {"lr_factor": (1 / 3, 1.0, 3.0), "latent_lr_factor": (0.1, 1.0, 10.0)}
 
 #: Share of each primitive's fitted samples held out for validation.
 VALIDATION_FRACTION = 0.25
@@ -58,29 +73,41 @@ def validation_split(labels: np.ndarray, train: np.ndarray, seed: int) -> tuple[
 
 
 def settings_of(preset: ExperimentPreset) -> list[dict]:
-    """Every setting of the grid as ``{"taus": [..], "latent_lr": x}`` (the preset's own first)."""
+    """Every setting of the grid as ``{"taus": [..], "latent_lr": x}`` (the preset's own first);
+    a plain-gradient-descent preset's as ``{"taus": [..], "latent_lr": x, "lr": y}`` over
+    :data:`SGD_TUNING_GRID`."""
     own = {"taus": list(preset.model.taus), "latent_lr": preset.train.latent_lr}
-    grid = [
-        {"taus": list(t), "latent_lr": preset.train.latent_lr * f}
-        for t, f in product(TUNING_GRID["taus"], TUNING_GRID["latent_lr_factor"])
-    ]
+    if preset.train.optimizer == "sgd":
+        own["lr"] = preset.train.lr
+        grid = [
+            {"taus": own["taus"], "latent_lr": preset.train.latent_lr * f, "lr": preset.train.lr * g}
+            for g, f in product(SGD_TUNING_GRID["lr_factor"], SGD_TUNING_GRID["latent_lr_factor"])
+        ]
+    else:
+        grid = [
+            {"taus": list(t), "latent_lr": preset.train.latent_lr * f}
+            for t, f in product(TUNING_GRID["taus"], TUNING_GRID["latent_lr_factor"])
+        ]
     return [own] + [s for s in grid if not _same(s, own)]
 
 
 def _same(a: dict, b: dict) -> bool:
-    return list(a["taus"]) == list(b["taus"]) and bool(np.isclose(a["latent_lr"], b["latent_lr"]))
+    same_lr = ("lr" in a) == ("lr" in b) and ("lr" not in a or bool(np.isclose(a["lr"], b["lr"])))
+    return same_lr and list(a["taus"]) == list(b["taus"]) and bool(np.isclose(a["latent_lr"], b["latent_lr"]))
 
 
 def _with(preset: ExperimentPreset, setting: dict) -> ExperimentPreset:
+    lr = {"lr": float(setting["lr"])} if "lr" in setting else {}
     return replace(
         preset,
         model=replace(preset.model, taus=tuple(setting["taus"])),
-        train=replace(preset.train, latent_lr=float(setting["latent_lr"])),
+        train=replace(preset.train, latent_lr=float(setting["latent_lr"]), **lr),
     )
 
 
 def _name(setting: dict) -> str:
-    return f"tau{setting['taus'][0]:g}_{setting['taus'][1]:g}-llr{setting['latent_lr']:.3g}"
+    lr = f"-lr{setting['lr']:.3g}" if "lr" in setting else ""
+    return f"tau{setting['taus'][0]:g}_{setting['taus'][1]:g}-llr{setting['latent_lr']:.3g}{lr}"
 
 
 def _final(result: dict) -> float:
@@ -121,8 +148,12 @@ def run_tune(exp: ExperimentDir) -> dict:
     results = {
         "latent_dim": q,
         "grid": {
-            "taus": [list(t) for t in TUNING_GRID["taus"]],
-            "latent_lr_factor": list(TUNING_GRID["latent_lr_factor"]),
+            **(
+                {k: list(v) for k, v in SGD_TUNING_GRID.items()}
+                if preset.train.optimizer == "sgd"
+                else {"taus": [list(t) for t in TUNING_GRID["taus"]]}
+                | {"latent_lr_factor": list(TUNING_GRID["latent_lr_factor"])}
+            ),
             "validation_fraction": VALIDATION_FRACTION,
             "epochs": [preset.fit_epochs, preset.infer_epochs],
         },
