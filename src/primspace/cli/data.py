@@ -99,6 +99,12 @@ def generate_command(
     height: Optional[int] = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
     width: Optional[int] = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
     no_images: bool = typer.Option(False, "--no-images", help="Joint values only (no rendering)."),
+    block_jitter: Optional[str] = typer.Option(
+        None,
+        "--block-jitter",
+        help="each: every sample's block jittered on its own (every preset's default); shared: one jitter "
+        "per primitive and grid cell, shared by the cell's block sizes (the paper's layout). Grid presets only.",
+    ),
     config_file: Optional[Path] = typer.Option(
         None,
         "--config",
@@ -126,13 +132,17 @@ def generate_command(
 
     out = output_file(out, inputs=(config_file,), overwrite=overwrite, writer=_GENERATE_MARK)
     if preset in COMPOSITE_PRESETS:
+        if block_jitter is not None:
+            raise UserError(
+                f"--block-jitter: --preset {preset} draws its blocks anywhere (no grid); it applies to paper and demo"
+            )
         _generate_composite(
             out, preset, config_file, (height, width, no_images), workers, backend, address, seed, overwrite
         )
         return
     if preset not in generate.PRESETS:
         raise UserError(f"unknown preset {preset!r}; choose from {', '.join([*generate.PRESETS, *COMPOSITE_PRESETS])}")
-    config = _generation_config(preset, config_file, height, width, no_images)
+    config = _generation_config(preset, config_file, height, width, no_images, block_jitter)
     check_workers(workers)
     start = time.perf_counter()
     shards = []
@@ -156,11 +166,16 @@ def generate_command(
     )
 
 
-def _generation_config(preset: str, config_file, height, width, no_images: bool):
-    """The validated ``GenerationConfig`` of a single-primitive preset with --config and the frame flags over it."""
+def _generation_config(preset: str, config_file, height, width, no_images: bool, block_jitter=None):
+    """The validated ``GenerationConfig`` of a single-primitive preset with --config, the frame flags and
+    --block-jitter over it."""
     import dataclasses
 
+    from primspace.sim.config import BLOCK_JITTERS
     from primspace.sim.generate import GenerationConfig, resolve_config
+
+    if block_jitter is not None and block_jitter not in BLOCK_JITTERS:
+        raise UserError(f"--block-jitter {block_jitter!r}: choose from {', '.join(BLOCK_JITTERS)}")
 
     config = resolve_config(preset)
     if config_file is not None:
@@ -174,6 +189,8 @@ def _generation_config(preset: str, config_file, height, width, no_images: bool)
         changes["height"] = height
     if width is not None:
         changes["width"] = width
+    if block_jitter is not None:
+        changes["block_jitter"] = block_jitter
     config = dataclasses.replace(config, **changes)
     try:
         return resolve_config(config)

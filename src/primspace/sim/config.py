@@ -4,9 +4,22 @@ The paper (section "Artificial Data") records 7 primitives x 245 block placement
 steps and 48 x 64 frames each; the ``paper`` preset makes the 245 as a 7 x 7 grid of
 positions x 5 block sizes. Samples are ordered primitive-major: index ``((p * n_x + i_x) * n_y + i_y) * n_sizes +
 i_size``. The seed only moves each block within its grid cell (uniform jitter of
-``jitter`` times the grid spacing each way, per axis); sizes are exact. Sample ``i``
-draws from ``np.random.SeedSequence([seed, i])`` (:func:`sample_params`), so the arrays
-do not depend on how the samples are split into shards or on the number of workers.
+``jitter`` times the grid spacing each way, per axis); sizes are exact.
+
+``block_jitter`` says which samples share a jitter draw (:func:`sample_params`):
+
+- ``"each"`` (every preset's default): sample ``i`` draws its own jitter from
+  ``np.random.SeedSequence([seed, i])``, so the sizes of a grid cell sit at different
+  positions.
+- ``"shared"`` (the paper's layout: "each position corresponds to five samples differing
+  in block size"): one draw per (primitive, grid cell), from
+  ``np.random.SeedSequence([seed, SHARED_JITTER_KEY, label, i_x, i_y])`` with ``label``
+  the primitive's registry index (:data:`~primspace.sim.primitives.PRIMITIVES`, so a
+  subset of primitives keeps its positions) and ``SHARED_JITTER_KEY`` a constant that
+  keeps these streams apart from the per-sample ones; every size of the cell uses it.
+
+Either way a sample's parameters depend on the seed and its index alone, never on how
+the samples are split into shards or on the number of workers.
 """
 
 from __future__ import annotations
@@ -20,13 +33,30 @@ import numpy as np
 from primspace.errors import UserError
 from primspace.sim.primitives import PRIMITIVES, primitive_index
 
-__all__ = ["GenerationConfig", "PRESETS", "PARAM_NAMES", "MIN_LENGTH", "resolve_config", "sample_params"]
+__all__ = [
+    "GenerationConfig",
+    "PRESETS",
+    "PARAM_NAMES",
+    "MIN_LENGTH",
+    "BLOCK_JITTERS",
+    "SHARED_JITTER_KEY",
+    "resolve_config",
+    "sample_params",
+]
 
 #: Names of the generative factors stored in ``params``.
 PARAM_NAMES = ("block_x", "block_y", "block_size")
 
 #: The shortest motion whose phases (three side touches) every step rate resolves.
 MIN_LENGTH = 31
+
+#: The values of ``GenerationConfig.block_jitter``: one draw per sample, or per (primitive, grid cell).
+BLOCK_JITTERS = ("each", "shared")
+
+#: The second entry of a shared draw's seed (:func:`sample_params`), "SHAR" in ASCII. A
+#: per-sample seed ``[seed, i]`` is two or three 32-bit words, a shared one five or six,
+#: so no shared seed equals a per-sample one; the constant names the stream.
+SHARED_JITTER_KEY = 0x53484152
 
 
 def _grid(lo: float, hi: float, n: int) -> tuple[float, ...]:
@@ -54,6 +84,10 @@ class GenerationConfig:
     jitter : float
         Block positions move uniformly within +- ``jitter`` x grid spacing (per axis),
         drawn from the seed; 0 keeps the exact grid.
+    block_jitter : {"each", "shared"}
+        ``"each"`` (default): every sample draws its own jitter. ``"shared"``: one draw
+        per (primitive, grid cell), shared by the cell's block sizes (the paper's layout);
+        see the module docstring for the seeds.
     dt : float
         Seconds per step (the paper: a 61-step minute, dt = 1 s).
     ik_tolerance : float
@@ -75,6 +109,7 @@ class GenerationConfig:
     dt: float = 1.0
     ik_tolerance: float = 0.002
     verify: bool = True
+    block_jitter: str = "each"
 
     def __post_init__(self) -> None:
         for name in ("block_x", "block_y", "block_size", "primitives"):
@@ -134,6 +169,8 @@ class GenerationConfig:
                 raise UserError(f"{name} = {bad[0]:.4g} m{extra} is outside the table's {what} range [{lo}, {hi}] m")
         if not (0.0 <= self.jitter <= 0.5):
             raise UserError(f"jitter = {self.jitter}: must be in [0, 0.5] (a fraction of the grid spacing)")
+        if self.block_jitter not in BLOCK_JITTERS:
+            raise UserError(f"block_jitter = {self.block_jitter!r}: must be one of {', '.join(BLOCK_JITTERS)}")
         if not (MIN_LENGTH <= self.length <= 100_000):
             raise UserError(f"length (T) = {self.length}: must be at least {MIN_LENGTH} (the phases need it)")
         if not (1 <= self.height <= MAX_IMAGE_SIZE[0] and 1 <= self.width <= MAX_IMAGE_SIZE[1]):
@@ -178,6 +215,8 @@ class GenerationConfig:
                     values[name] = tuple(float(v) for v in value) if ok else _bad()
                 elif kind == "bool":
                     values[name] = value if isinstance(value, bool) else _bad()
+                elif kind == "str":
+                    values[name] = value if isinstance(value, str) else _bad()
                 elif kind == "int":
                     values[name] = int(value) if _is_number(value) and float(value).is_integer() else _bad()
                 else:
@@ -193,6 +232,7 @@ _KIND_WORDS = {
     "int": "an integer",
     "float": "a number",
     "bool": "true or false",
+    "str": "a string",
 }
 
 
@@ -229,14 +269,24 @@ def resolve_config(config_or_preset) -> GenerationConfig:
 
 
 def sample_params(config: GenerationConfig, seed: int, index: int) -> tuple[int, float, float, float]:
-    """``(label, block_x, block_y, block_size)`` of sample ``index`` (depends on seed and index only)."""
+    """``(label, block_x, block_y, block_size)`` of sample ``index`` (depends on seed and index only).
+
+    The jitter's seed (see the module docstring): ``[seed, index]`` with ``block_jitter =
+    "each"``; ``[seed, SHARED_JITTER_KEY, label, i_x, i_y]`` with ``"shared"``, the same
+    for every size of the primitive's grid cell.
+    """
     n_y, n_s = len(config.block_y), len(config.block_size)
     per = config.n_per_primitive
     p, rest = divmod(int(index), per)
     ix, rest = divmod(rest, n_y * n_s)
     iy, isz = divmod(rest, n_s)
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(index)]))
+    label = primitive_index(config.primitives[p])
+    if config.block_jitter == "shared":
+        key = [int(seed), SHARED_JITTER_KEY, label, ix, iy]
+    else:
+        key = [int(seed), int(index)]
+    rng = np.random.default_rng(np.random.SeedSequence(key))
     jx, jy = rng.uniform(-1.0, 1.0, size=2) * config.jitter
     x = config.block_x[ix] + jx * config.spacing("block_x")
     y = config.block_y[iy] + jy * config.spacing("block_y")
-    return primitive_index(config.primitives[p]), float(x), float(y), float(config.block_size[isz])
+    return label, float(x), float(y), float(config.block_size[isz])
