@@ -89,6 +89,36 @@ def matmul_rate(device: torch.device, dtype=torch.float32, n: int = 2048, reps: 
     return 2 * n**3 / best
 
 
+def step_shape_rates(reps: int = 2000) -> dict:
+    """FLOP/s of the recurrent step's own matrix products (eager, one at a time, as training
+    calls them): the lower layer's ``addmm`` (batch 32 x 416 x 32: the outer product d ⊗ [u, 1]
+    times the packed [A | W]), the top layer's ``baddbmm`` (32 x (1 x 12 x 12)) and the
+    infer batch's (256 rows)."""
+    shapes = {
+        "addmm 32x416x32 (lower layer, fit batch)": (32, 416, 32),
+        "addmm 256x416x32 (lower layer, infer batch)": (256, 416, 32),
+        "baddbmm 32x(1x12x12) (top layer, fit batch)": None,
+    }
+    out = {}
+    for label, shape in shapes.items():
+        if shape is None:
+            c, d, m = torch.randn(32, 1, 12), torch.randn(32, 1, 12), torch.randn(32, 12, 12)
+            flops, fn = 2 * 32 * 12 * 12, lambda: torch.baddbmm(c, d, m)
+        else:
+            b, k, n = shape
+            c, x, w = torch.randn(n), torch.randn(b, k), torch.randn(k, n)
+            flops, fn = 2 * b * k * n, lambda: torch.addmm(c, x, w)
+        for _ in range(50):
+            fn()
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fn()
+        seconds = (time.perf_counter() - t0) / reps
+        out[label] = {"us": seconds * 1e6, "flops": flops / seconds}
+        print(f"  {label}: {seconds * 1e6:.1f} us, {flops / seconds / 1e9:.1f} GFLOP/s", flush=True)
+    return out
+
+
 def _sync(device: torch.device) -> None:
     if device.type == "cuda":
         torch.cuda.synchronize(device)
@@ -464,7 +494,8 @@ def _bench_path(path: str, pack: int, label: str, device: str, threads: int, wor
         run_s = pack * (PAPER_FIT_EPOCHS * PAPER_FIT_SAMPLES / f["samples_per_s"])
         run_s += pack * (PAPER_INFER_EPOCHS * PAPER_INFER_SAMPLES / i["samples_per_s"])
         at_once = pack if path == "packed" else (workers if device == "cpu" else 1)
-        grid_s = -(-GRID_RUNS // at_once) * run_s
+        # a pack larger than the grid trains the grid's runs in one pack, taken at the measured pace
+        grid_s = -(-GRID_RUNS // at_once) * run_s * (min(pack, GRID_RUNS) / pack)
         schedules[what] = {"run_min": run_s / 60 / pack if path == "packed" else run_s / 60, "grid_min": grid_s / 60}
         print(
             f"[{label}] paper schedule, {what}: {run_s / 60:.1f} min per {'pack' if path == 'packed' else 'run'}, "
@@ -492,6 +523,8 @@ def bench_issue41(args) -> dict:
             label = f"packed x{pack}" if path == "packed" else path
             out["paths"][label] = _bench_path(path, pack, label, device, threads, workers, rate, args)
     if args.profile and device == "cpu":
+        print("\nthe recurrent step's matrix products, alone (the ceiling of the motor-only epoch's share):")
+        out["step_shapes"] = step_shape_rates()
         out["profile"] = {}
         for images in (False, True):
             p = _in_child(profile_fit_epoch, images, threads, args.k_frames, args.top)

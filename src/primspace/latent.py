@@ -302,8 +302,7 @@ class LatentTable:
         Learning rate of the codes.
     betas, eps : Adam's constants.
     optimizer : {"adam", "sgd"}
-        ``"sgd"``: plain gradient descent instead, ``z_i ← z_i − lr ∇ℓ_i`` (the paper's "usual
-        batch gradient descend"; :class:`~primspace.train.TrainConfig` ``optimizer``).
+        ``"sgd"``: plain gradient descent, ``z_i ← z_i − lr ∇ℓ_i`` (``TrainConfig.optimizer``).
     """
 
     def __init__(
@@ -336,13 +335,9 @@ class LatentTable:
     def step(
         self, idx: torch.Tensor, grad: torch.Tensor, active: torch.Tensor | None = None, lr: torch.Tensor | None = None
     ) -> None:
-        """One Adam step on rows ``idx`` (unique) with their gradient ``grad`` (B, q).
-
-        ``active`` (B,) bool: only those rows step, the others keep their code and Adam
-        state (a batch padded to a static size, :mod:`primspace.train.captured`); ``lr``: a
-        learning rate held in a tensor (read when the step runs, as a CUDA graph needs)
-        instead of :attr:`lr`.
-        """
+        """One step (Adam, or SGD) on rows ``idx`` (unique) with their gradient ``grad`` (B, q);
+        ``active`` (B,) bool: only those rows step (a padded batch, :mod:`primspace.train.captured`);
+        ``lr``: a rate in a tensor (read when the step runs, as a CUDA graph needs) instead of :attr:`lr`."""
         lr = self.lr if lr is None else lr
         if self.optimizer == "sgd":
             self._descend(idx, grad, active, lr)
