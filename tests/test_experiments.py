@@ -720,3 +720,19 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     assert run_predict(exp, **args)["table"] == table
     points = list((exp.path / "runs" / f"predict{PREDICT_VERSION}").iterdir())
     assert points and all(p.name.endswith("-e2") for p in points)  # other epochs than the grid's: other points
+
+
+def test_clustering_again_after_rescaling_the_codes(finished):
+    # issue 42: is the gap between inits a matter of the codes' scale? every run, both rescalings
+    from primspace.experiments.clustering import RESCALINGS, rescale
+
+    _, intra, clustering, _ = finished
+    rows = clustering["rescaled"]
+    assert {(r["init"], r["rescaling"]) for r in rows} == {(r["init"], h) for r in intra["runs"] for h in RESCALINGS}
+    assert all(0 <= r["accuracy"] <= 1 and r["rms"] > 0 for r in rows)
+    z = np.random.default_rng(0).normal(size=(50, 4)) * [1, 10, 100, 1000] + 7
+    common, standard = (rescale(z, how) for how in RESCALINGS)
+    assert np.isclose(np.sqrt((common**2).sum(axis=1).mean()), 1.0) and np.allclose(
+        common * 1e3, rescale(z * 1e3, RESCALINGS[0]) * 1e3
+    )
+    assert np.allclose(standard.std(axis=0), 1.0) and np.allclose(standard.mean(axis=0), 0.0)

@@ -28,7 +28,7 @@ from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
 from primspace.experiments.runs import focus_runs, initial_codes, load_codes
 from primspace.experiments.workspace import ExperimentDir
 
-__all__ = ["run_clustering", "LEARNED_CODES", "INITIAL_CODES"]
+__all__ = ["run_clustering", "rescaled_rows", "rescale", "RESCALINGS", "LEARNED_CODES", "INITIAL_CODES"]
 
 
 def _clustered(X: np.ndarray, labels: np.ndarray, label_names, r2_target: float):
@@ -97,6 +97,38 @@ def _other_seeds(exp: ExperimentDir, intra: dict, q: int, focus_seed: int) -> di
     return out
 
 
+#: How :func:`rescaled_rows` puts every run's codes on one scale before clustering them again:
+#: the codes centred and divided by their root mean square distance to the mean (one factor per
+#: run), or standardised per dimension (one factor per dimension).
+RESCALINGS = ("common scale", "standardised per dimension")
+
+
+def rescale(z: np.ndarray, how: str) -> np.ndarray:
+    """Codes ``z`` (N, q) on one scale (:data:`RESCALINGS`)."""
+    centred = z - z.mean(axis=0)
+    if how == RESCALINGS[0]:
+        return centred / max(float(np.sqrt((centred**2).sum(axis=1).mean())), 1e-300)
+    return centred / np.maximum(centred.std(axis=0), 1e-300)
+
+
+def rescaled_rows(exp: ExperimentDir, intra: dict, q: int) -> list[dict]:
+    """Every seed's learned codes at ``q`` clustered again after each of :data:`RESCALINGS`
+    (issue 42: do zero- and projection-initialised codes cluster differently because of their
+    scale?), each row with the codes' RMS size before rescaling."""
+    data = exp.dataset()
+    rows = []
+    for run in sorted(intra["runs"], key=lambda r: (r["seed"], r["init"])):
+        if run["latent_dim"] != q:
+            continue
+        z, _ = load_codes(exp, run["init"], q, run["seed"])
+        z = z.astype(np.float64)
+        size = float(np.sqrt(((z - z.mean(axis=0)) ** 2).sum(axis=1).mean()))
+        for how in RESCALINGS:
+            row = _clustered(rescale(z, how), data.labels, data.label_names, exp.preset.cluster_r2).summary()
+            rows.append({"init": run["init"], "seed": run["seed"], "rescaling": how, "rms": size} | row)
+    return rows
+
+
 def run_clustering(exp: ExperimentDir) -> dict:
     """Cluster the codes of every init at the preset's q, and the raw trajectories (data, LASA)."""
     from primspace.data import import_lasa
@@ -139,6 +171,7 @@ def run_clustering(exp: ExperimentDir) -> dict:
                 f"initial codes P m (before training), q = {q}: τ = {row['tau']:.3g}",
             )
         results["by_seed"] = _other_seeds(exp, intra, q, seed)
+        results["rescaled"] = rescaled_rows(exp, intra, q)
         results["trajectory"]["data"] = _trajectories(
             exp, "data", data.motor, data.labels, data.label_names, preset.trajectory_r2
         )
