@@ -326,6 +326,12 @@ COMPARISONS = (
         "paper-images-short-sum",
         "the same at the paper preset with images, 35 % of the schedule, one seed, one H200",
     ),
+    (
+        "paper-adam40",
+        "paper-sgd40",
+        "Adam (ours) against the paper's plain gradient descent (`--optimizer sgd`, its two rates tuned on a "
+        "validation split), paper preset, motor only, q = 40, three seeds: the clustering ablation of issue 42",
+    ),
 )
 
 
@@ -337,11 +343,29 @@ def _final_metric(run: dict, phase: str, key: str) -> float | None:
     return curve[-1].get(key) if curve else None
 
 
+#: The columns of :func:`render_comparison` read from the clustering's rescaled rows
+#: (:func:`primspace.experiments.clustering.rescaled_rows`): the codes' size, then the
+#: accuracy after each rescaling.
+RESCALED_COLUMNS = {
+    "rms": "code RMS size",
+    "common scale": "clustering, common scale",
+    "standardised per dimension": "clustering, standardised",
+}
+
+
+def _rescaled(summary: dict, init: str, key: str) -> str:
+    rows = [r for r in summary["results"]["clustering"]["rescaled"] if r["init"] == init]
+    if key == "rms":
+        return mean_spread([r["rms"] for r in rows if r["rescaling"] == "common scale"], rng=False)
+    return mean_spread([r["accuracy"] for r in rows if r["rescaling"] == key], rng=False)
+
+
 def render_comparison(a: dict, b: dict, what: str) -> str:
     """Two summaries of the same grid under one changed setting, per init: the inferred
     motor loss and vision PSNR (all frames, per element: comparable across losses),
     success and clustering accuracy, mean ± std over seeds."""
     rows = []
+    rescaled = all(s["results"].get("clustering", {}).get("rescaled") for s in (a, b))
     inits = dict.fromkeys(r["init"] for r in a["results"]["intra"]["runs"])
     outcomes = {name: {row[0]: row for row in outcome_rows(s["results"])} for name, s in (("a", a), ("b", b))}
     for init in inits:
@@ -354,12 +378,11 @@ def render_comparison(a: dict, b: dict, what: str) -> str:
                 )
         for col in (2, 4):
             row += [outcomes[k].get(init, [""] * 5)[col] for k in ("a", "b")]
+        row += [_rescaled(s, init, key) for key in RESCALED_COLUMNS for s in (a, b) if rescaled]
         rows.append(row)
-    columns = ["init"] + [
-        f"{m}: {n}"
-        for m in ("eval motor MSE", "eval vision PSNR dB", "success, all", "clustering")
-        for n in (a["name"], b["name"])
-    ]
+    metrics = ["eval motor MSE", "eval vision PSNR dB", "success, all", "clustering"]
+    metrics += list(RESCALED_COLUMNS.values()) if rescaled else []  # the clustering experiment's rows
+    columns = ["init"] + [f"{m}: {n}" for m in metrics for n in (a["name"], b["name"])]
     return "\n".join(
         [
             f"#### {a['name']} against {b['name']}: {what}",
