@@ -323,14 +323,21 @@ def summarize_command(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier summary at OUT (nothing else)."),
 ) -> None:
     """Write the small summary of an experiment that the docs' tables are generated from
-    (`python -m primspace.report.markdown`); run it on the machine that ran the experiment (it records the CPU)."""
+    (`python -m primspace.report.markdown`), and beside it (OUT with suffix .codes.npz) the
+    codes of its runs, compressed (`primspace.experiments.summary_codes.read_codes` reads them);
+    run it on the machine that ran the experiment (it records the CPU)."""
     from primspace.experiments.summary import summarize, write_summary
+    from primspace.experiments.summary_codes import check_codes_output, codes_path
     from primspace.outputs import output_file
 
-    # --overwrite replaces a summary only (recognised by its summary_version), never another file
+    # --overwrite replaces a summary only (recognised by its summary_version), never another file,
+    # and a codes file only (its primspace_codes_version entry): both checked before anything is read
     path = output_file(out, inputs=(directory,), overwrite=overwrite, writer="primspace summarize")
-    write_summary(path, summarize(directory, name, command, note), overwrite=overwrite)
-    typer.echo(f"wrote {path}")
+    check_codes_output(codes_path(path), overwrite, inputs=(directory,))
+    written = write_summary(path, summarize(directory, name, command, note), overwrite=overwrite, codes_of=directory)
+    codes = written["codes"]
+    missing = f"; not kept, their folders unreadable: {', '.join(codes['missing'])}" if codes["missing"] else ""
+    typer.echo(f"wrote {path} and {codes_path(path)} (the codes of {codes['runs']} runs{missing})")
 
 
 @app.command("report")
