@@ -128,21 +128,9 @@ def fit(
     TrainingDivergedError
         The loss became NaN/inf (the last good checkpoint is kept).
     """
-    session, ckpt = fit_session(
-        dataset,
-        out_dir,
-        model_config=model_config,
-        train_config=train_config,
-        init=init,
-        indices=indices,
-        resume=resume,
-        overwrite=overwrite,
-        weights_from=weights_from,
-        initial_latents=initial_latents,
-        images=images,
-        scaler=scaler,
-        log_to=log_to,
-    )
+    args = dict(locals())  # fit_session takes every argument but progress
+    progress = args.pop("progress")
+    session, ckpt = fit_session(**args)
     return run_session(session, ckpt, progress, "fit")
 
 
@@ -213,23 +201,9 @@ def infer(
     -------
     TrainedRun
     """
-    session, ckpt = infer_session(
-        run,
-        dataset,
-        out_dir,
-        epochs=epochs,
-        init=init,
-        indices=indices,
-        train_config=train_config,
-        initial_latents=initial_latents,
-        resume=resume,
-        overwrite=overwrite,
-        observe=observe,
-        observe_frames=observe_frames,
-        fitted_data=fitted_data,
-        log_to=log_to,
-        **overrides,
-    )
+    args = dict(locals())  # infer_session takes every argument but progress
+    progress = args.pop("progress")
+    session, ckpt = infer_session(**args.pop("overrides"), **args)
     return run_session(session, ckpt, progress, "infer")
 
 
