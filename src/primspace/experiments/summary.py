@@ -133,6 +133,10 @@ def _clustering(c: dict) -> dict:
         "r2_target": c.get("r2_target"),
         "latent": rows(c.get("latent", [])),
         "by_seed": {s: rows(rs) for s, rs in c.get("by_seed", {}).items()},
+        # every seed's codes clustered after a rescaling (issue 42), with their size before it
+        "rescaled": [
+            {k: r.get(k) for k in ("init", "seed", "rescaling", "rms", *_CLUSTER_ROW)} for r in c.get("rescaled", [])
+        ],
         "trajectory": {
             name: {k: t.get(k) for k in ("n", "dim", "k", "r2_target", "chosen")}
             for name, t in c.get("trajectory", {}).items()
