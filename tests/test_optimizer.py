@@ -76,3 +76,18 @@ def test_the_optimizer_is_kept_and_checked(tmp_path):
             resume=True,
             progress=False,
         )
+
+
+def test_experiments_take_the_optimizer_its_rates_and_the_step():
+    from primspace.experiments.presets import resolve_preset
+
+    preset = resolve_preset("paper").with_overrides(optimizer="sgd", lr=0.03, latent_lr=30.0, step="captured")
+    assert (preset.train.optimizer, preset.train.lr, preset.train.latent_lr, preset.train.step) == (
+        "sgd",
+        0.03,
+        30.0,
+        "captured",
+    )
+    assert resolve_preset("paper").train.optimizer == "adam"  # every preset names its optimiser: Adam
+    with pytest.raises(UserError, match="optimizer must be one of"):
+        resolve_preset("paper").with_overrides(optimizer="lbfgs")

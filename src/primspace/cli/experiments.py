@@ -115,8 +115,9 @@ def _overrides(
         "device": device,
         "threads": threads,
     }
-    if optimizer is not None:  # (optimizer, lr, latent_lr): how θ and the codes step, and their rates
-        overrides |= dict(zip(("optimizer", "lr", "latent_lr"), (optimizer[0] and optimizer[0].value, *optimizer[1:])))
+    if optimizer is not None:  # (optimizer, lr, latent_lr, step): how θ and the codes step, and their rates
+        keys = ("optimizer", "lr", "latent_lr", "step")
+        overrides |= dict(zip(keys, (optimizer[0] and optimizer[0].value, *optimizer[1:])))
     if epochs is not None:
         fit_epochs, infer_epochs = _fit_infer_epochs(epochs)
         overrides |= {"fit_epochs": fit_epochs, "infer_epochs": infer_epochs or fit_epochs}
@@ -209,6 +210,11 @@ def _experiment_command(
         optimizer: Optional[Optimizer] = typer.Option(None, "--optimizer", help="Override: " + OPTIMIZER_HELP),
         lr: Optional[float] = typer.Option(None, "--lr", help="Override the learning rate of the weights."),
         latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Override the learning rate of the codes."),
+        step: Optional[str] = typer.Option(
+            None,
+            "--step",
+            help="How each run's batches step: eager (default), compiled or captured (docs/performance.md).",
+        ),
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
         device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
         threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
@@ -224,7 +230,7 @@ def _experiment_command(
             loss_reduction,
             device,
             threads,
-            (optimizer, lr, latent_lr),
+            (optimizer, lr, latent_lr, step),
         )
         exp = _experiment(
             _preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides, pack=pack

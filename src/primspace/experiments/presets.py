@@ -205,8 +205,8 @@ class ExperimentPreset:
     def with_overrides(self, **changes) -> "ExperimentPreset":
         """A copy with some fields changed (``None`` values are ignored), checked.
 
-        ``vision_frames``, ``loss_reduction``, ``device``, ``threads``, ``optimizer``, ``lr`` and
-        ``latent_lr`` are :class:`~primspace.train.TrainConfig` fields: they replace those of the
+        ``vision_frames``, ``loss_reduction``, ``device``, ``threads``, ``optimizer``, ``lr``,
+        ``latent_lr`` and ``step`` are :class:`~primspace.train.TrainConfig` fields: they replace those of the
         preset's ``train``.
 
         Raises
@@ -225,6 +225,7 @@ class ExperimentPreset:
             "optimizer",
             "lr",
             "latent_lr",
+            "step",
         ):  # training settings: they go into the preset's TrainConfig
             if key in changes:
                 changes["train"] = replace(changes.get("train", self.train), **{key: changes.pop(key)})
