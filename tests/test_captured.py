@@ -136,3 +136,35 @@ def test_captured_needs_one_process_and_whole_batches():
 def test_on_the_gpu_the_step_is_the_eager_step(step):
     ds = _data()
     _close(_fit(ds, "eager", device="cuda"), _fit(ds, step, device="cuda"), tol=1e-4)
+
+
+def test_the_graphs_warm_up_leaves_the_state_as_it_found_it():
+    # StepGraph runs a few steps before it records the graph; they must not count (CPU-checkable part)
+    from primspace.train.captured import CapturedStep, StepGraph
+    from primspace.train.sessions import fit_session
+
+    ds = _data()
+    tc = TrainConfig(epochs=2, batch_size=4, vision_frames=3, step="captured")
+    session, _ = fit_session(ds, model_config=MC, train_config=tc, indices=np.arange(10))
+    try:
+        session.start(None)
+        step = session.captured
+        assert isinstance(step, CapturedStep) and step.graph is None  # no graph on the CPU
+        epoch = session.begin_epoch()
+        _, parts = epoch.batches[0]
+        ((_, rows, steps),) = parts
+        step.autocast = epoch.autocast
+        step.code_lr.fill_(session.table.lr)
+        step._load(rows, steps)
+        table = session.table
+        state = [table.codes, table.exp_avg, table.exp_avg_sq, table.steps, *session.model.parameters()]
+        before = [t.detach().clone() for t in state]
+        graph = StepGraph(step._compute, state, [session.theta_opt])
+        graph.warm_up()
+        assert all(torch.equal(t, b) for t, b in zip(state, before))
+        fresh = [st for st in session.theta_opt.state.values()]
+        assert fresh and all(float(v.abs().sum()) == 0 for st in fresh for v in st.values())  # as if never stepped
+        graph.warm_up()  # again, now with a state to put back
+        assert all(torch.equal(t, b) for t, b in zip(state, before))
+    finally:
+        session.close()

@@ -108,26 +108,32 @@ class StepGraph:
             self._record()
         self.graph.replay()
 
-    def _record(self) -> None:
+    def warm_up(self) -> None:
+        """Run ``compute`` :attr:`WARMUP` times (they allocate the optimisers' state), then put
+        ``state`` and the optimisers' state back as they were (a state the warm-up created:
+        zeros, as a fresh one). Device-agnostic: the tests run it on the CPU."""
         saved = [t.detach().clone() for t in self.state]
         opt_saved = [
             {p: {k: v.clone() for k, v in st.items()} for p, st in opt.state.items()} for opt in self.optimizers
         ]
-        side = torch.cuda.Stream()
-        side.wait_stream(torch.cuda.current_stream())
-        with torch.cuda.stream(side):
-            for _ in range(self.WARMUP):
-                for opt in self.optimizers:
-                    opt.zero_grad(set_to_none=True)
-                self.compute()
-        torch.cuda.current_stream().wait_stream(side)
+        for _ in range(self.WARMUP):
+            for opt in self.optimizers:
+                opt.zero_grad(set_to_none=True)
+            self.compute()
         with torch.no_grad():
             for t, v in zip(self.state, saved):
                 t.copy_(v)
             for opt, before in zip(self.optimizers, opt_saved):
-                for p, st in opt.state.items():  # a state the warm-up created is a fresh one: zeros
+                for p, st in opt.state.items():
                     for k, v in st.items():
                         v.copy_(before[p][k]) if p in before else v.zero_()
+
+    def _record(self) -> None:
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            self.warm_up()
+        torch.cuda.current_stream().wait_stream(side)
         for opt in self.optimizers:
             opt.zero_grad(set_to_none=True)  # the captured backward writes the gradients afresh
         self.graph = torch.cuda.CUDAGraph()
