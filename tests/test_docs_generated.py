@@ -60,12 +60,14 @@ def test_the_act_tables_are_written_into_docs_act_md(tmp_path):
 
     from primspace.experiments.summary import summarize, write_summary
     from primspace.report.markdown import NO_ACT, blocks
+    from primspace.stats import spread_convention
 
     summary = summarize(act_experiment_dir(tmp_path / "exp"), "act-test", "primspace experiment act --out exp")
     text = blocks({"act-test": summary})["act"]
-    assert text.startswith("#### act-test\n\n```\nprimspace experiment act --out exp\n```")
+    # the page states the convention of its spreads once, atop the block
+    assert text.startswith(spread_convention() + "\n\n#### act-test\n\n```\nprimspace experiment act --out exp\n```")
     assert "q = 40, seeds 0, 1 (7 scenes each); the block moved 2-4 cm at 30 % of the motion" in text
-    assert "re-asked every 6 steps; mean ± std over seeds (ddof 1)." in text
+    assert "re-asked every 6 steps; mean ± sample std (ddof 1) over seeds." in text
     for title in (
         "**Scene only: success (2 seeds)**",
         "**Scene only: MSE of the steps after the first, scaled (2 seeds)**",
@@ -100,9 +102,22 @@ def test_blocks_are_replaced_between_their_markers_only():
 def test_numbers_are_printed_with_their_spread():
     assert g(2.7e-05) == "2.7e-5" and g(0.123456) == "0.12" and g(None) == "—" and g(float("nan")) == "—"
     assert g(2e-4) == "2.0e-4" and g(0.0012) == "0.0012" and g(1234.5) == "1.2e3"
+    # sample std (ddof 1): [1e-4, 3e-4] -> sqrt(2e-8 / 1) = 1.41e-4, one digit: 1e-4
     assert mean_spread([1e-4, 3e-4]) == "2.0e-4 ± 1e-4 [1.0e-4–3.0e-4]"
     assert mean_spread([0.5]) == "0.5"  # one seed: no spread to show
-    assert mean_spread([0.8, 0.9, 1.0], rng=False) == "0.9 ± 0.08"
+    assert mean_spread([None, 0.5]) == "0.5" and mean_spread([]) == "—"
+
+
+def test_the_spread_is_the_sample_std():
+    """ddof 1, not numpy's default 0: [0.8, 0.9, 1.0] has squared deviations 0.01 + 0 + 0.01,
+    so std = sqrt(0.02 / 2) = 0.1 (the population std, sqrt(0.02 / 3) = 0.082, printed 0.08
+    before issue 42); the 95 % t half-width is t(0.975, 2) · 0.1 / sqrt(3) = 4.303 · 0.1 / 1.732
+    = 0.248, printed with one digit: 0.2."""
+    assert mean_spread([0.8, 0.9, 1.0], rng=False) == "0.9 ± 0.1"
+    assert mean_spread([0.8, 0.9, 1.0], rng=False, ci=True) == "0.9 ± 0.1 (95 % CI ± 0.2)"
+    assert mean_spread([0.8, 0.9, 1.0], rng=True) == "0.9 ± 0.1 [0.8–1]"
+    # three digits: the std printed with two; [28, 30]: sqrt(2 / 1) = 1.41; t(0.975, 1) · 1.41 / sqrt(2) = 12.7
+    assert mean_spread([28.0, 30.0], 3, rng=False, ci=True) == "29 ± 1.4 (95 % CI ± 13)"
 
 
 def _summary(name, motor, psnr):
@@ -132,7 +147,8 @@ def test_two_summaries_are_compared_side_by_side_on_per_element_errors():
     )
     text = render_comparison(a, b, "two losses")
     assert text.startswith("#### mean against sum: two losses")
-    assert "| projection | 2.0e-4 ± 1e-4 | 0.002 ± 0 | 29 ± 1 | 29 ± 0 |" in text
+    # sample std (ddof 1): psnr [28, 30] -> 1.41 (two digits at three-digit means); motor [4e-3, 6e-3] -> 1.4e-3
+    assert "| projection | 2.0e-4 ± 1e-4 | 0.002 ± 0 | 29 ± 1.4 | 29 ± 0 |" in text
     assert "| zero | 0.001 ± 0 | 0.005 ± 0.001 |" in text
 
 

@@ -101,17 +101,20 @@ def test_spread_table_is_mean_and_std_over_seeds():
     columns, rows = spread_table({"runs": runs}, probe)
     assert columns[-1] == "probe R² (inferred codes)"
     fit, end = np.array([1e-4, 3e-4, 2e-4]), np.array([2e-4, 4e-4, 9e-4])
+    # the sample std (ddof 1): fit sqrt((1e-8 + 1e-8 + 0) / 2) = 1e-4, end 3.6e-4; the probe's
+    # two values 0.9, 0.8 (the third is missing): sqrt(2 * 0.05^2 / 1) = 0.0707
     assert rows == [
         [
             "projection",
             10,
             3,
-            f"{fit.mean():.3g} ± {fit.std():.2g}",
+            f"{fit.mean():.3g} ± {fit.std(ddof=1):.2g}",
             "0.01 ± 0",
-            f"{end.mean():.3g} ± {end.std():.2g}",
-            "0.85 ± 0.05",
+            f"{end.mean():.3g} ± {end.std(ddof=1):.2g}",
+            "0.85 ± 0.071",
         ]
     ]
+    assert rows[0][3] == "0.0002 ± 0.0001" and rows[0][5] == "0.0005 ± 0.00036"
     assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
 
 
@@ -143,7 +146,7 @@ def test_clustering_and_success_over_seeds(tmp_path):
     columns, rows = outcome_spread_table(c2, s2)
     row = next(r for r in rows if r[0] == "projection")
     rates = [s2["generated"]["projection"]["overall"], s2["by_seed"]["1"]["projection"]["overall"]]
-    assert row[1] == 2 and row[2] == f"{np.mean(rates):.3g} ± {np.std(rates):.2g}"
+    assert row[1] == 2 and row[2] == f"{np.mean(rates):.3g} ± {np.std(rates, ddof=1):.2g}"  # sample std
     assert any(r[0] == "untrained P m" for r in rows)
 
 

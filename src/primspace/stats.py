@@ -2,14 +2,18 @@
 
 - :func:`wilson_interval`: the Wilson score interval of a binomial proportion (success
   rates of the simulator's judge, :mod:`primspace.experiments.success`).
+- the spread over seeds as the docs and the report print it: :func:`sample_std` (ddof 1),
+  :func:`t_interval` (the mean and its two-sided Student-t half-width; :func:`t_factor`
+  the half-width per std), and :func:`spread_convention`, the sentence that says so.
 """
 
 from __future__ import annotations
 
 import math
-from statistics import NormalDist
+from collections.abc import Iterable
+from statistics import NormalDist, fmean, stdev
 
-__all__ = ["wilson_interval", "normal_quantile"]
+__all__ = ["wilson_interval", "normal_quantile", "sample_std", "t_factor", "t_interval", "spread_convention"]
 
 
 def normal_quantile(confidence: float) -> float:
@@ -86,3 +90,86 @@ def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[f
     low = 0.0 if successes == 0 else max(0.0, centre - half)
     high = 1.0 if successes == n else min(1.0, centre + half)
     return low, high
+
+
+def sample_std(values: Iterable[float]) -> float:
+    """The sample standard deviation (ddof 1, ``sqrt(sum (x - mean)^2 / (n - 1))``) of
+    ``values``: the spread over seeds every table prints; NaN for fewer than two values
+    (one seed has no spread).
+
+    With three seeds the population std (ddof 0) is ``sqrt(2/3)`` of it: it understates
+    the spread and makes "a gap beyond the spread" lenient.
+
+    Examples
+    --------
+    >>> sample_std([1.0, 2.0, 3.0])
+    1.0
+    """
+    v = [float(x) for x in values]
+    return stdev(v) if len(v) > 1 else math.nan
+
+
+def t_factor(n: int, level: float = 0.95) -> float:
+    """``t(1 - (1 - level) / 2, n - 1) / sqrt(n)``: the two-sided Student-t interval's
+    half-width of a mean of ``n`` values, in units of their sample std (NaN for n < 2).
+
+    Examples
+    --------
+    >>> round(t_factor(3), 3)
+    2.484
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if n < 2:
+        return math.nan
+    from scipy.stats import t  # scipy only where an interval is asked for
+
+    return float(t.ppf(1.0 - (1.0 - level) / 2.0, n - 1)) / math.sqrt(n)
+
+
+def t_interval(values: Iterable[float], level: float = 0.95) -> tuple[float, float]:
+    """The mean of ``values`` and the half-width of its two-sided Student-t interval::
+
+        half_width = t(1 - (1 - level) / 2, n - 1) * std / sqrt(n)      (std: ddof 1)
+
+    The interval is ``mean ± half_width``: with 2-10 seeds the t quantile (12.7 for two,
+    4.30 for three, 2.78 for five) is well above the normal 1.96.
+
+    Parameters
+    ----------
+    values : iterable of float
+        The per-seed values, at least one.
+    level : float, default 0.95
+        Coverage, in (0, 1).
+
+    Returns
+    -------
+    (float, float)
+        ``(mean, half_width)``; the half-width is NaN for a single value (no spread).
+
+    Raises
+    ------
+    ValueError
+        For no values, or a level outside (0, 1).
+
+    Examples
+    --------
+    >>> mean, half = t_interval([1.0, 2.0, 3.0])
+    >>> mean, round(half, 3)
+    (2.0, 2.484)
+    """
+    v = [float(x) for x in values]
+    if not v:
+        raise ValueError("t_interval needs at least one value")
+    return fmean(v), t_factor(len(v), level) * sample_std(v)
+
+
+def spread_convention(seeds: Iterable[int] = (3, 5)) -> str:
+    """The sentence that states, once per page, how a spread over seeds is printed: the
+    sample std (ddof 1) and the 95 % t-interval half-width, with its factor for each
+    number of ``seeds`` the page shows."""
+    factors = ", ".join(f"{t_factor(n):.3g} · std for {n} seeds" for n in seeds)
+    return (
+        "Spreads: mean ± std over seeds (sample std, ddof 1); 95 % t-interval half-width = "
+        f"t(0.975, n-1) · std / sqrt(n) ({factors})."
+    )

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from primspace.errors import UserError, first_line
+from primspace.stats import sample_std
 
 __all__ = [
     "file_stem",
@@ -222,16 +223,19 @@ def probe_table(results: dict) -> tuple[list[str], list[list]]:
     return ["init", "q", "seed", "codes", *[f"R² {n}" for n in names], "mean R²"], rows
 
 
-def mean_std(values: list) -> str:
-    """``mean ± std`` (population std over seeds) of the values that are not None."""
-    v = np.asarray([x for x in values if x is not None], dtype=float)
-    return "—" if v.size == 0 else f"{v.mean():.3g} ± {v.std():.2g}"
+def mean_std(values: list, digits: int = 3) -> str:
+    """``mean ± std`` (sample std over seeds, ddof 1) of the values that are not None; one
+    value alone (no spread), "—" for none."""
+    v = [float(x) for x in values if x is not None]
+    if len(v) < 2:
+        return f"{v[0]:.{digits}g}" if v else "—"
+    return f"{np.mean(v):.{digits}g} ± {sample_std(v):.2g}"
 
 
 def spread_table(results: dict, probe: dict | None = None) -> tuple[list[str], list[list]] | None:
-    """Intra over seeds: per (q, init), mean ± std over the seeds of the final fit loss, the
-    eval loss before inference and after it, and (with the probe's results) the mean
-    probe R² of the inferred codes. None with fewer than two seeds of any (q, init)."""
+    """Intra over seeds: per (q, init), mean ± sample std (ddof 1) over the seeds of the
+    final fit loss, the eval loss before inference and after it, and (with the probe's
+    results) the mean probe R² of the inferred codes. None with fewer than two seeds of any (q, init)."""
     groups: dict = {}
     for r in results["runs"]:
         groups.setdefault((r["latent_dim"], r["init"]), []).append(r)
@@ -257,7 +261,8 @@ def spread_table(results: dict, probe: dict | None = None) -> tuple[list[str], l
 
 def outcome_spread_table(clustering: dict | None, success: dict | None) -> tuple[list[str], list[list]] | None:
     """Success rates (all primitives, grasp) and latent clustering accuracy per init:
-    mean ± std over the focus seed and the others (``by_seed``). None with one seed."""
+    mean ± sample std (ddof 1) over the focus seed and the others (``by_seed``). None with
+    one seed."""
     acc: dict = {}
     if clustering is not None:
         per_seed = [clustering["latent"]] + list(clustering.get("by_seed", {}).values())
@@ -344,28 +349,26 @@ def failed_criteria_table(results: dict) -> tuple[list[str], list[list]]:
 
 
 def inter_table(results: dict) -> tuple[list[str], list[list]]:
-    """Inter: phase-2 loss at the start and at the end, mean ± std over folds, per init."""
+    """Inter: phase-2 loss at the start and at the end, mean ± sample std (ddof 1) over folds, per init."""
     by: dict[str, list] = {}
     for r in results["runs"]:
         by.setdefault(r["init"], []).append(r)
     rows = []
     for init, runs in by.items():
-        first = np.array([r["phase2"][0]["loss"] for r in runs])
-        last = np.array([r["phase2"][-1]["loss"] for r in runs])
-        rows.append(
-            [init, len(runs), f"{first.mean():.4g} ± {first.std():.2g}", f"{last.mean():.4g} ± {last.std():.2g}"]
-        )
+        first = [r["phase2"][0]["loss"] for r in runs]
+        last = [r["phase2"][-1]["loss"] for r in runs]
+        rows.append([init, len(runs), mean_std(first, 4), mean_std(last, 4)])
     return ["init", "folds", "phase-2 loss at start", "phase-2 final loss"], rows
 
 
 def tuning_table(results: dict, intra: dict | None = None) -> tuple[list[str], list[list]]:
     """Tune: per q and init, the chosen setting (layer time constants, latent learning
     rate, its validation loss), the final eval loss under the shared setting and under
-    the tuned one (mean ± std over seeds), and in how many seeds projection's final eval
-    loss is below the init's, seed by seed, under each (does a gap survive tuning?). The
-    setting is chosen at one q (``latent_dim``) and applied at every q: rows of another q
-    name that choice instead of repeating it. The shared runs are ``intra``'s (default:
-    the copy the tune results keep)."""
+    the tuned one (mean ± sample std over seeds, ddof 1), and in how many seeds
+    projection's final eval loss is below the init's, seed by seed, under each (does a
+    gap survive tuning?). The setting is chosen at one q (``latent_dim``) and applied at
+    every q: rows of another q name that choice instead of repeating it. The shared runs
+    are ``intra``'s (default: the copy the tune results keep)."""
     finals = _tuning_finals(results, intra)
     tuned_at = results.get("latent_dim")
     rows = []
@@ -458,7 +461,7 @@ def scene_table(results: dict) -> tuple[list[str], list[list]]:
 
 
 def cell_text(cell, digits: int = 4) -> str:
-    """``[mean, std, n]`` as "mean ± std" (n > 1) or "mean"; "–" for none."""
+    """``[mean, std (ddof 1), n]`` as "mean ± std" (n > 1) or "mean"; "–" for none."""
     if not cell:
         return "–"
     mean, std, n = cell

@@ -41,7 +41,7 @@ def _what(results: dict) -> str:
         f"the closed loop (the scene policy asked again every {every} steps with the current frame, its belief "
         "corrected when the frame surprises it), the open loop (its first plan replayed), ProMP re-conditioned on "
         f"the executed joints every {every} steps (it does not see), and the closed loop without the move. "
-        "Mean ± std over seeds (ddof 1)."
+        "Mean ± sample std (ddof 1) over seeds."
     )
 
 

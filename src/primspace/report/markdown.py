@@ -15,11 +15,13 @@ report shows one experiment directory, these blocks every stored summary.
 :mod:`primspace.report.summary_tables` renders one summary; this module says which
 summary goes where, renders README's table, and writes the files.
 
-What is generated: per summary, the losses (mean ± std over seeds, and the per-seed
-range), success rates (mean ± std over seeds, and the pooled rate with its Wilson 95 %
-interval), clustering accuracies, the inter folds, the tuned baselines, and the paper's
-claims with each rule's version, threshold, per-seed verdicts, the judge-tolerance sweep
-and the earlier rule's verdict; and README's table of results at a glance.
+What is generated: per summary, the losses (mean ± sample std over seeds, ddof 1, and
+the per-seed range), success rates (mean ± sample std over seeds, and the pooled rate
+with its Wilson 95 % interval), clustering accuracies, the inter folds, the tuned
+baselines, and the paper's claims with each rule's version, threshold, per-seed
+verdicts, the judge-tolerance sweep and the earlier rule's verdict; and README's table
+of results at a glance. Each page states the convention of its spreads once, atop its
+first block with numbers (:func:`primspace.stats.spread_convention`).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from primspace.experiments.act_results import act_latency_text, act_tables
 from primspace.experiments.claims import check_claims
 from primspace.experiments.results import projection_lead
 from primspace.experiments.summary import read_summary
+from primspace.stats import spread_convention
 from primspace.report.summary_tables import (
     COMPARISONS,
     final_losses,
@@ -113,8 +116,9 @@ _GLANCE_COLUMNS = [
 def glance(summaries: dict[str, dict]) -> str:
     """README's results at a glance: one row per summary of :data:`ORDER` with intra runs.
 
-    Columns: projection's and zero's final eval loss at the largest q (mean ± std over
-    seeds); their success in the simulator and the clustering accuracy of their codes,
+    Columns: projection's and zero's final eval loss at the largest q (mean ± sample std
+    over seeds, and the 95 % t-interval half-width); their success in the simulator and
+    the clustering accuracy of their codes,
     where run; where the baselines were tuned (here or in the summary :data:`TUNED_IN`
     names), in how many seeds projection ends below zero and below pca with every init
     tuned; and how many of the paper's sentences checked hold in every seed."""
@@ -137,7 +141,7 @@ def glance(summaries: dict[str, dict]) -> str:
                 f"*{name}*",
                 str(len(by.get("projection", []))),
                 str(max(r["latent_dim"] for r in intra["runs"])),
-                *(mean_spread(by.get(i, []), rng=False) for i in ("projection", "zero")),
+                *(mean_spread(by.get(i, []), rng=False, ci=True) for i in ("projection", "zero")),
                 *(outcome(i, 2) if success else "—" for i in ("projection", "zero")),
                 *(outcome(i, 4) if clustering else "—" for i in ("projection", "zero")),
                 _tuned_cell(summaries.get(TUNED_IN.get(name, name), {})),
@@ -146,7 +150,7 @@ def glance(summaries: dict[str, dict]) -> str:
         )
     if not rows:
         return "No stored summaries yet (docs/results/)."
-    return table(_GLANCE_COLUMNS, rows)
+    return spread_convention() + "\n\n" + table(_GLANCE_COLUMNS, rows)
 
 
 def _tuned_cell(summary: dict) -> str:
@@ -176,7 +180,7 @@ def render_act(summary: dict) -> str:
         f"q = {act['latent_dim']}, seeds {', '.join(map(str, seeds))}"
         + (f" ({' or '.join(map(str, n_test))} scenes each)" if n_test else "")
         + f"; the block moved {100 * lo:g}-{100 * hi:g} cm at {100 * at:g} % of the motion, the closed loop "
-        f"re-asked every {act['every']} steps; mean ± std over seeds (ddof 1)."
+        f"re-asked every {act['every']} steps; mean ± sample std (ddof 1) over seeds."
     )
     for title, columns, rows in act_tables(act):
         lines += ["", f"**{title}**", "", table(columns, [[str(c) for c in row] for row in rows])]
@@ -201,18 +205,20 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
         for a, b, what in COMPARISONS
         if a in summaries and b in summaries
     ]
-    results = "\n\n".join(parts) or "No stored summaries yet (docs/results/)."
+    note = spread_convention() + "\n\n"  # once per page: atop its first block with numbers
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
     scene = "\n\n".join(render_scene(s) for s in summaries.values() if "scene" in s["results"])
     composite = "\n\n".join(render_composite(s) for s in summaries.values() if "composite" in s["results"])
     act = "\n\n".join(render_act(s) for s in summaries.values() if "act" in s["results"])
+    if scene and not predicted:
+        scene = note + scene  # docs/predict.md's first block with numbers
     return {
         "glance": glance(summaries),
-        "results": results,
-        "predict": predicted or "No stored prediction summaries yet (docs/results/).",
+        "results": note + "\n\n".join(parts) if parts else "No stored summaries yet (docs/results/).",
+        "predict": note + predicted if predicted else "No stored prediction summaries yet (docs/results/).",
         "scene": scene or "No stored scene-only summaries yet (docs/results/).",
-        "composite": composite or "No stored composite summaries yet (docs/results/).",
-        "act": act or NO_ACT,
+        "composite": note + composite if composite else "No stored composite summaries yet (docs/results/).",
+        "act": note + act if act else NO_ACT,
     }
 
 

@@ -156,10 +156,15 @@ def intra(out_dir: Path, report: HtmlReport) -> None:
     report.table(columns, rows, "Final losses per run.")
     spread = spread_table(results, read_results(out_dir, PROBE_RESULTS))
     if spread is not None:
-        report.table(*spread, "Spread over seeds (each seed its own split, weights and projection): mean ± std.")
+        report.table(
+            *spread, "Spread over seeds (each seed its own split, weights and projection): mean ± sample std (ddof 1)."
+        )
     outcomes = outcome_spread_table(read_results(out_dir, "clustering"), read_results(out_dir, "success"))
     if outcomes is not None:
-        report.table(*outcomes, "Success rates and latent clustering over seeds (at the clustered q): mean ± std.")
+        report.table(
+            *outcomes,
+            "Success rates and latent clustering over seeds (at the clustered q): mean ± sample std (ddof 1).",
+        )
 
 
 def calibration(out_dir: Path, report: HtmlReport) -> None:
@@ -185,7 +190,7 @@ def calibration(out_dir: Path, report: HtmlReport) -> None:
         "same P. Movement and R² below are the projection fit's, on its training part (R² of P m: how well P m "
         "itself predicts the fitted codes; held-out R² of the map: out-of-fold)."
     )
-    report.table(*table, "Eval-part loss at the start and the end of inference, mean ± std over seeds.")
+    report.table(*table, "Eval-part loss at the start and the end of inference, mean ± sample std (ddof 1) over seeds.")
     ok, text = calibration_verdict(results)
     verdict = {
         True: "calibrated never loses (by more than 5%) to projection or zero",
@@ -320,7 +325,7 @@ def prediction(out_dir: Path, report: HtmlReport) -> None:
         "conditions); each with the continuity correction. The peers on the same split: "
         "ProMP conditioning given the labels, one ProMP for all, the nearest fitted demonstration, the mean motion "
         "of the primitive (given the label); the ProMPs' noise chosen on the answer. MSE of the unobserved steps, "
-        "mean ± std over seeds"
+        "mean ± sample std (ddof 1) over seeds"
         + (
             "; success as judged by the simulator (at 100 % nothing is left to predict)."
             if results.get("judged")
@@ -360,8 +365,8 @@ def scene_only(out_dir: Path, report: HtmlReport) -> None:
         f"code is searched inside that cluster's affine subspace ({results['epochs']} epochs, θ of the projection fit "
         f"at q = {results['latent_dim']} frozen) and decoded whole (docs/predict.md). Beside it, on the same samples: "
         "the mean motion of the primitive's fitted demonstrations (given the label) and the same run's codes inferred "
-        "from the whole motion (the reproduction). MSE of the steps after the first (scaled units), mean ± std over "
-        "seeds" + ("; success as judged by the simulator." if results.get("judged") else ".")
+        "from the whole motion (the reproduction). MSE of the steps after the first (scaled units), mean ± sample std "
+        "(ddof 1) over seeds" + ("; success as judged by the simulator." if results.get("judged") else ".")
     )
     columns, rows = scene_table(results)
     report.table(columns, rows)
@@ -387,7 +392,7 @@ def composite(out_dir: Path, report: HtmlReport) -> None:
         columns,
         rows,
         "primspace per init, then its peers on the raw scaled joints (peer: rows; "
-        "ruptures, hmmlearn), the same held-out demonstrations and scores; mean ± std over seeds.",
+        "ruptures, hmmlearn), the same held-out demonstrations and scores; mean ± sample std (ddof 1) over seeds.",
     )
     single = primitives_table(results)
     if single is not None:

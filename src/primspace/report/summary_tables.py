@@ -5,7 +5,7 @@ The markdown counterpart of :mod:`primspace.report.sections` (the HTML report): 
 results and compute nothing. Each function takes a summary (``docs/results/*.json``,
 :mod:`primspace.experiments.summary`) and returns markdown text;
 :mod:`primspace.report.markdown` puts the text between the markers of the docs files.
-Standard deviations are population ones (over the seeds run).
+Standard deviations are sample ones (ddof 1, over the seeds run; :func:`primspace.stats.sample_std`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from primspace.experiments.composite.results import (
 )
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
 from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
-from primspace.stats import wilson_interval
+from primspace.stats import sample_std, t_interval, wilson_interval
 
 __all__ = [
     "g",
@@ -50,14 +50,15 @@ def g(x: float | None, digits: int = 2) -> str:
     return re.sub(r"e([+-])0*(\d)", lambda m: "e" + ("-" if m.group(1) == "-" else "") + m.group(2), text)
 
 
-def mean_spread(values: list[float], digits: int = 2, rng: bool = True) -> str:
-    """``mean ± std`` (population std) and, with several values, ``[min–max]``."""
+def mean_spread(values: list[float], digits: int = 2, rng: bool = True, ci: bool = False) -> str:
+    """``mean ± std`` (sample std, ddof 1), with several values ``[min–max]`` (``rng``) and the
+    95 % t-interval half-width (``ci``, :func:`primspace.stats.t_interval`); one value alone."""
     v = np.asarray([x for x in values if x is not None], dtype=float)
-    if v.size == 0:
-        return "—"
-    if v.size == 1:
-        return g(v[0], digits)
-    text = f"{g(v.mean(), digits)} ± {g(v.std(), 1 if digits <= 2 else digits - 1)}"
+    if v.size < 2:
+        return g(v[0], digits) if v.size else "—"
+    spread = 1 if digits <= 2 else digits - 1
+    text = f"{g(v.mean(), digits)} ± {g(sample_std(v), spread)}"
+    text += f" (95 % CI ± {g(t_interval(v)[1], spread)})" if ci else ""
     return text + (f" [{g(v.min(), digits)}–{g(v.max(), digits)}]" if rng else "")
 
 
@@ -103,7 +104,7 @@ def _seed_points(success: dict) -> dict[str, list[dict]]:
 
 
 def _rate(points: list[dict], prim: str | None) -> str:
-    """Mean ± std over seeds of a success rate, and the pooled rate with its Wilson 95 % interval."""
+    """Mean ± sample std (ddof 1) over seeds of a success rate, and the pooled rate with its Wilson 95 % interval."""
     rates, k, n = [], 0, 0
     for p in points:
         counts = p["counts"] if prim is None else {prim: p["counts"].get(prim)}
@@ -222,7 +223,7 @@ def _intra_section(res: dict) -> list[str]:
         return []
     return [
         "",
-        "Losses (mean ± std over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
+        "Losses (mean ± sample std (ddof 1) over seeds [per-seed range]): the fit's final loss, and the eval part's loss "
         "(θ frozen) before the first and after the last inference epoch.",
         "",
         table(["q", "init", "seeds", "fit, final", "eval, start", "eval, final"], _intra_rows(res["intra"])),
@@ -239,13 +240,15 @@ def _outcome_section(res: dict, preset: dict) -> list[str]:
     keep = [0, 1] + ([2, 3] if res.get("success") else []) + ([4] if res.get("clustering") else [])
     said = (
         [
-            "success rate of the generated eval motions judged by the simulator (mean ± std over seeds; pooled "
+            "success rate of the generated eval motions judged by the simulator (mean ± sample std (ddof 1) over seeds; pooled "
             "over seeds with its Wilson 95 % interval)"
         ]
         if res.get("success")
         else []
     ) + (
-        [f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± std over seeds [range])"]
+        [
+            f"clustering accuracy of the codes (R² = {preset.get('cluster_r2')}; mean ± sample std (ddof 1) over seeds [range])"
+        ]
         if res.get("clustering")
         else []
     )
@@ -263,7 +266,7 @@ def _inter_section(res: dict) -> list[str]:
         return []
     return [
         "",
-        f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± std over folds and seeds):",
+        f"Inter-primitive, phase 2 at q = {res['inter'].get('latent_dim')} (mean ± sample std (ddof 1) over folds and seeds):",
         "",
         table(["init", "folds", "loss at start", "after 1/8 of the epochs", "final"], _inter_rows(res["inter"])),
     ]
@@ -294,7 +297,7 @@ def _tune_section(res: dict) -> list[str]:
         f"Fair baselines (`primspace experiment tune`): each init tuned on a validation split carved from "
         f"the fitted part, over the same grid (layer time constants {tune['grid']['taus']}, latent "
         f"learning rate x {factors}) at q = {tune['latent_dim']} and applied at every q, epochs the "
-        "preset's for all; the final eval loss with the shared and the tuned setting (mean ± std over "
+        "preset's for all; the final eval loss with the shared and the tuned setting (mean ± sample std (ddof 1) over "
         "seeds). README's table and the claims use the shared setting (the paper's protocol); this table "
         "says whether a gap survives tuning:",
         "",
@@ -363,7 +366,7 @@ def _rescaled(summary: dict, init: str, key: str) -> str:
 def render_comparison(a: dict, b: dict, what: str) -> str:
     """Two summaries of the same grid under one changed setting, per init: the inferred
     motor loss and vision PSNR (all frames, per element: comparable across losses),
-    success and clustering accuracy, mean ± std over seeds."""
+    success and clustering accuracy, mean ± sample std (ddof 1) over seeds."""
     rows = []
     rescaled = all(s["results"].get("clustering", {}).get("rescaled") for s in (a, b))
     inits = dict.fromkeys(r["init"] for r in a["results"]["intra"]["runs"])
@@ -388,7 +391,7 @@ def render_comparison(a: dict, b: dict, what: str) -> str:
             f"#### {a['name']} against {b['name']}: {what}",
             "",
             "Per-element errors recomputed on every frame, so the two losses are compared on the same scale; "
-            "mean ± std over seeds (pooled success with its Wilson 95 % interval).",
+            "mean ± sample std (ddof 1) over seeds (pooled success with its Wilson 95 % interval).",
             "",
             table(columns, rows),
         ]
@@ -417,7 +420,7 @@ def render_composite(summary: dict) -> str:
         f"W = {co.get('window')}, epochs {preset.get('fit_epochs')} + {preset.get('infer_epochs')}; measured on "
         f"{cpu.get('model', '?')}." + (f" {summary['note']}" if summary.get("note") else ""),
         "",
-        "Mean ± std over seeds; losses are mean squared errors of the scaled joints of the held-out "
+        "Mean ± sample std (ddof 1) over seeds; losses are mean squared errors of the scaled joints of the held-out "
         "demonstrations; boundaries match one-to-one within the tolerance; accuracies are per step (Hungarian). "
         "Peers: " + "; ".join(f"`{k}` {v}" for k, v in PEER_RULES.items()) + ".",
         "",
@@ -461,7 +464,7 @@ def render_scene(summary: dict) -> str:
             "",
             f"q = {sc['latent_dim']}, seeds {', '.join(map(str, seeds))}, {sc['epochs']} inference epochs in the "
             "subspace; n: samples per seed; MSE of the steps after the first (joints scaled to [-1, 1] over the data "
-            "set), mean ± std over seeds"
+            "set), mean ± sample std (ddof 1) over seeds"
             + ("; success: the share the simulator judges a success." if sc.get("judged") else "."),
             "",
             table(columns, [[str(c) for c in row] for row in rows]),
@@ -484,7 +487,7 @@ def render_predict(summary: dict) -> str:
         "",
         f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "
         f"{pr['epochs']} inference epochs for the gradient starts; measured on {cpu.get('model', '?')}. MSE of the "
-        "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± std over seeds"
+        "unobserved steps (joints scaled to [-1, 1] over the data set), mean ± sample std (ddof 1) over seeds"
         + ("; success: the share of predicted motions the simulator judges a success." if pr.get("judged") else "."),
     ]
     if not splits_tasks(pr):
