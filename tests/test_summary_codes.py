@@ -14,10 +14,11 @@ from primspace.errors import OutputExistsError, UserError
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
 from primspace.experiments.runs import load_codes, phase_dir
-from primspace.experiments.summary import read_summary, summarize, write_summary
+from primspace.experiments.summary import read_summary, summarize
 from primspace.experiments.summary_codes import (
     VERSION_KEY,
     codes_in_data_order,
+    write_summary_with_codes,
     codes_path,
     read_codes,
 )
@@ -59,7 +60,7 @@ def exp(tmp_path_factory):
 def stored(exp, tmp_path_factory):
     """The summary and its codes, written as ``primspace summarize`` writes them."""
     out = tmp_path_factory.mktemp("docs") / "tiny.json"
-    summary = write_summary(out, summarize(exp.path, "tiny", COMMAND), codes_of=exp.path)
+    summary = write_summary_with_codes(out, summarize(exp.path, "tiny", COMMAND), exp.path)
     return out, summary
 
 
@@ -113,21 +114,21 @@ def test_clustering_is_checked_again_from_the_codes_alone(exp, stored):
 def test_a_codes_file_is_replaced_only_when_asked_and_only_its_own(exp, tmp_path):
     out = tmp_path / "tiny.json"
     summary = summarize(exp.path, "tiny", COMMAND)
-    write_summary(out, summary, codes_of=exp.path)
+    write_summary_with_codes(out, summary, exp.path)
     codes = codes_path(out)
     before = codes.read_bytes()
     with pytest.raises(OutputExistsError):  # the summary exists: refused before the codes are written
-        write_summary(out, summary, codes_of=exp.path)
+        write_summary_with_codes(out, summary, exp.path)
     out.unlink()
     with pytest.raises(OutputExistsError):  # the codes exist: refused, and no summary written
-        write_summary(out, summary, codes_of=exp.path)
+        write_summary_with_codes(out, summary, exp.path)
     assert not out.exists() and codes.read_bytes() == before
-    write_summary(out, summary, overwrite=True, codes_of=exp.path)  # an earlier codes file: replaced
+    write_summary_with_codes(out, summary, exp.path, overwrite=True)  # an earlier codes file: replaced
     assert read_codes(codes)["runs"].keys() == set(KEYS)
     np.savez_compressed(codes, latents=np.zeros(3))  # someone else's archive at that name
     out.unlink()
     with pytest.raises(UserError, match="replaces only an earlier codes file"):
-        write_summary(out, summary, overwrite=True, codes_of=exp.path)
+        write_summary_with_codes(out, summary, exp.path, overwrite=True)
     assert not out.exists()
     with pytest.raises(UserError, match="not a primspace codes file"):
         read_codes(codes)
@@ -144,7 +145,7 @@ def test_runs_whose_folders_are_gone_are_named_and_labels_kept_when_readable(exp
     meta = json.loads((copy / "experiment.json").read_text())
     meta["data"] = str(tmp_path / "gone.h5")  # the data file did not travel
     (copy / "experiment.json").write_text(json.dumps(meta))
-    summary = write_summary(tmp_path / "s.json", summarize(copy, "s", COMMAND), codes_of=copy)
+    summary = write_summary_with_codes(tmp_path / "s.json", summarize(copy, "s", COMMAND), copy)
     assert summary["codes"] == {"file": "s.codes.npz", "runs": 2, "missing": ["intra/zero-q4-s0"]}
     codes = read_codes(tmp_path / "s.codes.npz")
     assert list(codes["runs"]) == KEYS[1:]

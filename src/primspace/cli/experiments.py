@@ -165,6 +165,17 @@ _PACK_HELP = (
 )
 
 
+#: How a grid's runs step (the preset's TrainConfig): the options of every experiment command.
+_STEPPING = {
+    "optimizer": typer.Option(None, "--optimizer", help="Override: " + OPTIMIZER_HELP),
+    "lr": typer.Option(None, "--lr", help="Override the learning rate of the weights."),
+    "latent_lr": typer.Option(None, "--latent-lr", help="Override the learning rate of the codes."),
+    "step": typer.Option(
+        None, "--step", help="How each run's batches step: eager (default), compiled or captured (docs/performance.md)."
+    ),
+}
+
+
 def _experiment_command(
     name: str, doc: str, steps: tuple[str, ...], table: str | None, preset_names: str | None = None
 ) -> None:
@@ -207,30 +218,17 @@ def _experiment_command(
         loss_reduction: Optional[LossReduction] = typer.Option(
             None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."
         ),
-        optimizer: Optional[Optimizer] = typer.Option(None, "--optimizer", help="Override: " + OPTIMIZER_HELP),
-        lr: Optional[float] = typer.Option(None, "--lr", help="Override the learning rate of the weights."),
-        latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Override the learning rate of the codes."),
-        step: Optional[str] = typer.Option(
-            None,
-            "--step",
-            help="How each run's batches step: eager (default), compiled or captured (docs/performance.md).",
-        ),
+        optimizer: Optional[Optimizer] = _STEPPING["optimizer"],
+        lr: Optional[float] = _STEPPING["lr"],
+        latent_lr: Optional[float] = _STEPPING["latent_lr"],
+        step: Optional[str] = _STEPPING["step"],
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
         device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
         threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
     ) -> None:
+        stepping = (optimizer, lr, latent_lr, step)
         overrides = _overrides(
-            name,
-            latent_dims,
-            inits,
-            seeds,
-            epochs,
-            images,
-            vision_frames,
-            loss_reduction,
-            device,
-            threads,
-            (optimizer, lr, latent_lr, step),
+            name, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads, stepping
         )
         exp = _experiment(
             _preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides, pack=pack
@@ -332,16 +330,15 @@ def summarize_command(
     (`python -m primspace.report.markdown`), and beside it (OUT with suffix .codes.npz) the
     codes of its runs, compressed (`primspace.experiments.summary_codes.read_codes` reads them);
     run it on the machine that ran the experiment (it records the CPU)."""
-    from primspace.experiments.summary import summarize, write_summary
-    from primspace.experiments.summary_codes import check_codes_output, codes_path
+    from primspace.experiments.summary import summarize
+    from primspace.experiments.summary_codes import check_codes_output, codes_path, write_summary_with_codes
     from primspace.outputs import output_file
 
     # --overwrite replaces a summary only (recognised by its summary_version), never another file,
     # and a codes file only (its primspace_codes_version entry): both checked before anything is read
     path = output_file(out, inputs=(directory,), overwrite=overwrite, writer="primspace summarize")
     check_codes_output(codes_path(path), overwrite, inputs=(directory,))
-    written = write_summary(path, summarize(directory, name, command, note), overwrite=overwrite, codes_of=directory)
-    codes = written["codes"]
+    codes = write_summary_with_codes(path, summarize(directory, name, command, note), directory, overwrite)["codes"]
     missing = f"; not kept, their folders unreadable: {', '.join(codes['missing'])}" if codes["missing"] else ""
     typer.echo(f"wrote {path} and {codes_path(path)} (the codes of {codes['runs']} runs{missing})")
 

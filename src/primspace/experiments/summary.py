@@ -8,8 +8,8 @@ accuracy of each clustering, the inter folds. ``docs/results/NAME.json`` holds o
 run we report; ``python -m primspace.report.markdown`` writes the tables of README and
 docs/results.md from them, and a test keeps the committed text equal to what it writes.
 Beside each, ``docs/results/NAME.codes.npz`` keeps the codes of the directory's runs
-(:mod:`primspace.experiments.summary_codes`, written by :func:`write_summary` with
-``codes_of``), so that clustering can be re-checked without training again.
+(:mod:`primspace.experiments.summary_codes`, written by ``primspace summarize``), so that
+clustering can be re-checked without training again.
 
 The claims (:func:`primspace.experiments.claims.check_claims`) read a summary's
 ``results`` exactly as they read a directory, so a rule that changes is re-judged from
@@ -340,22 +340,14 @@ def read_summary(path: str | Path) -> dict:
     return summary
 
 
-def write_summary(path: str | Path, summary: dict, overwrite: bool = False, codes_of: str | Path | None = None) -> dict:
+def write_summary(path: str | Path, summary: dict, overwrite: bool = False) -> dict:
     """Write a summary compactly (one line per top-level key), atomically; an existing
-    file only with ``overwrite``. Returns the summary written.
-
-    With ``codes_of`` (the experiment directory summarised), the codes of its runs go beside
-    it first (``NAME.codes.npz``, :func:`primspace.experiments.summary_codes.write_run_codes`;
-    an existing one replaced only with ``overwrite`` and only if it is an earlier codes file),
-    and the summary's ``codes`` field names that file and the number of runs it holds.
+    file only with ``overwrite``. Returns the summary written. (``primspace summarize`` also
+    writes the codes of the runs beside it first, :mod:`primspace.experiments.summary_codes`,
+    and names them in the summary's ``codes`` field.)
     """
-    from primspace.files import atomic_write_text, check_output
+    from primspace.files import atomic_write_text
 
-    if codes_of is not None:
-        from primspace.experiments.summary_codes import codes_path, write_run_codes
-
-        check_output(path, overwrite)  # a summary that cannot be written is refused before its codes are
-        summary = summary | {"codes": write_run_codes(codes_path(path), codes_of, overwrite)}
     lines = ",\n".join(f"{json.dumps(k)}: {json.dumps(v, separators=(',', ':'))}" for k, v in summary.items())
     atomic_write_text(path, "{\n" + lines + "\n}\n", overwrite)
     return summary

@@ -56,6 +56,7 @@ __all__ = [
     "write_run_codes",
     "read_codes",
     "codes_in_data_order",
+    "write_summary_with_codes",
 ]
 
 log = logging.getLogger(__name__)
@@ -248,3 +249,16 @@ def codes_in_data_order(run: dict, n_samples: int) -> tuple[np.ndarray, np.ndarr
     is_train = np.zeros(n_samples, dtype=bool)
     is_train[run["fit/indices"]] = True
     return z, is_train
+
+
+def write_summary_with_codes(path: str | Path, summary: dict, directory: str | Path, overwrite: bool = False) -> dict:
+    """What ``primspace summarize`` writes: the codes of ``directory``'s runs beside the
+    summary ``path`` (:func:`write_run_codes`), then the summary with its ``codes`` field
+    naming them (:func:`primspace.experiments.summary.write_summary`). A summary that cannot
+    be written is refused before its codes are; returns the summary written."""
+    from primspace.experiments.summary import write_summary
+    from primspace.files import check_output
+
+    check_output(path, overwrite)
+    codes = write_run_codes(codes_path(path), directory, overwrite)
+    return write_summary(path, summary | {"codes": codes}, overwrite=overwrite)
