@@ -216,3 +216,30 @@ def test_a_tune_run_on_copied_runs_shows_only_its_tuning_table():
     assert "Losses (mean" not in section and "The paper's sentences" not in section
     alone = blocks({TUNED_IN[name]: tuned})["results"]
     assert "Losses (mean" in alone and "Fair baselines" in alone
+
+
+def test_a_side_of_a_comparison_may_be_several_summaries_one_per_init():
+    # rates tuned per init: one experiment each, compared as one setting (issue 42's ablation)
+    from primspace.report.markdown import merged, render_comparison
+
+    rescaled = lambda init, acc: [  # noqa: E731
+        {"init": init, "seed": 0, "rescaling": how, "rms": 2.0, "accuracy": acc}
+        for how in ("common scale", "standardised per dimension")
+    ]
+    a = _summary("adam", {"zero": [1e-3], "projection": [2e-4]}, {"zero": [None], "projection": [None]})
+    a["results"]["clustering"] = {
+        "latent": [],
+        "by_seed": {},
+        "rescaled": rescaled("zero", 0.4) + rescaled("projection", 0.8),
+    }
+    zero = _summary("sgd-zero", {"zero": [3e-3]}, {"zero": [None]})
+    zero["results"]["clustering"] = {"latent": [], "by_seed": {}, "rescaled": rescaled("zero", 0.7)}
+    proj = _summary("sgd-projection", {"projection": [5e-4]}, {"projection": [None]})
+    proj["results"]["clustering"] = {"latent": [], "by_seed": {}, "rescaled": rescaled("projection", 0.9)}
+    summaries = {s["name"]: s for s in (a, zero, proj)}
+    both = merged(summaries, ("sgd-zero", "sgd-projection"))
+    assert both["name"] == "sgd-zero + sgd-projection" and len(both["results"]["intra"]["runs"]) == 2
+    assert merged(summaries, "adam") is a
+    text = render_comparison(a, both, "Adam against SGD")
+    assert "| zero | 0.001 | 0.003 |" in text and "clustering, common scale: sgd-zero + sgd-projection" in text
+    assert "| 0.4 | 0.7 | 0.4 | 0.7 |" in text  # each init's rescaled accuracies, from its own summary

@@ -51,6 +51,7 @@ from primspace.report.summary_tables import (
 )
 
 __all__ = [
+    "merged",
     "g",
     "mean_spread",
     "render_summary",
@@ -196,14 +197,37 @@ def load_summaries(root: Path) -> dict[str, dict]:
     return {n: found[n] for n in sorted(found, key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))}
 
 
+def _names(side) -> tuple[str, ...]:
+    return (side,) if isinstance(side, str) else tuple(side)
+
+
+def merged(summaries: dict[str, dict], side) -> dict:
+    """One side of a comparison (:data:`COMPARISONS`): a summary, or several summaries of one
+    setting that differ only in their inits (e.g. rates tuned per init, one experiment each)
+    as one: their intra runs and clustering rows together."""
+    names = _names(side)
+    if len(names) == 1:
+        return summaries[names[0]]
+    parts = [summaries[n]["results"] for n in names]
+    intra = {"runs": [r for p in parts for r in p["intra"]["runs"]]}
+    clustering = {"latent": [], "by_seed": {}, "rescaled": []}
+    for p in parts:
+        c = p.get("clustering") or {}
+        clustering["latent"] += c.get("latent", [])
+        clustering["rescaled"] += c.get("rescaled", [])
+        for seed, rows in c.get("by_seed", {}).items():
+            clustering["by_seed"].setdefault(seed, []).extend(rows)
+    return {"name": " + ".join(names), "results": {"intra": intra, "clustering": clustering}}
+
+
 def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block, by block name (:data:`TARGETS`)."""
     tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
     parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
     parts += [
-        render_comparison(summaries[a], summaries[b], what)
+        render_comparison(merged(summaries, a), merged(summaries, b), what)
         for a, b, what in COMPARISONS
-        if a in summaries and b in summaries
+        if all(n in summaries for n in _names(a) + _names(b))
     ]
     note = spread_convention() + "\n\n"  # once per page: atop its first block with numbers
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
