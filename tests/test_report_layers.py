@@ -28,6 +28,7 @@ READERS = {
     "primspace.experiments.claims",
     "primspace.experiments.claim_rules_v1",
     "primspace.experiments.claim_verdicts",
+    "primspace.experiments.claim_rules_central",
     "primspace.experiments.summary",
     "primspace.experiments.composite.results",
     "primspace.experiments.act_results",
