@@ -243,3 +243,41 @@ def test_a_side_of_a_comparison_may_be_several_summaries_one_per_init():
     text = render_comparison(a, both, "Adam against SGD")
     assert "| zero | 0.001 | 0.003 |" in text and "clustering, common scale: sgd-zero + sgd-projection" in text
     assert "| 0.4 | 0.7 | 0.4 | 0.7 |" in text  # each init's rescaled accuracies, from its own summary
+
+
+def _clustered(seed_acc: dict, rescaled: dict | None = None) -> dict:
+    """A summary whose clustering holds ``{seed: (zero, projection)}`` learned accuracies."""
+    rows = {
+        s: [{"init": i, "codes": "learned", "accuracy": a} for i, a in zip(("zero", "projection"), acc)]
+        for s, acc in seed_acc.items()
+    }
+    first = min(rows)
+    scaled = [
+        {"init": i, "seed": s, "rescaling": how, "rms": 1.0, "accuracy": a}
+        for how, by_seed in (rescaled or {}).items()
+        for s, acc in by_seed.items()
+        for i, a in zip(("zero", "projection"), acc)
+    ]
+    clustering = {
+        "seed": first,
+        "latent": rows[first],
+        "by_seed": {str(s): r for s, r in rows.items() if s != first},
+        "rescaled": scaled,
+    }
+    return {"name": "x", "results": {"clustering": clustering}}
+
+
+def test_the_clustering_ablation_reads_its_rule():
+    # docs/reproduce.md: the gap (projection - zero, per seed) is gone when |g| <= s and it shrank by more than both spreads
+    import numpy as np
+
+    from primspace.report.markdown import clustering_ablation, clustering_gaps
+
+    adam_acc = {0: (0.45, 0.89), 1: (0.40, 0.79), 2: (0.50, 0.82)}  # gaps 0.44, 0.39, 0.32
+    same = {"common scale": adam_acc}
+    adam = _clustered(adam_acc, same)
+    assert np.allclose(clustering_gaps(adam)["as they are"], [0.44, 0.39, 0.32])
+    text = clustering_ablation(adam, _clustered({0: (0.88, 0.89), 1: (0.80, 0.79), 2: (0.81, 0.82)}))
+    assert "the optimiser explains the gap" in text and "the scale does not explain it" in text
+    text = clustering_ablation(adam, _clustered({0: (0.6, 0.89), 1: (0.5, 0.79), 2: (0.6, 0.82)}))
+    assert "the optimiser does not explain the gap" in text

@@ -31,11 +31,13 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from primspace.experiments.act_results import act_latency_text, act_tables
 from primspace.experiments.claims import check_claims
-from primspace.experiments.results import projection_lead
+from primspace.experiments.results import LEARNED_CODES, projection_lead
 from primspace.experiments.summary import read_summary
-from primspace.stats import spread_convention
+from primspace.stats import sample_std, spread_convention
 from primspace.report.summary_tables import (
     COMPARISONS,
     final_losses,
@@ -52,6 +54,8 @@ from primspace.report.summary_tables import (
 
 __all__ = [
     "merged",
+    "clustering_gaps",
+    "clustering_ablation",
     "g",
     "mean_spread",
     "render_summary",
@@ -201,6 +205,10 @@ def load_summaries(root: Path) -> dict[str, dict]:
     return {n: found[n] for n in sorted(found, key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))}
 
 
+#: The comparison whose sides are the clustering ablation's (Adam's summary first).
+ABLATION = "paper-adam40"
+
+
 def _names(side) -> tuple[str, ...]:
     return (side,) if isinstance(side, str) else tuple(side)
 
@@ -214,7 +222,7 @@ def merged(summaries: dict[str, dict], side) -> dict:
         return summaries[names[0]]
     parts = [summaries[n]["results"] for n in names]
     intra = {"runs": [r for p in parts for r in p["intra"]["runs"]]}
-    clustering = {"latent": [], "by_seed": {}, "rescaled": []}
+    clustering = {"latent": [], "by_seed": {}, "rescaled": [], "seed": (parts[0].get("clustering") or {}).get("seed")}
     for p in parts:
         c = p.get("clustering") or {}
         clustering["latent"] += c.get("latent", [])
@@ -224,12 +232,54 @@ def merged(summaries: dict[str, dict], side) -> dict:
     return {"name": " + ".join(names), "results": {"intra": intra, "clustering": clustering}}
 
 
+def clustering_gaps(summary: dict) -> dict[str, list[float]]:
+    """Per seed, projection's clustering accuracy minus zero's (learned codes), as they are and
+    after each rescaling of the clustering's ``rescaled`` rows: ``{how: [gap per seed]}``."""
+    c = summary["results"].get("clustering") or {}
+    rows = [(int(c.get("seed", 0)), r) for r in c.get("latent", [])]
+    rows += [(int(seed), r) for seed, rs in c.get("by_seed", {}).items() for r in rs]
+    ways = {"as they are": {(seed, r["init"]): r["accuracy"] for seed, r in rows if r.get("codes") == LEARNED_CODES}}
+    for r in c.get("rescaled", []):
+        ways.setdefault(r["rescaling"], {})[(int(r["seed"]), r["init"])] = r["accuracy"]
+    return {
+        how: [acc[(s, "projection")] - acc[(s, "zero")] for s in sorted({s for s, _ in acc}) if (s, "zero") in acc]
+        for how, acc in ways.items()
+    }
+
+
+def _gone(base: list[float], other: list[float]) -> tuple[bool, str]:
+    """docs/reproduce.md's rule: the gap is gone in ``other`` (|g| <= s) and shrank by more than both spreads."""
+    (g0, s0), (g1, s1) = ((float(np.mean(v)), sample_std(v)) for v in (base, other))
+    ok = abs(g1) <= s1 and g0 - g1 > s0 + s1
+    return ok, f"{g1:.2f} ± {s1:.2f} against {g0:.2f} ± {s0:.2f}"
+
+
+def clustering_ablation(adam: dict, sgd: dict) -> str:
+    """The verdict of the clustering ablation (docs/reproduce.md, its rule written before the
+    runs): does the optimiser, or the codes' scale, explain the gap between zero and projection?"""
+    a, b = clustering_gaps(adam), clustering_gaps(sgd)
+    if len(a.get("as they are", [])) < 2 or len(b.get("as they are", [])) < 2:
+        return "The clustering ablation needs two seeds or more on each side."
+    lines = ["Gap = projection's clustering accuracy minus zero's, per seed; mean ± sample std over seeds:", ""]
+    ok, text = _gone(a["as they are"], b["as they are"])
+    lines.append(
+        f"- plain gradient descent: {text} (Adam) — the optimiser {'explains' if ok else 'does not explain'} the gap"
+    )
+    for how in (h for h in a if h != "as they are"):
+        ok, text = _gone(a["as they are"], a[how])
+        lines.append(
+            f"- Adam's codes, {how}: {text} (as they are) — the scale {'explains' if ok else 'does not explain'} it"
+        )
+    return "\n".join(lines)
+
+
 def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block, by block name (:data:`TARGETS`)."""
     tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
     parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
     parts += [
         render_comparison(merged(summaries, a), merged(summaries, b), what)
+        + ("\n\n" + clustering_ablation(merged(summaries, a), merged(summaries, b)) if a == ABLATION else "")
         for a, b, what in COMPARISONS
         if all(n in summaries for n in _names(a) + _names(b))
     ]
