@@ -34,10 +34,10 @@ def _jobs(ds, epochs=3, **train):
     ]
 
 
-def _close(a, b, tol=TOL):
+def _close(a, b, tol=TOL, weight_tol=None):
     assert np.abs(a.latents - b.latents).max() < tol
     for x, y in zip(a.model.state_dict().values(), b.model.state_dict().values()):
-        assert torch.allclose(x.cpu(), y.cpu(), atol=tol, rtol=0)
+        assert torch.allclose(x.cpu(), y.cpu(), atol=weight_tol or tol, rtol=0)
     assert [h["epoch"] for h in a.history] == [h["epoch"] for h in b.history]
     assert np.allclose([h["loss"] for h in a.history], [h["loss"] for h in b.history], rtol=tol)
 
@@ -104,5 +104,10 @@ def test_on_the_gpu_packed_runs_match_each_run_alone(step):
         fit(**(job | {"train_config": TrainConfig(**(vars(job["train_config"]) | {"step": "eager"}))}), progress=False)
         for job in jobs
     ]
+    # On the GPU a packed product is a batched kernel (bmm, grouped convolution) whose rounding
+    # differs from the single run's; Adam divides a near-zero gradient by its own size, so a
+    # weight that barely moves can move by a few 1e-4 either way (measured on an H100 after 3
+    # epochs: weights up to 5.2e-4 apart, codes 1.0e-6, losses 1.7e-6 relative). Codes and
+    # losses are held to 1e-5; a wrong gradient would move them by far more.
     for a, p in zip(alone, fit_packed(jobs, progress=False)):
-        _close(a, p, tol=1e-4)
+        _close(a, p, tol=1e-5, weight_tol=2e-3)
