@@ -14,6 +14,7 @@ from primspace.cli import animate  # noqa: F401
 from primspace.cli import predict  # noqa: F401
 from primspace.cli import act  # noqa: F401
 from primspace.cli import experiments  # noqa: F401
+from primspace.cli import diagnose  # noqa: F401
 from primspace.cli.app import app, main
 
 __all__ = ["app", "main"]
