@@ -29,6 +29,8 @@ READERS = {
     "primspace.experiments.claim_rules_v1",
     "primspace.experiments.claim_verdicts",
     "primspace.experiments.claim_rules_central",
+    "primspace.experiments.claim_rules_v2",
+    "primspace.experiments.claim_rules_v4",
     "primspace.experiments.summary",
     "primspace.experiments.composite.results",
     "primspace.experiments.act_results",

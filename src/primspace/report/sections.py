@@ -94,11 +94,13 @@ def claims(out_dir: Path, report: HtmlReport) -> None:
         return
     report.section("The paper's claims, checked")
     report.paragraph(
-        "Each sentence is quoted verbatim from the paper's Experimental Results; the paper gives no numbers for "
-        'its curves, so the rule in the second column is our reading of it. "does not hold" marks where our '
-        "results differ from the sentence (stronger or weaker: the numbers say which)."
+        "Each sentence is quoted verbatim from the paper (its abstract, Experimental Results and Summary); the "
+        "paper gives no numbers for its curves, so the rule in the second column is our reading of it. The "
+        "direction says which way a verdict other than holds goes: in the paper's favour (random-projection "
+        "initialisation does better than the sentence says), against the paper (it does worse, or the effect is "
+        "absent), or cannot be checked at this scale (the runs it needs are missing)."
     )
-    columns, rows = claims_table(out_dir)
+    columns, rows = claims_table(out_dir, codes=out_dir)
     report.table(columns, rows)
 
 

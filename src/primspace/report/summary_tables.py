@@ -14,7 +14,7 @@ import re
 
 import numpy as np
 
-from primspace.experiments.claims import check_claims, eighth_loss
+from primspace.experiments.claims import check_claims, codes_of_summary, eighth_loss, verdict_text
 from primspace.experiments.composite.results import (
     PEER_RULES,
     bounds_table,
@@ -164,21 +164,21 @@ def _inter_rows(inter: dict) -> list[list[str]]:
     return rows
 
 
-def _claim_rows(results: dict) -> list[list[str]]:
+def _claim_rows(results: dict, codes=None) -> list[list[str]]:
     rows = []
-    for r in check_claims(results):
+    for r in check_claims(results, codes):
         if r["verdict"] == "not run":
             continue
-        verdict = f"**{r['verdict']}**"
-        if len(r["per_seed"]) > 1:
-            verdict += " (" + ", ".join(f"seed {s}: {v}" for s, v in r["per_seed"].items()) + ")"
-        if r.get("sweep"):
-            verdict += "; by judge tolerance: " + ", ".join(
-                f"{float(t) * 1000:g} mm {v}" for t, v in r["sweep"].items()
-            )
-            verdict += " (robust)" if r["robust"] else " (**not robust** to the tolerance)"
         earlier = "; ".join(f"v{p['version']}: {p['verdict']}" for p in r["previous"]) or "—"
-        rows.append([f"“{r['quote']}”", f"v{r['version']}: {r['test']}", verdict, earlier])
+        rows.append(
+            [
+                f"“{r['quote']}”",
+                f"v{r['version']}: {r['test']}",
+                verdict_text(r, markdown=True),
+                r["direction"],
+                earlier,
+            ]
+        )
     return rows
 
 
@@ -194,7 +194,7 @@ def render_summary(summary: dict, tune_only: bool = False) -> str:
     out += _outcome_section(res, summary.get("preset", {}))
     out += _inter_section(res)
     out += _tune_section(res)
-    out += _claims_section(res)
+    out += _claims_section(res, codes_of_summary(summary))
     return "\n".join(out)
 
 
@@ -272,16 +272,17 @@ def _inter_section(res: dict) -> list[str]:
     ]
 
 
-def _claims_section(res: dict) -> list[str]:
-    """The lines of a summary's claims table (none where no claim is checked)."""
-    claims = _claim_rows(res)
+def _claims_section(res: dict, codes=None) -> list[str]:
+    """The lines of a summary's claims table (none where no claim is checked); ``codes``: its
+    codes file, where it has one."""
+    claims = _claim_rows(res, codes)
     if not claims:
         return []
     return [
         "",
         "The paper's sentences, checked (`primspace.experiments.claims`):",
         "",
-        table(["the paper (verbatim)", "rule (version): what we test", "verdict", "earlier rule"], claims),
+        table(["the paper (verbatim)", "rule (version): what we test", "verdict", "direction", "earlier rule"], claims),
     ]
 
 
