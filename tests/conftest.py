@@ -49,6 +49,24 @@ def assert_user_error(result: CliResult, *fragments: str) -> None:
         assert fragment in lines[0], (fragment, lines[0])
 
 
+# ------------------------------------------------------------------ a tiny simulated data set
+
+#: The tiny data set's generator settings: two block positions per primitive, 14 motions of
+#: 31 steps, no images (seconds to generate).
+TINY_DATA = dict(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory):
+    """The path of a tiny simulated data set (:data:`TINY_DATA`, seed 0), generated once per
+    test module: the experiments' tests run their grids on it."""
+    from primspace.sim.generate import GenerationConfig, generate_dataset
+
+    path = tmp_path_factory.mktemp("data") / "tiny.h5"
+    generate_dataset(GenerationConfig(**TINY_DATA), seed=0, out=path, progress=False)
+    return path
+
+
 # ------------------------------------------------------------------ figures (PNG files)
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

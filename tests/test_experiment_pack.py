@@ -35,17 +35,6 @@ TINY = ExperimentPreset(
 )
 
 
-@pytest.fixture(scope="module")
-def tiny_data(tmp_path_factory):
-    """Two block positions per primitive: 14 motions of 31 steps, no images."""
-    from primspace.sim.generate import GenerationConfig, generate_dataset
-
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
-    path = tmp_path_factory.mktemp("data") / "tiny.h5"
-    generate_dataset(config, seed=0, out=path, progress=False)
-    return path
-
-
 def _points(exp: ExperimentDir, preset: ExperimentPreset) -> list[tuple]:
     """The intra grid points of ``preset`` as pack_grid_runs takes them."""
     labels = exp.dataset().labels

@@ -39,17 +39,6 @@ TINY = ExperimentPreset(
 
 
 @pytest.fixture(scope="module")
-def tiny_data(tmp_path_factory):
-    """Two block positions per primitive: 14 motions of 31 steps, no images (seconds)."""
-    from primspace.sim.generate import GenerationConfig, generate_dataset
-
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
-    path = tmp_path_factory.mktemp("data") / "tiny.h5"
-    generate_dataset(config, seed=0, out=path, progress=False)
-    return path
-
-
-@pytest.fixture(scope="module")
 def finished(tiny_data, tmp_path_factory):
     """An experiment directory with intra, clustering and success done."""
     exp = ExperimentDir(tmp_path_factory.mktemp("exp") / "out", TINY, data=tiny_data, workers=1, progress=False)

@@ -228,7 +228,7 @@ def test_segment_names_the_file_field_and_sample_of_a_short_demonstration(run_cl
     assert not (tmp_path / "seg").exists()
 
 
-def test_an_experiment_on_data_with_hostile_names_writes_inside_its_folder_only(tmp_path):
+def test_an_experiment_on_data_with_hostile_names_writes_inside_its_folder_only(tmp_path, tiny_data):
     """Issue 38, item 1, end to end: label names that are paths ('/../../../victim', '../up', an
     absolute path, a newline, 300 characters, markup) go through the intra experiment, its
     figures and its report; every file written lies inside the experiment folder, and a file
@@ -241,11 +241,8 @@ def test_an_experiment_on_data_with_hostile_names_writes_inside_its_folder_only(
     from primspace.experiments.intra import run_intra
     from primspace.experiments.workspace import ExperimentDir
     from primspace.report import build_report
-    from primspace.sim.generate import GenerationConfig, generate_dataset
 
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
-    generate_dataset(config, seed=0, out=tmp_path / "plain.h5", progress=False)
-    data = MotionDataset.load(tmp_path / "plain.h5")
+    data = MotionDataset.load(tiny_data)
     hostile = ["/../../../victim", "../up", "/abs/x", "new\nline", "x" * 300, "<script>alert(1)</script>", "a/b"]
     dataclasses.replace(data, label_names=hostile[: len(data.label_names)], path=None).save(tmp_path / "hostile.h5")
     victim = tmp_path / "victim.png"

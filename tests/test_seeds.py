@@ -118,7 +118,7 @@ def test_spread_table_is_mean_and_std_over_seeds():
     assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
 
 
-def test_clustering_and_success_over_seeds(tmp_path):
+def test_clustering_and_success_over_seeds(tmp_path, tiny_data):
     """Two seeds: the first seed's results are those of a one-seed experiment, bit for
     bit; the second's are under ``by_seed``; the outcome table averages both."""
     from dataclasses import replace
@@ -130,11 +130,8 @@ def test_clustering_and_success_over_seeds(tmp_path):
     from primspace.experiments.results import outcome_spread_table
     from primspace.experiments.success import run_success
     from primspace.experiments.workspace import ExperimentDir
-    from primspace.sim.generate import GenerationConfig, generate_dataset
 
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
-    data = tmp_path / "tiny.h5"
-    generate_dataset(config, seed=0, out=data, progress=False)
+    data = tiny_data
     one = ExperimentDir(tmp_path / "one", TINY, data=data, workers=1, progress=False)
     two = ExperimentDir(tmp_path / "two", replace(TINY, seeds=(0, 1)), data=data, workers=1, progress=False)
     (c1, s1), (c2, s2) = [(run_clustering(e), run_success(e)) for e in (one, two)]

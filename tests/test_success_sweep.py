@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from test_experiments import tiny_data  # noqa: F401 (the shared fixture: 14 motions, no images)
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError

@@ -44,14 +44,9 @@ COMMAND = "primspace experiment intra --out tiny"
 
 
 @pytest.fixture(scope="module")
-def exp(tmp_path_factory):
-    """Two block positions per primitive: 14 motions of 31 steps, no images; the intra grid run."""
-    from primspace.sim.generate import GenerationConfig, generate_dataset
-
-    config = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, images=False)
-    data = tmp_path_factory.mktemp("data") / "tiny.h5"
-    generate_dataset(config, seed=0, out=data, progress=False)
-    exp = ExperimentDir(tmp_path_factory.mktemp("exp") / "out", TINY, data=data, workers=1, progress=False)
+def exp(tiny_data, tmp_path_factory):
+    """The intra grid run on the tiny data set (conftest's ``tiny_data``)."""
+    exp = ExperimentDir(tmp_path_factory.mktemp("exp") / "out", TINY, data=tiny_data, workers=1, progress=False)
     run_intra(exp)
     return exp
 

@@ -10,6 +10,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from primspace.plots.base import init_color
+from primspace.stats import sample_std
 
 __all__ = ["plot_loss_curves", "plot_intra_losses", "plot_latent_pca"]
 
@@ -29,8 +30,10 @@ def plot_loss_curves(
     ----------
     histories : mapping of label -> list of dict, or of label -> list of lists
         Each run's ``metrics.jsonl`` (:attr:`primspace.train.TrainedRun.history`). A list
-        of histories under one label is drawn as mean ± std over them (paper Fig.
-        ``loss_inter``); on a log axis the band's lower edge stops at the lowest run.
+        of histories under one label (seeds, folds) is drawn as their mean ± sample std
+        (ddof 1, :func:`primspace.stats.sample_std`, the convention of every table; the
+        legend says so) per epoch (paper Fig. ``loss_inter``); on a log axis the band's
+        lower edge stops at the lowest run.
     key : {"loss", "motor", "vision"}
     colors : mapping of label -> colour, optional
         Default: :data:`INIT_COLORS` when a label starts with an init name.
@@ -42,6 +45,7 @@ def plot_loss_curves(
         fig, ax = plt.subplots(figsize=(5.5, 3.6))
     else:
         fig = ax.figure
+    banded = False
     for label, runs in histories.items():
         runs = [runs] if runs and isinstance(runs[0], dict) else list(runs)
         curves = [
@@ -57,7 +61,8 @@ def plot_loss_curves(
         mean = values.mean(axis=0)
         ax.plot(epochs, mean, color=color, lw=1.5, label=str(label))
         if len(curves) > 1:
-            std = values.std(axis=0)
+            std = np.apply_along_axis(sample_std, 0, values)  # over the runs, per epoch
+            banded = True
             lower = mean - std
             if log_scale:  # a band below zero has no place on a log axis: stop it at the lowest run
                 lower = np.maximum(lower, values.min(axis=0))
@@ -67,7 +72,9 @@ def plot_loss_curves(
     ax.set_xlabel("epoch")
     ax.set_ylabel(f"{key} (mean squared error)" if key != "loss" else "loss")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    legend = ax.legend(fontsize=8)
+    if banded:
+        legend.set_title("mean ± sample std (ddof 1)", prop={"size": 7})
     if title:
         ax.set_title(title, fontsize=10)
     return fig
@@ -80,7 +87,8 @@ def plot_intra_losses(runs: Sequence[dict], *, phase: str = "fit", key: str = "l
     ----------
     runs : list of dict
         Intra-primitive run results (``init``, ``latent_dim``, ``seed``, and the per-epoch
-        histories ``fit`` / ``infer``); several seeds of one (init, q) are drawn as mean ± std.
+        histories ``fit`` / ``infer``); several seeds of one (init, q) are drawn as mean ± sample
+        std (ddof 1) over the seeds.
     phase : {"fit", "infer"}
         Fitting θ and Z (paper Fig. ``loss_train``) or inferring Z (Fig. ``loss_test``).
     """

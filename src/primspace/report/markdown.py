@@ -3,8 +3,10 @@ written from the stored summaries.
 
 ``python -m primspace.report.markdown`` (``make docs``) reads every ``docs/results/*.json``
 (experiment summaries, :mod:`primspace.experiments.summary`) and rewrites the generated
-blocks of README.md (the results at a glance), docs/results.md (the tables per summary),
-docs/predict.md (prediction, scene), docs/sequences.md (composite segmentation) and
+blocks of README.md (the results at a glance), docs/results.md (the tables per summary,
+and the numbers its prose discusses), docs/predict.md (prediction, scene),
+docs/sequences.md (composite segmentation, and its synthesis at a glance; the blocks
+behind the prose: :mod:`primspace.report.prose_numbers`) and
 docs/act.md (acting from the scene and in closed loop, :func:`render_act`): the text between ``<!-- generated: NAME -->`` and ``<!-- end generated: NAME -->``.
 ``--check`` writes nothing and exits 1 when a block differs from what it would write
 (tests/test_docs_generated.py runs it). Everything else in those files is prose, written
@@ -37,6 +39,7 @@ from primspace.experiments.act_results import act_latency_text, act_tables
 from primspace.experiments.claims import check_claims
 from primspace.experiments.results import LEARNED_CODES, projection_lead
 from primspace.experiments.summary import read_summary
+from primspace.report.prose_numbers import render_composite_glance, render_differ
 from primspace.stats import sample_std, spread_convention
 from primspace.report.summary_tables import (
     COMPARISONS,
@@ -83,9 +86,11 @@ SUMMARY_DIR = Path("docs") / "results"
 TARGETS = {
     "glance": Path("README.md"),
     "results": Path("docs") / "results.md",
+    "differ": Path("docs") / "results.md",
     "predict": Path("docs") / "predict.md",
     "scene": Path("docs") / "predict.md",
     "composite": Path("docs") / "sequences.md",
+    "composite-glance": Path("docs") / "sequences.md",
     "act": Path("docs") / "act.md",
 }
 
@@ -296,6 +301,8 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
         "predict": note + predicted if predicted else "No stored prediction summaries yet (docs/results/).",
         "scene": scene or "No stored scene-only summaries yet (docs/results/).",
         "composite": note + composite if composite else "No stored composite summaries yet (docs/results/).",
+        "composite-glance": render_composite_glance(summaries),
+        "differ": render_differ(summaries),
         "act": note + act if act else NO_ACT,
     }
 
