@@ -1,5 +1,5 @@
-"""The numbers of README, docs/results.md, docs/predict.md, docs/sequences.md and docs/act.md,
-written from the stored summaries.
+"""The numbers of README, docs/results.md, docs/predict.md, docs/sequences.md, docs/act.md and
+docs/reproduce.md, written from the stored summaries.
 
 ``python -m primspace.report.markdown`` (``make docs``) reads every ``docs/results/*.json``
 (experiment summaries, :mod:`primspace.experiments.summary`) and rewrites the generated
@@ -7,7 +7,8 @@ blocks of README.md (the results at a glance), docs/results.md (the tables per s
 and the numbers its prose discusses), docs/predict.md (prediction, scene),
 docs/sequences.md (composite segmentation, and its synthesis at a glance; the blocks
 behind the prose: :mod:`primspace.report.prose_numbers`) and
-docs/act.md (acting from the scene and in closed loop, :func:`render_act`): the text between ``<!-- generated: NAME -->`` and ``<!-- end generated: NAME -->``.
+docs/act.md (acting from the scene and in closed loop, :func:`render_act`) and docs/reproduce.md
+(the paper's own setting and the clustering ablation, :mod:`primspace.report.reproduce_blocks`): the text between ``<!-- generated: NAME -->`` and ``<!-- end generated: NAME -->``.
 ``--check`` writes nothing and exits 1 when a block differs from what it would write
 (tests/test_docs_generated.py runs it). Everything else in those files is prose, written
 by hand around the blocks.
@@ -33,21 +34,27 @@ import re
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from primspace.experiments.act_results import act_latency_text, act_tables
 from primspace.experiments.claims import check_claims
-from primspace.experiments.results import LEARNED_CODES, projection_lead
+from primspace.experiments.results import projection_lead
 from primspace.experiments.summary import read_summary
+from primspace.report.comparisons import COMPARISONS, render_comparison
 from primspace.report.prose_numbers import render_composite_glance, render_differ
-from primspace.stats import sample_std, spread_convention
+from primspace.report.reproduce_blocks import (
+    ABLATION,
+    ablation,
+    clustering_ablation,
+    clustering_gaps,
+    paper_setting,
+)
+from primspace.report.comparisons import merged, side_names
+from primspace.stats import spread_convention
 from primspace.report.summary_tables import (
-    COMPARISONS,
     final_losses,
     g,
     mean_spread,
     outcome_rows,
-    render_comparison,
     render_composite,
     render_predict,
     render_scene,
@@ -92,6 +99,8 @@ TARGETS = {
     "composite": Path("docs") / "sequences.md",
     "composite-glance": Path("docs") / "sequences.md",
     "act": Path("docs") / "act.md",
+    "ablation": Path("docs") / "reproduce.md",
+    "paper-setting": Path("docs") / "reproduce.md",
 }
 
 #: The act block while no stored summary holds act results.
@@ -210,83 +219,15 @@ def load_summaries(root: Path) -> dict[str, dict]:
     return {n: found[n] for n in sorted(found, key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))}
 
 
-#: The comparison whose sides are the clustering ablation's (Adam's summary first).
-ABLATION = "paper-adam40"
-
-
-def _names(side) -> tuple[str, ...]:
-    return (side,) if isinstance(side, str) else tuple(side)
-
-
-def merged(summaries: dict[str, dict], side) -> dict:
-    """One side of a comparison (:data:`COMPARISONS`): a summary, or several summaries of one
-    setting that differ only in their inits (e.g. rates tuned per init, one experiment each)
-    as one: their intra runs and clustering rows together."""
-    names = _names(side)
-    if len(names) == 1:
-        return summaries[names[0]]
-    parts = [summaries[n]["results"] for n in names]
-    intra = {"runs": [r for p in parts for r in p["intra"]["runs"]]}
-    clustering = {"latent": [], "by_seed": {}, "rescaled": [], "seed": (parts[0].get("clustering") or {}).get("seed")}
-    for p in parts:
-        c = p.get("clustering") or {}
-        clustering["latent"] += c.get("latent", [])
-        clustering["rescaled"] += c.get("rescaled", [])
-        for seed, rows in c.get("by_seed", {}).items():
-            clustering["by_seed"].setdefault(seed, []).extend(rows)
-    return {"name": " + ".join(names), "results": {"intra": intra, "clustering": clustering}}
-
-
-def clustering_gaps(summary: dict) -> dict[str, list[float]]:
-    """Per seed, projection's clustering accuracy minus zero's (learned codes), as they are and
-    after each rescaling of the clustering's ``rescaled`` rows: ``{how: [gap per seed]}``."""
-    c = summary["results"].get("clustering") or {}
-    rows = [(int(c.get("seed", 0)), r) for r in c.get("latent", [])]
-    rows += [(int(seed), r) for seed, rs in c.get("by_seed", {}).items() for r in rs]
-    ways = {"as they are": {(seed, r["init"]): r["accuracy"] for seed, r in rows if r.get("codes") == LEARNED_CODES}}
-    for r in c.get("rescaled", []):
-        ways.setdefault(r["rescaling"], {})[(int(r["seed"]), r["init"])] = r["accuracy"]
-    return {
-        how: [acc[(s, "projection")] - acc[(s, "zero")] for s in sorted({s for s, _ in acc}) if (s, "zero") in acc]
-        for how, acc in ways.items()
-    }
-
-
-def _gone(base: list[float], other: list[float]) -> tuple[bool, str]:
-    """docs/reproduce.md's rule: the gap is gone in ``other`` (|g| <= s) and shrank by more than both spreads."""
-    (g0, s0), (g1, s1) = ((float(np.mean(v)), sample_std(v)) for v in (base, other))
-    ok = abs(g1) <= s1 and g0 - g1 > s0 + s1
-    return ok, f"{g1:.2f} ± {s1:.2f} against {g0:.2f} ± {s0:.2f}"
-
-
-def clustering_ablation(adam: dict, sgd: dict) -> str:
-    """The verdict of the clustering ablation (docs/reproduce.md, its rule written before the
-    runs): does the optimiser, or the codes' scale, explain the gap between zero and projection?"""
-    a, b = clustering_gaps(adam), clustering_gaps(sgd)
-    if len(a.get("as they are", [])) < 2 or len(b.get("as they are", [])) < 2:
-        return "The clustering ablation needs two seeds or more on each side."
-    lines = ["Gap = projection's clustering accuracy minus zero's, per seed; mean ± sample std over seeds:", ""]
-    ok, text = _gone(a["as they are"], b["as they are"])
-    lines.append(
-        f"- plain gradient descent: {text} (Adam) — the optimiser {'explains' if ok else 'does not explain'} the gap"
-    )
-    for how in (h for h in a if h != "as they are"):
-        ok, text = _gone(a["as they are"], a[how])
-        lines.append(
-            f"- Adam's codes, {how}: {text} (as they are) — the scale {'explains' if ok else 'does not explain'} it"
-        )
-    return "\n".join(lines)
-
-
 def blocks(summaries: dict[str, dict]) -> dict[str, str]:
     """The text of every generated block, by block name (:data:`TARGETS`)."""
     tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
     parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
     parts += [
         render_comparison(merged(summaries, a), merged(summaries, b), what)
-        + ("\n\n" + clustering_ablation(merged(summaries, a), merged(summaries, b)) if a == ABLATION else "")
+        + ("\n\n" + clustering_ablation(merged(summaries, a), merged(summaries, b)) if a == ABLATION[0] else "")
         for a, b, what in COMPARISONS
-        if all(n in summaries for n in _names(a) + _names(b))
+        if all(n in summaries for n in side_names(a) + side_names(b))
     ]
     note = spread_convention() + "\n\n"  # once per page: atop its first block with numbers
     predicted = "\n\n".join(render_predict(s) for s in summaries.values() if "predict" in s["results"])
@@ -304,6 +245,8 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
         "composite-glance": render_composite_glance(summaries),
         "differ": render_differ(summaries),
         "act": note + act if act else NO_ACT,
+        "ablation": ablation(summaries),
+        "paper-setting": paper_setting(summaries),
     }
 
 

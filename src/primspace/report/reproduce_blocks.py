@@ -22,13 +22,13 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.experiments.results import LEARNED_CODES
-from primspace.report.summary_tables import g, mean_spread, render_comparison, table
+from primspace.report.comparisons import merged, render_comparison, side_names
+from primspace.report.summary_tables import g, mean_spread, table
 from primspace.stats import sample_std
 
 __all__ = [
     "PAPER_SETTING",
     "ABLATION",
-    "merged",
     "clustering_gaps",
     "clustering_ablation",
     "ablation",
@@ -54,29 +54,6 @@ PAPER_SETTING = (
 #: The clustering ablation's two sides: Adam's summary, and plain gradient descent's
 #: (one summary, or one per init when the rates were tuned per init).
 ABLATION = ("paper-adam40", "paper-sgd40")
-
-
-def _names(side) -> tuple[str, ...]:
-    return (side,) if isinstance(side, str) else tuple(side)
-
-
-def merged(summaries: dict[str, dict], side) -> dict:
-    """One side of a comparison: a summary, or several summaries of one setting that differ
-    only in their inits (e.g. rates tuned per init, one experiment each) as one: their intra
-    runs and clustering rows together."""
-    names = _names(side)
-    if len(names) == 1:
-        return summaries[names[0]]
-    parts = [summaries[n]["results"] for n in names]
-    intra = {"runs": [r for p in parts for r in p["intra"]["runs"]]}
-    clustering = {"latent": [], "by_seed": {}, "rescaled": [], "seed": (parts[0].get("clustering") or {}).get("seed")}
-    for p in parts:
-        c = p.get("clustering") or {}
-        clustering["latent"] += c.get("latent", [])
-        clustering["rescaled"] += c.get("rescaled", [])
-        for seed, rows in c.get("by_seed", {}).items():
-            clustering["by_seed"].setdefault(seed, []).extend(rows)
-    return {"name": " + ".join(names), "results": {"intra": intra, "clustering": clustering}}
 
 
 def clustering_gaps(summary: dict) -> dict[str, list[float]]:
@@ -123,8 +100,8 @@ def clustering_ablation(adam: dict, sgd: dict) -> str:
 def ablation(summaries: dict[str, dict]) -> str:
     """docs/reproduce.md's ablation block: the two sides' table and the rule's verdict."""
     adam, sgd = ABLATION
-    if not all(n in summaries for n in _names(adam) + _names(sgd)):
-        return f"The clustering ablation's summaries ({', '.join(_names(adam) + _names(sgd))}) are not all stored yet."
+    if not all(n in summaries for n in side_names(adam) + side_names(sgd)):
+        return f"The clustering ablation's summaries ({', '.join(side_names(adam) + side_names(sgd))}) are not all stored yet."
     a, b = merged(summaries, adam), merged(summaries, sgd)
     what = "Adam (ours) against plain gradient descent (`--optimizer sgd`), paper preset, motor only, q = 40"
     return render_comparison(a, b, what) + "\n\n" + clustering_ablation(a, b)

@@ -33,11 +33,9 @@ __all__ = [
     "outcome_rows",
     "final_losses",
     "render_summary",
-    "render_comparison",
     "render_composite",
     "render_scene",
     "render_predict",
-    "COMPARISONS",
 ]
 
 
@@ -319,86 +317,6 @@ def final_losses(intra: dict, q: int | None = None) -> dict[str, list[float]]:
 
 
 #: Pairs of summaries shown side by side: (a, b, what differs). Both must be stored.
-COMPARISONS = (
-    (
-        "demo-images-mean",
-        "demo-images-sum",
-        "the per-element loss (ours) against the paper's summed loss (`--loss-reduction sum`)",
-    ),
-    (
-        "paper-images-short-mean",
-        "paper-images-short-sum",
-        "the same at the paper preset with images, 35 % of the schedule, one seed, one H200",
-    ),
-    (
-        "paper-adam40",
-        "paper-sgd40",
-        "Adam (ours) against the paper's plain gradient descent (`--optimizer sgd`, its two rates tuned on a "
-        "validation split), paper preset, motor only, q = 40, three seeds: the clustering ablation of issue 42",
-    ),
-)
-
-
-def _final_metric(run: dict, phase: str, key: str) -> float | None:
-    """An intra run's final all-frame ``key`` (motor, vision, psnr) of ``phase``, else its last logged value."""
-    if run.get("final"):
-        return run["final"][phase].get(key)
-    curve = run["fit" if phase == "fit" else "infer"]
-    return curve[-1].get(key) if curve else None
-
-
-#: The columns of :func:`render_comparison` read from the clustering's rescaled rows
-#: (:func:`primspace.experiments.clustering.rescaled_rows`): the codes' size, then the
-#: accuracy after each rescaling.
-RESCALED_COLUMNS = {
-    "rms": "code RMS size",
-    "common scale": "clustering, common scale",
-    "standardised per dimension": "clustering, standardised",
-}
-
-
-def _rescaled(summary: dict, init: str, key: str) -> str:
-    rows = [r for r in summary["results"]["clustering"]["rescaled"] if r["init"] == init]
-    if key == "rms":
-        return mean_spread([r["rms"] for r in rows if r["rescaling"] == "common scale"], rng=False)
-    return mean_spread([r["accuracy"] for r in rows if r["rescaling"] == key], rng=False)
-
-
-def render_comparison(a: dict, b: dict, what: str) -> str:
-    """Two summaries of the same grid under one changed setting, per init: the inferred
-    motor loss and vision PSNR (all frames, per element: comparable across losses),
-    success and clustering accuracy, mean ± sample std (ddof 1) over seeds."""
-    rows = []
-    rescaled = all(s["results"].get("clustering", {}).get("rescaled") for s in (a, b))
-    inits = dict.fromkeys(r["init"] for r in a["results"]["intra"]["runs"])
-    outcomes = {name: {row[0]: row for row in outcome_rows(s["results"])} for name, s in (("a", a), ("b", b))}
-    for init in inits:
-        row = [init]
-        for key in ("motor", "psnr"):
-            for s in (a, b):
-                runs = [r for r in s["results"]["intra"]["runs"] if r["init"] == init]
-                row.append(
-                    mean_spread([_final_metric(r, "infer", key) for r in runs], 3 if key == "psnr" else 2, rng=False)
-                )
-        for col in (2, 4):
-            row += [outcomes[k].get(init, [""] * 5)[col] for k in ("a", "b")]
-        row += [_rescaled(s, init, key) for key in RESCALED_COLUMNS for s in (a, b) if rescaled]
-        rows.append(row)
-    metrics = ["eval motor MSE", "eval vision PSNR dB", "success, all", "clustering"]
-    metrics += list(RESCALED_COLUMNS.values()) if rescaled else []  # the clustering experiment's rows
-    columns = ["init"] + [f"{m}: {n}" for m in metrics for n in (a["name"], b["name"])]
-    return "\n".join(
-        [
-            f"#### {a['name']} against {b['name']}: {what}",
-            "",
-            "Per-element errors recomputed on every frame, so the two losses are compared on the same scale; "
-            "mean ± sample std (ddof 1) over seeds (pooled success with its Wilson 95 % interval).",
-            "",
-            table(columns, rows),
-        ]
-    )
-
-
 def _md_table(columns_rows) -> str:
     columns, rows = columns_rows
     return table(columns, [[str(c) for c in row] for row in rows])
