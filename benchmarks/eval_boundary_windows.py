@@ -74,11 +74,12 @@ def main() -> None:
     for seed in (int(s) for s in args.seeds.split(",")):
         for k, v in scores(args.experiment, seed).items():
             table.setdefault(k, []).append(v)
+    print("mean ± sample std over seeds (ddof 1)")
     print("| method | F1 within ±W | within [−W, +2W] | within ±2W | nearest found W+1 to 2W steps late |")
     print("|---|---|---|---|---|")
     for k, v in table.items():
         v = np.asarray(v)
-        print(f"| {k} | " + " | ".join(f"{m:.2f} ± {s:.2f}" for m, s in zip(v.mean(0), v.std(0))) + " |")
+        print(f"| {k} | " + " | ".join(f"{m:.2f} ± {s:.2f}" for m, s in zip(v.mean(0), v.std(0, ddof=1))) + " |")
 
 
 if __name__ == "__main__":

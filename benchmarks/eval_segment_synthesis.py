@@ -6,7 +6,7 @@ code per demonstration, trained on single primitives: e.g. the paper or demo pre
 ``intra`` fit of seed s) with :func:`primspace.segmentation.synthesis.segment_by_synthesis`,
 and scored as the composite experiment scores its methods: boundary precision / recall / F1
 within ``--tolerance`` steps and the per-step labelling accuracy (Hungarian), as many
-clusters as primitives. Prints a Markdown table (mean ± std over seeds, per-seed values) and
+clusters as primitives. Prints a Markdown table (mean ± sample std over seeds, ddof 1, per-seed values) and
 writes the numbers as JSON.
 
     python benchmarks/eval_segment_synthesis.py --data comp-demo/data.h5 \\
@@ -26,6 +26,7 @@ from primspace.data import MotionDataset
 from primspace.experiments.composite.experiment import split_sequences
 from primspace.segmentation import segmentation_scores
 from primspace.segmentation.synthesis import segment_by_synthesis
+from primspace.stats import sample_std
 from primspace.train import load_run
 
 
@@ -70,8 +71,8 @@ def main() -> None:
         rc = np.mean([r["boundary"]["recall"] for r in seeds])
         per = ", ".join(f"{a:.2f} / {b:.2f}" for a, b in zip(f1, acc))
         print(
-            f"| {init} | {p:.2f} / {rc:.2f} / {np.mean(f1):.2f} ± {np.std(f1):.2f} | "
-            f"{np.mean(acc):.2f} ± {np.std(acc):.2f} | {per} |"
+            f"| {init} | {p:.2f} / {rc:.2f} / {np.mean(f1):.2f} ± {sample_std(f1):.2f} | "
+            f"{np.mean(acc):.2f} ± {sample_std(acc):.2f} | {per} |"
         )
     if args.out:
         with open(args.out, "w") as fh:
