@@ -1,6 +1,8 @@
 """docs/reproduce.md's generated blocks (primspace.report.reproduce_blocks): the paper's own
 setting beside ours, and the clustering ablation, from summaries built here."""
 
+import numpy as np
+
 from primspace.report.reproduce_blocks import PAPER_SETTING, ablation, paper_setting, success_by_primitive
 
 NAMES = ["touch", "grasp"]
@@ -63,3 +65,45 @@ def test_the_paper_setting_block_compares_each_stored_pair_and_names_what_is_mis
 
 def test_the_ablation_block_waits_for_both_sides():
     assert "not all stored yet" in ablation({})
+
+
+def _balance(mse: float, rms: dict, ratio: float | None = None, cosine: float | None = None) -> dict:
+    """A loss-balance result (``primspace diagnose loss-balance --json``) of two primitives and joints."""
+    theta = {"motor": {"all": 1.0}}
+    if ratio is not None:
+        theta |= {"vision_over_motor": {"all": ratio}, "cosine": {"all": cosine}}
+    return {
+        "loss_reduction": "sum" if ratio is not None else "mean",
+        "mse": {"motor": mse},
+        "motor_rms": float(np.mean(list(rms.values()))),
+        "vision_share": 0.99 if ratio is not None else 0.0,
+        "primitives": NAMES,
+        "joints": ["robot:panda0_joint1", "robot:panda0_joint2"],
+        "per_primitive": {p: {"n": 10, "motor_rms": r} for p, r in rms.items()},
+        "joint_rms": {"values": [[r, 2 * r] for r in rms.values()]},
+        "gradients": {"theta": theta, "codes": {}},
+    }
+
+
+def test_the_paper_setting_rules_read_success_the_motor_fit_and_the_gradients():
+    ours_name, theirs_name, _ = PAPER_SETTING[0]
+    ours = _summary(ours_name, {"projection": [1e-4, 1e-4]}, {"projection": [(1.0, 1.0), (1.0, 0.9)]})
+    theirs = _summary(theirs_name, {"projection": [5e-3]}, {"projection": [(0.4, 0.0)]})
+    balances = {
+        "paper-adam40": {"runs": {"projection fit": _balance(2e-5, {"touch": 0.002, "grasp": 0.002})}},
+        theirs_name: {"runs": {"projection fit": _balance(4e-3, {"touch": 0.02, "grasp": 0.05}, 35.0, 0.3)}},
+    }
+    text = paper_setting({ours_name: ours, theirs_name: theirs}, balances)
+    assert "Success under the summed loss collapses: projection 0.20" in text
+    assert "200x ours" in text and "rank correlation of the primitives' success with their motor RMS -1.00" in text
+    assert "the motor fit explains the collapse" in text
+    assert "θ-gradient is 35x the motor term's, cosine 0.30: the vision term holds the motor fit back" in text
+    assert "| paper-sum40: projection fit | sum |" in text and "| run | joint1 | joint2 |" in text
+    # the joint RMS over every sample: primitives of equal size, RMS of (0.02, 0.05) and of their doubles
+    assert f"| {theirs_name}: projection fit | 0.038 | 0.076 |" in text
+    weak = dict(
+        balances,
+        **{theirs_name: {"runs": {"projection fit": _balance(1e-4, {"touch": 0.02, "grasp": 0.01}, 2.0, 0.3)}}},
+    )
+    text = paper_setting({ours_name: ours, theirs_name: theirs}, weak)
+    assert "the motor fit does not explain the collapse" in text and "does not hold the motor fit back" in text

@@ -46,6 +46,7 @@ from primspace.report.reproduce_blocks import (
     ablation,
     clustering_ablation,
     clustering_gaps,
+    load_balances,
     paper_setting,
 )
 from primspace.report.comparisons import merged, side_names
@@ -219,8 +220,9 @@ def load_summaries(root: Path) -> dict[str, dict]:
     return {n: found[n] for n in sorted(found, key=lambda n: (ORDER.index(n) if n in ORDER else len(ORDER), n))}
 
 
-def blocks(summaries: dict[str, dict]) -> dict[str, str]:
-    """The text of every generated block, by block name (:data:`TARGETS`)."""
+def blocks(summaries: dict[str, dict], balances: dict[str, dict] | None = None) -> dict[str, str]:
+    """The text of every generated block, by block name (:data:`TARGETS`); ``balances``: the
+    stored loss-balance measurements (:func:`primspace.report.reproduce_blocks.load_balances`)."""
     tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
     parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
     parts += [
@@ -246,7 +248,7 @@ def blocks(summaries: dict[str, dict]) -> dict[str, str]:
         "differ": render_differ(summaries),
         "act": note + act if act else NO_ACT,
         "ablation": ablation(summaries),
-        "paper-setting": paper_setting(summaries),
+        "paper-setting": paper_setting(summaries, balances),
     }
 
 
@@ -271,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path, default=Path("."), help="the repository (default: here)")
     parser.add_argument("--check", action="store_true", help="write nothing; exit 1 if a block differs")
     args = parser.parse_args(argv)
-    new = blocks(load_summaries(args.root))
+    new = blocks(load_summaries(args.root), load_balances(args.root / SUMMARY_DIR))
     stale = []
     for target in dict.fromkeys(TARGETS.values()):
         path = args.root / target

@@ -19,12 +19,16 @@ Every spread is the sample std over seeds (ddof 1). Reads summaries only.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
+from scipy.stats import spearmanr
 
 from primspace.experiments.results import LEARNED_CODES
 from primspace.report.comparisons import merged, render_comparison, side_names
 from primspace.report.summary_tables import g, mean_spread, table
-from primspace.stats import sample_std
+from primspace.stats import sample_std, wilson_interval
 
 __all__ = [
     "PAPER_SETTING",
@@ -34,6 +38,10 @@ __all__ = [
     "ablation",
     "success_by_primitive",
     "paper_setting",
+    "load_balances",
+    "balance_tables",
+    "setting_verdicts",
+    "BALANCE_DIR",
 ]
 
 #: The summaries of the paper-setting block, in order: (ours, the paper's setting, what differs).
@@ -127,10 +135,11 @@ def success_by_primitive(summary: dict) -> tuple[list[str], list[list[str]]]:
     return ["run", *names, "all"], rows
 
 
-def paper_setting(summaries: dict[str, dict]) -> str:
+def paper_setting(summaries: dict[str, dict], balances: dict[str, dict] | None = None) -> str:
     """docs/reproduce.md's block on the paper's own setting: each pair of :data:`PAPER_SETTING`
     that is stored, as a comparison (errors per element, success, clustering), then success
-    per primitive of every stored summary of the pairs."""
+    per primitive of every stored summary of the pairs; the loss-balance measurements
+    (``balances``, :func:`load_balances`) and the section's rules (:func:`setting_verdicts`)."""
     parts, stored = [], []
     for ours, theirs, what in PAPER_SETTING:
         if ours in summaries and theirs in summaries:
@@ -144,6 +153,130 @@ def paper_setting(summaries: dict[str, dict]) -> str:
         rows += rows_i if columns_i == columns else []
     if rows:
         parts.append("**Success per primitive** (mean ± sample std over seeds)\n\n" + table(columns, rows))
+    if balances:
+        parts.append(balance_tables(balances))
+    verdicts = setting_verdicts(summaries, balances or {})
+    if verdicts:
+        parts.append("**The rules** (written before the run, above):\n\n" + "\n".join(verdicts))
     if missing:
         parts.append(f"Not stored yet: {', '.join(dict.fromkeys(missing))}.")
     return "\n\n".join(parts)
+
+
+#: Where the loss-balance measurements (``primspace diagnose loss-balance --json``) are kept,
+#: one file per setting: ``{"command": ..., "runs": {name: the command's JSON}}``.
+BALANCE_DIR = "balance"
+
+#: The rules of docs/reproduce.md's paper-setting section (written before the run).
+MOTOR_FIT_FACTOR = 10.0  # the summed loss's fit motor error at least this many times ours
+VISION_GRADIENT_FACTOR = 10.0  # the vision term's θ-gradient at least this many times the motor term's
+OPPOSED_COSINE = -0.5  # ... or the two θ-gradients opposed at least this much
+
+
+def load_balances(results_dir) -> dict[str, dict]:
+    """The stored loss-balance files of ``results_dir / BALANCE_DIR``, by file stem."""
+    folder = Path(results_dir) / BALANCE_DIR
+    return {p.stem: json.loads(p.read_text(encoding="utf-8")) for p in sorted(folder.glob("*.json"))}
+
+
+def _joint_rms(b: dict) -> list[float]:
+    """RMS per joint over every sample (the per-primitive RMS weighted by the primitives' sizes)."""
+    values = np.asarray(b["joint_rms"]["values"], dtype=float)
+    n = np.asarray([b["per_primitive"][p]["n"] for p in b["primitives"]], dtype=float)
+    return list(np.sqrt((n[:, None] * values**2).sum(0) / n.sum()))
+
+
+def balance_tables(balances: dict[str, dict]) -> str:
+    """Per measured run: the motor error, the vision term's share of the loss and of the
+    θ- and code-gradients, the cosine of the two terms' θ-gradients; then the motor RMS
+    per primitive and per joint (radians)."""
+    runs = {f"{setting}: {name}": b for setting, f in balances.items() for name, b in f["runs"].items()}
+    if not runs:
+        return ""
+    rows, prims, joints = [], [], []
+    for name, b in runs.items():
+        th, co = b.get("gradients", {}).get("theta", {}), b.get("gradients", {}).get("codes", {})
+        rows.append(
+            [name, b["loss_reduction"], g(b["mse"]["motor"]), g(b["motor_rms"]), g(b["vision_share"])]
+            + [g(th.get("vision_over_motor", {}).get("all")), g(th.get("cosine", {}).get("all"))]
+            + [g(co.get("vision_over_motor_median")), g(co.get("cosine"))]
+        )
+        prims.append([name] + [g(b["per_primitive"][p]["motor_rms"]) for p in b["primitives"]])
+        joints.append([name] + [g(v) for v in _joint_rms(b)])
+    first = next(iter(runs.values()))
+    columns = ["run", "loss", "motor MSE (scaled)", "motor RMS (rad)", "vision share of the loss"]
+    columns += ["θ-gradient vision / motor", "cosine of the θ-gradients", "code gradient vision / motor"]
+    columns += ["cosine of the code gradients"]
+    short = [j.split("_")[-1] if "joint" in j else j for j in first["joints"]]
+    return "\n\n".join(
+        [
+            "**The loss's two terms at the end of each run** (`primspace diagnose loss-balance`; gradients over "
+            "the run's own samples; '—': no vision term)",
+            table(columns, rows),
+            "**Motor RMS per primitive** (rad)",
+            table(["run", *first["primitives"]], prims),
+            "**Motor RMS per joint** (rad, over every sample)",
+            table(["run", *short], joints),
+        ]
+    )
+
+
+def _pooled(summary: dict) -> tuple[int, int]:
+    """Projection's successes and trials in the simulator, pooled over seeds: ``(k, n)``."""
+    success = summary["results"].get("success") or {}
+    k = n = 0
+    for gen in [success.get("generated", {})] + list(success.get("by_seed", {}).values()):
+        p = gen.get("projection")
+        if p:
+            k += sum(p.get("successes") or {q: round(p["rates"][q] * c) for q, c in p["counts"].items()}.values())
+            n += sum(p["counts"].values())
+    return k, n
+
+
+def setting_verdicts(summaries: dict[str, dict], balances: dict[str, dict]) -> list[str]:
+    """The three rules of docs/reproduce.md's paper-setting section, on projection's runs
+    (:data:`PAPER_SETTING`'s first pair; the balances ``paper-adam40`` (ours) and
+    ``paper-sum40``): does success collapse, does the motor fit explain it, does the vision
+    term hold the motor fit back? A rule whose numbers are not stored says so."""
+    ours, theirs, _ = PAPER_SETTING[0]
+    out = []
+    if ours in summaries and theirs in summaries and _pooled(summaries[theirs])[1]:
+        (k0, n0), (k1, n1) = _pooled(summaries[ours]), _pooled(summaries[theirs])
+        (lo0, hi0), (lo1, hi1) = wilson_interval(k0, n0), wilson_interval(k1, n1)
+        verdict = "collapses" if hi1 < lo0 else "does not collapse"
+        out.append(
+            f"- Success under the summed loss {verdict}: projection {k1 / n1:.2f} [{lo1:.2f}, {hi1:.2f}] against "
+            f"ours {k0 / n0:.2f} [{lo0:.2f}, {hi0:.2f}] (pooled over seeds, Wilson 95 %)."
+        )
+    sum_fit = balances.get(theirs, {}).get("runs", {}).get("projection fit")
+    our_fit = balances.get("paper-adam40", {}).get("runs", {}).get("projection fit")
+    if sum_fit and our_fit:
+        factor = sum_fit["mse"]["motor"] / our_fit["mse"]["motor"]
+        text = f"- The fit's motor error under the summed loss is {factor:.0f}x ours (projection, the fitted samples)"
+        success = summaries.get(theirs, {}).get("results", {}).get("success")
+        if success:
+            rates = {
+                p: np.mean([g_["projection"]["rates"][p] for g_ in _generated(success)]) for p in sum_fit["primitives"]
+            }
+            rho = spearmanr(
+                [rates[p] for p in sum_fit["primitives"]],
+                [sum_fit["per_primitive"][p]["motor_rms"] for p in sum_fit["primitives"]],
+            ).statistic
+            explains = factor >= MOTOR_FIT_FACTOR and rho <= -0.5
+            text += f"; rank correlation of the primitives' success with their motor RMS {rho:.2f}: the motor fit {'explains' if explains else 'does not explain'} the collapse"
+        out.append(text + ".")
+        th = sum_fit.get("gradients", {}).get("theta", {})
+        ratio, cos = th.get("vision_over_motor", {}).get("all"), th.get("cosine", {}).get("all")
+        if ratio is not None and cos is not None:
+            held = ratio >= VISION_GRADIENT_FACTOR or cos <= OPPOSED_COSINE
+            out.append(
+                f"- At the end of fitting the vision term's θ-gradient is {ratio:.0f}x the motor term's, cosine "
+                f"{cos:.2f}: the vision term {'holds' if held else 'does not hold'} the motor fit back."
+            )
+    return out
+
+
+def _generated(success: dict) -> list[dict]:
+    return [
+        gen for gen in [success.get("generated", {})] + list(success.get("by_seed", {}).values()) if "projection" in gen
+    ]
