@@ -196,10 +196,12 @@ def balance_tables(balances: dict[str, dict]) -> str:
     rows, prims, joints = [], [], []
     for name, b in runs.items():
         th, co = b.get("gradients", {}).get("theta", {}), b.get("gradients", {}).get("codes", {})
+        ratio, cos = th.get("vision_over_motor", {}).get("all"), th.get("cosine", {}).get("all")
+        code_ratio, code_cos = co.get("vision_over_motor_median"), co.get("cosine")
         rows.append(
-            [name, b["loss_reduction"], g(b["mse"]["motor"]), g(b["motor_rms"]), g(b["vision_share"])]
-            + [g(th.get("vision_over_motor", {}).get("all")), g(th.get("cosine", {}).get("all"))]
-            + [g(co.get("vision_over_motor_median")), g(co.get("cosine"))]
+            [name, b["loss_reduction"], g(b["mse"]["motor"]), g(b["motor_rms"]), f"{100 * b['vision_share']:.1f} %"]
+            + [f"{ratio:.0f}x" if ratio is not None else "—", g(cos), f"{code_ratio:.0f}x" if code_ratio else "—"]
+            + [g(code_cos)]
         )
         prims.append([name] + [g(b["per_primitive"][p]["motor_rms"]) for p in b["primitives"]])
         joints.append([name] + [g(v) for v in _joint_rms(b)])
@@ -207,7 +209,7 @@ def balance_tables(balances: dict[str, dict]) -> str:
     columns = ["run", "loss", "motor MSE (scaled)", "motor RMS (rad)", "vision share of the loss"]
     columns += ["θ-gradient vision / motor", "cosine of the θ-gradients", "code gradient vision / motor"]
     columns += ["cosine of the code gradients"]
-    short = [j.split("_")[-1] if "joint" in j else j for j in first["joints"]]
+    short = [j.rsplit(":", 1)[-1].split("_", 1)[-1] if "panda" in j else j for j in first["joints"]]
     return "\n\n".join(
         [
             "**The loss's two terms at the end of each run** (`primspace diagnose loss-balance`; gradients over "
