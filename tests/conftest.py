@@ -176,3 +176,25 @@ def pinned_for_this_cpu(table: dict, what: str, vendor: bool = False):
     if cls not in table:
         pytest.skip(f"{what}: pinned on {', '.join(sorted(table))} CPUs; this one is {cls}")
     return table[cls]
+
+
+def _one_thread():
+    from primspace.train.config import thread_limit
+
+    with thread_limit(1):
+        yield
+
+
+@pytest.fixture(scope="module")
+def one_thread():
+    """One torch and BLAS thread for a module's tests (tiny models on two shared cores run many
+    times slower with a second thread), the process's settings restored after; a module asks for
+    it with ``pytestmark = pytest.mark.usefixtures("one_thread")``."""
+    yield from _one_thread()
+
+
+@pytest.fixture
+def one_thread_each():
+    """The same per test: for comparisons bit for bit with processes that run one thread (the CPU
+    kernels may split their sums by thread)."""
+    yield from _one_thread()

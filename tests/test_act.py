@@ -25,13 +25,7 @@ LOOKS = [0, 6, 12, 18, 24]  # 0, every, 2 every, ... before the last step (30)
 CLI_LOOKS = list(range(0, 30, DEFAULT_EVERY))  # primspace act's default --every
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """One BLAS thread: the tests share two loaded cores (oversubscribed, the ProMP's fit takes 10x longer)."""
-    from primspace.train.config import thread_limit
-
-    with thread_limit(1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_thread")  # one thread (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -31,14 +31,7 @@ CPU = torch.device("cpu")
 NO_AUTOCAST = torch.no_grad()
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """One torch thread while these tests run (tiny models; two threads on shared cores
-    ran 10x slower), the process's setting restored after."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")  # one thread (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@ arriving step, the forecast of the remaining steps, and the offline reference.""
 
 import numpy as np
 import pytest
-import torch
 
 from primspace.data import MotionDataset
 from primspace.errors import UserError
@@ -16,13 +15,7 @@ FAST = dict(batch_size=12, threads=1, final_lr_fraction=1.0)  # online steps at 
 MODEL = ModelConfig(latent_dim=20, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=32, motor_hidden=32)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """One thread: the loops are latency-bound, and threads only contend on a busy machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")  # one thread (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -47,13 +47,7 @@ def held_out(data: MotionDataset) -> np.ndarray:
     return np.array(out)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """One BLAS thread: the tests share two loaded cores (oversubscribed, a fit takes 10x longer)."""
-    from primspace.train.config import thread_limit
-
-    with thread_limit(1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_thread")  # one thread (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -18,15 +18,7 @@ from test_vision_frames import SMALL
 CPU = torch.device("cpu")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One math thread, as the training processes of tests/test_distributed.py: the CPU
-    kernels may split their sums by thread, so bit-for-bit comparisons need the same count
-    (and tiny models run many times faster without a second thread on a busy machine)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread_each")  # one thread per test (tests/conftest.py): bit-for-bit sums
 
 
 @pytest.fixture(scope="module")
