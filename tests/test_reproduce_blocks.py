@@ -28,6 +28,7 @@ def _summary(name: str, motor: dict, rates: dict) -> dict:
                 "rates": dict(zip(NAMES, r[s])),
                 "counts": dict.fromkeys(NAMES, 10),
                 "overall": sum(r[s]) / 2,
+                "successes": {n: round(10 * x) for n, x in zip(NAMES, r[s])},
             }
             for init, r in rates.items()
         }
@@ -73,6 +74,7 @@ def _balance(mse: float, rms: dict, ratio: float | None = None, cosine: float | 
     if ratio is not None:
         theta |= {"vision_over_motor": {"all": ratio}, "cosine": {"all": cosine}}
     return {
+        "kind": "fit",
         "loss_reduction": "sum" if ratio is not None else "mean",
         "mse": {"motor": mse},
         "motor_rms": float(np.mean(list(rms.values()))),
@@ -95,8 +97,11 @@ def test_the_paper_setting_rules_read_success_the_motor_fit_and_the_gradients():
     }
     text = paper_setting({ours_name: ours, theirs_name: theirs}, balances)
     assert "Success under the summed loss collapses: projection 0.20" in text
-    assert "200x ours" in text and "rank correlation of the primitives' success with their motor RMS -1.00" in text
-    assert "the motor fit explains the collapse" in text
+    assert (
+        "200x ours" in text
+        and "rank correlation of the primitives' success with their motor RMS (the fitted samples) -1.00" in text
+    )
+    assert "by the rule the motor fit explains the collapse" in text
     assert "θ-gradient is 35x the motor term's, cosine 0.30: the vision term holds the motor fit back" in text
     assert "| paper-sum40: projection fit | sum |" in text and "| run | joint1 | joint2 |" in text
     # the joint RMS over every sample: primitives of equal size, RMS of (0.02, 0.05) and of their doubles

@@ -230,7 +230,7 @@ def _pooled(summary: dict) -> tuple[int, int]:
     for gen in [success.get("generated", {})] + list(success.get("by_seed", {}).values()):
         p = gen.get("projection")
         if p:
-            k += sum(p.get("successes") or {q: round(p["rates"][q] * c) for q, c in p["counts"].items()}.values())
+            k += sum((p.get("successes") or {q: round(p["rates"][q] * c) for q, c in p["counts"].items()}).values())
             n += sum(p["counts"].values())
     return k, n
 
@@ -256,16 +256,24 @@ def setting_verdicts(summaries: dict[str, dict], balances: dict[str, dict]) -> l
         factor = sum_fit["mse"]["motor"] / our_fit["mse"]["motor"]
         text = f"- The fit's motor error under the summed loss is {factor:.0f}x ours (projection, the fitted samples)"
         success = summaries.get(theirs, {}).get("results", {}).get("success")
+        judged = balances[theirs]["runs"].get("projection infer", sum_fit)  # the samples success judged, where stored
         if success:
-            rates = {
-                p: np.mean([g_["projection"]["rates"][p] for g_ in _generated(success)]) for p in sum_fit["primitives"]
-            }
+            names = judged["primitives"]
+            rates = {p: np.mean([g_["projection"]["rates"][p] for g_ in _generated(success)]) for p in names}
             rho = spearmanr(
-                [rates[p] for p in sum_fit["primitives"]],
-                [sum_fit["per_primitive"][p]["motor_rms"] for p in sum_fit["primitives"]],
+                [rates[p] for p in names], [judged["per_primitive"][p]["motor_rms"] for p in names]
             ).statistic
             explains = factor >= MOTOR_FIT_FACTOR and rho <= -0.5
-            text += f"; rank correlation of the primitives' success with their motor RMS {rho:.2f}: the motor fit {'explains' if explains else 'does not explain'} the collapse"
+            samples = {"fit": "the fitted samples", "infer": "the inferred samples, those judged"}[judged["kind"]]
+            text += (
+                f"; rank correlation of the primitives' success with their motor RMS ({samples}) {rho:.2f}: by the "
+                f"rule the motor fit {'explains' if explains else 'does not explain'} the collapse"
+                + (
+                    ""
+                    if explains or factor < MOTOR_FIT_FACTOR
+                    else " (the error is there, but the primitives that fail most are not those with the largest error)"
+                )
+            )
         out.append(text + ".")
         th = sum_fit.get("gradients", {}).get("theta", {})
         ratio, cos = th.get("vision_over_motor", {}).get("all"), th.get("cosine", {}).get("all")
