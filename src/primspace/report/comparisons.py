@@ -34,12 +34,21 @@ COMPARISONS = (
 )
 
 
-def _final_metric(run: dict, phase: str, key: str) -> float | None:
-    """An intra run's final all-frame ``key`` (motor, vision, psnr) of ``phase``, else its last logged value."""
+def _final_metric(run: dict, phase: str, key: str, motor_loss: bool = False) -> float | None:
+    """An intra run's final all-frame ``key`` (motor, vision, psnr) of ``phase``, else its last logged
+    value; ``motor_loss``: the run's loss is its motor MSE (motor only, per-element mean, weight 1)."""
     if run.get("final"):
         return run["final"][phase].get(key)
     curve = run["fit" if phase == "fit" else "infer"]
-    return curve[-1].get(key) if curve else None
+    last = curve[-1] if curve else {}
+    return last.get(key, last.get("loss") if key == "motor" and motor_loss else None)
+
+
+def _motor_loss(summary: dict) -> bool:
+    """Whether a summary's losses are its motor MSE: motor only, the per-element mean, motor weight 1."""
+    preset = summary.get("preset", {})
+    train = preset.get("train", {})
+    return preset.get("images") is False and train.get("loss_reduction") == "mean" and train.get("motor_weight") == 1.0
 
 
 #: The columns of :func:`render_comparison` read from the clustering's rescaled rows
@@ -73,7 +82,11 @@ def render_comparison(a: dict, b: dict, what: str) -> str:
             for s in (a, b):
                 runs = [r for r in s["results"]["intra"]["runs"] if r["init"] == init]
                 row.append(
-                    mean_spread([_final_metric(r, "infer", key) for r in runs], 3 if key == "psnr" else 2, rng=False)
+                    mean_spread(
+                        [_final_metric(r, "infer", key, _motor_loss(s)) for r in runs],
+                        3 if key == "psnr" else 2,
+                        rng=False,
+                    )
                 )
         for col in (2, 4):
             row += [outcomes[k].get(init, [""] * 5)[col] for k in ("a", "b")]
