@@ -27,9 +27,11 @@ import torch.multiprocessing as mp
 from primspace.data import MotionDataset
 from primspace.train import TrainConfig, TrainingDivergedError, fit, infer, load_run
 from primspace.train.distributed import World, part_bounds
-from test_streaming import numbers, one_thread, same_state  # noqa: F401 (one_thread: autouse, as the processes)
+from test_streaming import numbers, same_state
 from test_train import primitives
 from test_vision_frames import SMALL
+
+pytestmark = pytest.mark.usefixtures("one_thread_each")  # one thread per test, as the processes (tests/conftest.py)
 
 # 13 samples in batches of 4: the last batch has one sample, so one process has none
 BASE = dict(epochs=2, batch_size=4, threads=1, seed=0, checkpoint_every=1, final_lr_fraction=1.0)  # resumed to 3 below
