@@ -118,7 +118,7 @@ def main() -> None:
     from primspace.act.command import fit_planners
     from primspace.act.planners import ProMPPlanner
     from primspace.data import MotionDataset
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
     from primspace.predict.scene_policy import ScenePolicy
     from primspace.train import load_run
     from primspace.train.starts import fitted_samples

@@ -22,7 +22,7 @@ def main() -> None:
     import sklearn.linear_model  # noqa: F401  (the import, timed on its own)
 
     print(f"import scikit-learn: {time.perf_counter() - t0:.2f} s")
-    from primspace.calibration import CodeCalibration
+    from primspace.model.calibration import CodeCalibration
 
     rng = np.random.default_rng(0)
     for n, q in ((52, 8), (343, 40), (2000, 40)):

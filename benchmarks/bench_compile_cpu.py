@@ -2,7 +2,7 @@
 
 One fit step (forward, masked-free MSE, backward) of the paper-sized decoder (q = 40, layers
 32/12, T = 61, 9 joints, motor only) at batch ``--batch``, eager against the same model whose
-:meth:`~primspace.model.MTRNNDecoder.dynamics` (the two layers' 61-step loops) is wrapped by
+:meth:`~primspace.model.decoder.MTRNNDecoder.dynamics` (the two layers' 61-step loops) is wrapped by
 ``torch.compile`` (Inductor, default mode), on ``--threads`` CPU threads. Prints the first
 call (the compile) and the median of ``--steps`` timed calls after it, their ratio, and the
 largest difference of the loss and of the code gradient between the two (the compiled
@@ -25,7 +25,7 @@ import time
 
 import torch
 
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 
 
 def _step(model, z, target):

@@ -53,7 +53,7 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from primspace.data import MotionDataset
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, configure_process, fit, infer
 
 T, J, H, W, Q = 61, 9, 48, 64, 40

@@ -26,7 +26,7 @@ from primspace.data import MotionDataset
 from primspace.experiments.composite.experiment import split_sequences
 from primspace.segmentation import segmentation_scores
 from primspace.segmentation.synthesis import segment_by_synthesis
-from primspace.stats import sample_std
+from primspace.utils.stats import sample_std
 from primspace.train import load_run
 
 

@@ -138,7 +138,7 @@ def main() -> None:
     torch.set_num_threads(1)
 
     from primspace.data import MotionDataset
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
     from primspace.predict.frame_features import ColourBlob
     from primspace.train import load_run
     from primspace.train.starts import fitted_samples

@@ -161,7 +161,7 @@ def sim_file(tmp_path_factory):
 def sim_run(sim_file, tmp_path_factory):
     """A small run with an image head on samples 0, 1, 2 (sample 3 left out)."""
     from primspace.data import MotionDataset
-    from primspace.model_config import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, fit
 
     ds = MotionDataset.load(sim_file).load_images()
@@ -244,7 +244,7 @@ def test_animate_refuses_bad_options_in_one_line(run_cli, sim_run, tmp_path):
 
 def test_animate_leaves_the_replay_out_for_data_not_of_the_simulator(run_cli, tmp_path):
     from primspace.data import MotionDataset
-    from primspace.model_config import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, fit
 
     rng = np.random.default_rng(0)

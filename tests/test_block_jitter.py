@@ -12,7 +12,7 @@ import pytest
 from conftest import assert_user_error
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim import generate
 from primspace.sim.config import BLOCK_JITTERS, PRESETS, GenerationConfig, sample_params
 

@@ -9,8 +9,8 @@ import torch
 from conftest import assert_user_error
 from test_train import SMALL, _tc, eval_set, primitives, train_set  # noqa: F401 (the fixtures, shared)
 
-from primspace.calibration import CodeCalibration
-from primspace.errors import UserError
+from primspace.model.calibration import CodeCalibration
+from primspace.utils.errors import UserError
 from primspace.train import evaluate, fit, infer, load_run
 
 

@@ -6,9 +6,9 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.latent import LatentTable
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentTable
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, fit, infer
 from primspace.train import captured
 from primspace.train.captured import padded_rows

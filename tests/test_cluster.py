@@ -23,7 +23,7 @@ from primspace.cluster import (
 )
 from primspace.cluster import lrsc as lrsc_module
 from primspace.cluster import spectral as spectral_module
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 
 def union_of_subspaces(n_per, dims, ambient, *, affine=True, noise=0.0, seed=0, offset_scale=1.0):

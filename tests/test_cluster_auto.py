@@ -23,7 +23,7 @@ from primspace.cluster.auto import (
     stability_score,
     top_eigenvalues,
 )
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 
 def planted(noise, seed=0, k=4, n_per=40, dim=2, ambient=40, offset_scale=0.3):

@@ -24,7 +24,7 @@ from primspace.cluster import (
     sweep_figure,
     tau_sweep,
 )
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 
 @pytest.fixture

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.sim.composite import (
     ALLOWED,
     COMPOSITE_PRESETS,

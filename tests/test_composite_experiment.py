@@ -154,7 +154,7 @@ def test_segment_command(finished, tmp_path, run_cli):
 
 def test_segment_refuses_a_run_with_one_code_per_sequence(long_data, tmp_path, run_cli):
     from primspace.data import MotionDataset
-    from primspace.model import ModelConfig
+    from primspace.model.decoder import ModelConfig
     from primspace.train import TrainConfig, fit
 
     data = MotionDataset.load(long_data)
@@ -268,7 +268,7 @@ def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_prim
 def test_lasa_chains_leave_out_the_demonstrations_of_the_single_strokes():
     from primspace.data.importers import chain_lasa
     from primspace.data.importers.lasa import CHAIN_DEMOS
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
 
     data = chain_lasa(12, seed=0, demos=CHAIN_DEMOS)
     used = {int(p.rsplit(" ", 1)[1]) for s in data.source_ids for p in s.split(": ", 1)[1].split(" + ")}

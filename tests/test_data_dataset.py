@@ -9,7 +9,7 @@ from hypothesis.extra.numpy import arrays
 
 from primspace.data import DatasetWriter, LazyImages, MotionDataset
 from primspace.data.schema import SCHEMA_VERSION
-from primspace.errors import DataError, OutputExistsError, UserError
+from primspace.utils.errors import DataError, OutputExistsError, UserError
 
 
 def make_dataset(n=5, t=6, j=3, images=True, seed=0):

@@ -20,7 +20,7 @@ from conftest import assert_user_error
 from primspace.data import MotionDataset, import_npz, import_robomimic, resample
 from primspace.data.importers import frame_steps
 from primspace.data.importers.frames import resize_frames
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 SRC_H, SRC_W = 32, 40  # source frames (even sides: yuv420p video)
 

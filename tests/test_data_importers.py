@@ -5,7 +5,7 @@ import pytest
 
 from primspace.data import import_csv_folder, import_lasa, import_npz, resample
 from primspace.data.importers import lasa_shape_names
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 
 def sequences(lengths=(30, 45, 12), joints=3, seed=0):

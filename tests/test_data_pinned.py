@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from primspace.data import DatasetWriter, LazyImages, MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 RECORD = os.environ.get("PRIMSPACE_PIN_RECORD") == "1"
 

@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 from scipy.signal import resample as plain_fourier_resample
 
 from primspace.data import resample
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 lengths = st.integers(min_value=2, max_value=120)
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False, width=64)

@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from primspace.data import JointScaler
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 values = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False, width=64)
 shapes = st.tuples(st.integers(1, 6), st.integers(1, 12), st.integers(1, 5))

@@ -13,7 +13,7 @@ import primspace.data.indices
 import primspace.data.schema
 from primspace.data import DatasetWriter, MotionDataset, check_indices, read_indices
 from primspace.data.schema import ARRAYS, ATTRIBUTES, FIELDS, arrays_of, dims_of, empty_arrays, field, markdown_table
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "data.md"
 

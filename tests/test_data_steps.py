@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from primspace.data import DatasetWriter, MotionDataset
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 MOTOR = np.random.default_rng(0).normal(size=(3, 6, 2))
 LENGTHS = np.array([6, 4, 3])

@@ -60,7 +60,7 @@ def test_the_act_tables_are_written_into_docs_act_md(tmp_path):
 
     from primspace.experiments.summary import summarize, write_summary
     from primspace.report.markdown import NO_ACT, blocks
-    from primspace.stats import spread_convention
+    from primspace.utils.stats import spread_convention
 
     summary = summarize(act_experiment_dir(tmp_path / "exp"), "act-test", "primspace experiment act --out exp")
     text = blocks({"act-test": summary})["act"]

@@ -5,7 +5,7 @@ import copy
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import map_objective, prior_terms

@@ -6,7 +6,7 @@ import pytest
 import torch
 from sklearn.base import clone
 
-from primspace.errors import OutputExistsError, UserError
+from primspace.utils.errors import OutputExistsError, UserError
 from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer, load_run, reconstruct
 from test_train import SMALL, primitives

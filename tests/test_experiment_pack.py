@@ -108,7 +108,7 @@ def test_packing_trains_nothing_that_is_finished(tiny_data, tmp_path):
 
 def test_a_failed_pack_is_left_to_the_grid(tiny_data, tmp_path, monkeypatch):
     import primspace.train.packed as packed
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
 
     def refuse(prepared, progress=None, label="fit"):
         raise UserError("refused for the test")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_figure, assert_user_error
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.clustering import run_clustering
 from primspace.experiments.inter import run_inter
@@ -222,7 +222,7 @@ def test_a_failed_run_is_reported_and_the_others_finish(tiny_data, tmp_path, run
 
 
 def test_experiment_dir_refuses_another_preset_or_data(finished, tmp_path):
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
 
     exp = finished[0]
     with pytest.raises(UserError, match="made with preset 'tiny'"):
@@ -593,7 +593,7 @@ def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path)
 def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tmp_path, run_cli):
     from primspace.cli.experiments import _judgeable_steps
     from primspace.data import import_lasa
-    from primspace.errors import DataError
+    from primspace.utils.errors import DataError
     from primspace.experiments.presets import PRESETS
 
     lasa = tmp_path / "lasa.h5"
@@ -661,7 +661,7 @@ def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
 def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_path):
     """A directory of an older version (four inits) gains calibrated runs beside its own;
     dropping an init or changing any other setting is still refused."""
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
 
     exp = ExperimentDir(tmp_path / "grow", TINY, data=tiny_data, workers=1, progress=False)
     run_intra(exp)

@@ -12,7 +12,7 @@ import pytest
 from conftest import assert_user_error
 
 from primspace.data import DatasetWriter, MotionDataset
-from primspace.errors import DataError, OutputExistsError, UserError
+from primspace.utils.errors import DataError, OutputExistsError, UserError
 from primspace.sim import generate
 from primspace.sim.generate import GenerationConfig, generate_dataset, shard_dir, shard_ranges, shard_size
 

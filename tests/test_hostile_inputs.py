@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from conftest import assert_user_error
-from primspace.errors import UserError
-from primspace.seeds import MAX_SEED, check_seed
+from primspace.utils.errors import UserError
+from primspace.utils.seeds import MAX_SEED, check_seed
 from test_train import primitives
 
 
@@ -68,7 +68,7 @@ def test_negative_experiment_seeds_are_refused_before_the_folder_is_made(run_cli
 def test_an_index_file_holds_plain_whole_numbers(tmp_path, text, match):
     """Issue 38: '0_1' read as 1 (Python's digit grouping) and 2**70 gave an OverflowError traceback."""
     from primspace.data.indices import read_indices
-    from primspace.errors import DataError
+    from primspace.utils.errors import DataError
 
     path = tmp_path / "idx.txt"
     path.write_text(f"0 {text}\n")
@@ -180,7 +180,7 @@ def test_a_summary_name_is_one_line(tmp_path, name):
 def test_a_folder_of_another_command_is_named_for_what_it_is(run_cli, data_file, tmp_path):
     """Issue 38, item 8: '(no such result.json)' for a folder holding predict's result.json, and
     summarize calling predict's and segment's result.json 'not written by a primspace command'."""
-    from primspace.outputs import describe
+    from primspace.utils.outputs import describe
 
     train = ("train", data_file, "--epochs", "1", "--latent-dim", "2", "--layers", "4,2", "--out", tmp_path / "run")
     assert run_cli(*train).code == 0
@@ -195,7 +195,7 @@ def test_a_folder_of_another_command_is_named_for_what_it_is(run_cli, data_file,
 
 def test_a_write_error_names_the_output_not_its_temporary(tmp_path):
     """Issue 38, item 8: a read-only folder's error named the temporary file instead of --out."""
-    from primspace.files import os_error, temp_prefix
+    from primspace.utils.files import os_error, temp_prefix
 
     out = tmp_path / "result.h5"
     tmp = tmp_path / f"{temp_prefix(out.name)}abc.tmp"

@@ -8,7 +8,7 @@ import pytest
 from conftest import assert_user_error
 from primspace.data import MotionDataset
 from primspace.data.importers.frames import AlignedFrames, fit_box, resize_frames
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 
 def _square(n=1, size=84):

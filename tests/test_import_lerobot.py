@@ -20,7 +20,7 @@ from conftest import assert_user_error
 from primspace.data import MotionDataset, import_lerobot, resample
 from primspace.data.importers import frame_steps
 from primspace.data.importers.lerobot import parse_episodes
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 FPS = 10
 H, W = 48, 64  # frames: sides that every encoder takes (AV1 wants multiples of 8)

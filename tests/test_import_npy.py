@@ -9,7 +9,7 @@ import pytest
 from primspace.data import MotionDataset, import_npz
 from primspace.data.importers import import_npy_folder, looks_like_npy_folder
 from primspace.data.importers.padding import padded_lengths
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 from test_data_import_frames import frames_of, joints_of
 
 REAL = (15, 23, 9, 20)  # real steps of each episode; padded to 23 (the 15 of 23)

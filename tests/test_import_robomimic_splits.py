@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from primspace.data import import_robomimic, resample
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 from test_data_import_frames import joints_of, robomimic_demos, write_robomimic
 
 LENGTHS = (12, 14, 10, 16, 11, 13, 15, 9, 12, 14, 10, 17)  # demo_0 .. demo_11

@@ -23,7 +23,7 @@ import pytest
 from conftest import assert_user_error
 
 from primspace.data import DatasetWriter, MotionDataset
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 SAMPLE = dict(labels=[0, 1, 2, 0, 1, -1], params=np.arange(12.0).reshape(6, 2))
 

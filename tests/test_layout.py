@@ -37,92 +37,53 @@ MODULES = sorted(SRC.rglob("*.py"))
 MAX_MODULE_LINES = 500
 MAX_FUNCTION_LINES = 60
 
+#: Every floor above ``utils``: it imports none of them.
+ABOVE_UTILS = (
+    "data",
+    "sim",
+    "cluster",
+    "probe",
+    "segmentation",
+    "model",
+    "train",
+    "predict",
+    "estimator",
+    "plots",
+    "act",
+    "experiments",
+    "report",
+    "demo",
+    "cli",
+)
+
 # package (or module) -> what it may never import
 FORBIDDEN = {
-    "data": (
-        "sim",
-        "latent",
-        "model",
-        "model_config",
-        "train",
-        "predict",
-        "cluster",
-        "plots",
-        "act",
-        "experiments",
-        "report",
-        "demo",
-        "cli",
-    ),
-    "sim": (
-        "latent",
-        "model",
-        "model_config",
-        "train",
-        "predict",
-        "cluster",
-        "plots",
-        "act",
-        "experiments",
-        "report",
-        "demo",
-        "cli",
-    ),
-    "cluster": ("sim", "latent", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
-    "probe": ("sim", "latent", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
+    # the floor everyone stands on: errors, files, output marks and folders, seeds, progress, statistics
+    "utils": ABOVE_UTILS,
+    "data": ("sim", "model", "train", "predict", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
+    "sim": ("model", "train", "predict", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
+    "cluster": ("sim", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
+    "probe": ("sim", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
     # the segmentation package: the windows method, scores, results, peers (ruptures, hmmlearn) and
     # upper bounds (classifiers given the labels) see motion arrays and codes only ...
-    "segmentation": ("sim", "latent", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
+    "segmentation": ("sim", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
     # ... the methods of a single-primitive model decode a trained run (train)
     "segmentation.synthesis": ("sim", "act", "experiments", "report", "demo", "cli"),
     "segmentation.surprise": ("sim", "act", "experiments", "report", "demo", "cli"),
     "segmentation.inferred": ("sim", "act", "experiments", "report", "demo", "cli"),
-    "model_config": (
-        "model",
-        "latent",
-        "train",
-        "predict",
-        "sim",
-        "cluster",
-        "plots",
-        "act",
-        "experiments",
-        "report",
-        "demo",
-        "cli",
-    ),
-    "model": ("latent", "train", "predict", "sim", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
-    "latent": ("model", "train", "predict", "sim", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
+    # the model: its config (torch-free), the decoder, the codes and their starts, the calibration
+    "model": ("train", "predict", "sim", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
     "train": ("sim", "cluster", "predict", "plots", "act", "experiments", "report", "demo", "cli"),
-    # prediction: one floor above train (and cluster, for the scene mode), below the experiments
+    # prediction from a beginning: one floor above train (and cluster: primitives as clusters of codes)
     "predict": ("sim", "plots", "act", "experiments", "report", "demo", "cli"),
     # the estimator (AutoDecoder) sits above train and predict, below the experiments
     "estimator": ("sim", "act", "experiments", "report", "demo", "cli"),
-    "plots": ("train", "predict", "model", "latent", "act", "experiments", "report", "demo", "cli"),
-    # acting: the scene policy (predict) executed in the simulator (sim), below the experiments
+    "plots": ("train", "predict", "model", "act", "experiments", "report", "demo", "cli"),
+    # acting: plans from the scene executed in the simulator (sim), below the experiments
     "act": ("experiments", "report", "demo", "cli"),
     "experiments": ("report", "demo", "cli"),
     "report": ("demo", "cli"),
     "demo": ("cli",),
-    # small statistics helpers: the standard library only
-    "stats": (
-        "data",
-        "sim",
-        "cluster",
-        "probe",
-        "segmentation",
-        "model_config",
-        "model",
-        "latent",
-        "train",
-        "predict",
-        "plots",
-        "act",
-        "experiments",
-        "report",
-        "demo",
-        "cli",
-    ),
 }
 
 
@@ -340,7 +301,7 @@ def test_the_import_graph_sees_every_form():
     assert target("primspace.experiments.intra", "from primspace.data import MotionDataset") == "primspace.data.dataset"
     assert target("primspace.cli.app", "from primspace import __version__") == "primspace"
     assert target("primspace.cli.app", "from primspace.nowhere import x") is None
-    assert {"primspace.data.storage", "primspace.files"} <= set(_edges()["primspace.data.dataset"]) | set(
+    assert {"primspace.data.storage", "primspace.utils.files"} <= set(_edges()["primspace.data.dataset"]) | set(
         _edges()["primspace.data.storage"]
     )
     assert _cycles({"a": {"b": 0}, "b": {"c": 0}, "c": {"a": 0}, "d": {"a": 0}}) == [["a", "b", "c"]]
@@ -352,3 +313,13 @@ def test_the_layer_table_names_real_packages():
     names = {".".join(_name(p).split(".")[:2]) for p in MODULES}
     for layer, forbidden in FORBIDDEN.items():
         assert (layer in tops or layer in names) and set(forbidden) <= tops, (layer, set(forbidden) - tops)
+
+
+def test_the_model_config_and_the_command_line_defaults_load_without_torch():
+    """``primspace.model.config`` (and the ``model`` package) is torch-free: configs and CLI defaults load fast."""
+    import subprocess
+    import sys
+
+    code = "import sys, primspace.model.config; assert 'torch' not in sys.modules, 'torch imported'"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

@@ -15,9 +15,9 @@ import torch
 from conftest import assert_user_error
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.loss_balance import loss_balance
-from primspace.model import ModelConfig
+from primspace.model.decoder import ModelConfig
 from primspace.train import TrainConfig, fit, reconstruct
 from primspace.train.loss import DataTensors, batch_loss
 from test_train import primitives

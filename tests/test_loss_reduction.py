@@ -15,11 +15,11 @@ import torch.nn.functional as F
 from conftest import assert_user_error
 
 from primspace.data import JointScaler
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.presets import default_train, resolve_preset
 from primspace.experiments.workspace import ExperimentDir
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loss import DataTensors, batch_loss
 from test_train import SMALL, primitives

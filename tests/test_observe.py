@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.latent import appendix_a_observed
+from primspace.utils.errors import UserError
+from primspace.model.latent import appendix_a_observed
 from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.loss import DataTensors

@@ -5,9 +5,9 @@ import pytest
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.errors import UserError
-from primspace.latent import LatentTable
-from primspace.model import ModelConfig
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentTable
+from primspace.model.decoder import ModelConfig
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.loss import DataTensors, batch_loss
 from primspace.train.packed import fit_packed

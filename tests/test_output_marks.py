@@ -26,7 +26,7 @@ from conftest import assert_user_error
 from test_output_safety import data_file  # noqa: F401 (the shared fixture: a small motor-only data set)
 
 from primspace.data import MotionDataset
-from primspace.errors import OutputExistsError
+from primspace.utils.errors import OutputExistsError
 
 TRAIN = ("--layers", "8,4", "--threads", "1", "--batch-size", "4", "--latent-dim", "3", "--no-images")
 
@@ -160,7 +160,7 @@ def test_a_cluster_output_that_appears_meanwhile_is_not_merged_into(run_cli, poi
 def test_atomic_path_never_replaces_a_target_that_appears_meanwhile(tmp_path, monkeypatch):
     """The library's exclusive publish, with renameat2 and with its fallbacks (hard link;
     an exclusively created placeholder)."""
-    from primspace import files
+    from primspace.utils import files
 
     fallbacks = [None, "link", "placeholder"]
     for mode in fallbacks:
@@ -187,19 +187,20 @@ def test_atomic_directory_publishes_without_replacing_and_never_mixes_two_writer
     in place, and if another writer's file lands there first, ours are taken back."""
     from pathlib import Path
 
-    from primspace import files
-    from primspace.cluster.outputs import atomic_directory
+    from primspace.utils import files
+    from primspace.cluster.outputs import CLUSTER_OUTPUT
+    from primspace.utils.folders import atomic_directory
 
     for fallback in (False, True):
         if fallback:
             monkeypatch.setattr(files, "_renameat2", lambda: None)
         new = tmp_path / f"new-{fallback}"
-        with atomic_directory(new) as tmp:
+        with atomic_directory(new, False, CLUSTER_OUTPUT) as tmp:
             (tmp / "result.json").write_text("{}")
         assert (new / "result.json").read_text() == "{}"
         late = tmp_path / f"late-{fallback}"
         with pytest.raises(OutputExistsError):
-            with atomic_directory(late) as tmp:
+            with atomic_directory(late, False, CLUSTER_OUTPUT) as tmp:
                 (tmp / "labels.csv").write_text("mine")
                 late.mkdir()
                 (late / "theirs.txt").write_text("theirs")
@@ -295,7 +296,7 @@ def test_overwrite_refuses_a_data_set_another_runs_checkpoint_and_a_python_file(
 
 
 def test_overwrite_replaces_an_earlier_output_of_the_same_command_only(run_cli, fit_run, data_file, npz_pair, tmp_path):
-    from primspace.outputs import file_writer
+    from primspace.utils.outputs import file_writer
 
     a, b = npz_pair
     data = tmp_path / "i.h5"
@@ -341,7 +342,7 @@ def test_marks_are_read_back(tmp_path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from primspace.outputs import describe, file_writer
+    from primspace.utils.outputs import describe, file_writer
     from primspace.plots import save_figure
     from primspace.plots.animation import save_gif
 

@@ -17,8 +17,8 @@ import pytest
 from conftest import assert_user_error
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.files import atomic_write_text, check_outside_inputs, remove_stale_temporaries, temp_prefix
+from primspace.utils.errors import UserError
+from primspace.utils.files import atomic_write_text, check_outside_inputs, remove_stale_temporaries, temp_prefix
 
 TRAIN = ("--layers", "8,4", "--threads", "1", "--batch-size", "4", "--latent-dim", "3", "--no-images")
 
@@ -266,7 +266,7 @@ def test_temporaries_of_a_killed_writer_are_removed_by_the_next_write(tmp_path):
     # a process that dies while holding a temporary (SIGKILL: no clean-up)
     code = (
         "import os, signal, sys; sys.path[:0] = sys.argv[1:2]\n"
-        "from primspace.files import atomic_path\n"
+        "from primspace.utils.files import atomic_path\n"
         f"with atomic_path({str(target)!r}) as tmp:\n"
         "    tmp.write_bytes(b'half')\n"
         "    os.kill(os.getpid(), signal.SIGKILL)\n"

@@ -5,8 +5,8 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.model import ModelConfig
+from primspace.utils.errors import UserError
+from primspace.model.decoder import ModelConfig
 from primspace.train import TrainConfig, TrainingDivergedError, fit, infer, load_run
 from primspace.train.packed import fit_packed, infer_packed
 

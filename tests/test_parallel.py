@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from primspace.errors import UserError
-from primspace.parallel import run_jobs
+from primspace.utils.errors import UserError
+from primspace.utils.parallel import run_jobs
 
 ITEMS = [(6, 3), (1, 0), (5, 2), (9, 4), (7, 7)]
 
@@ -44,7 +44,7 @@ def test_unknown_backend():
 
 def test_the_local_path_never_imports_ray():
     code = (
-        "import operator, sys; from primspace.parallel import run_jobs; "
+        "import operator, sys; from primspace.utils.parallel import run_jobs; "
         "list(run_jobs(operator.add, [(1, 2), (3, 4)], workers=2, progress=False)); "
         "assert 'ray' not in sys.modules, 'ray imported'"
     )
@@ -79,7 +79,7 @@ def _alive(pid: int) -> bool:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 def test_pool_workers_exit_when_the_driver_is_killed():
     code = (
-        "import time; from primspace.parallel import run_jobs; print('go', flush=True); "
+        "import time; from primspace.utils.parallel import run_jobs; print('go', flush=True); "
         "list(run_jobs(time.sleep, [(300,), (300,)], workers=2, progress=False))"
     )
     driver = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)

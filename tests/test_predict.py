@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.metrics import unobserved_mse
 from primspace.train import TrainConfig, fit
 from primspace.predict.candidates import NOISE_GRID, CodeMixture, continuity_correction

@@ -60,7 +60,7 @@ def test_the_prediction_grid_keeps_its_numbers(case):
 
 
 def test_the_priors_settings_name_their_kinds():
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
     from primspace.predict.grid import grid_predictors
 
     with pytest.raises(UserError, match="prior_settings takes prior, map, encoder, got 'mixture'"):

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import assert_figure, assert_user_error
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict import PRIOR, predict
 from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction, top1_accuracy
 from primspace.train import TrainConfig, fit

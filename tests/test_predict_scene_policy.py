@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
 from primspace.train import TrainConfig, fit
 from conftest import assert_user_error

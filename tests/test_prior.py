@@ -5,7 +5,7 @@ weighted by the posterior over primitives, the K-fold choices, and online filter
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict import unobserved_mse
 from primspace.predict.code_prior import DecodedGaussian, SequentialGaussian, StepGains, choose_prior, fit_gaussian
 from primspace.predict.primitives import primitives_from_clusters, primitives_from_labels

@@ -7,7 +7,7 @@ import copy
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict import unobserved_mse
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.code_prior import GaussianCode

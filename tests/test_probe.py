@@ -6,7 +6,7 @@ line; and the intra experiment writes its table into the results and the report.
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.probe import linear_probe
 
 

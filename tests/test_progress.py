@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from primspace import progress
+from primspace.utils import progress
 
 _STAMP = r"\[\d\d:\d\d:\d\d\] "
 

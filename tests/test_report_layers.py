@@ -109,7 +109,7 @@ def test_figures_never_run_a_model():
                 _within(m, p)
                 for p in (
                     "primspace.train",
-                    "primspace.model",
+                    "primspace.model.decoder",
                     "primspace.experiments",
                     "primspace.report",
                     "primspace.demo",
@@ -194,7 +194,7 @@ def _old_experiment_dir(path: Path) -> Path:
 
 
 def test_the_report_reads_an_old_directory_and_computes_nothing(tmp_path, monkeypatch):
-    import primspace.latent
+    import primspace.model.latent
     import primspace.train
     from primspace.report import build_report
 
@@ -202,7 +202,7 @@ def test_the_report_reads_an_old_directory_and_computes_nothing(tmp_path, monkey
         raise AssertionError("the report computed something")
 
     for module, name in (
-        (primspace.latent, "appendix_a_check"),
+        (primspace.model.latent, "appendix_a_check"),
         (primspace.train, "reconstruct"),
         (primspace.train, "load_run"),
         (primspace.train, "fit"),
@@ -230,7 +230,7 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
 
     from primspace.experiments.presets import PRESETS, ExperimentPreset
     from primspace.experiments.runs import train_configs
-    from primspace.model import ModelConfig
+    from primspace.model.decoder import ModelConfig
     from primspace.train import TrainConfig
 
     flat = json.loads(json.dumps(PRESETS["demo"].to_dict()))  # then in the old, flat form:
@@ -260,7 +260,7 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
 
 def test_a_results_file_that_is_a_link_is_refused(tmp_path):
     """A results file linked to another file would put that file's text into the report."""
-    from primspace.errors import UserError
+    from primspace.utils.errors import UserError
     from primspace.experiments.results import read_results
 
     (tmp_path / "results").mkdir()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.train import TrainConfig, check_run_data, fit, infer, load_run
 from primspace.train.rundata import load_fitted_data
 from test_train import SMALL, primitives

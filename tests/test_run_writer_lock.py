@@ -12,7 +12,7 @@ import time
 import pytest
 
 from conftest import assert_user_error
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.train import TrainConfig, fit, load_run
 from primspace.train.rundir import LOCK_NAME, WriterLock
 from test_train import SMALL, primitives

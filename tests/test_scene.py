@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.scene import affine_subspace, cluster_codes, predict_scene, run_scene_point, scene_clusters
 from primspace.train import TrainConfig, fit
 from conftest import assert_user_error

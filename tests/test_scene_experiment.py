@@ -9,7 +9,7 @@ import pytest
 from conftest import assert_user_error
 from test_experiments import TINY
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.results import scene_table
 from primspace.experiments.scene_only import SCENE_METHODS, run_scene
 from primspace.experiments.workspace import ExperimentDir

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.base import Predictor
 from primspace.predict.metrics import observed_prefix, unobserved_mse
 from primspace.predict.peers import MeanMotionPeer

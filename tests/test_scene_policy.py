@@ -11,7 +11,7 @@ import pytest
 
 from primspace.data import MotionDataset
 from primspace.data.scaling import JointScaler
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.scene_policy import ScenePolicy, continue_from
 
 #: The primitives simulated (labels 0 and 2 of the simulator's seven).

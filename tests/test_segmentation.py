@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation import (
     boundaries_from_segments,
     boundary_f1,

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation import boundary_f1, step_labelling_accuracy
 from primspace.segmentation.bounds import (
     clustered_bound,

@@ -112,7 +112,7 @@ def test_segment_codes_inferred_with_the_weights_frozen(tmp_path):
     from primspace.segmentation.inferred import in_model_frame
     from primspace.segmentation.synthesis import segment_by_synthesis
     from primspace.train import fit
-    from primspace.model_config import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig
     from test_train import primitives
 

@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.latent import LatentInitializer
-from primspace.model import MTRNNDecoder, ModelConfig, code_interpolation
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentInitializer
+from primspace.model.decoder import MTRNNDecoder, ModelConfig, code_interpolation
 from primspace.train import TrainConfig, evaluate, fit, infer
 
 SMALL = dict(layer_sizes=(12, 6), p_hidden=16, motor_hidden=16)

@@ -7,7 +7,7 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim.execute import WORKSPACE, Executor, Perturbation, check_block
 from primspace.sim.ik import solve_path
 from primspace.sim.primitives import PRIMITIVES, R_DOWN, finger_geometry, get_primitive, script_motion

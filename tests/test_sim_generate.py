@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from primspace.errors import DataError, OutputExistsError, UserError
+from primspace.utils.errors import DataError, OutputExistsError, UserError
 from primspace.sim.generate import (
     PARAM_NAMES,
     PRESETS,

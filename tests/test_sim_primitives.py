@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim.primitives import (
     PRIMITIVES,
     PUSH_AXIS,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import primspace.sim
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim import scene as scene_module
 from primspace.sim.ik import solve_path
 from primspace.sim.primitives import (

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.sim.ik import solve_path
 from primspace.sim.primitives import PRIMITIVES, R_DOWN, Script, finger_geometry, script_motion
 from primspace.sim.scene import JOINT_NAMES, Scene

@@ -16,7 +16,7 @@ import pytest
 from conftest import assert_user_error
 from primspace.data import DatasetWriter, MotionDataset
 from primspace.data.importers import chain_lasa, import_lasa
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 
 def _data(n=8, ids=True):
@@ -133,7 +133,7 @@ def test_lasa_and_its_chains_name_their_demonstrations():
 
 
 def test_a_run_on_some_samples_records_their_ids(tmp_path):
-    from primspace.model import ModelConfig
+    from primspace.model.decoder import ModelConfig
     from primspace.train import TrainConfig, fit
 
     data = _data(8)

@@ -1,12 +1,12 @@
 """The spread over seeds as the docs print it (issue 42): the sample std (ddof 1) and the
-95 % Student-t interval of the mean, :mod:`primspace.stats`."""
+95 % Student-t interval of the mean, :mod:`primspace.utils.stats`."""
 
 import math
 
 import numpy as np
 import pytest
 
-from primspace.stats import sample_std, spread_convention, t_factor, t_interval
+from primspace.utils.stats import sample_std, spread_convention, t_factor, t_interval
 
 
 def test_t_interval_of_one_two_three():

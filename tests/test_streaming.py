@@ -8,7 +8,7 @@ import torch
 from conftest import assert_user_error
 
 from primspace.data import MotionDataset
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.train import TrainConfig, evaluate, fit, infer
 from primspace.train import streaming
 from primspace.train.streaming import FrameReader, frames_bytes, should_stream

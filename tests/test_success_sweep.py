@@ -12,7 +12,7 @@ import pytest
 
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.success import (
     point_by_tolerance,
     point_intervals,
@@ -32,7 +32,7 @@ from primspace.sim.success import (
     evaluate_dataset_sweep,
     success_rates,
 )
-from primspace.stats import normal_quantile, wilson_interval
+from primspace.utils.stats import normal_quantile, wilson_interval
 from test_sim_success import BLOCKS, joints_of, scene  # noqa: F401 (scene: the shared fixture)
 
 BACK_OFF_GAP = 0.007  # the hold-window gap of the backed-off motions (m)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import assert_user_error
-from primspace.errors import OutputExistsError, UserError
+from primspace.utils.errors import OutputExistsError, UserError
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
 from primspace.experiments.runs import load_codes, phase_dir

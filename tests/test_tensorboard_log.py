@@ -13,7 +13,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
 from test_train import SMALL, primitives
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.logger import TensorBoardLogger, scalars

@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.errors import OutputExistsError, UserError
-from primspace.model import ModelConfig
+from primspace.utils.errors import OutputExistsError, UserError
+from primspace.model.decoder import ModelConfig
 from primspace.train import (
     TrainConfig,
     TrainingDivergedError,

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from primspace.errors import UserError
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.utils.errors import UserError
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loss import DataTensors, batch_loss
 from test_train import primitives

@@ -24,7 +24,7 @@ from primspace.experiments.presets import PRESETS
 from primspace.experiments.results import LEARNED_CODES, final, qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
-from primspace.progress import announce
+from primspace.utils.progress import announce
 from primspace.report import build_report
 
 __all__ = ["run_demo"]

@@ -31,7 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["ALPHAS", "ProbeResult", "linear_probe"]
 

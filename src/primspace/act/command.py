@@ -26,7 +26,7 @@ from primspace.act.episode import BlockMove, run_episode
 from primspace.act.planners import DEFAULT_EVERY, PLANNERS, PolicyPlanner, ProMPPlanner, check_every
 
 CLOSED, OPEN, PROMP = PLANNERS
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "ACT_FILES",
@@ -39,7 +39,7 @@ __all__ = [
     "write_animation",
 ]
 
-#: The mark ``act`` writes into its outputs (primspace.outputs).
+#: The mark ``act`` writes into its outputs (primspace.utils.outputs).
 ACT_MARK = "primspace act"
 #: The files of an ``act`` output directory (result.json last).
 ACT_FILES = ("executed.h5", "act.gif", "result.json")

@@ -107,7 +107,7 @@ def run_episode(
         Keep the camera frame after every step (for the animation).
     """
     if move is not None and not 1 <= int(move.step) < int(length):
-        from primspace.errors import UserError
+        from primspace.utils.errors import UserError
 
         raise UserError(f"the block can be moved before steps 1..{int(length) - 1}, got step {move.step}")
     first = np.asarray(first_joints, dtype=np.float64).reshape(1, 1, -1)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["PolicyPlanner", "ProMPPlanner", "PLANNERS", "DEFAULT_EVERY", "check_every"]
 

@@ -37,8 +37,8 @@ def act_command(
     """Execute the primitive in the scene in MuJoCo: planned from the camera, re-planned in closed loop when a frame
     surprises the plan; the open loop and ProMP re-conditioned on the executed joints run the same scene."""
     from primspace.act.command import ACT_FILES, ACT_MARK, act, write_outputs
-    from primspace.cluster.outputs import OutputKind, atomic_directory, check_output_directory
-    from primspace.files import check_outside_inputs
+    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory
+    from primspace.utils.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
 
     inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])

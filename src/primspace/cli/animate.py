@@ -14,7 +14,7 @@ from primspace.cli.train import run_sample
 # primspace.plots.animation.MAX_FRAMES, repeated so that `primspace --help` does not load
 # matplotlib (tests/test_animate.py checks that the two agree).
 _MAX_FRAMES = 30
-#: The mark ``animate`` writes into its GIF (primspace.outputs).
+#: The mark ``animate`` writes into its GIF (primspace.utils.outputs).
 _ANIMATE_MARK = "primspace animate"
 
 

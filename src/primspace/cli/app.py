@@ -1,7 +1,7 @@
 """The ``primspace`` Typer application and its entry point.
 
 Commands register themselves on :data:`app` from the modules of this package; a
-:class:`~primspace.errors.UserError` raised anywhere below is printed by :func:`main` as
+:class:`~primspace.utils.errors.UserError` raised anywhere below is printed by :func:`main` as
 one line, ``primspace: error: ...``, with exit status 2 and no traceback. So is every
 error of the option parser (an unknown option or command, a bad or missing value): one
 line naming the option, not Click's usage box.
@@ -17,7 +17,7 @@ import sys
 import typer
 import typer.main
 
-from primspace.errors import UserError, first_line
+from primspace.utils.errors import UserError, first_line
 
 try:  # typer >= 0.2x carries its own copy of Click
     from typer._click import exceptions as _click_errors
@@ -150,7 +150,7 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``primspace`` command (and ``python -m primspace``).
 
     Every error a user can fix is one line on stderr, ``primspace: error: ...``, exit 2:
-    a :class:`~primspace.errors.UserError`, a refusal of the file system, and any error
+    a :class:`~primspace.utils.errors.UserError`, a refusal of the file system, and any error
     of the option parser. Ctrl-C is one line and exit 130. ``primspace`` alone prints the
     help (exit 2, as Click does).
     """

@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from primspace.errors import UserError, first_line
+from primspace.utils.errors import UserError, first_line
 
 from primspace.cli.app import app
 from primspace.cli.options import echo_json
@@ -80,12 +80,13 @@ def cluster_command(
     overwrite: bool = typer.Option(False, help="Replace a non-empty OUT directory."),
 ) -> None:
     """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
-    from primspace.cluster.outputs import check_output_directory
-    from primspace.files import check_outside_inputs
+    from primspace.cluster.outputs import CLUSTER_OUTPUT
+    from primspace.utils.folders import check_output_directory
+    from primspace.utils.files import check_outside_inputs
 
     k, k_flag = _primitives_option(k, k_deprecated)
     check_outside_inputs(out, (src, labels))
-    check_output_directory(out, overwrite)
+    check_output_directory(out, overwrite, CLUSTER_OUTPUT)
     r2_target = _parse_r2(r2)
     _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init, k_flag)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
@@ -173,13 +174,8 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
     """``labels.csv`` (``samples``: each point's index in the data file; default the row),
     ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
     from primspace.cluster import clustering_figure, sweep_figure
-    from primspace.cluster.outputs import (
-        CLUSTER_OUTPUT,
-        atomic_directory,
-        write_json,
-        write_labels_csv,
-        write_sweep_csv,
-    )
+    from primspace.cluster.outputs import CLUSTER_OUTPUT, write_labels_csv, write_sweep_csv
+    from primspace.utils.folders import atomic_directory, write_json
     from primspace.plots import save_figure
 
     n, scores = result.n_samples, result.scores
@@ -188,8 +184,8 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
     figure = clustering_figure(
         result, title=f"{src.name}: tau = {result.tau:.3g}, R^2 = {result.r2:.4f}, rank {result.rank}{acc}{shown}"
     )
-    record["writer"] = CLUSTER_OUTPUT.command  # result.json says who wrote it (primspace.outputs reads it)
-    with atomic_directory(out, overwrite) as tmp:
+    record["writer"] = CLUSTER_OUTPUT.command  # result.json says who wrote it (primspace.utils.outputs reads it)
+    with atomic_directory(out, overwrite, CLUSTER_OUTPUT) as tmp:
         write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true, samples)
         write_json(tmp / "result.json", record)
         save_figure(figure, tmp / "clustering.png", writer=CLUSTER_OUTPUT.command)

@@ -8,13 +8,13 @@ from typing import Optional
 
 import typer
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import check_workers, echo_json
 
 
-# the marks these commands write into their outputs (primspace.outputs): --overwrite replaces only their own
+# the marks these commands write into their outputs (primspace.utils.outputs): --overwrite replaces only their own
 _GENERATE_MARK, _SHOW_MARK = "primspace generate", "primspace show"
 
 # ============================================================================ data
@@ -125,7 +125,7 @@ def generate_command(
     """
     import time
 
-    from primspace.outputs import output_file
+    from primspace.utils.outputs import output_file
     from primspace.sim import generate
     from primspace.sim.composite import COMPOSITE_PRESETS
     from primspace.sim.generate import generate_dataset
@@ -256,7 +256,7 @@ def show_command(
 ) -> None:
     """Draw one sample: a strip of camera frames and its joint curves."""
     from primspace.data.dataset import MotionDataset
-    from primspace.outputs import output_file
+    from primspace.utils.outputs import output_file
     from primspace.plots import plot_sim_sample, save_figure
 
     if frames < 1:

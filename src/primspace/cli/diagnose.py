@@ -10,14 +10,14 @@ import typer
 
 from primspace.cli.app import app
 from primspace.cli.options import configure_threads, threads_option
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 diagnose_app = typer.Typer(
     help="Diagnostics of a trained run: what its loss and its errors are made of.", no_args_is_help=True
 )
 app.add_typer(diagnose_app, name="diagnose")
 
-#: The mark ``diagnose loss-balance`` writes into its JSON (``writer``, :mod:`primspace.outputs`).
+#: The mark ``diagnose loss-balance`` writes into its JSON (``writer``, :mod:`primspace.utils.outputs`).
 _LOSS_BALANCE_MARK = "primspace diagnose loss-balance"
 
 
@@ -39,8 +39,8 @@ def loss_balance_command(
     """
     from primspace.data import MotionDataset
     from primspace.experiments.loss_balance import loss_balance
-    from primspace.files import atomic_write_json
-    from primspace.outputs import output_file
+    from primspace.utils.files import atomic_write_json
+    from primspace.utils.outputs import output_file
     from primspace.train import load_run
 
     configure_threads(threads, "cpu")

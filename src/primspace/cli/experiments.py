@@ -8,8 +8,8 @@ from typing import Optional
 
 import typer
 
-from primspace.seeds import check_seed
-from primspace.errors import UserError
+from primspace.utils.seeds import check_seed
+from primspace.utils.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import check_workers, device_option, echo_table, int_list, name_list, threads_option
@@ -34,7 +34,7 @@ class Backend(str, Enum):
 def _experiment(preset: str | None, data, out, backend, address, workers, seed, overrides: dict, pack: int = 1):
     from primspace.experiments.presets import DEFAULT_PRESET, resolve_preset
     from primspace.experiments.workspace import ExperimentDir
-    from primspace.parallel import default_workers
+    from primspace.utils.parallel import default_workers
 
     from primspace.cli.app import invocation
 
@@ -78,7 +78,7 @@ def _judgeable_steps(exp, name: str, steps: tuple[str, ...]) -> tuple[str, ...]:
     imported demonstrations) leaves the success step out, with a note, instead of failing."""
     if "success:run_success" not in steps:
         return steps
-    from primspace.errors import DataError
+    from primspace.utils.errors import DataError
     from primspace.sim.success import check_judgeable
 
     try:
@@ -332,7 +332,7 @@ def summarize_command(
     run it on the machine that ran the experiment (it records the CPU)."""
     from primspace.experiments.summary import summarize
     from primspace.experiments.summary_codes import check_codes_output, codes_path, write_summary_with_codes
-    from primspace.outputs import output_file
+    from primspace.utils.outputs import output_file
 
     # --overwrite replaces a summary only (recognised by its summary_version), never another file,
     # and a codes file only (its primspace_codes_version entry): both checked before anything is read
@@ -360,7 +360,7 @@ def demo_command(
 ) -> None:
     """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
     from primspace.demo import run_demo
-    from primspace.parallel import default_workers
+    from primspace.utils.parallel import default_workers
 
     check_workers(workers)
     summary = run_demo(out, workers=workers or default_workers(), device=device, threads=threads)

@@ -12,7 +12,7 @@ from typing import Optional
 
 import typer
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import name_list
@@ -43,7 +43,7 @@ MAX_LENGTH = 100_000
 #: per sample are already more than the decoder's head is meant for; a larger size is a typo
 #: that would end in a memory error (80000x80000 asked for 179 GiB), not a data set.
 MAX_IMAGE_SIDE = 1024
-# the mark this command writes into its outputs (primspace.outputs): --overwrite replaces only its own
+# the mark this command writes into its outputs (primspace.utils.outputs): --overwrite replaces only its own
 _IMPORT_MARK = "primspace import"
 
 _SRC = typer.Argument(
@@ -121,7 +121,7 @@ def import_command(
 
     Frames: each step takes the recorded frame nearest in time, fitted (--image-fit) and resized to --image-size.
     """
-    from primspace.outputs import output_file
+    from primspace.utils.outputs import output_file
 
     length = _parse_length(length)
     source = None if src is None or str(src).lower() == "lasa" else src
@@ -221,7 +221,7 @@ def _parse_length(text: str) -> int:
 def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
     """``"48x64"`` -> ``(48, 64)``, a size the decoder's image head can produce."""
     from primspace.data.importers import DEFAULT_IMAGE_SIZE
-    from primspace.model_config import ModelConfig, check_image_size
+    from primspace.model.config import ModelConfig, check_image_size
 
     if text is None:
         return DEFAULT_IMAGE_SIZE

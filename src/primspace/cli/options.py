@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.train.config import TrainConfig
 
 #: ``--threads``'s help, the same wherever torch runs (the default is ``TrainConfig.threads``).

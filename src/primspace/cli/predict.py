@@ -17,9 +17,9 @@ import typer
 
 from primspace.cli.app import app
 from primspace.cli.options import threads_option
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
-#: The mark ``predict`` writes into its data file and figure (primspace.outputs).
+#: The mark ``predict`` writes into its data file and figure (primspace.utils.outputs).
 PREDICT_MARK = "primspace predict"
 #: The files of a ``primspace predict`` output directory (result.json last: it says the output is complete).
 PREDICT_FILES = ("predicted.h5", "prediction.png", "posterior.png", "result.json")
@@ -54,7 +54,7 @@ def _shown_titles(dataset, indices) -> list[str]:
 
 def _judged(predicted_dataset) -> dict | None:
     """Success of the predicted motions in the simulator, when the data can be judged (else None)."""
-    from primspace.errors import DataError
+    from primspace.utils.errors import DataError
     from primspace.sim.success import check_judgeable, evaluate_dataset, success_rates
 
     try:
@@ -197,8 +197,8 @@ def predict_command(
 ) -> None:
     """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded
     (with --scene: the whole motion from the first frame and joints, as the named primitive, by the scene policy)."""
-    from primspace.cluster.outputs import OutputKind, atomic_directory
-    from primspace.files import check_outside_inputs
+    from primspace.utils.folders import OutputKind, atomic_directory
+    from primspace.utils.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
 
     source, clusters = parse_primitives(primitives, clusters, scene)

@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import configure_threads, threads_option
@@ -90,9 +90,9 @@ def segment_command(
     clustering of segment codes); scored against the data's step_segments / step_labels when it has them."""
     import numpy as np
 
-    from primspace.cluster.outputs import OutputKind, atomic_directory, check_output_directory, write_json
+    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory, write_json
     from primspace.data import MotionDataset
-    from primspace.files import check_outside_inputs
+    from primspace.utils.files import check_outside_inputs
     from primspace.train import load_run
 
     kind = OutputKind("primspace segment", SEGMENT_FILES, frozenset({"window", "boundaries", "scores"}))
@@ -189,7 +189,7 @@ def _segment_by_primitives(trained, ds, run: Path, data: Path, primitives, toler
     from primspace.segmentation.synthesis import segment_by_synthesis
     from primspace.sim.composite import transition_steps
 
-    from primspace.progress import stage
+    from primspace.utils.progress import stage
 
     k = _primitives(ds, primitives, data)
     segment = segment_by_surprise if method == "surprise" else segment_by_synthesis
@@ -203,7 +203,7 @@ def _write_segments(path: Path, samples, result) -> None:
     """One row per segment: the sample (data index), its segment number, steps, label."""
     from collections import Counter
 
-    from primspace.files import atomic_write_text
+    from primspace.utils.files import atomic_write_text
 
     lines, seen = ["sample,segment,start,stop,label"], Counter()
     for i, a, b, lab in zip(result.segment_sample, result.segment_start, result.segment_stop, result.segment_labels):

@@ -9,10 +9,10 @@ from typing import Optional, Tuple
 
 import typer
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 from primspace.cli.app import app
-from primspace.model_config import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train.config import TrainConfig
 from primspace.cli.options import configure_threads, device_option, float_list, int_list, threads_option
 
@@ -76,7 +76,7 @@ def _log_to_option():
     return typer.Option(None, "--log-to", metavar="tensorboard DIR", help=_LOG_TO_HELP)
 
 
-#: The mark ``reconstruct`` writes into its PNG (primspace.outputs).
+#: The mark ``reconstruct`` writes into its PNG (primspace.utils.outputs).
 _RECONSTRUCT_MARK = "primspace reconstruct"
 
 _LOSS_REDUCTION_HELP = (
@@ -118,7 +118,7 @@ def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path
     """The data set and its --indices selection, once --out is known to lie outside every input."""
     from primspace.data.dataset import MotionDataset
     from primspace.data.indices import read_indices
-    from primspace.files import check_outside_inputs
+    from primspace.utils.files import check_outside_inputs
 
     check_outside_inputs(out, (file, indices, other))
     ds = MotionDataset.load(file)
@@ -446,7 +446,7 @@ def run_sample(
     import numpy as np
 
     from primspace.data.dataset import MotionDataset
-    from primspace.outputs import output_file
+    from primspace.utils.outputs import output_file
     from primspace.train import check_run_data, load_run
 
     if frames < min_frames:

@@ -55,7 +55,7 @@ from primspace.cluster.spectral import (
     njw_labels,
     spectral_embedding,
 )
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "AUTO_CRITERIA",

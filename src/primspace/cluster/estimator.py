@@ -29,7 +29,7 @@ from primspace.cluster.spectral import (
     spectral_embedding,
     spectral_embedding_dense,
 )
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["LowRankSubspaceClustering", "DEFAULT_R2_TARGET"]
 

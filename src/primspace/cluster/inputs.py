@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.errors import DataError, UserError, first_line
+from primspace.utils.errors import DataError, UserError, first_line
 
 __all__ = ["ClusterPoints", "load_points", "read_labels", "H5_SUFFIXES"]
 

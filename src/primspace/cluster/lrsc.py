@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "R2_GRID",

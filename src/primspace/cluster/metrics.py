@@ -15,7 +15,7 @@ from scipy.optimize import linear_sum_assignment
 from sklearn.metrics import adjusted_rand_score, normalized_mutual_info_score
 from sklearn.metrics.cluster import contingency_matrix
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["clustering_accuracy", "clustering_scores", "UNKNOWN_LABEL"]
 

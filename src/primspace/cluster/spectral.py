@@ -54,7 +54,7 @@ from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_random_state
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "SpectralEmbedding",

@@ -21,7 +21,7 @@ from sklearn.utils import check_array
 from primspace.cluster.estimator import LowRankSubspaceClustering, resolve_tau, small_problem_threads, tau_option_from
 from primspace.cluster.lrsc import R2_GRID, SelfRepresentationSVD
 from primspace.cluster.metrics import clustering_scores
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["sweep", "tau_sweep", "R2_GRID", "DEFAULT_R2_GRID", "TAU_PARAMETERS"]
 

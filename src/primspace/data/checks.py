@@ -37,7 +37,7 @@ def convert_fields(ds) -> None:
 
 
 def validate_fields(ds) -> None:
-    """Check every field of ``ds``; raise :class:`~primspace.errors.DataError` naming file,
+    """Check every field of ``ds``; raise :class:`~primspace.utils.errors.DataError` naming file,
     field and sample.
 
     Each array is checked (``motor`` first), then the attribute naming its last axis, then

@@ -13,7 +13,7 @@ Every check names the file, the field and the sample index, e.g.
 ``demo.h5, field 'motor', sample 12: contains NaN or inf``. Values too large for
 float32 are refused before the cast (named as too large, not as the inf the cast would
 make), and an image chunk that cannot be decoded (a corrupted or truncated file) is a
-:class:`~primspace.errors.DataError` naming the file, field ``images`` and the sample,
+:class:`~primspace.utils.errors.DataError` naming the file, field ``images`` and the sample,
 on every read path: :class:`LazyImages` indexing, :meth:`MotionDataset.load_images`,
 :meth:`MotionDataset.save` and :meth:`DatasetWriter.copy_from`.
 """
@@ -35,7 +35,7 @@ from primspace.data.indices import check_indices, mask_indices
 from primspace.data.schema import ARRAYS, SCHEMA_VERSION, names_of
 from primspace.data.reading import read_fields
 from primspace.data.storage import DatasetWriter, write_dataset
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = ["MotionDataset", "LazyImages", "DatasetWriter", "SCHEMA_VERSION"]
 

@@ -3,7 +3,7 @@
 ``check_stored``).
 
 Each takes one field's value (or the data set being built) and either returns it
-converted or raises a :class:`~primspace.errors.DataError` naming the file, the field
+converted or raises a :class:`~primspace.utils.errors.DataError` naming the file, the field
 and, where it applies, the sample. The table says which field uses which and in what
 order they run; the checks shared with the step fields and the source ids live in
 :mod:`primspace.data.steps` and :mod:`primspace.data.values`.
@@ -15,7 +15,7 @@ import numpy as np
 
 from primspace.data.images import LazyImages
 from primspace.data.values import as_float32, check_finite, check_int32_labels
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = [
     "coerce_motor",

@@ -3,7 +3,7 @@
 The frames of a data set file are stored one gzip-compressed chunk per sample (see
 :mod:`primspace.data.schema`), so a view reads only the samples asked for, and a
 subset is a view (an index into the file), never a copy. A chunk that cannot be decoded
-is a :class:`~primspace.errors.DataError` naming the file, the field and the sample
+is a :class:`~primspace.utils.errors.DataError` naming the file, the field and the sample
 (:func:`read_samples`), on every read path.
 """
 
@@ -14,7 +14,7 @@ import os
 import h5py
 import numpy as np
 
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["LazyImages", "read_samples", "as_view", "IMAGE_BLOCK"]
 

@@ -12,7 +12,7 @@ array([3, 0, 2])
 >>> check_indices([3, 3], 5)
 Traceback (most recent call last):
 ...
-primspace.errors.UserError: sample indices list a sample more than once
+primspace.utils.errors.UserError: sample indices list a sample more than once
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 __all__ = ["check_indices", "mask_indices", "read_indices"]
 
@@ -47,8 +47,8 @@ def check_indices(
         ``[0, n_samples)``. None: no range check (the data set is not known yet).
     source : path-like, optional
         The index file they were read from. Given: errors are
-        :class:`~primspace.errors.DataError` naming that file and field ``indices``;
-        else :class:`~primspace.errors.UserError` (a Python argument).
+        :class:`~primspace.utils.errors.DataError` naming that file and field ``indices``;
+        else :class:`~primspace.utils.errors.UserError` (a Python argument).
     data_path : path-like, optional
         The data set file the samples belong to, named when an index is out of range.
     unique : bool, default True

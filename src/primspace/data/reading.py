@@ -17,7 +17,7 @@ import numpy as np
 
 from primspace.data.images import LazyImages
 from primspace.data.schema import ARRAYS, ATTRIBUTES, SCHEMA_VERSION, WRITER_ATTRIBUTE, Field
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["read_fields", "file_writer"]
 

@@ -30,7 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = ["resample"]
 

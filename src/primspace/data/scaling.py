@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 __all__ = ["JointScaler"]
 

@@ -68,6 +68,7 @@ from primspace.data.field_checks import (
 )
 from primspace.data.steps import coerce_steps, validate_lengths, validate_step_labels, validate_step_segments
 from primspace.data.values import coerce_source_ids, validate_source_ids
+from primspace.utils.outputs import DATA_SET_MARK
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -99,7 +100,7 @@ CHECKSUM_CHUNK_BYTES = 1 << 18
 #: :func:`primspace.data.reading.file_writer`). Not a :class:`MotionDataset` field:
 #: loading ignores it, and a file without it (every file written without ``writer=``,
 #: every file of other tools) has no mark.
-WRITER_ATTRIBUTE = "primspace_writer"
+WRITER_ATTRIBUTE = DATA_SET_MARK  # primspace.utils.outputs reads it back
 
 
 @dataclass(frozen=True)

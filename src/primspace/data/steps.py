@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = [
     "STEP_FIELDS",

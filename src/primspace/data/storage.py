@@ -33,8 +33,8 @@ from primspace.data.schema import (
 )
 from primspace.data.reading import read_fields
 from primspace.data.values import as_float32
-from primspace.errors import DataError, first_line
-from primspace.files import atomic_path, check_free_space
+from primspace.utils.errors import DataError, first_line
+from primspace.utils.files import atomic_path, check_free_space
 
 __all__ = ["DatasetWriter", "write_dataset"]
 
@@ -46,7 +46,7 @@ _LAZY = tuple(f for f in ARRAYS if f.lazy)
 
 def write_dataset(ds, path: Path, overwrite: bool, compression_level: int, writer=None) -> Path:
     """Write the data set ``ds`` to ``path`` in blocks of samples (see :meth:`MotionDataset.save`);
-    refused first when its disk cannot hold the arrays uncompressed (:func:`~primspace.files.check_free_space`)."""
+    refused first when its disk cannot hold the arrays uncompressed (:func:`~primspace.utils.files.check_free_space`)."""
     check_free_space(path, (1 << 20) + sum(_raw_bytes(v) for v in arrays_of(ds).values() if v is not None))
     settings = {a.writer_option: _option_value(a, getattr(ds, a.name)) for a in ARRAYS if a.writer_option}
     with DatasetWriter(
@@ -116,7 +116,7 @@ class DatasetWriter:
     dt : float
     source : str
     overwrite : bool
-        Replace an existing file (else :class:`~primspace.errors.OutputExistsError`,
+        Replace an existing file (else :class:`~primspace.utils.errors.OutputExistsError`,
         raised before anything is written).
     compression_level : int
         gzip level of the per-sample image chunks.

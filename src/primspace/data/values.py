@@ -1,6 +1,6 @@
 """Checks on the values of a data set, before they are stored: finite, within float32,
 labels within int32, source ids one line of text each. Each failure is a
-:class:`~primspace.errors.DataError` naming the file, the field, the sample and the
+:class:`~primspace.utils.errors.DataError` naming the file, the field, the sample and the
 position inside it (step and joint, or column).
 
 The float32 check runs *before* the cast: casting 1e39 to float32 gives inf, which the
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = [
     "FLOAT32_MAX",

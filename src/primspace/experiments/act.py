@@ -36,7 +36,7 @@ import numpy as np
 
 from primspace.act.planners import DEFAULT_EVERY, PLANNERS
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.act_results import ALL, act_table, act_tables
 from primspace.experiments.intra import run_intra
 from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, judgeable, predicted_subset, projection_seeds

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 from primspace.experiments import figures
 from primspace.experiments.results import ANIMATION_RESULTS
 from primspace.experiments.runs import focus_runs, intra_run_dir

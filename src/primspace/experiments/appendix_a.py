@@ -2,7 +2,7 @@
 
 For P with entries N(0, 1/q) the paper shows E[Pa·Pb] = a·b and
 Var[Pa·Pb] ≤ (3|a|²|b|² − (a·b)²)/q. :func:`run_appendix_a` draws 2000 matrices P per q
-(:func:`primspace.latent.appendix_a_check`), with a and b two scaled, flattened motor
+(:func:`primspace.model.latent.appendix_a_check`), with a and b two scaled, flattened motor
 sequences of the data set (two of the same primitive, and two of different primitives,
 as the paper's a and b), and writes ``results/appendix_a.json``; the report prints it.
 """
@@ -31,7 +31,7 @@ def run_appendix_a(exp: ExperimentDir, *, overwrite: bool = False) -> dict:
     (unless ``overwrite``). Each q draws from its own seed (``random_state=q``).
     """
     from primspace.data import JointScaler
-    from primspace.latent import appendix_a_check
+    from primspace.model.latent import appendix_a_check
 
     if not overwrite and (done := exp.read_results("appendix_a")) is not None:
         return done

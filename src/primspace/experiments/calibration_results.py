@@ -1,6 +1,6 @@
 """The calibrated start against the raw projection, zero and pca, read from the intra results.
 
-Calibrated projection (:class:`primspace.calibration.CodeCalibration`) starts a new code at
+Calibrated projection (:class:`primspace.model.calibration.CodeCalibration`) starts a new code at
 a ridge map of ``P m`` instead of ``P m``: :func:`calibration_table` compares its eval loss
 with the other starts' per q, beside how far the fitted codes moved from ``P m`` and how well
 the map predicts them; :func:`calibration_verdict` says whether it never loses. Reads

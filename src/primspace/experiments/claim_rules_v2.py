@@ -29,7 +29,7 @@ from primspace.experiments.claim_rules_central import chance_level
 from primspace.experiments.claim_rules_v1 import has_inits, losses_by_q
 from primspace.experiments.claim_verdicts import AGAINST, IN_FAVOUR, PARTLY, Outcome
 from primspace.experiments.results import LEARNED_CODES
-from primspace.stats import wilson_interval
+from primspace.utils.stats import wilson_interval
 
 __all__ = [
     "LOW_DIMENSIONAL_Q",

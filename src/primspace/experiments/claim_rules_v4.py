@@ -14,7 +14,7 @@ Three rules new or changed (:mod:`primspace.experiments.claims` quotes the sente
   checked and the verdict is at most "partly". The threshold was named after the stored
   codes had been read (Adam's runs move about 0.06 of ``‖P m‖``, plain SGD's about 0.3).
 - inter (:func:`inter_improved`): robustness compares the sample std (ddof 1,
-  :func:`primspace.stats.sample_std`) of the final loss over folds, where version 2 used
+  :func:`primspace.utils.stats.sample_std`) of the final loss over folds, where version 2 used
   the population std (ddof 0); the rest as version 2.
 - the Summary's "Initialization of the latent variable by random linear projections
   improves intra- and inter-primitive generalization capabilities compared to

@@ -43,7 +43,7 @@ import torch
 from primspace.data import MotionDataset
 from primspace.data.indices import check_indices
 from primspace.data.steps import valid_steps
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.train.loss import DataTensors, batch_loss, code_variation
 from primspace.train.observe import Observation
 from primspace.train.rundata import load_fitted_data

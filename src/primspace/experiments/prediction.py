@@ -211,7 +211,7 @@ def run_predict(
 
 def judgeable(data: MotionDataset) -> bool:
     """Whether the simulator's judge can replay ``data`` (simulated data with its scene)."""
-    from primspace.errors import DataError
+    from primspace.utils.errors import DataError
     from primspace.sim.success import check_judgeable
 
     try:

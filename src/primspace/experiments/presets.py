@@ -9,7 +9,7 @@ clustering at q = 40 with τ chosen for R² = 0.9999; inter-primitive folds at q
 epochs of the inter-primitive phases, the latent sizes other than 20 and 40) the values
 below are ours; docs/reproduce.md lists them beside the paper's.
 
-A preset holds the decoder's :class:`~primspace.model.ModelConfig` and the optimiser's
+A preset holds the decoder's :class:`~primspace.model.config.ModelConfig` and the optimiser's
 :class:`~primspace.train.TrainConfig` as they are; each run derives its own from them
 (:func:`primspace.experiments.runs.train_configs`: the run's q, seed and epochs).
 """
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 
-from primspace.errors import UserError, config_from_dict
-from primspace.model import ModelConfig
+from primspace.utils.errors import UserError, config_from_dict
+from primspace.model.decoder import ModelConfig
 from primspace.train import TrainConfig
 
 __all__ = [
@@ -85,7 +85,7 @@ class ExperimentPreset:
         Share of samples that fit θ and Z (the paper: 20%), drawn per primitive.
     inits : tuple of str
         Latent initialisations compared in the intra-primitive experiment; ``calibrated``
-        infers with projection's fit (beyond the paper, :mod:`primspace.calibration`).
+        infers with projection's fit (beyond the paper, :mod:`primspace.model.calibration`).
     latent_dims : tuple of int
         Latent sizes q compared.
     seeds : tuple of int
@@ -214,7 +214,7 @@ class ExperimentPreset:
         UserError
             An unknown initialisation, a latent size < 1, negative epochs, no seeds.
         """
-        from primspace.latent import START_METHODS
+        from primspace.model.latent import START_METHODS
 
         changes = {k: v for k, v in changes.items() if v is not None}
         for key in (

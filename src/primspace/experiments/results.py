@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from primspace.errors import UserError, first_line
-from primspace.stats import sample_std
+from primspace.utils.errors import UserError, first_line
+from primspace.utils.stats import sample_std
 
 __all__ = [
     "file_stem",

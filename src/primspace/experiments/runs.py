@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import RESULT_FILE, run_dir_of
 from primspace.experiments.workspace import ExperimentDir
@@ -102,7 +102,7 @@ def shared_fits_last(points: list) -> list:
 def fit_lock(fit_dir: Path):
     """The lock (a context manager) beside ``fit_dir`` that grid points sharing a fit
     (:data:`FIT_INIT_OF`) hold while they resume it, so they train it once."""
-    from primspace.files import exclusive_lock
+    from primspace.utils.files import exclusive_lock
 
     return exclusive_lock(fit_dir.parent / f".{fit_dir.name}.lock")
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.intra import run_intra
 from primspace.experiments.prediction import (
     PREDICT_MAX_SAMPLES,

@@ -9,7 +9,7 @@ judged too, as a check of the judge: they must all succeed.
 Every motion is replayed once and judged at each "held" distance of the declared
 :data:`~primspace.sim.success.SEPARATION_SWEEP` (4-10 mm; the 10 mm default was chosen
 after results were seen), and each rate comes with its Wilson 95 % interval
-(:func:`primspace.stats.wilson_interval`). Results files written before the sweep lack
+(:func:`primspace.utils.stats.wilson_interval`). Results files written before the sweep lack
 ``successes``, ``by_tolerance`` and ``intervals``: read them through
 :func:`point_by_tolerance`, :func:`point_successes` and :func:`point_intervals`.
 """
@@ -26,7 +26,7 @@ from primspace.experiments.intra import run_intra
 from primspace.experiments.runs import focus_runs, intra_run_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
-from primspace.stats import wilson_interval
+from primspace.utils.stats import wilson_interval
 
 __all__ = [
     "run_success",

@@ -22,7 +22,7 @@ import json
 import platform
 from pathlib import Path
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.act_results import ALL
 from primspace.experiments.results import read_meta, read_results
 
@@ -346,7 +346,7 @@ def write_summary(path: str | Path, summary: dict, overwrite: bool = False) -> d
     writes the codes of the runs beside it first, :mod:`primspace.experiments.summary_codes`,
     and names them in the summary's ``codes`` field.)
     """
-    from primspace.files import atomic_write_text
+    from primspace.utils.files import atomic_write_text
 
     lines = ",\n".join(f"{json.dumps(k)}: {json.dumps(v, separators=(',', ':'))}" for k, v in summary.items())
     atomic_write_text(path, "{\n" + lines + "\n}\n", overwrite)

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.errors import OutputExistsError, UserError
+from primspace.utils.errors import OutputExistsError, UserError
 from primspace.experiments.results import read_meta, read_results
 from primspace.experiments.runs import fit_point_dir, intra_key
 from primspace.experiments.sweep import run_dir_of
@@ -159,8 +159,8 @@ def check_codes_output(path: str | os.PathLike, overwrite: bool = False, inputs=
     """Refuse to write the codes file ``path``: an existing one without ``overwrite``, and one
     that is not an earlier codes file (:func:`is_codes_file`) even with it; a directory; a path
     that is, holds or lies inside one of ``inputs``. Returns ``path``."""
-    from primspace.files import check_outside_inputs
-    from primspace.outputs import describe
+    from primspace.utils.files import check_outside_inputs
+    from primspace.utils.outputs import describe
 
     path = Path(path)
     check_outside_inputs(path, inputs, option)
@@ -182,7 +182,7 @@ def check_codes_output(path: str | os.PathLike, overwrite: bool = False, inputs=
 def write_codes(path: str | os.PathLike, arrays: dict[str, np.ndarray], overwrite: bool = False) -> Path:
     """Write ``arrays`` (:func:`collect_codes`) to ``path`` compressed, atomically (a temporary
     file renamed into place), checked by :func:`check_codes_output` first."""
-    from primspace.files import atomic_path
+    from primspace.utils.files import atomic_path
 
     if VERSION_KEY not in arrays:
         raise ValueError(f"a codes file holds {VERSION_KEY}")
@@ -257,7 +257,7 @@ def write_summary_with_codes(path: str | Path, summary: dict, directory: str | P
     naming them (:func:`primspace.experiments.summary.write_summary`). A summary that cannot
     be written is refused before its codes are; returns the summary written."""
     from primspace.experiments.summary import write_summary
-    from primspace.files import check_output
+    from primspace.utils.files import check_output
 
     check_output(path, overwrite)
     codes = write_run_codes(codes_path(path), directory, overwrite)

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from primspace.files import atomic_write_json, atomic_write_text
-from primspace.parallel import run_jobs
+from primspace.utils.files import atomic_write_json, atomic_write_text
+from primspace.utils.parallel import run_jobs
 
 __all__ = ["GridPoint", "GridResult", "run_grid", "complete_result", "RESULT_FILE", "ERROR_FILE"]
 
@@ -74,7 +74,7 @@ def run_grid(
     out_dir : path
         The experiment directory; runs go to ``out_dir/runs/<key>``.
     backend, workers, address
-        See :func:`primspace.parallel.run_jobs`.
+        See :func:`primspace.utils.parallel.run_jobs`.
     """
     keys = [p.key for p in points]
     if len(set(keys)) != len(keys):

@@ -34,7 +34,7 @@ from itertools import product
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.intra import run_intra, run_intra_point, split_indices
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint

@@ -33,7 +33,7 @@ import numpy as np
 
 from primspace import __version__
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.presets import LASA_CHAIN_SEQUENCES, LASA_CHAINS, LASA_DATA, ExperimentPreset
 from primspace.experiments.results import (
     META_FILE,
@@ -44,7 +44,7 @@ from primspace.experiments.results import (
     results_file,
 )
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
-from primspace.files import atomic_path, atomic_write_json, check_outside_inputs, check_writable_directory
+from primspace.utils.files import atomic_path, atomic_write_json, check_outside_inputs, check_writable_directory
 
 __all__ = ["ExperimentDir", "results_file", "read_results", "read_meta"]
 
@@ -59,7 +59,7 @@ class ExperimentDir:
     data : path-like, optional
         An existing data set; default: generate the preset's simulated data into
         ``path/data.h5`` on first use.
-    backend, workers, address : see :func:`primspace.parallel.run_jobs`.
+    backend, workers, address : see :func:`primspace.utils.parallel.run_jobs`.
     progress : bool, optional
     seed : int
         Seed of the generated data.

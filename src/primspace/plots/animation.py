@@ -28,8 +28,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
 
-from primspace.files import atomic_path
-from primspace.outputs import gif_comment
+from primspace.utils.files import atomic_path
+from primspace.utils.outputs import gif_comment
 
 __all__ = ["animation_frames", "save_gif", "draw_animation", "frame_steps", "MAX_FRAMES", "MAX_SIZE", "FRAME_MS"]
 
@@ -215,8 +215,8 @@ def save_gif(
     """Write RGB frames ``(n, h, w, 3)`` as a looping animated GIF, atomically.
 
     ``writer`` (a command's mark) is stored as the GIF's comment
-    (:func:`primspace.outputs.gif_comment`); ``overwrite=False`` never replaces an
-    existing ``path`` (:func:`primspace.files.atomic_path`).
+    (:func:`primspace.utils.outputs.gif_comment`); ``overwrite=False`` never replaces an
+    existing ``path`` (:func:`primspace.utils.files.atomic_path`).
 
     One palette of at most 255 colours maps every frame without dithering, so unchanged
     pixels keep their colour and Pillow stores them as transparent (an index is left free

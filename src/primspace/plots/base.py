@@ -8,8 +8,8 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
-from primspace.files import atomic_path
-from primspace.outputs import png_metadata
+from primspace.utils.files import atomic_path
+from primspace.utils.outputs import png_metadata
 
 __all__ = ["save_figure", "INIT_COLORS", "init_color", "label_colors"]
 
@@ -29,9 +29,9 @@ def save_figure(
     """Write ``fig`` as PNG to ``path`` atomically (creating the folder) and close it.
 
     ``writer`` (a command's mark, ``"primspace show"``) is stored in a PNG text chunk
-    (:func:`primspace.outputs.png_metadata`); ``overwrite=False`` never replaces an
+    (:func:`primspace.utils.outputs.png_metadata`); ``overwrite=False`` never replaces an
     existing ``path``, even one that appears while the figure is written
-    (:func:`primspace.files.atomic_path`).
+    (:func:`primspace.utils.files.atomic_path`).
     """
     path = Path(path)
     try:

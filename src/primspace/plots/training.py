@@ -10,7 +10,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from primspace.plots.base import init_color
-from primspace.stats import sample_std
+from primspace.utils.stats import sample_std
 
 __all__ = ["plot_loss_curves", "plot_intra_losses", "plot_latent_pca"]
 
@@ -31,7 +31,7 @@ def plot_loss_curves(
     histories : mapping of label -> list of dict, or of label -> list of lists
         Each run's ``metrics.jsonl`` (:attr:`primspace.train.TrainedRun.history`). A list
         of histories under one label (seeds, folds) is drawn as their mean ± sample std
-        (ddof 1, :func:`primspace.stats.sample_std`, the convention of every table; the
+        (ddof 1, :func:`primspace.utils.stats.sample_std`, the convention of every table; the
         legend says so) per epoch (paper Fig. ``loss_inter``); on a log axis the band's
         lower edge stops at the lowest run.
     key : {"loss", "motor", "vision"}

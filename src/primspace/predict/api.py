@@ -35,8 +35,8 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.data.steps import valid_steps
-from primspace.errors import UserError
-from primspace.latent import INFER_STARTS
+from primspace.utils.errors import UserError
+from primspace.model.latent import INFER_STARTS
 from primspace.predict.base import Predictor
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS, GradientPredictor

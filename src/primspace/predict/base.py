@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.metrics import check_lengths, check_observed, valid_mask
 from primspace.train.observe import Observation
 

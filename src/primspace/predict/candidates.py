@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "condition_ensemble",

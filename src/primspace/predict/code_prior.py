@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "PRIOR_GRID",

@@ -43,14 +43,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.online import OnlineResult, online_steps
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import map_refine, prior_terms
-from primspace.progress import progress_bar, stage
+from primspace.utils.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.config import thread_limit
 from primspace.train.observe import NOTHING, Observation

@@ -27,7 +27,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.decomposition import PCA
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["BLOCK_COLOUR", "PixelPCA", "ColourBlob", "PixelVector", "FEATURE_NAMES", "frame_features", "check_frames"]
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.latent import INFER_STARTS
+from primspace.utils.errors import UserError
+from primspace.model.latent import INFER_STARTS
 from primspace.predict.base import Forecast, Predictor, motions_as_dataset, observation_rule
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask

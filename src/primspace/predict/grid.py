@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.api import fit_predictor, make_predictor, predict, run_predictor
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.metrics import finite_mean, unobserved_mse

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "unobserved_mse",

@@ -30,12 +30,12 @@ import time
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.online import OnlineResult, online_steps
-from primspace.progress import progress_bar, stage
+from primspace.utils.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
 
@@ -67,7 +67,7 @@ class MixturePredictor(Predictor):
         noise the label-free posterior mean chose (``condition`` must be False).
     progress : bool, optional
         Show the decoding and the leave-one-out choices (a spinner in a terminal, a line per
-        stage in a log; default: as :func:`primspace.progress.stage`).
+        stage in a log; default: as :func:`primspace.utils.progress.stage`).
     """
 
     def __init__(

@@ -8,7 +8,7 @@ After each arriving step ``t`` (a counter shared by the samples of a data set, w
 processed together as one batch, each within its own valid length):
 
 1. ``k`` iterations of the row-wise Adam of :func:`~primspace.train.infer`
-   (:class:`~primspace.latent.LatentTable`: the run's ``latent_lr``, Adam's betas) on the
+   (:class:`~primspace.model.latent.LatentTable`: the run's ``latent_lr``, Adam's betas) on the
    codes, θ frozen, with the loss of ``infer(..., observe=t)``
    (:func:`~primspace.train.loss.batch_loss`: the motor MSE over each sample's observed
    valid entries, plus the vision term over its observed frames when the run uses
@@ -48,10 +48,10 @@ import numpy as np
 import torch
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.latent import INFER_STARTS, LatentTable
+from primspace.utils.errors import UserError
+from primspace.model.latent import INFER_STARTS, LatentTable
 from primspace.predict.metrics import unobserved_mse
-from primspace.progress import progress_bar
+from primspace.utils.progress import progress_bar
 from primspace.train.api import as_run, infer, uses_images
 from primspace.train.checks import check_calibrated, check_data_fits, check_init
 from primspace.train.config import resolve_device

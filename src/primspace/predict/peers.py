@@ -29,7 +29,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.base import Predictor, observed_mask
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 

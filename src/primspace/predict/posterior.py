@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
 

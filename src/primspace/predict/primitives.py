@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["Primitives", "primitives_from_labels", "primitives_from_clusters", "PRIMITIVE_SOURCES"]
 

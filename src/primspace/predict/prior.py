@@ -40,7 +40,7 @@ import time
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.code_prior import (
@@ -54,7 +54,7 @@ from primspace.predict.code_prior import (
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.online import OnlineResult, online_steps
 from primspace.predict.primitives import PRIMITIVE_SOURCES, primitives_from_clusters, primitives_from_labels
-from primspace.progress import progress_bar, stage
+from primspace.utils.progress import progress_bar, stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
 

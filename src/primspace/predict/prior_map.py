@@ -10,7 +10,7 @@ and ``r`` the prior predictor's observation noise per entry,
     ``J(z) = Σ_observed (d(θ, z) − x)² / (2 r) + ½ (z − μ_k)ᵀ C_k⁻¹ (z − μ_k)``
 
 minimised by ``iterations`` steps of Adam on the code (:func:`map_refine`, a row-wise Adam,
-:class:`~primspace.latent.LatentTable`: each code moves as if it had its own optimiser, so
+:class:`~primspace.model.latent.LatentTable`: each code moves as if it had its own optimiser, so
 the batch does not change any code's path). The prediction is the decoded MAP code, then
 the continuity correction (:func:`~primspace.predict.candidates.continuity_correction`).
 
@@ -36,8 +36,8 @@ import numpy as np
 import torch
 from sklearn.base import clone
 
-from primspace.errors import UserError
-from primspace.latent import LatentTable
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentTable
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask

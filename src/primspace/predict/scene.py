@@ -13,7 +13,7 @@ principal directions (``r``: the fewest that explain at least 90 % of the cluste
 variance, or ``rank=``). θ is frozen and only ``a`` is optimised (start ``a = 0``: the
 cluster mean), by the masked loss of inference (:func:`primspace.train.loss.batch_loss`)
 on the observed entries: the first step's joints and the first frame. Row-wise Adam
-(:class:`~primspace.latent.LatentTable`), the whole set in order, on the CPU, seeded by the
+(:class:`~primspace.model.latent.LatentTable`), the whole set in order, on the CPU, seeded by the
 run's seed: the same call gives the same codes. The decoder's whole sequence is the
 prediction (:class:`~primspace.predict.Prediction`), scored on the steps after the
 first (:func:`primspace.predict.metrics.unobserved_mse`).
@@ -43,14 +43,14 @@ import torch
 
 from primspace.data import MotionDataset
 from primspace.data.steps import valid_steps
-from primspace.errors import UserError
-from primspace.latent import LatentTable
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentTable
 from primspace.predict.api import Prediction
 from primspace.predict.base import Forecast, Predictor, motions_as_dataset
 from primspace.predict.scene_clusters import SCENE_VARIANCE, SceneClusters, affine_subspace, cluster_codes
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS
 from primspace.predict.metrics import frame_errors, unobserved_mse
-from primspace.progress import progress_bar
+from primspace.utils.progress import progress_bar
 from primspace.train.api import as_run, reconstruct, uses_images
 from primspace.train.checks import select
 from primspace.train.config import lr_factor

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from primspace.cluster.estimator import LowRankSubspaceClustering
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["SCENE_VARIANCE", "SceneClusters", "cluster_codes", "affine_subspace"]
 

@@ -24,7 +24,7 @@ from sklearn.linear_model import Ridge, RidgeCV
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.frame_features import frame_features
 from primspace.predict.peers import LabelledPeer, phase
 

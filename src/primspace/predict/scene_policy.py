@@ -53,7 +53,7 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.data.images import as_view
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.predict.api import Prediction
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.candidates import continuity_correction

@@ -6,7 +6,7 @@ import datetime as _dt
 from pathlib import Path
 from typing import Callable
 
-from primspace.errors import UserError, first_line
+from primspace.utils.errors import UserError, first_line
 from primspace.experiments.results import META_FILE, read_meta, results_file
 from primspace.report import sections
 from primspace.report.page import HtmlReport

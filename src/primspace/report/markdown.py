@@ -24,7 +24,7 @@ with its Wilson 95 % interval), clustering accuracies, the inter folds, the tune
 baselines, and the paper's claims with each rule's version, threshold, per-seed
 verdicts, the judge-tolerance sweep and the earlier rule's verdict; and README's table
 of results at a glance. Each page states the convention of its spreads once, atop its
-first block with numbers (:func:`primspace.stats.spread_convention`).
+first block with numbers (:func:`primspace.utils.stats.spread_convention`).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ from primspace.report.reproduce_blocks import (
     paper_setting,
 )
 from primspace.report.comparisons import merged, side_names
-from primspace.stats import spread_convention
+from primspace.utils.stats import spread_convention
 from primspace.report.summary_tables import (
     final_losses,
     g,

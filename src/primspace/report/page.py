@@ -14,7 +14,7 @@ import stat
 from pathlib import Path
 from typing import Any, Sequence
 
-from primspace.files import atomic_write_text
+from primspace.utils.files import atomic_write_text
 
 __all__ = ["HtmlReport"]
 

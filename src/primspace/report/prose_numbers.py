@@ -7,7 +7,7 @@ zero against projection, over seeds and per seed, and the raw trajectories' clus
 :func:`render_composite_glance` is docs/sequences.md's block ``composite-glance``: per
 composite summary, the model of single primitives against the peers and the window codes,
 and whether issue 27's target is met (a rule, not a hand-typed verdict).
-Spreads are the sample std over seeds (ddof 1, :func:`primspace.stats.sample_std`).
+Spreads are the sample std over seeds (ddof 1, :func:`primspace.utils.stats.sample_std`).
 """
 
 from __future__ import annotations

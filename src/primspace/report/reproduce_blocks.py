@@ -28,7 +28,7 @@ from scipy.stats import spearmanr
 from primspace.experiments.results import LEARNED_CODES
 from primspace.report.comparisons import merged, render_comparison, side_names
 from primspace.report.summary_tables import g, mean_spread, table
-from primspace.stats import sample_std, wilson_interval
+from primspace.utils.stats import sample_std, wilson_interval
 
 __all__ = [
     "PAPER_SETTING",

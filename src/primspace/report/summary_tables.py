@@ -5,7 +5,7 @@ The markdown counterpart of :mod:`primspace.report.sections` (the HTML report): 
 results and compute nothing. Each function takes a summary (``docs/results/*.json``,
 :mod:`primspace.experiments.summary`) and returns markdown text;
 :mod:`primspace.report.markdown` puts the text between the markers of the docs files.
-Standard deviations are sample ones (ddof 1, over the seeds run; :func:`primspace.stats.sample_std`).
+Standard deviations are sample ones (ddof 1, over the seeds run; :func:`primspace.utils.stats.sample_std`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from primspace.experiments.composite.results import (
 )
 from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
 from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
-from primspace.stats import sample_std, t_interval, wilson_interval
+from primspace.utils.stats import sample_std, t_interval, wilson_interval
 
 __all__ = [
     "g",
@@ -51,7 +51,7 @@ def g(x: float | None, digits: int = 2) -> str:
 
 def mean_spread(values: list[float], digits: int = 2, rng: bool = True, ci: bool = False) -> str:
     """``mean ± std`` (sample std, ddof 1), with several values ``[min–max]`` (``rng``) and the
-    95 % t-interval half-width (``ci``, :func:`primspace.stats.t_interval`); one value alone."""
+    95 % t-interval half-width (``ci``, :func:`primspace.utils.stats.t_interval`); one value alone."""
     v = np.asarray([x for x in values if x is not None], dtype=float)
     if v.size < 2:
         return g(v[0], digits) if v.size else "—"

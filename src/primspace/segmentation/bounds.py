@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation.result import label_segments
 from primspace.segmentation.scores import step_labelling_accuracy
 from primspace.segmentation.peers import LABEL_STEPS, resample_segment

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation.result import SegmentationResult, label_segments
 
 __all__ = ["in_model_frame", "infer_segment_codes", "relabel_by_inference"]

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation.result import label_segments
 from primspace.segmentation.windows import auto_penalty, noise_variances
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from primspace.cluster import LowRankSubspaceClustering
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["SEGMENT_R2_TARGET", "SegmentationResult", "label_segments"]
 

@@ -50,7 +50,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation.result import SegmentationResult
 from primspace.segmentation.synthesis import (
     DEFAULT_GRID,

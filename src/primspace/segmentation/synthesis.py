@@ -46,7 +46,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.segmentation.inferred import relabel_by_inference
 from primspace.segmentation.result import SegmentationResult, label_segments
 

@@ -42,7 +42,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.segmentation.result import SEGMENT_R2_TARGET, SegmentationResult, label_segments
 from primspace.segmentation.scores import valid_lengths
 

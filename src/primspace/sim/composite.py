@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.seeds import check_seed
-from primspace.errors import DataError
+from primspace.utils.seeds import check_seed
+from primspace.utils.errors import DataError
 from primspace.sim.composite_config import (
     ALLOWED,
     COMPOSITE_PRESETS,
@@ -306,7 +306,7 @@ def generate_composite(
         Progress bar (default: when stderr is a terminal).
     workers : int or None
         Local processes (None: every usable core); chunks of consecutive sequences
-        (:func:`~primspace.sim.shards.shard_ranges`) run through :func:`primspace.parallel.run_jobs`.
+        (:func:`~primspace.sim.shards.shard_ranges`) run through :func:`primspace.utils.parallel.run_jobs`.
 
     Returns
     -------
@@ -322,8 +322,8 @@ def generate_composite(
     """
     from primspace.data import DatasetWriter, MotionDataset
     from primspace.data.schema import arrays_of
-    from primspace.files import check_output
-    from primspace.parallel import default_workers, run_jobs
+    from primspace.utils.files import check_output
+    from primspace.utils.parallel import default_workers, run_jobs
     from primspace.sim.generate import finished_shards
     from primspace.sim.shards import shard_ranges
 

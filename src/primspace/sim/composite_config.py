@@ -14,7 +14,7 @@ import math
 from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim.config import MIN_LENGTH
 from primspace.sim.primitives import PRIMITIVES, primitive_index
 from primspace.sim.scene import TABLE

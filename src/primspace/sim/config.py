@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim.primitives import PRIMITIVES, primitive_index
 
 __all__ = [

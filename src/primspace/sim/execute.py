@@ -24,7 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim.config import PRESETS
 from primspace.sim.primitives import get_primitive
 from primspace.sim.primitives.judging import TOLERANCES, SuccessResult, Tolerances

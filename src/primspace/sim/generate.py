@@ -16,7 +16,7 @@ block (:mod:`~primspace.sim.rollout`; with ``verify`` the primitive's success cr
 
 **Parallelism.** Samples are split into shards of consecutive indices whose size
 depends on N alone (:func:`~primspace.sim.shards.shard_ranges`), run through
-:func:`primspace.parallel.run_jobs`. In memory, :func:`generate_shard` is the job and
+:func:`primspace.utils.parallel.run_jobs`. In memory, :func:`generate_shard` is the job and
 returns arrays. With ``out``, :func:`write_shard` is the job: it writes its shard as a
 complete data set file (atomic) into ``.<out name>.shards/`` beside ``out``, with a
 ``manifest.json`` naming the generation (settings, seed, layout, versions; the layout is
@@ -38,8 +38,8 @@ from typing import Callable
 import numpy as np
 
 from primspace.data.schema import arrays_of, empty_arrays
-from primspace.seeds import check_seed
-from primspace.errors import DataError, UserError
+from primspace.utils.seeds import check_seed
+from primspace.utils.errors import DataError, UserError
 from primspace.sim.config import MIN_LENGTH, PARAM_NAMES, PRESETS, GenerationConfig, resolve_config, sample_params
 from primspace.sim.primitives import R_DOWN, finger_geometry, get_primitive
 from primspace.sim.shards import (
@@ -205,7 +205,7 @@ def _generate_file(
     when complete, then the shard directory is removed.
     """
     from primspace.data import DatasetWriter
-    from primspace.parallel import run_jobs
+    from primspace.utils.parallel import run_jobs
 
     directory = shard_dir(out)
     prepare_shard_dir(directory, shard_manifest(config, seed), overwrite)
@@ -313,8 +313,8 @@ def generate_dataset(
     is 20 lines.
     """
     from primspace.data import MotionDataset
-    from primspace.files import check_output
-    from primspace.parallel import BACKENDS, default_workers
+    from primspace.utils.files import check_output
+    from primspace.utils.parallel import BACKENDS, default_workers
 
     config = resolve_config(config_or_preset)
     seed = check_seed(seed)
@@ -339,7 +339,7 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
     """The :class:`~primspace.data.MotionDataset` built in memory from the jobs' arrays (the
     first failure stops the run)."""
     from primspace.data import MotionDataset
-    from primspace.parallel import run_jobs
+    from primspace.utils.parallel import run_jobs
 
     jobs = run_jobs(
         generate_shard, [(config, seed, range(a, b)) for a, b in shard_ranges(config.n_samples)], **run_options

@@ -14,7 +14,7 @@ import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from primspace.errors import UserError, first_line  # noqa: E402
+from primspace.utils.errors import UserError, first_line  # noqa: E402
 from primspace.sim.scene import Scene  # noqa: E402
 
 __all__ = ["Camera", "MAX_IMAGE_SIZE", "replay_frames"]

@@ -30,7 +30,7 @@ import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from primspace.errors import UserError  # noqa: E402
+from primspace.utils.errors import UserError  # noqa: E402
 
 __all__ = [
     "Table",

@@ -17,7 +17,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.sim.config import PARAM_NAMES, PRESETS, GenerationConfig
 from primspace.sim.primitives import PRIMITIVES
 
@@ -81,7 +81,7 @@ def prepare_shard_dir(directory: Path, manifest: dict, overwrite: bool) -> None:
     Shards of another generation (another seed, setting, layout or primspace version)
     are never reused: with ``overwrite`` they are removed, else :class:`UserError`.
     """
-    from primspace.files import atomic_write_json
+    from primspace.utils.files import atomic_write_json
 
     file = directory / MANIFEST_NAME
     try:

@@ -70,7 +70,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 from primspace.sim.primitives import PRIMITIVES, Primitive, get_primitive
 from primspace.sim.primitives.judging import TOLERANCES, SuccessResult, Tolerances
 from primspace.sim.rollout import Rollout, replay

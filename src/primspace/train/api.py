@@ -21,9 +21,9 @@ import numpy as np
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.errors import UserError
-from primspace.latent import LatentTable
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentTable
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.loop import epoch_values, evaluate_loop, opened_stream
 from primspace.train.loss import DataTensors
@@ -74,9 +74,9 @@ def fit(
         Its ``stream_frames`` reads the frames from the file batch by batch; under a
         started ``torch.distributed`` group the processes train one model (docs/scale.md).
     init : {"zero", "random", "projection", "pca", "calibrated"}
-        How the codes start (:class:`primspace.latent.LatentInitializer`); ``calibrated``
+        How the codes start (:class:`primspace.model.latent.LatentInitializer`); ``calibrated``
         (with ``weights_from`` only): the parent's initialiser, its codes mapped by the
-        parent's calibration (:class:`primspace.calibration.CodeCalibration`). A fit whose
+        parent's calibration (:class:`primspace.model.calibration.CodeCalibration`). A fit whose
         initialiser is ``projection`` or ``pca`` ends by fitting its own calibration map
         (``TrainedRun.calibration``; diagnostics in ``calibration.json``).
     indices : array-like of int, optional
@@ -173,7 +173,7 @@ def infer(
         data, ``projection`` with a new ``P`` from ``seed``). ``calibrated``: the run's
         initialiser, its codes mapped by the run's calibration (``B P m + c``, ridge from
         the training samples' initial to fitted codes; runs fitted with ``projection`` or
-        ``pca`` init have one, :mod:`primspace.calibration`). ``nearest``: the fitted code
+        ``pca`` init have one, :mod:`primspace.model.calibration`). ``nearest``: the fitted code
         of the fitted demonstration whose motor is nearest (over the observed steps).
     indices : array-like of int, optional
         Samples of ``dataset`` to use.

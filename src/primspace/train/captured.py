@@ -5,14 +5,14 @@ hundreds of small operations per batch (61 steps x 2 layers, forward and backwar
 step is bound by launching them, not by arithmetic (docs/performance.md):
 
 * ``"compiled"`` (:class:`CompiledDecoder`): the recurrent loop
-  (:meth:`~primspace.model.MTRNNDecoder.dynamics`) through ``torch.compile``; the
+  (:meth:`~primspace.model.decoder.MTRNNDecoder.dynamics`) through ``torch.compile``; the
   elementwise work of the cell is fused. The heads stay eager.
 * ``"captured"`` (:class:`CapturedStep`): every batch has the same shape, so the whole
   step (forward, loss, backward, θ's Adam and the codes' row-wise Adam) is recorded once as
   a CUDA graph and replayed for every batch: one launch per batch. Static shapes: a
   batch has ``min(batch_size, N)`` rows, a shorter last batch padded with rows that are
   not in it and weigh 0 in the loss (:func:`~primspace.train.loss.batch_loss`
-  ``weights``) and do not step (:meth:`~primspace.latent.LatentTable.step` ``active``);
+  ``weights``) and do not step (:meth:`~primspace.model.latent.LatentTable.step` ``active``);
   the K drawn frames are indices into the static buffer of each batch's steps; the
   learning rates are tensors the graph reads. On the CPU the same padded step runs
   without a graph: what the tests check on machines without a GPU.
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import torch
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.train.loss import batch_loss
 
 __all__ = [

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from primspace.calibration import CodeCalibration
+from primspace.model.calibration import CodeCalibration
 from primspace.data import JointScaler
-from primspace.errors import UserError
-from primspace.latent import LatentInitializer
+from primspace.utils.errors import UserError
+from primspace.model.latent import LatentInitializer
 
 __all__ = [
     "CHECKPOINT_FORMAT",

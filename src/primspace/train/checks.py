@@ -1,5 +1,5 @@
 """Checks of the arguments of :func:`primspace.train.fit` and :func:`primspace.train.infer`:
-each refuses bad input with one :class:`~primspace.errors.UserError` line."""
+each refuses bad input with one :class:`~primspace.utils.errors.UserError` line."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import numpy as np
 
 from primspace.data import JointScaler, MotionDataset
 from primspace.data.indices import check_indices
-from primspace.errors import UserError
-from primspace.latent import CALIBRATABLE, CALIBRATED, START_METHODS
-from primspace.model import ModelConfig
+from primspace.utils.errors import UserError
+from primspace.model.latent import CALIBRATABLE, CALIBRATED, START_METHODS
+from primspace.model.decoder import ModelConfig
 from primspace.train.run import TrainedRun
 
 __all__ = [
@@ -25,7 +25,7 @@ __all__ = [
 
 
 def check_init(init: str, starts: tuple[str, ...] = START_METHODS) -> None:
-    """Refuse a start that is not one of ``starts`` (``fit``: :data:`~primspace.latent.START_METHODS`;
+    """Refuse a start that is not one of ``starts`` (``fit``: :data:`~primspace.model.latent.START_METHODS`;
     ``infer`` adds ``nearest``)."""
     if init not in starts:
         raise UserError(f"unknown latent init '{init}'; choose one of {', '.join(starts)}")

@@ -15,8 +15,8 @@ from dataclasses import asdict, dataclass
 from typing import Iterator
 
 
-from primspace.errors import UserError, config_from_dict
-from primspace.seeds import check_seed
+from primspace.utils.errors import UserError, config_from_dict
+from primspace.utils.seeds import check_seed
 
 __all__ = [
     "TrainConfig",
@@ -55,7 +55,7 @@ class TrainConfig:
     lr : float
         Learning rate of the model weights θ.
     latent_lr : float
-        Learning rate of the codes (row-wise, :class:`primspace.latent.LatentTable`).
+        Learning rate of the codes (row-wise, :class:`primspace.model.latent.LatentTable`).
     optimizer : {"adam", "sgd"}
         How θ and the codes step. ``"adam"`` (default): Adam for θ, a row-wise Adam for the
         codes (each code's moments its own). ``"sgd"``: plain gradient descent of both, the
@@ -158,7 +158,7 @@ class TrainConfig:
         How each batch's step runs (docs/performance.md, "Training at the speed of the
         hardware"). ``"eager"`` (default): operation by operation, the numbers of every
         earlier version bit for bit. ``"compiled"``: the recurrent loop
-        (:meth:`~primspace.model.MTRNNDecoder.dynamics`) through ``torch.compile``, its
+        (:meth:`~primspace.model.decoder.MTRNNDecoder.dynamics`) through ``torch.compile``, its
         cell fused (a compile of minutes the first time, cached on disk after). ``"captured"``:
         every batch padded to ``batch_size`` with rows that weigh 0, and on CUDA the whole
         step (forward, loss, backward, both optimisers, the codes' update) replayed as one

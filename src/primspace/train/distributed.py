@@ -20,7 +20,7 @@ process stands and does its few collective operations. How a batch is shared:
   processes) still runs one forward and backward, on the batch's first sample with
   weight 0, so every process joins every gradient reduction: uneven batches never hang.
 - **The codes replicated.** Every process holds the whole code table and its row-wise
-  Adam state (:class:`~primspace.latent.LatentTable`); after each batch the parts' code
+  Adam state (:class:`~primspace.model.latent.LatentTable`); after each batch the parts' code
   gradients are gathered (``all_gather``, ``B x q`` numbers) and every process applies
   the same step to the batch's rows, so the tables stay identical without being sent.
   Why not a sharded table (SSDNeRF gives each rank a fixed range of scenes): a sample
@@ -51,7 +51,7 @@ from datetime import timedelta
 
 import torch
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["World", "Part", "part_bounds", "current_world", "launched", "data_parallel"]
 

@@ -22,7 +22,7 @@ With ``infer(..., observe="none", observe_frames=..., init="calibrated")`` the s
   ``TrainConfig.seed``, so it is the same for every call and never stored. The frames are
   projected a chunk of steps at a time (:data:`PROJECTION_BYTES` of ``P`` at most) and the
   images read a block of samples at a time: the whole ``P`` is never held;
-* ``B, c``: a :class:`~primspace.calibration.CodeCalibration` from the fitted
+* ``B, c``: a :class:`~primspace.model.calibration.CodeCalibration` from the fitted
   demonstrations' ``x`` (the same observation rule applied to them) to their fitted codes
   (a caller starting many times keeps it: :func:`primspace.train.starts.fitted_start`'s
   ``cache``, keyed by ``("frames",) + rule``). One map over the whole code (``K·q`` outputs, windows not
@@ -37,10 +37,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.calibration import CodeCalibration
+from primspace.model.calibration import CodeCalibration
 from primspace.data import MotionDataset
 from primspace.data.images import IMAGE_BLOCK, as_view
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.train.observe import Observation, observation_masks
 
 __all__ = [

@@ -26,8 +26,8 @@ import os
 import time
 from pathlib import Path
 
-from primspace.errors import UserError
-from primspace.files import check_writable_directory, os_error
+from primspace.utils.errors import UserError
+from primspace.utils.files import check_writable_directory, os_error
 
 __all__ = ["LOG_TARGETS", "INSTALL_HINT", "log_dir", "check_log_to", "scalars", "TensorBoardLogger", "open_logger"]
 

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.latent import LatentInitializer, LatentTable
-from primspace.model import MTRNNDecoder
-from primspace.progress import progress_bar
+from primspace.model.latent import LatentInitializer, LatentTable
+from primspace.model.decoder import MTRNNDecoder
+from primspace.utils.progress import progress_bar
 from primspace.train.captured import CapturedStep, CompiledDecoder, check_single_process
 from primspace.train.config import TrainConfig, TrainingDivergedError, lr_factor
 from primspace.train.distributed import World, current_world, data_parallel, no_sync

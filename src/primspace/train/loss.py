@@ -23,7 +23,7 @@ import torch.nn.functional as F
 
 from primspace.data import JointScaler, MotionDataset
 from primspace.data.steps import valid_steps
-from primspace.latent import LatentTable
+from primspace.model.latent import LatentTable
 from primspace.train.config import TrainConfig
 from primspace.train.observe import observation_masks
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.data.steps import valid_steps
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["Observation", "NOTHING", "FIRST", "observation_masks", "observation_record"]
 

@@ -32,8 +32,8 @@ from dataclasses import astuple
 import torch
 from torch.func import functional_call, vmap
 
-from primspace.errors import UserError
-from primspace.progress import progress_bar
+from primspace.utils.errors import UserError
+from primspace.utils.progress import progress_bar
 from primspace.train.captured import StepGraph, check_graphable, float_rates, padded_rows, tensor_rates
 from primspace.train.config import TrainingDivergedError, thread_limit
 from primspace.train.loop import Session

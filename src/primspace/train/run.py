@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.calibration import CodeCalibration
+from primspace.model.calibration import CodeCalibration
 from primspace.data import JointScaler
-from primspace.latent import LatentInitializer
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.model.latent import LatentInitializer
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig
 
 __all__ = ["TrainedRun"]

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.train.run import TrainedRun
 
 __all__ = ["fingerprint", "check_run_data", "load_fitted_data", "recorded_data"]

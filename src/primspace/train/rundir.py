@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from primspace.errors import OutputExistsError, UserError
-from primspace.files import (
+from primspace.utils.errors import OutputExistsError, UserError
+from primspace.utils.files import (
     atomic_path,
     atomic_write_json,
     atomic_write_text,
@@ -44,7 +44,7 @@ from primspace.files import (
     check_writable_directory,
     os_error,
 )
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train.checkpoint import read_checkpoint, unpack_checkpoint
 from primspace.train.config import TrainConfig
 from primspace.train.run import TrainedRun

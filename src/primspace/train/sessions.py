@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from primspace.calibration import CodeCalibration
+from primspace.model.calibration import CodeCalibration
 from primspace.data import JointScaler, MotionDataset
-from primspace.errors import UserError
-from primspace.latent import CALIBRATABLE, INFER_STARTS, LatentInitializer, LatentTable
-from primspace.model import ModelConfig, MTRNNDecoder
+from primspace.utils.errors import UserError
+from primspace.model.latent import CALIBRATABLE, INFER_STARTS, LatentInitializer, LatentTable
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train.checkpoint import unpack_checkpoint
 from primspace.train.checks import (
     check_calibrated,

@@ -6,11 +6,11 @@ each new sample's code from what was observed of it (:mod:`primspace.train.obser
 * ``zero``, ``random``: as without observation (they read no data);
 * ``projection``: ``P (M ⊙ m)``, the run's ``P`` (paper, *Initialization of Latent
   Vectors*) applied to the scaled motor sequence with its unobserved steps set to zero;
-  Appendix A then holds for the observed parts (:func:`primspace.latent.appendix_a_observed`);
+  Appendix A then holds for the observed parts (:func:`primspace.model.latent.appendix_a_observed`);
 * ``pca``: ``V_q (M ⊙ (m − mean))``, the principal directions (the run's when it was fitted
   with ``pca``; else fitted here on the zero-filled observed part of the data inferred);
 * ``calibrated``: the ridge map towards the identity
-  (:class:`primspace.calibration.CodeCalibration`) from the fitted demonstrations' observed
+  (:class:`primspace.model.calibration.CodeCalibration`) from the fitted demonstrations' observed
   projections (the same rule applied to them) to their fitted codes
   (:func:`observed_calibration`);
 * ``nearest``: the fitted code of the fitted demonstration whose motor is nearest over the
@@ -31,11 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.calibration import CodeCalibration
+from primspace.model.calibration import CodeCalibration
 from primspace.data import MotionDataset
-from primspace.errors import UserError
-from primspace.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitializer
-from primspace.model_config import ModelConfig
+from primspace.utils.errors import UserError
+from primspace.model.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitializer
+from primspace.model.config import ModelConfig
 from primspace.train.frames_start import check_frames_start, frames_start, frames_start_codes
 from primspace.train.observe import NOTHING, Observation, observation_masks
 from primspace.train.rundata import load_fitted_data

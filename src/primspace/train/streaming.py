@@ -37,7 +37,7 @@ import torch
 
 from primspace.data import MotionDataset
 from primspace.data.images import LazyImages
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = ["FrameReader", "FrameStream", "frames_bytes", "memory_budget", "should_stream"]
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from primspace.data.resample import resample
 from primspace.data.values import as_float32
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = [
     "resample_located",

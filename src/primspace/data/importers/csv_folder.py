@@ -34,7 +34,7 @@ import numpy as np
 from primspace.data.dataset import MotionDataset
 from primspace.data.importers.common import resample_located
 from primspace.data.values import FLOAT32_MAX, too_large
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["import_csv_folder"]
 

@@ -48,7 +48,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from primspace.errors import DataError, UserError
+from primspace.utils.errors import DataError, UserError
 
 __all__ = [
     "DEFAULT_IMAGE_SIZE",
@@ -216,7 +216,7 @@ class AlignedFrames:
 
     def collect(self) -> "AlignedFrames":
         """Read, fit and resize the frames of every demonstration added (a progress bar on a terminal)."""
-        from primspace.progress import progress_bar
+        from primspace.utils.progress import progress_bar
 
         pending, self._pending = self._pending, []
         with progress_bar(len(pending), "decoding frames") as advance:

@@ -15,7 +15,7 @@ import numpy as np
 
 from primspace.data.dataset import MotionDataset
 from primspace.data.resample import resample
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["import_lasa", "lasa_shape_names", "chain_lasa", "CHAIN_SHAPES", "CHAIN_DEMOS", "PRIMITIVE_DEMOS"]
 

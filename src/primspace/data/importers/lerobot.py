@@ -77,7 +77,7 @@ from primspace.data.importers.lerobot_meta import (
     task_names,
 )
 from primspace.data.importers.lerobot_video import table_images, video_frames
-from primspace.errors import DataError, UserError, first_line
+from primspace.utils.errors import DataError, UserError, first_line
 
 __all__ = ["import_lerobot", "is_lerobot_dir", "parse_episodes"]
 

@@ -20,7 +20,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 
 from primspace.data.importers.common import printable, rate_dt, shown
-from primspace.errors import DataError, UserError, first_line
+from primspace.utils.errors import DataError, UserError, first_line
 
 __all__ = [
     "Episode",

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data.importers.common import printable
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["video_frames", "table_images"]
 

@@ -50,7 +50,7 @@ from primspace.data.dataset import MotionDataset
 from primspace.data.importers.common import check_fits_memory, demonstrations, parse_labels, printable
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, as_image_fit
 from primspace.data.importers.padding import checked_lengths, padded_lengths, padding_note
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["import_npy_folder", "looks_like_npy_folder", "checked_text", "NPY_FILES"]
 

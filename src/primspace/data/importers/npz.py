@@ -63,7 +63,7 @@ from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, a
 from primspace.data.importers.npy_folder import checked_text
 from primspace.data.importers.padding import checked_lengths, padded_lengths, padding_note
 from primspace.data.schema import ATTRIBUTES
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["import_npz", "npz_sequences", "NpzJoints"]
 

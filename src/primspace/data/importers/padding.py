@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import DataError
+from primspace.utils.errors import DataError
 
 __all__ = ["padded_lengths", "checked_lengths", "padding_note"]
 

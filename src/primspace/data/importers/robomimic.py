@@ -59,7 +59,7 @@ import numpy as np
 from primspace.data.dataset import MotionDataset
 from primspace.data.importers.common import check_fits_memory, demonstrations, natural_key, printable, rate_dt
 from primspace.data.importers.frames import DEFAULT_IMAGE_SIZE, AlignedFrames, as_image_fit, check_frames
-from primspace.errors import DataError, first_line
+from primspace.utils.errors import DataError, first_line
 
 __all__ = ["import_robomimic", "looks_like_robomimic"]
 

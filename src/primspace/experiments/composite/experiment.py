@@ -4,7 +4,7 @@ The paper's next step (*Summary and Discussion*): "To model more complex behavio
 composed of many consecutive primitives, instead of using a single latent vector
 $\\mathbf{z}$ of fixed dimension usually a sequence of such vectors is used." Each run of
 the grid ``composite/<init>-q<q>-s<seed>`` fits the decoder (one code per window of
-``model.code_window`` steps, :class:`~primspace.model.MTRNNDecoder`) and the codes of a
+``model.code_window`` steps, :class:`~primspace.model.decoder.MTRNNDecoder`) and the codes of a
 random ``train_fraction`` of the long demonstrations, then infers the codes of the others
 with θ frozen, starting from the convolutional random projection (``projection``), zero,
 random or PCA codes. The inferred code sequences are then segmented and labelled without
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments import figures
 from primspace.experiments.composite.primitives import run_primitives
 from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries

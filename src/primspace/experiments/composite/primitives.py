@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.experiments.composite.results import METHODS
 from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries
 from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_preset
@@ -151,7 +151,7 @@ def run_primitives_point(
             "accuracy_template_labels": template_label_bound(fitted, primitives, held, result),
         }
         out[name] |= {k: result.chosen[k] for k in ("offset", "costs", "threshold") if k in result.chosen}
-    from primspace.files import atomic_path
+    from primspace.utils.files import atomic_path
 
     with atomic_path(run_dir / TIMELINE_FILE) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, **timeline)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 from primspace.sim.primitives.base import Primitive
 from primspace.sim.primitives.circle import CircleCCW, CircleCW
 from primspace.sim.primitives.contact import Grasp, Touch, TouchRight

@@ -47,7 +47,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from primspace.model_config import ModelConfig, check_image_size
+from primspace.model.config import ModelConfig, check_image_size
 
 __all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput", "code_interpolation"]
 

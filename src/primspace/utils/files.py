@@ -12,7 +12,7 @@ the finished temporary is renamed onto the target with ``renameat2(RENAME_NOREPL
 (or, where that is missing, hard-linked to it, ``link`` failing when the target exists;
 or renamed over a placeholder created exclusively), so a target that appeared meanwhile
 (another writer finishing first) is never replaced: the write fails with
-:class:`~primspace.errors.OutputExistsError` instead. Output folders are published alike
+:class:`~primspace.utils.errors.OutputExistsError` instead. Output folders are published alike
 (:func:`atomic_directory`); an existing empty folder is written into in place, never
 swapped for a new one, and refused with one line when it is not writable.
 
@@ -25,7 +25,7 @@ what it reads.
 
 This module knows files only, not what is in them: it sits below the data layer, which
 writes through it. Which command wrote a file, and the check of a command's file output
-that reads it (:func:`primspace.outputs.output_file`), are :mod:`primspace.outputs`'s.
+that reads it (:func:`primspace.utils.outputs.output_file`), are :mod:`primspace.utils.outputs`'s.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
-from primspace.errors import OutputExistsError, UserError
+from primspace.utils.errors import OutputExistsError, UserError
 
 __all__ = [
     "check_output",
@@ -267,7 +267,7 @@ def atomic_path(path: str | os.PathLike, overwrite: bool = True) -> Iterator[Pat
         Final location.
     overwrite : bool, default True
         True: the temporary is renamed over ``path`` (``os.replace``). False: refused
-        with :class:`~primspace.errors.OutputExistsError` if ``path`` exists before
+        with :class:`~primspace.utils.errors.OutputExistsError` if ``path`` exists before
         anything is written, and published without replacing
         (:func:`rename_noreplace`): if ``path`` appeared meanwhile (another writer
         finished first), the same error, the temporary removed and ``path`` untouched.

@@ -1,6 +1,6 @@
 """The decoder's sizes: :class:`ModelConfig` (saved as JSON in a run's ``config.json``).
 
-Kept apart from :mod:`primspace.model` (the torch modules) so that reading or writing a
+Kept apart from :mod:`primspace.model.decoder` (the torch modules) so that reading or writing a
 configuration, and the command line's defaults, do not import torch.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from primspace.errors import UserError, config_from_dict
+from primspace.utils.errors import UserError, config_from_dict
 
 __all__ = ["ModelConfig", "check_image_size"]
 

@@ -55,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["CodeCalibration", "RELATIVE_ALPHAS"]
 

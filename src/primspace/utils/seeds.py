@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = ["MAX_SEED", "check_seed"]
 

@@ -14,7 +14,7 @@ A command's mark is ``"primspace <command>"`` (``"primspace show"``). Where it i
 
 Folders are recognised by their own files instead: a run by its ``config.json``
 (:func:`primspace.train.rundir.prepare_run_dir`), a cluster or segment output by its
-``result.json`` (:func:`primspace.cluster.outputs.check_output_directory`), an
+``result.json`` (:func:`primspace.utils.folders.check_output_directory`), an
 experiment by its ``experiment.json``.
 
 :func:`check_replaceable` is the rule every file-writing command applies (through
@@ -23,7 +23,7 @@ unless it carries the command's own mark; the one-line error names the file and 
 (:func:`describe`).
 
 This module sits above the data layer (it reads a data set file's mark through
-:mod:`primspace.data.reading`) and above :mod:`primspace.files`, which the data layer
+:mod:`primspace.data.reading`) and above :mod:`primspace.utils.files`, which the data layer
 writes through.
 """
 
@@ -34,13 +34,24 @@ import os
 from pathlib import Path
 from typing import Iterable
 
-from primspace.errors import OutputExistsError, UserError
-from primspace.files import check_output, check_outside_inputs
+from primspace.utils.errors import OutputExistsError, UserError
+from primspace.utils.files import check_output, check_outside_inputs
 
-__all__ = ["MARK_KEY", "png_metadata", "gif_comment", "file_writer", "describe", "check_replaceable", "output_file"]
+__all__ = [
+    "MARK_KEY",
+    "DATA_SET_MARK",
+    "png_metadata",
+    "gif_comment",
+    "file_writer",
+    "describe",
+    "check_replaceable",
+    "output_file",
+]
 
 #: The PNG text key of a figure's mark.
 MARK_KEY = "primspace"
+#: The root attribute of an HDF5 data set that names the command that wrote it.
+DATA_SET_MARK = "primspace_writer"
 _PNG, _GIF, _HDF5 = b"\x89PNG\r\n\x1a\n", (b"GIF87a", b"GIF89a"), b"\x89HDF\r\n\x1a\n"
 #: ``source`` attributes of data sets the simulator writes (``primspace generate``): files
 #: generated before the writer mark (primspace <= 0.5) are recognised by them.
@@ -104,16 +115,13 @@ def _image_mark(path: Path, kind: str) -> str | None:
 def _data_set_mark(path: Path) -> str | None:
     import h5py
 
-    from primspace.data.reading import file_writer as data_writer
-
-    mark = data_writer(path)
-    if mark is not None:
-        return mark
     try:
         with h5py.File(path, "r") as f:
-            source = f.attrs.get("source", "")
-    except (OSError, ValueError):
+            mark, source = f.attrs.get(DATA_SET_MARK), f.attrs.get("source", "")
+    except Exception:  # noqa: BLE001 - not a file, not HDF5, unreadable: no mark
         return None
+    if mark is not None:
+        return mark.decode("utf-8", "replace") if isinstance(mark, bytes) else str(mark)
     source = source.decode("utf-8", "replace") if isinstance(source, bytes) else str(source)
     return "primspace generate" if source.startswith(_GENERATED_SOURCES) else None
 
@@ -220,8 +228,8 @@ def output_file(
     Refused, each in one line: an empty name; ``dir/`` (a trailing separator names a
     directory, so no file called ``dir`` is written) or an existing directory; a path that
     is, contains or lies inside one of ``inputs``
-    (:func:`~primspace.files.check_outside_inputs`); an existing file unless ``overwrite``
-    (:func:`~primspace.files.check_output`); with ``writer`` (the command's mark, e.g.
+    (:func:`~primspace.utils.files.check_outside_inputs`); an existing file unless ``overwrite``
+    (:func:`~primspace.utils.files.check_output`); with ``writer`` (the command's mark, e.g.
     ``"primspace show"``), an existing file that is not an earlier output of that command,
     even with ``overwrite`` (:func:`check_replaceable`).
     """

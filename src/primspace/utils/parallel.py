@@ -20,8 +20,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
-from primspace.errors import UserError, first_line
-from primspace.progress import progress_bar
+from primspace.utils.errors import UserError, first_line
+from primspace.utils.progress import progress_bar
 
 __all__ = ["JobOutcome", "run_jobs", "BACKENDS", "default_workers"]
 

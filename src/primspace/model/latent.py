@@ -37,7 +37,7 @@ import math
 import numpy as np
 import torch
 
-from primspace.errors import UserError
+from primspace.utils.errors import UserError
 
 __all__ = [
     "INIT_METHODS",
@@ -56,7 +56,7 @@ __all__ = [
 INIT_METHODS = ("zero", "random", "projection", "pca")
 
 #: A start that needs a trained run: its initialiser's codes mapped by the run's
-#: :class:`primspace.calibration.CodeCalibration` (runs fitted with projection or pca).
+#: :class:`primspace.model.calibration.CodeCalibration` (runs fitted with projection or pca).
 CALIBRATED = "calibrated"
 
 #: The initialisers whose codes depend on the data, so a map from them to fitted codes means something.
