@@ -80,7 +80,7 @@ def main() -> None:
 
     from primspace.data import import_lasa
     from primspace.experiments.intra import split_indices
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, configure_process, fit, infer
 
     start_time = time.perf_counter()

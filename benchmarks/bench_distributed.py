@@ -149,7 +149,7 @@ def _train_process(rank: int, size: int, port: int, spec: dict, out: str) -> Non
     )
     torch.set_num_threads(spec["threads"])
     from primspace.data import MotionDataset
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, configure_process, fit
     from primspace.train.distributed import launched
 

@@ -34,7 +34,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from primspace.data import MotionDataset
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, configure_process, fit, infer
 
     with tempfile.TemporaryDirectory() as tmp:

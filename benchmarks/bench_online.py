@@ -47,7 +47,7 @@ import torch
 from threadpoolctl import threadpool_limits
 
 from primspace.data import MotionDataset
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig, fit
 from primspace.predict.online import OnlineInference, infer_online, offline_errors
 

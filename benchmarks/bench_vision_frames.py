@@ -35,7 +35,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from primspace.data import MotionDataset
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, configure_process, fit, infer
 
     ks = [int(k) for k in args.ks.split(",")]

@@ -154,7 +154,7 @@ def test_segment_command(finished, tmp_path, run_cli):
 
 def test_segment_refuses_a_run_with_one_code_per_sequence(long_data, tmp_path, run_cli):
     from primspace.data import MotionDataset
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, fit
 
     data = MotionDataset.load(long_data)

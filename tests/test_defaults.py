@@ -96,7 +96,7 @@ def test_threads_from_python_limit_torch_and_blas_while_training_and_are_put_bac
     from threadpoolctl import threadpool_limits
 
     from primspace.data import MotionDataset
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, fit, infer
     from primspace.train.loop import Session
 

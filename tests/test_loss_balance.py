@@ -17,7 +17,7 @@ from conftest import assert_user_error
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.experiments.loss_balance import loss_balance
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig, fit, reconstruct
 from primspace.train.loss import DataTensors, batch_loss
 from test_train import primitives

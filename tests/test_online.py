@@ -8,7 +8,7 @@ from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.train import TrainConfig, fit, infer, reconstruct
 from primspace.predict.online import OnlineInference, infer_online, offline_errors
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from test_train import SMALL, primitives
 
 FAST = dict(batch_size=12, threads=1, final_lr_fraction=1.0)  # online steps at a constant rate, as infer here

@@ -7,7 +7,7 @@ import torch
 from primspace.data import JointScaler, MotionDataset
 from primspace.utils.errors import UserError
 from primspace.model.latent import LatentTable
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.loss import DataTensors, batch_loss
 from primspace.train.packed import fit_packed

@@ -6,7 +6,7 @@ import torch
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig, TrainingDivergedError, fit, infer, load_run
 from primspace.train.packed import fit_packed, infer_packed
 

@@ -230,7 +230,7 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
 
     from primspace.experiments.presets import PRESETS, ExperimentPreset
     from primspace.experiments.runs import train_configs
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig
 
     flat = json.loads(json.dumps(PRESETS["demo"].to_dict()))  # then in the old, flat form:

@@ -133,7 +133,7 @@ def test_lasa_and_its_chains_name_their_demonstrations():
 
 
 def test_a_run_on_some_samples_records_their_ids(tmp_path):
-    from primspace.model.decoder import ModelConfig
+    from primspace.model.config import ModelConfig
     from primspace.train import TrainConfig, fit
 
     data = _data(8)

@@ -10,7 +10,7 @@ import torch
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import OutputExistsError, UserError
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train import (
     TrainConfig,
     TrainingDivergedError,

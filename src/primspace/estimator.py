@@ -21,7 +21,7 @@ from sklearn.base import BaseEstimator
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError, first_line
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.predict import DEFAULT_PREDICT_EPOCHS, DEFAULT_PREDICTOR, predict
 from primspace.train.api import evaluate, fit, infer, reconstruct
 from primspace.train.config import TrainConfig

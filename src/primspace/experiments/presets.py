@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields, replace
 
 from primspace.utils.errors import UserError, config_from_dict
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig
 
 __all__ = [

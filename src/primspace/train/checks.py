@@ -9,7 +9,7 @@ from primspace.data import JointScaler, MotionDataset
 from primspace.data.indices import check_indices
 from primspace.utils.errors import UserError
 from primspace.model.latent import CALIBRATABLE, CALIBRATED, START_METHODS
-from primspace.model.decoder import ModelConfig
+from primspace.model.config import ModelConfig
 from primspace.train.run import TrainedRun
 
 __all__ = [
