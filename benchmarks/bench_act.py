@@ -119,7 +119,7 @@ def main() -> None:
     from primspace.act.planners import ProMPPlanner
     from primspace.data import MotionDataset
     from primspace.utils.errors import UserError
-    from primspace.predict.scene_policy import ScenePolicy
+    from primspace.act.scene_policy import ScenePolicy
     from primspace.train import load_run
     from primspace.train.starts import fitted_samples
 

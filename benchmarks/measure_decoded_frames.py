@@ -5,7 +5,7 @@ A measurement, not a test. For a run whose model has an image head, on its fitte
 
 a. **the decoded first frame against the real one.** Frame 0 of each fitted code
    (``run.model(z, frame_steps=0)``, rounded to uint8 as ``reconstruct`` does) and the real
-   frame 0, both read by :class:`~primspace.predict.frame_features.ColourBlob` (the block's
+   frame 0, both read by :class:`~primspace.act.frame_features.ColourBlob` (the block's
    colour: mass, column, row): is the block's colour in the decoded frames (mass), and how
    well the decoded centroid tracks the real one (correlation per axis, mean absolute error
    in pixels, against always answering the mean real centroid). Also the block's red excess
@@ -139,7 +139,7 @@ def main() -> None:
 
     from primspace.data import MotionDataset
     from primspace.utils.errors import UserError
-    from primspace.predict.frame_features import ColourBlob
+    from primspace.act.frame_features import ColourBlob
     from primspace.train import load_run
     from primspace.train.starts import fitted_samples
 

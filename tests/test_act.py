@@ -16,7 +16,7 @@ from test_train import SMALL
 
 from primspace.act import PLANNERS, PolicyPlanner, run_episode
 from primspace.act.episode import BlockMove
-from primspace.act.planners import DEFAULT_EVERY
+from primspace.act.planner import DEFAULT_EVERY
 from primspace.data import MotionDataset
 from primspace.train import TrainConfig, fit
 

@@ -51,8 +51,8 @@ def numbers(case) -> dict:
     from primspace.act.planners import PolicyPlanner
     from primspace.predict.peers import ProMPPeer
     from primspace.predict.primitives import primitives_from_clusters
-    from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
-    from primspace.predict.scene_policy import ScenePolicy
+    from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
+    from primspace.act.scene_policy import ScenePolicy
     from primspace.sim.execute import Executor
     from primspace.sim.scene import Scene
 

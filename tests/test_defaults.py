@@ -62,8 +62,7 @@ def test_threads_default_is_the_train_configs_on_every_command_where_torch_runs(
 
 #: The experiments run torch in their runs: --threads and --device go to the preset's TrainConfig.
 _GRIDS = ["demo"] + [
-    f"experiment {name}"
-    for name in ("intra", "clustering", "success", "inter", "composite", "tune", "predict", "scene", "all")
+    f"experiment {name}" for name in ("intra", "clustering", "success", "inter", "composite", "tune", "predict", "all")
 ]
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from primspace.utils.errors import UserError
-from primspace.predict.frame_features import (
+from primspace.act.frame_features import (
     BLOCK_COLOUR,
     ColourBlob,
     PixelPCA,

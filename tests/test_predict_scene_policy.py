@@ -14,7 +14,7 @@ import pytest
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
-from primspace.predict.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
+from primspace.act.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
 from primspace.train import TrainConfig, fit
 from conftest import assert_user_error
 from test_train import SMALL
@@ -77,9 +77,9 @@ def test_the_default_of_predict_scene_is_the_scene_policy(run_cli, files, tmp_pa
 
 
 def test_python_predicts_from_the_scene_with_the_scene_policy(files):
-    from primspace import predict as api
+    from primspace import act
 
-    assert api.predict_from_scene is predict_from_scene and api.ScenePolicy is ScenePolicy
+    assert act.predict_from_scene is predict_from_scene and act.ScenePolicy is ScenePolicy
     data = MotionDataset.load(files / "data.h5")
     p = predict_from_scene(files / "run", data, 2, indices=[0, 4, 8])
     assert p.init == p.details["mode"] == SCENE_POLICY and p.details["name"] == "wave" and p.details["primitive"] == 2
@@ -131,6 +131,7 @@ def test_without_labels_the_primitives_are_clusters_named_cluster_k(run_cli, fil
         ("no_frames_run", "data.h5", ["--primitive", "push"], ["learns from the fitted demonstrations' camera frames"]),
         ("run", "data.h5", ["--primitive", "push", "--latent-lr", "0.1"], ["--latent-lr", "not with --scene"]),
         ("run", "data.h5", ["--primitive", "push", "--observe", "0.5"], ["do not give --observe"]),
+        ("run", "data.h5", ["--primitive", "push", "--init", "zero"], ["do not give --init"]),
         ("run", "data.h5", ["--primitive", "push", "--prior-samples", "5"], ["--prior-samples"]),
         ("run", "data.h5", [], ["--scene needs --primitive"]),
     ],

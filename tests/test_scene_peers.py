@@ -9,7 +9,7 @@ from primspace.utils.errors import UserError
 from primspace.predict.base import Predictor
 from primspace.predict.metrics import observed_prefix, unobserved_mse
 from primspace.predict.peers import MeanMotionPeer
-from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
+from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
 
 H, W, T, J = 48, 64, 30, 3
 TABLE = (184, 153, 115)

@@ -12,7 +12,7 @@ import pytest
 from primspace.data import MotionDataset
 from primspace.data.scaling import JointScaler
 from primspace.utils.errors import UserError
-from primspace.predict.scene_policy import ScenePolicy, continue_from
+from primspace.act.scene_policy import ScenePolicy, continue_from
 
 #: The primitives simulated (labels 0 and 2 of the simulator's seven).
 PRIMS = ("touch", "push")

@@ -1,7 +1,7 @@
 """``primspace act``: one scene, the primitive asked for, executed in MuJoCo (docs/act.md).
 
 The run's fitted demonstrations (its data file, or ``data=``) with their camera frames fit the
-scene policy (:class:`~primspace.predict.scene_policy.ScenePolicy`) and a ProMP of each
+scene policy (:class:`~primspace.act.scene_policy.ScenePolicy`) and a ProMP of each
 primitive. A scene is a data file's sample (``FILE:INDEX``: its block and its first joints)
 or a block given as ``x,y,size`` in metres (the first joints: the mean first step of the
 primitive's fitted demonstrations). Three planners execute it: the closed loop (the policy
@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from primspace.act.episode import BlockMove, run_episode
-from primspace.act.planners import DEFAULT_EVERY, PLANNERS, PolicyPlanner, ProMPPlanner, check_every
+from primspace.act.planner import DEFAULT_EVERY, check_every
+from primspace.act.planners import PLANNERS, ProMPPlanner
 
 CLOSED, OPEN, PROMP = PLANNERS
 from primspace.utils.errors import UserError
@@ -93,7 +94,7 @@ def fit_planners(run, fitted, every: int):
     """The scene policy (maps at steps ``0, every, 2·every, ...``) and the ProMP peer, fitted on
     ``fitted`` (the run's fitted demonstrations, with frames), scaled by the run's scaler."""
     from primspace.predict.peers import ProMPPeer
-    from primspace.predict.scene_policy import ScenePolicy
+    from primspace.act.scene_policy import ScenePolicy
 
     motor = run.scaler.transform(fitted.motor)
     length = motor.shape[1]
@@ -144,8 +145,8 @@ def act(
         _, dx, dy = perturbation.draw(np.random.default_rng([int(seed), 40]), where.block_x, where.block_y, where.size)
         move = BlockMove(perturbation.step_index(length), dx, dy)
     planners = {
-        CLOSED: PolicyPlanner(policy, k, every),
-        OPEN: PolicyPlanner(policy, k, None),
+        CLOSED: policy.planner(k, every),
+        OPEN: policy.planner(k, None),
         PROMP: ProMPPlanner(promp, label, length, every),
     }
     shared = Scene()

@@ -4,7 +4,7 @@ The paper's framing is predictive coding: "Predicted information is compared wit
 one and internal state is corrected based on the error." Here the arm executes the plan one
 step at a time in MuJoCo (:class:`~primspace.sim.execute.Executor`, the same kinematics and
 block model as the success judge); after each step the planner is asked again when it is
-due (:meth:`~primspace.act.planners.PolicyPlanner.due`) with the camera frame of that step
+due (:meth:`~primspace.act.planner.Planner.due`) with the camera frame of that step
 and the joints executed so far, and the arm follows the new plan. A perturbation moves the
 block on the table before one step (``move``: the step and the displacement), as a person
 would push it aside while the arm approaches; the judge then checks the primitive against
@@ -95,7 +95,8 @@ def run_episode(
 
     Parameters
     ----------
-    planner : PolicyPlanner or ProMPPlanner
+    planner : Planner
+        Its :meth:`~primspace.act.planner.Planner.reset` is called first.
     executor : Executor
         A fresh executor of the scene (nothing executed yet).
     first_joints : ndarray (J,)
@@ -110,6 +111,7 @@ def run_episode(
         from primspace.utils.errors import UserError
 
         raise UserError(f"the block can be moved before steps 1..{int(length) - 1}, got step {move.step}")
+    planner.reset()
     first = np.asarray(first_joints, dtype=np.float64).reshape(1, 1, -1)
     executor.step(first[0, 0])
     executed = [scaler.transform(first)[0, 0].astype(np.float64)]

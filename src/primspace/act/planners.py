@@ -1,11 +1,6 @@
-"""What makes the plan at a step of an episode (:func:`primspace.act.episode.run_episode`).
+"""The planners of ``primspace act`` and the act experiment (:class:`~primspace.act.planner.Planner`).
 
-A planner answers ``plan(step, frame, executed)``: the whole motion ``(T, J)`` (scaled units)
-given the camera ``frame`` seen after executing step ``step`` and the ``executed`` steps
-``0..step`` (scaled). :meth:`due` says at which steps the episode asks it again (always at
-step 0); between two plans the arm follows the last one.
-
-* :class:`PolicyPlanner`: the scene policy (:class:`~primspace.predict.scene_policy.ScenePolicy`)
+* :class:`PolicyPlanner`: the scene policy (:class:`~primspace.act.scene_policy.ScenePolicy`)
   asked with the current frame every ``every`` steps (closed loop) or only at step 0 (open
   loop: the first plan replayed); each plan continues from the last executed step.
 * :class:`ProMPPlanner`: the peer that cannot see: a ProMP of the primitive
@@ -17,42 +12,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.utils.errors import UserError
+from primspace.act.planner import DEFAULT_EVERY, Planner
 
-__all__ = ["PolicyPlanner", "ProMPPlanner", "PLANNERS", "DEFAULT_EVERY", "check_every"]
-
-#: Steps between two looks of the closed loop (61-step motions: 20 looks); chosen with the scene
-#: policy's threshold and horizon on seed 0's first 70 evaluation samples of the paper preset (docs/act.md).
-DEFAULT_EVERY = 3
+__all__ = ["PolicyPlanner", "ProMPPlanner", "PLANNERS"]
 
 #: The planners of ``primspace act`` and the act experiment, by the name their rows carry.
 PLANNERS = ("closed loop", "open loop", "ProMP re-conditioned")
 
 
-def check_every(every) -> int | None:
-    """``every`` as a positive int, or None (never re-plan); one UserError otherwise."""
-    if every is None:
-        return None
-    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise UserError(f"the re-planning interval must be a whole number of steps >= 1, got {every!r}")
-    return int(every)
-
-
-class _Planner:
-    def __init__(self, every: int | None):
-        self.every = check_every(every)
-
-    def due(self, step: int) -> bool:
-        """Whether a plan is made after executing ``step``."""
-        return step == 0 or (self.every is not None and step % self.every == 0)
-
-
-class PolicyPlanner(_Planner):
+class PolicyPlanner(Planner):
     """The scene policy: the plan from the first frame, corrected when a later frame surprises it.
 
     At step 0 the belief is the first frame's features and the plan is made from it. At a later
     due step the frame is compared with what the policy predicted for it
-    (:meth:`~primspace.predict.scene_policy.ScenePolicy.correct`): a surprise corrects the belief
+    (:meth:`~primspace.act.scene_policy.ScenePolicy.correct`): a surprise corrects the belief
     and a new plan continues from the executed joints; otherwise the plan stands.
     :attr:`corrections` lists the steps of the corrections.
 
@@ -69,6 +42,10 @@ class PolicyPlanner(_Planner):
     def __init__(self, policy, primitive: int, every: int | None = DEFAULT_EVERY):
         super().__init__(every)
         self.policy, self.primitive = policy, int(primitive)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the belief, the plan and the corrections of the last episode."""
         self.belief, self.current, self.corrections = None, None, []
 
     def plan(self, step: int, frame: np.ndarray, executed: np.ndarray) -> np.ndarray:
@@ -85,7 +62,7 @@ class PolicyPlanner(_Planner):
         return self.current
 
 
-class ProMPPlanner(_Planner):
+class ProMPPlanner(Planner):
     """A fitted :class:`~primspace.predict.peers.ProMPPeer` (per label) conditioned on the executed
     steps; the frame is not read.
 

@@ -1,6 +1,6 @@
 """The peers of the scene mode: the whole motion from the first frame and the primitive (issue 40).
 
-primspace's :class:`~primspace.predict.scene.ScenePredictor` predicts a motion from its first
+primspace's :class:`~primspace.act.scene_policy.ScenePolicy` predicts a motion from its first
 camera frame and the primitive to do; these two predictors (:class:`~primspace.predict.base.Predictor`)
 are what it is measured against. Both read only the **first frame** of each sample
 (``frames[:, 0]`` of ``(n, T, H, W, 3)`` uint8; frames ``(n, H, W, 3)`` are taken as the first
@@ -11,7 +11,7 @@ the steps after the first.
 
 * :class:`ContextualProMPPeer`: per primitive, a ProMP (the ``movement-primitives``
   package's ``imitate``) and a ridge regression from the first frame's features
-  (:mod:`primspace.predict.frame_features`, standardised) to each demonstration's ProMP
+  (:mod:`primspace.act.frame_features`, standardised) to each demonstration's ProMP
   weights; the prediction is the trajectory of the predicted weights.
 * :class:`NearestFramePeer`: the fitted demonstration of the same primitive whose first frame
   is nearest, replayed whole.
@@ -25,7 +25,7 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from primspace.utils.errors import UserError
-from primspace.predict.frame_features import frame_features
+from primspace.act.frame_features import frame_features
 from primspace.predict.peers import LabelledPeer, phase
 
 __all__ = ["ContextualProMPPeer", "NearestFramePeer", "RIDGE_ALPHAS"]
@@ -109,7 +109,7 @@ class ContextualProMPPeer(_ScenePeer):
     features : str or object
         The first frame's features: ``"pca"`` (principal components of the pixels), ``"blob"``
         (the red block's mass and centroid), ``"pixels"``, or a transformer
-        (:func:`~primspace.predict.frame_features.frame_features`).
+        (:func:`~primspace.act.frame_features.frame_features`).
     alpha : "auto" or float
         The ridge penalty (> 0), or ``"auto"``: chosen per group by leave-one-out among
         :data:`RIDGE_ALPHAS` (scikit-learn's ``RidgeCV``).
@@ -240,7 +240,7 @@ class NearestFramePeer(_ScenePeer):
     ----------
     features : str or object
         ``"pixels"``, ``"blob"``, ``"pca"`` or a transformer
-        (:func:`~primspace.predict.frame_features.frame_features`).
+        (:func:`~primspace.act.frame_features.frame_features`).
     per_label : bool
         Search only the test sample's own label (labels needed; default) or all.
 

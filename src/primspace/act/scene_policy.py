@@ -8,7 +8,7 @@ steps with the frame of that step and the joints executed so far.
 **What it reads of a frame.** The block is 2-4 pixels wide in a 48 x 64 frame; its position
 and size are all a scene-only motion depends on, and the pixels' principal components spend
 themselves on the arm (docs/act.md measures both). The default features are the moments of
-the block's colour (:class:`~primspace.predict.frame_features.ColourBlob`: mass, column,
+the block's colour (:class:`~primspace.act.frame_features.ColourBlob`: mass, column,
 row), read the same way from the fitted demonstrations' frames and from a new frame.
 
 **The map.** Per primitive, a Gaussian process (an RBF kernel with one length per feature, a
@@ -40,8 +40,7 @@ at the last executed step decays linearly to zero over :attr:`horizon` steps.
 **The default scene mode.** :func:`predict_from_scene` fits the policy on a run's fitted
 demonstrations and predicts a data set's motions from their first frames and first joints:
 it is what ``primspace predict --scene`` runs. Measured on the paper preset (docs/act.md, three
-seeds) it succeeds 0.98 ± 0.004 in the simulator where the code searched in a cluster's affine subspace
-(:func:`primspace.predict.scene.predict_scene`, kept in Python) succeeds 0. The primitives are
+seeds) it succeeds 0.98 ± 0.004 in the simulator. The primitives are
 the fitted labels or, without labels, clusters of the run's fitted codes (``primitives=``).
 """
 
@@ -53,11 +52,13 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.data.images import as_view
+from primspace.act.planner import DEFAULT_EVERY
+from primspace.act.planners import PolicyPlanner
 from primspace.utils.errors import UserError
 from primspace.predict.api import Prediction
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.candidates import continuity_correction
-from primspace.predict.frame_features import ColourBlob, frame_features
+from primspace.act.frame_features import ColourBlob, frame_features
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.primitives import (
     PRIMITIVE_SOURCES,
@@ -136,7 +137,7 @@ class ScenePolicy(Predictor):
         The trained run whose fitted demonstrations (in its order) are fitted; needed for
         ``space="code"`` (its codes and decoder).
     features : "blob", "pca" or a transformer
-        What is read of a frame (:func:`~primspace.predict.frame_features.frame_features`).
+        What is read of a frame (:func:`~primspace.act.frame_features.frame_features`).
     space : {"motion", "code"}
         What the first frame's map predicts (module docstring).
     steps : sequence of int
@@ -284,6 +285,12 @@ class ScenePolicy(Predictor):
         return codes
 
     # -- seeing and planning --------------------------------------------------------------
+    def planner(self, primitive, every: int | None = DEFAULT_EVERY) -> PolicyPlanner:
+        """The episode's :class:`~primspace.act.planner.Planner` of ``primitive`` (a name or an id):
+        closed loop every ``every`` steps, open loop with None; it drives :meth:`see`,
+        :meth:`correct` and :meth:`replan`."""
+        return PolicyPlanner(self, self.primitives_.resolve(primitive), every)
+
     def see(self, frames) -> np.ndarray:
         """The features (n, d) of ``frames`` (n, H, W, 3)."""
         return self.extractor_.transform(np.asarray(frames))
@@ -385,8 +392,7 @@ def predict_from_scene(
 ) -> Prediction:
     """Each sample's whole motion from its first frame and first joints, as primitive ``primitive``,
     by the scene policy: the default of ``primspace predict --scene`` (docs/act.md: on the paper
-    preset it succeeds 0.98 ± 0.004 in the simulator over three seeds, where the code searched in a
-    cluster's subspace, :func:`~primspace.predict.scene.predict_scene`, succeeds 0).
+    preset it succeeds 0.98 ± 0.004 in the simulator over three seeds).
 
     Parameters
     ----------

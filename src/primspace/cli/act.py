@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from primspace.act.planners import DEFAULT_EVERY
+from primspace.act.planner import DEFAULT_EVERY
 from primspace.cli.app import app
 from primspace.cli.options import threads_option
 

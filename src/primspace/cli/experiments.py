@@ -289,14 +289,6 @@ _experiment_command(
     "predict_error_table",
 )
 _experiment_command(
-    "scene",
-    "Act from the scene only (see the block, do a push): each evaluation sample's first frame and joints and "
-    "its primitive, named as a cluster of the fitted codes; success per primitive beside the primitive's mean motion "
-    "and the reproduction from the whole motion, over seeds (runs intra if needed; needs images; docs/predict.md).",
-    ("scene_only:run_scene",),
-    "scene_table",
-)
-_experiment_command(
     "act",
     "Act from the scene and in closed loop in MuJoCo (see the block, do the primitive; the block moved 2-4 cm at "
     "30 % of the motion): the scene policy against the contextual ProMP, the nearest first frame and the mean motion "

@@ -2,10 +2,8 @@
 as that primitive, or with ``--scene`` a whole motion from the first frame and the primitive named;
 docs/predict.md).
 
-``--scene`` runs the scene policy (:func:`primspace.predict.scene_policy.predict_from_scene`: the
-block's colour in the first frame to the motion, per primitive), the best scene mode measured
-(docs/predict.md). The older scene mode, the code searched in a cluster's affine subspace
-(:func:`primspace.predict.scene.predict_scene`), stays in Python and is not reachable from here."""
+``--scene`` runs the scene policy (:func:`primspace.act.scene_policy.predict_from_scene`: the
+block's colour in the first frame to the motion, per primitive; docs/act.md)."""
 
 from __future__ import annotations
 
@@ -166,8 +164,7 @@ def predict_command(
         "--scene",
         help="The scene only: the whole motion from the first frame and the first joints, as the "
         "primitive to perform (--primitive), by the scene policy (the block's colour in the first "
-        "frame to the motion, fitted on the run's fitted demonstrations and their frames; the best "
-        "scene mode measured; the older subspace search is predict_scene in Python). Not with --observe, "
+        "frame to the motion, fitted on the run's fitted demonstrations and their frames). Not with --observe, "
         "--observe-frames, --init, --online, --latent-lr; --epochs is not read.",
     ),
     primitive: Optional[str] = typer.Option(
@@ -241,7 +238,7 @@ def _predict(run, dataset, scene: bool, prior: dict, motor, frames, init, contin
     from primspace.predict import DEFAULT_PREDICTOR, PRIOR, predict
 
     if scene:
-        from primspace.predict.scene_policy import SCENE_POLICY, predict_from_scene
+        from primspace.act.scene_policy import SCENE_POLICY, predict_from_scene
 
         prediction = predict_from_scene(
             run,
@@ -304,7 +301,7 @@ def parse_primitives(
     """``--primitives labels|clusters|K`` and ``--clusters K`` as (where the primitives come from, the
     number of clusters or None); one line for a value that is none of these or contradicts the other.
     With ``scene`` and neither given the source is None: labels when the fitted data has labels, else
-    clusters (:func:`~primspace.predict.scene_policy.predict_from_scene` decides)."""
+    clusters (:func:`~primspace.act.scene_policy.predict_from_scene` decides)."""
     k = clusters
     if primitives is None:
         source = "clusters" if clusters is not None else "labels"
@@ -415,7 +412,7 @@ def _write_posterior(tmp: Path, prediction, dataset) -> None:
 
 def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
     """What ``primspace predict`` prints when it is done."""
-    from primspace.predict.scene_policy import SCENE_POLICY
+    from primspace.act.scene_policy import SCENE_POLICY
 
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     means = means or "every valid step was observed, no step left to score"

@@ -9,7 +9,7 @@ camera frame, and its primitive (the label, given).
 **Scene only** (the first frame and the first joints; the primitive given): each row's motion
 is scored by the MSE of the steps after the first (scaled units) and by the simulator's judge:
 
-* ``scene policy`` (ours, :class:`~primspace.predict.scene_policy.ScenePolicy`, the block's
+* ``scene policy`` (ours, :class:`~primspace.act.scene_policy.ScenePolicy`, the block's
   colour moments to the motion, per primitive) and ``scene policy (code)`` (the same map to
   the run's codes, decoded);
 * ``contextual ProMP (pixels)`` (the issue's peer: ridge from the PCA of the first frame's
@@ -83,8 +83,8 @@ def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.nd
     """{row: motor (n, T, J) physical} of the scene-only rows; ``policy``: the closed loop's, fitted
     (its first frame's map is the scene-only plan)."""
     from primspace.predict.peers import MeanMotionPeer
-    from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
-    from primspace.predict.scene_policy import ScenePolicy
+    from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
+    from primspace.act.scene_policy import ScenePolicy
     from primspace.train import load_run, reconstruct
 
     scaler = fit.scaler

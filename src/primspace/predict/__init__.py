@@ -13,15 +13,7 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
   the frozen decoder, or by an encoder trained on the decoder's own samples (measured: neither
   beats the prior's conditioning on the simulated presets; docs/predict.md); ``predict(...,
   primitive="push")`` asks it for every motion as that primitive (:mod:`primspace.predict.posterior`);
-* :class:`ScenePolicy` (:mod:`primspace.predict.scene_policy`): the whole motion from the first frame
-  and joints, the primitive given (a label or a cluster of the fitted codes), a Gaussian process per
-  primitive from the block's colour in the frame; :func:`predict_from_scene` runs it on a data set, the
-  default scene mode (``primspace predict --scene``; the best measured, docs/predict.md);
-* :class:`ScenePredictor` (:mod:`primspace.predict.scene`): the older scene mode, the code searched in
-  the primitive's cluster subspace (:func:`predict_scene`; Python only, no longer behind the CLI);
-* the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion;
-  and the scene-only peers (:mod:`primspace.predict.scene_peers`): a contextual ProMP from the first
-  frame's features, the demonstration of the nearest first frame.
+* the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
 
 :func:`predict` runs one on a data set and scores it (:func:`~primspace.predict.metrics.unobserved_mse`,
 the one error); :func:`grid_predictions` runs the experiment's rows on one split.
@@ -48,9 +40,6 @@ from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.prior import PRIOR, PriorPredictor
-from primspace.predict.scene import ScenePredictor, predict_scene
-from primspace.predict.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
-from primspace.predict.scene_peers import ContextualProMPPeer, NearestFramePeer
 
 __all__ = [
     "Predictor",
@@ -74,16 +63,9 @@ __all__ = [
     "PriorMapPredictor",
     "EncoderPredictor",
     "POSTERIOR_FRACTIONS",
-    "ScenePolicy",
-    "predict_from_scene",
-    "SCENE_POLICY",
-    "ScenePredictor",
-    "predict_scene",
     "ProMPPeer",
     "NearestPeer",
     "MeanMotionPeer",
-    "ContextualProMPPeer",
-    "NearestFramePeer",
     "best_noise",
     "unobserved_mse",
     "frame_errors",

@@ -2,7 +2,7 @@
 
 A primitive is either a label of the fitted demonstrations (when the user has labels) or a
 cluster of the fitted codes found without labels, by the paper's affine low-rank subspace
-clustering (:func:`~primspace.predict.scene_clusters.cluster_codes`). :class:`Primitives`
+clustering (:func:`cluster_codes`). :class:`Primitives`
 keeps the assignment of every fitted code and a name per primitive, and turns what a user
 asks for (a name such as ``"push"``, or an id) into a primitive, with one line naming
 those available when it names none.
@@ -16,7 +16,7 @@ import numpy as np
 
 from primspace.utils.errors import UserError
 
-__all__ = ["Primitives", "primitives_from_labels", "primitives_from_clusters", "PRIMITIVE_SOURCES"]
+__all__ = ["Primitives", "primitives_from_labels", "primitives_from_clusters", "cluster_codes", "PRIMITIVE_SOURCES", "top1_accuracy"]
 
 #: Where the primitives come from.
 PRIMITIVE_SOURCES = ("labels", "clusters")
@@ -115,13 +115,56 @@ def primitives_from_labels(labels, label_names=None) -> Primitives:
 def primitives_from_clusters(codes, n_clusters: int, labels=None, label_names=None, random_state: int = 0):
     """The fitted ``codes`` clustered into ``n_clusters`` affine subspaces (labels, when given,
     only name them: a cluster is called by its members' majority label, ``"cluster k"`` without)."""
-    from primspace.predict.scene_clusters import cluster_codes
-
-    found = cluster_codes(codes, n_clusters, labels, label_names, random_state=random_state)
-    names = [f"cluster {k}" if n is None else str(n) for k, n in enumerate(found.names)]
+    assignment, majority, majority_names = cluster_codes(codes, n_clusters, labels, label_names, random_state)
+    names = [f"cluster {k}" if n is None else str(n) for k, n in enumerate(majority_names)]
     seen: dict = {}
     for k, n in enumerate(names):  # two clusters of one majority label get distinct names
         seen[n] = seen.get(n, 0) + 1
         if seen[n] > 1:
             names[k] = f"{n} ({seen[n]})"
-    return Primitives(found.labels.astype(np.int64), names, list(found.majority), "clusters")
+    return Primitives(assignment, names, majority, "clusters")
+
+
+def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, random_state: int = 0):
+    """Cluster ``codes`` (N, K·q) with :class:`~primspace.cluster.LowRankSubspaceClustering`
+    (affine): the cluster of each code (N,) int64, numbered by first member; per cluster, the
+    majority label of its members and that label's name (None without labels), which only name it."""
+    from primspace.cluster.estimator import LowRankSubspaceClustering
+
+    codes = np.asarray(codes, dtype=np.float64)
+    if (
+        isinstance(n_clusters, (bool, np.bool_))
+        or not isinstance(n_clusters, (int, np.integer))
+        or not 1 <= n_clusters <= len(codes)
+    ):
+        raise UserError(
+            f"the number of clusters must be a whole number in 1..{len(codes)} (the fitted codes), got {n_clusters!r}"
+        )
+    model = LowRankSubspaceClustering(int(n_clusters), affine=True, random_state=random_state)
+    raw = model.fit(codes).labels_
+    order = list(dict.fromkeys(raw.tolist()))  # by first member
+    order += [c for c in range(int(n_clusters)) if c not in order]
+    ids = np.array([order.index(c) for c in raw], dtype=np.int64)
+    majority, names = [], []
+    for k in range(int(n_clusters)):
+        own = None if labels is None else np.asarray(labels)[ids == k]
+        own = None if own is None else own[own >= 0]
+        top = None if own is None or not own.size else int(np.bincount(own).argmax())
+        majority.append(top)
+        names.append(None if top is None else _name(top, label_names))
+    return ids, majority, names
+
+
+def top1_accuracy(posterior, stands_for, labels) -> float | None:
+    """Share of the labelled samples (``labels`` >= 0) whose most probable primitive (``posterior``
+    (n, P)) stands for their label (``stands_for``: the label of each primitive, None for none);
+    None without labels."""
+    if labels is None:
+        return None
+    labels = np.asarray(labels)
+    scored = labels >= 0
+    if not scored.any():
+        return None
+    table = np.array([-2 if v is None else int(v) for v in stands_for])
+    top = np.asarray(posterior).argmax(axis=1)
+    return float(np.mean(table[top[scored]] == labels[scored]))
