@@ -16,7 +16,7 @@ steps of ``motor`` only: the unobserved ones are set to zero before anything loo
 * :class:`MeanMotionPeer`: the mean motion of the sample's primitive (or of all).
 * :func:`best_noise`: the ProMP's observation noise chosen *on the answer*.
 * :class:`LabelledPeer`: what the peers share (the checks, label groups; the scene peers of
-  :mod:`primspace.predict.scene_peers` derive from it too), and :func:`phase`.
+  :mod:`primspace.act.scene_peers` derive from it too), and :func:`phase`.
 
 The error of a prediction is :func:`primspace.predict.metrics.unobserved_mse`, for the
 peers and primspace's predictors alike.
