@@ -1,8 +1,8 @@
-"""The rules of the paper's central claims (primspace.experiments.claim_rules_central) can hold and fail."""
+"""The rules of the paper's central claims (primspace.results.claim_rules_central) can hold and fail."""
 
-from primspace.experiments.claim_rules_central import generalisation_improved, separated_from_the_onset
-from primspace.experiments.claim_verdicts import PARTLY
-from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
+from primspace.results.claim_rules_central import generalisation_improved, separated_from_the_onset
+from primspace.results.claim_verdicts import PARTLY
+from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
 
 
 def _intra(**finals):

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from primspace.experiments.claim_rules_v2 import clustering_similar, random_fit_bad, zero_within
-from primspace.experiments.claim_rules_v4 import (
+from primspace.results.claim_rules_v2 import clustering_similar, random_fit_bad, zero_within
+from primspace.results.claim_rules_v4 import (
     CODE_DRIFT,
     LITTLE_CHANGE,
     code_drift,
@@ -19,17 +19,9 @@ from primspace.experiments.claim_rules_v4 import (
     intra_and_inter_improved,
     projection_good_and_still,
 )
-from primspace.experiments.claim_verdicts import (
-    AGAINST,
-    AS_SAID,
-    IN_FAVOUR,
-    PARTLY,
-    UNCHECKABLE,
-    Outcome,
-    rule_verdict,
-)
-from primspace.experiments.claims import CLAIMS, RULES_VERSION, check_claims, claims_table, codes_of_summary
-from primspace.experiments.results import LEARNED_CODES
+from primspace.results.claim_verdicts import AGAINST, AS_SAID, IN_FAVOUR, PARTLY, UNCHECKABLE, Outcome, rule_verdict
+from primspace.results.claims import CLAIMS, RULES_VERSION, check_claims, claims_table, codes_of_summary
+from primspace.results.layout import LEARNED_CODES
 
 
 def _run(init, q, seed=0, fit=1e-4, start=1e-2, end=1e-4):

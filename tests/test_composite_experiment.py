@@ -70,7 +70,7 @@ def test_runs_are_segmented_and_scored(finished):
 
 
 def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
-    from primspace.experiments.composite.results import bounds_table, composite_table, recall_table
+    from primspace.results.composite import bounds_table, composite_table, recall_table
     from primspace.segmentation.peers import PEERS
 
     _, results = finished
@@ -97,7 +97,7 @@ def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
 
 def test_the_summary_keeps_the_peers_and_the_docs_render_them(finished):
     from primspace.report.markdown import render_composite
-    from primspace.experiments.summary import summarize
+    from primspace.results.summary import summarize
 
     exp, results = finished
     summary = summarize(exp.path, "tiny", "primspace experiment composite --out tiny")
@@ -239,9 +239,9 @@ def by_primitives(long_data, tmp_path_factory):
 
 
 def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_primitives):
-    from primspace.experiments.composite.results import composite_table
+    from primspace.results.composite import composite_table
     from primspace.report.markdown import render_composite
-    from primspace.experiments.summary import summarize
+    from primspace.results.summary import summarize
 
     exp, results = by_primitives
     [row] = results["primitives"]

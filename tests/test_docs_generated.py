@@ -3,6 +3,7 @@ generated from the stored summaries (docs/results/*.json) by ``python -m
 primspace.report.markdown``: the committed text must equal what it writes, so no number
 in those blocks is typed by hand or left stale."""
 
+import re
 from pathlib import Path
 
 import pytest
@@ -58,7 +59,7 @@ def test_the_act_tables_are_written_into_docs_act_md(tmp_path):
     dict) gives docs/act.md its three tables and the latency line."""
     from test_report_layers import ACT_LOOP_ROWS, ACT_SCENE_ROWS, act_experiment_dir
 
-    from primspace.experiments.summary import summarize, write_summary
+    from primspace.results.summary import summarize, write_summary
     from primspace.report.markdown import NO_ACT, blocks
     from primspace.utils.stats import spread_convention
 
@@ -281,3 +282,38 @@ def test_the_clustering_ablation_reads_its_rule():
     assert "the optimiser explains the gap" in text and "the scale does not explain it" in text
     text = clustering_ablation(adam, _clustered({0: (0.6, 0.89), 1: (0.5, 0.79), 2: (0.6, 0.82)}))
     assert "the optimiser does not explain the gap" in text
+
+
+#: A path of one machine: its temporary, home, work or user folders, or a drive.
+MACHINE_PATH = re.compile(r"(?<![\w.])(/tmp/|/root/|/home/|/work/|/Users/|[A-Z]:\\)")
+#: The benchmarks' shared lock (benchmarks/bench_*.py ``flock`` it): a path every machine has.
+SHARED_LOCK = "/tmp/primspace-bench.lock"
+
+
+def test_no_doc_holds_a_path_of_one_machine():
+    """Commands in README and docs/*.md run on a reader's machine: the generated ones print
+    placeholders (``OUT``, ``DATA.h5``) where the stored summaries keep the paths they ran with."""
+    found = [
+        f"{path.relative_to(ROOT)}:{n}: {line.strip()[:160]}"
+        for path in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if MACHINE_PATH.search(line.replace(SHARED_LOCK, ""))
+    ]
+    assert not found, "paths of one machine in the docs:\n" + "\n".join(found)
+    assert MACHINE_PATH.search("--out /work/runs/x") and MACHINE_PATH.search("C:\\runs")
+    assert not MACHINE_PATH.search("https://example.org/home/x --out OUT")
+
+
+def test_a_stored_command_is_printed_with_placeholders_for_its_paths():
+    from primspace.report.commands import portable_command
+
+    stored = (
+        "primspace experiment intra --preset paper --data /work/runs/a/data.h5 --out /tmp/w/exp/b --workers 2\n"
+        "primspace experiment clustering --data /tmp/w/exp/b/data.h5 --out=/tmp/w/exp/b --json C:\\x\\r.json -o rel"
+    )
+    assert portable_command(stored) == (
+        "primspace experiment intra --preset paper --data DATA.h5 --out OUT --workers 2\n"
+        "primspace experiment clustering --data OUT/data.h5 --out=OUT --json JSON.json -o rel"
+    )
+    kept = "primspace experiment act --out exp --note 'two  spaces'"
+    assert portable_command(kept) == kept

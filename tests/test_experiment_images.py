@@ -12,8 +12,9 @@ from test_experiments import TINY
 
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
-from primspace.experiments.results import final_loss_table
-from primspace.experiments.runs import intra_run_dir, psnr
+from primspace.results.tables import final_loss_table
+from primspace.results.layout import intra_run_dir
+from primspace.experiments.runs import psnr
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
 

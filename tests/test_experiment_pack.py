@@ -11,7 +11,8 @@ from conftest import assert_user_error
 from primspace.experiments import figures, intra
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
-from primspace.experiments.runs import fit_and_infer, intra_run_dir, load_run_data, pack_grid_runs, phase_dir
+from primspace.experiments.runs import fit_and_infer, load_run_data, pack_grid_runs
+from primspace.results.layout import intra_run_dir, phase_dir
 from primspace.experiments.workspace import ExperimentDir
 from primspace.train import load_run
 

@@ -15,7 +15,7 @@ from primspace.experiments.clustering import run_clustering
 from primspace.experiments.inter import run_inter
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
-from primspace.experiments.results import qualitative_check
+from primspace.results.tables import qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
@@ -95,9 +95,10 @@ def _hungarian_accuracy(true, pred) -> float:
 
 def test_clustering_and_success_results(finished):
     from primspace.cluster import LowRankSubspaceClustering
-    from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
-    from primspace.experiments.runs import intra_key, load_codes
-    from primspace.experiments.sweep import run_dir_of
+    from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
+    from primspace.results.layout import intra_key
+    from primspace.experiments.runs import load_codes
+    from primspace.results.layout import run_dir_of
     from primspace.sim.success import evaluate_dataset
     from primspace.train import load_run, reconstruct
 
@@ -391,7 +392,7 @@ def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
     import re
     from pathlib import Path
 
-    from primspace.experiments.claims import CLAIMS, check_claims
+    from primspace.results.claims import CLAIMS, check_claims
 
     paper = Path(__file__).resolve().parents[2] / "shared" / "paper.tex"
     if not paper.exists():
@@ -411,7 +412,7 @@ def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
         if r["init"] == "zero":
             for h in r["infer"]:
                 h["loss"] *= 1e3
-    from primspace.experiments.claims import CLAIMS as C
+    from primspace.results.claims import CLAIMS as C
 
     similar = next(c for c in C if c.key == "infer_similar")
     assert similar.check(doctored)[0] is False
@@ -423,8 +424,8 @@ def test_a_summary_holds_what_the_claims_and_docs_read(finished):
     """The stored summary of a directory gives the same verdicts and numbers as the
     directory itself (the docs are generated from summaries), and stays small."""
     from primspace.report.markdown import render_summary
-    from primspace.experiments.claims import check_claims
-    from primspace.experiments.summary import read_summary, summarize
+    from primspace.results.claims import check_claims
+    from primspace.results.summary import read_summary, summarize
 
     exp, intra, _, success = finished
     with pytest.raises(UserError, match="recorded no commands"):  # made from Python: no command to name
@@ -456,7 +457,7 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
     part carved from the fitted part (never the evaluation part), and the intra protocol
     reruns with each init's choice beside the shared setting."""
     from primspace.experiments.intra import split_indices
-    from primspace.experiments.results import tuning_table
+    from primspace.results.tables import tuning_table
     from primspace.experiments.tuning import TUNING_GRID, run_tune, settings_of, validation_split
     from primspace.sim.generate import GenerationConfig, generate_dataset
 
@@ -494,7 +495,7 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
 def test_a_summary_names_every_version_that_ran_into_the_directory():
     """A stage added to an older directory by a newer version shows beside the version
     that made it (0.8's summaries named only the first)."""
-    from primspace.experiments.summary import recorded_versions
+    from primspace.results.summary import recorded_versions
 
     meta = {
         "primspace": "0.5.0",
@@ -513,7 +514,7 @@ def test_tuning_table_names_the_tuned_q_on_rows_of_another_q():
     """The setting is chosen at one q and applied at every q: a row of another q says whose
     choice it is and shows no validation loss (it had none); the last column counts, seed by
     seed, where projection ends below the init, shared and tuned."""
-    from primspace.experiments.results import tuning_table
+    from primspace.results.tables import tuning_table
 
     def run(init, q, seed, loss):
         return {"init": init, "latent_dim": q, "seed": seed, "infer": [{"loss": 1.0}, {"loss": loss}]}
@@ -611,8 +612,8 @@ def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tm
     """The intra grid's calibrated point has no fit of its own: it and the projection point
     share ``projection-q4-s0/fit`` under a lock (two workers: trained once, every epoch logged
     once), and its codes start at that fit's calibration map applied to P m."""
-    from primspace.experiments.calibration_results import calibration_table, calibration_verdict
-    from primspace.experiments.runs import intra_run_dir
+    from primspace.results.calibration import calibration_table, calibration_verdict
+    from primspace.results.layout import intra_run_dir
     from primspace.train import load_run
 
     preset = replace(TINY, inits=("projection", "calibrated"))

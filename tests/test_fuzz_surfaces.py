@@ -80,7 +80,7 @@ def test_npz_numbering_never_pairs_joints_with_another_samples_frames(tmp_path_f
 @given(st.text(min_size=0, max_size=400))
 def test_no_name_from_data_reaches_a_path(tmp_path_factory, name):
     """Any label or task name: its figure and animation lie in OUT/figures, under 255 bytes."""
-    from primspace.experiments.results import animation_file, figure_file
+    from primspace.results.layout import animation_file, figure_file
 
     out = tmp_path_factory.mktemp("exp")
     for path in (figure_file(out, f"reconstruction_{name}"), animation_file(out, name)):

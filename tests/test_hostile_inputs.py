@@ -105,7 +105,7 @@ def test_a_name_from_data_never_reaches_a_path(tmp_path):
     and replaced a file two levels above the experiment. Every figure and animation name goes
     through one function: the file stays in OUT/figures, its name is short, and two names never
     share a file."""
-    from primspace.experiments.results import animation_file, figure_file
+    from primspace.results.layout import animation_file, figure_file
 
     out = tmp_path / "exp"
     figures = (out / "figures").resolve()
@@ -171,7 +171,7 @@ def test_predict_options_are_never_ignored_without_a_word(run_cli, data_file, tm
 @pytest.mark.parametrize("name", ["", "   ", "two\nlines", "nul\x00"])
 def test_a_summary_name_is_one_line(tmp_path, name):
     """Issue 38, item 7: summarize --name empty or multi-line was accepted (it is a heading)."""
-    from primspace.experiments.summary import summarize
+    from primspace.results.summary import summarize
 
     with pytest.raises(UserError, match="the summary's name is a heading on one line"):
         summarize(tmp_path, name)

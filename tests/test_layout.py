@@ -50,6 +50,7 @@ ABOVE_UTILS = (
     "estimator",
     "plots",
     "act",
+    "results",
     "experiments",
     "report",
     "demo",
@@ -60,29 +61,61 @@ ABOVE_UTILS = (
 FORBIDDEN = {
     # the floor everyone stands on: errors, files, output marks and folders, seeds, progress, statistics
     "utils": ABOVE_UTILS,
-    "data": ("sim", "model", "train", "predict", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
-    "sim": ("model", "train", "predict", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
-    "cluster": ("sim", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
-    "probe": ("sim", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
+    "data": (
+        "sim",
+        "model",
+        "train",
+        "predict",
+        "cluster",
+        "plots",
+        "act",
+        "results",
+        "experiments",
+        "report",
+        "demo",
+        "cli",
+    ),
+    "sim": ("model", "train", "predict", "cluster", "plots", "act", "results", "experiments", "report", "demo", "cli"),
+    "cluster": ("sim", "model", "train", "predict", "act", "results", "experiments", "report", "demo", "cli"),
+    "probe": ("sim", "model", "train", "predict", "act", "results", "experiments", "report", "demo", "cli"),
     # the segmentation package: the windows method, scores, results, peers (ruptures, hmmlearn) and
     # upper bounds (classifiers given the labels) see motion arrays and codes only ...
-    "segmentation": ("sim", "model", "train", "predict", "act", "experiments", "report", "demo", "cli"),
+    "segmentation": ("sim", "model", "train", "predict", "act", "results", "experiments", "report", "demo", "cli"),
     # ... the methods of a single-primitive model decode a trained run (train)
-    "segmentation.synthesis": ("sim", "act", "experiments", "report", "demo", "cli"),
-    "segmentation.surprise": ("sim", "act", "experiments", "report", "demo", "cli"),
-    "segmentation.inferred": ("sim", "act", "experiments", "report", "demo", "cli"),
+    "segmentation.synthesis": ("sim", "act", "results", "experiments", "report", "demo", "cli"),
+    "segmentation.surprise": ("sim", "act", "results", "experiments", "report", "demo", "cli"),
+    "segmentation.inferred": ("sim", "act", "results", "experiments", "report", "demo", "cli"),
     # the model: its config (torch-free), the decoder, the codes and their starts, the calibration
-    "model": ("train", "predict", "sim", "cluster", "plots", "act", "experiments", "report", "demo", "cli"),
-    "train": ("sim", "cluster", "predict", "plots", "act", "experiments", "report", "demo", "cli"),
+    "model": ("train", "predict", "sim", "cluster", "plots", "act", "results", "experiments", "report", "demo", "cli"),
+    "train": ("sim", "cluster", "predict", "plots", "act", "results", "experiments", "report", "demo", "cli"),
     # prediction from a beginning: one floor above train (and cluster: primitives as clusters of codes)
-    "predict": ("sim", "plots", "act", "experiments", "report", "demo", "cli"),
+    "predict": ("sim", "plots", "act", "results", "experiments", "report", "demo", "cli"),
     # the estimator (AutoDecoder) sits above train and predict, below the experiments
-    "estimator": ("sim", "act", "experiments", "report", "demo", "cli"),
-    "plots": ("train", "predict", "model", "act", "experiments", "report", "demo", "cli"),
+    "estimator": ("sim", "act", "results", "experiments", "report", "demo", "cli"),
+    "plots": ("train", "predict", "model", "act", "results", "experiments", "report", "demo", "cli"),
     # acting: plans from the scene executed in the simulator (sim), below the experiments
-    "act": ("experiments", "report", "demo", "cli"),
+    "act": ("results", "experiments", "report", "demo", "cli"),
+    # reading an experiment folder's results (its layout, readers, tables, the claims): JSON and arrays
+    # only, below the experiments that write them and the report that prints them
+    "results": (
+        "sim",
+        "cluster",
+        "probe",
+        "segmentation",
+        "model",
+        "train",
+        "predict",
+        "estimator",
+        "plots",
+        "act",
+        "experiments",
+        "report",
+        "demo",
+        "cli",
+    ),
     "experiments": ("report", "demo", "cli"),
-    "report": ("demo", "cli"),
+    # the report reads results only: no experiment
+    "report": ("experiments", "demo", "cli"),
     "demo": ("cli",),
 }
 

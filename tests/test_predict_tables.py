@@ -153,7 +153,7 @@ def test_the_html_report_shows_the_same_two_tables(tmp_path):
 
 
 def test_a_summary_keeps_the_grids_version_and_its_given_rows(tmp_path):
-    from primspace.experiments.summary import summarize
+    from primspace.results.summary import summarize
 
     predict = _summary()["results"]["predict"] | {"by_seed": _by_seed()}
     (tmp_path / "results").mkdir()

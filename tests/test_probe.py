@@ -87,7 +87,8 @@ def test_the_intra_experiment_probes_every_run_and_reports_it(tmp_path):
     from test_experiments import TINY
 
     from primspace.experiments.intra import run_intra
-    from primspace.experiments.results import probe_table, read_results
+    from primspace.results.tables import probe_table
+    from primspace.results.readers import read_results
     from primspace.experiments.runs import initial_codes
     from primspace.experiments.workspace import ExperimentDir
     from primspace.report import build_report

@@ -21,20 +21,8 @@ import primspace
 
 SRC = Path(primspace.__file__).resolve().parent
 
-# the modules of primspace.experiments that read results and import no experiment
-READERS = {
-    "primspace.experiments.results",
-    "primspace.experiments.calibration_results",
-    "primspace.experiments.claims",
-    "primspace.experiments.claim_rules_v1",
-    "primspace.experiments.claim_verdicts",
-    "primspace.experiments.claim_rules_central",
-    "primspace.experiments.claim_rules_v2",
-    "primspace.experiments.claim_rules_v4",
-    "primspace.experiments.summary",
-    "primspace.experiments.composite.results",
-    "primspace.experiments.act_results",
-}
+# the package that reads results (readers, tables, claims) and imports no experiment
+RESULTS = "primspace.results"
 
 
 def _modules(package: str) -> list[str]:
@@ -73,7 +61,9 @@ def _within(name: str, package: str) -> bool:
     return name == package or name.startswith(package + ".")
 
 
-@pytest.mark.parametrize("package", ["primspace.report", "primspace.experiments", "primspace.plots", "primspace.demo"])
+@pytest.mark.parametrize(
+    "package", ["primspace.results", "primspace.report", "primspace.experiments", "primspace.plots", "primspace.demo"]
+)
 def test_every_module_imports(package):
     for name in _modules(package):
         importlib.import_module(name)
@@ -81,10 +71,10 @@ def test_every_module_imports(package):
 
 def test_the_report_imports_only_the_results_readers():
     for module in _modules("primspace.report"):
-        allowed = READERS | {"primspace.experiments"}
-        bad = {m for m in _imports(module) if _within(m, "primspace.experiments") and m not in allowed}
+        bad = {m for m in _imports(module) if _within(m, "primspace.experiments")}
         assert not bad, (module, bad)
         assert "primspace.demo" not in _imports(module)
+    assert any(_within(m, RESULTS) for module in _modules("primspace.report") for m in _imports(module))
 
 
 def test_no_experiment_imports_the_report_or_the_demo():
@@ -94,10 +84,13 @@ def test_no_experiment_imports_the_report_or_the_demo():
 
 
 def test_readers_and_figures_import_no_experiment():
-    for module in sorted(READERS | {"primspace.experiments.figures"}):
-        others = {m for m in _imports(module) if _within(m, "primspace.experiments")} - READERS
+    readers = _modules(RESULTS)
+    assert {f"{RESULTS}.layout", f"{RESULTS}.readers", f"{RESULTS}.claims", f"{RESULTS}.measures"} <= set(readers)
+    for module in readers:
+        others = {m for m in _imports(module) if _within(m, "primspace.experiments")}
         assert not others, (module, others)
-    assert not {m for m in _imports("primspace.experiments.results") if _within(m, "primspace.experiments")}
+    others = {m for m in _imports("primspace.experiments.figures") if _within(m, "primspace.experiments")}
+    assert not others, others
 
 
 def test_figures_never_run_a_model():
@@ -124,11 +117,7 @@ def test_importing_the_report_loads_no_experiment():
         "import sys, primspace.report; print(sorted(m for m in sys.modules if m.startswith('primspace.experiments')))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    # the packages themselves: their __init__ imports nothing
-    assert set(json.loads(out.replace("'", '"'))) <= READERS | {
-        "primspace.experiments",
-        "primspace.experiments.composite",
-    }
+    assert json.loads(out.replace("'", '"')) == []
 
 
 # ------------------------------------------------- an experiment directory of an older version
@@ -261,7 +250,7 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
 def test_a_results_file_that_is_a_link_is_refused(tmp_path):
     """A results file linked to another file would put that file's text into the report."""
     from primspace.utils.errors import UserError
-    from primspace.experiments.results import read_results
+    from primspace.results.readers import read_results
 
     (tmp_path / "results").mkdir()
     secret = tmp_path / "secret.json"
@@ -328,7 +317,7 @@ def act_experiment_dir(path: Path) -> Path:
 
 def test_the_act_tables_are_read_without_an_experiment():
     from primspace.experiments.act import act_tables as from_experiment
-    from primspace.experiments.act_results import act_tables
+    from primspace.results.act import act_tables
 
     results = fake_act_results()
     tables = act_tables(results)
@@ -345,8 +334,8 @@ def test_the_act_tables_are_read_without_an_experiment():
 
 
 def test_the_summary_keeps_the_act_results_small(tmp_path):
-    from primspace.experiments.act_results import act_tables
-    from primspace.experiments.summary import _round, summarize
+    from primspace.results.act import act_tables
+    from primspace.results.summary import _round, summarize
 
     out = act_experiment_dir(tmp_path / "exp")
     results = fake_act_results()

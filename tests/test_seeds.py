@@ -4,7 +4,7 @@ intra results whose numbers we choose."""
 
 import json
 
-from primspace.experiments.claims import check_claims
+from primspace.results.claims import check_claims
 
 
 def _run(init, seed, fit, start, end, q=10):
@@ -87,7 +87,7 @@ def test_no_seed_holding_is_said(tmp_path):
 def test_spread_table_is_mean_and_std_over_seeds():
     import numpy as np
 
-    from primspace.experiments.results import spread_table
+    from primspace.results.tables import spread_table
 
     runs = [
         _run("projection", s, fit, 1e-2, end) for s, fit, end in ((0, 1e-4, 2e-4), (1, 3e-4, 4e-4), (2, 2e-4, 9e-4))
@@ -127,7 +127,7 @@ def test_clustering_and_success_over_seeds(tmp_path, tiny_data):
     from test_experiments import TINY
 
     from primspace.experiments.clustering import run_clustering
-    from primspace.experiments.results import outcome_spread_table
+    from primspace.results.tables import outcome_spread_table
     from primspace.experiments.success import run_success
     from primspace.experiments.workspace import ExperimentDir
 
@@ -218,7 +218,7 @@ def test_success_and_clustering_claims_are_checked_in_every_seed(tmp_path):
 
 
 def test_a_tie_never_counts_and_a_small_gap_is_within_the_spread(tmp_path):
-    from primspace.experiments.claims import CLAIMS
+    from primspace.results.claims import CLAIMS
 
     check = next(c for c in CLAIMS if c.key == "success").check
     tie = _rates(_sensitive(1.0, 1.0, 0.0), _sensitive(1.0, 1.0, 0.0))
@@ -242,7 +242,7 @@ def test_the_success_verdict_is_given_at_every_judge_tolerance(tmp_path):
     assert row["verdict"] == "partly"  # grasp higher, pull and push tied at 10 mm
     assert row["sweep"] == {"0.004": "does not hold", "0.01": "partly"}  # push lower at 4 mm
     assert row["robust"] is False
-    from primspace.experiments.claims import claims_table
+    from primspace.results.claims import claims_table
 
     _, table = claims_table(tmp_path)
     text = next(r for r in table if "gripper fingers" in r[0])[2]
@@ -250,7 +250,7 @@ def test_the_success_verdict_is_given_at_every_judge_tolerance(tmp_path):
 
 
 def test_inter_claim_measures_speed_final_and_robustness_paired_by_fold(tmp_path):
-    from primspace.experiments.claims import CLAIMS
+    from primspace.results.claims import CLAIMS
 
     check = next(c for c in CLAIMS if c.key == "inter").check
 

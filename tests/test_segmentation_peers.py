@@ -141,6 +141,6 @@ def test_supervised_bound_separates_separable_segments_and_not_noise():
 
 
 def test_every_peer_is_described_for_the_tables():
-    from primspace.experiments.composite.results import PEER_RULES
+    from primspace.results.composite import PEER_RULES
 
     assert list(PEER_RULES) == list(PEERS)

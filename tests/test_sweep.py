@@ -2,7 +2,8 @@
 
 import json
 
-from primspace.experiments.sweep import ERROR_FILE, RESULT_FILE, GridPoint, run_grid
+from primspace.results.layout import ERROR_FILE, RESULT_FILE
+from primspace.experiments.sweep import GridPoint, run_grid
 
 
 def square_job(run_dir, x):

@@ -180,7 +180,7 @@ def _experiment_command(
     name: str, doc: str, steps: tuple[str, ...], table: str | None, preset_names: str | None = None
 ) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
-    then print ``table`` (a function of :mod:`primspace.experiments.results`) of the first step's results.
+    then print ``table`` (a function of :mod:`primspace.results.tables`) of the first step's results.
     ``preset_names`` names the map in :mod:`primspace.experiments.presets` from the
     ``--preset`` a user gives to the preset this experiment runs (composite:
     ``COMPOSITE_PRESET_OF``, ``demo`` -> ``composite-demo``; read when the command runs, so
@@ -320,10 +320,11 @@ def summarize_command(
 ) -> None:
     """Write the small summary of an experiment that the docs' tables are generated from
     (`python -m primspace.report.markdown`), and beside it (OUT with suffix .codes.npz) the
-    codes of its runs, compressed (`primspace.experiments.summary_codes.read_codes` reads them);
+    codes of its runs, compressed (`primspace.results.codes.read_codes` reads them);
     run it on the machine that ran the experiment (it records the CPU)."""
-    from primspace.experiments.summary import summarize
-    from primspace.experiments.summary_codes import check_codes_output, codes_path, write_summary_with_codes
+    from primspace.results.summary import summarize
+    from primspace.results.codes import check_codes_output, codes_path
+    from primspace.experiments.summary_codes import write_summary_with_codes
     from primspace.utils.outputs import output_file
 
     # --overwrite replaces a summary only (recognised by its summary_version), never another file,

@@ -1,8 +1,9 @@
 """The paper's experiments (Experimental Results), as resumable grids of runs.
 
 Data flows one way: each experiment trains, clusters or judges and writes its results
-(``OUT/results/<name>.json`` and arrays); its figures are drawn from those results alone;
-the report (:mod:`primspace.report`) reads them and computes nothing.
+(``OUT/results/<name>.json`` and arrays, named by :mod:`primspace.results.layout`); its
+figures are drawn from those results alone; the report (:mod:`primspace.report`) reads
+them and computes nothing.
 
 Compute (each writes results, then draws its figures):
 
@@ -19,14 +20,15 @@ Shared by them:
 - :mod:`~primspace.experiments.runs`: run keys, per-run configurations, data, codes.
 - :mod:`~primspace.experiments.workspace`: the experiment directory (data, stages, grids).
 - :mod:`~primspace.experiments.sweep`: the grid runner (local processes or Ray; skips finished runs).
+- :mod:`~primspace.experiments.summary_codes`: the codes of the runs, gathered beside a summary.
 
-Reading results (import no experiment; the report uses only these):
+Drawing:
 
-- :mod:`~primspace.experiments.results`: file names, readers, tables and the qualitative verdict.
-- :mod:`~primspace.experiments.calibration_results`: the calibrated start's table and verdict.
-- :mod:`~primspace.experiments.claims`: the paper's sentences, verbatim, checked against results.
-- :mod:`~primspace.experiments.claim_verdicts`: a rule's outcome, its verdict counted over seeds.
 - :mod:`~primspace.experiments.figures`: every experiment figure, drawn from results files.
+
+Reading results is :mod:`primspace.results`'s (the folder's layout, readers, tables, the
+claims); the experiments write with its layout and read back with its readers, and the
+report reads only it.
 
 This package's ``__init__`` imports nothing, so reading results never loads an experiment.
 """

@@ -37,11 +37,12 @@ import numpy as np
 from primspace.act.planners import DEFAULT_EVERY, PLANNERS
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
-from primspace.experiments.act_results import ALL, act_table, act_tables
+from primspace.results.act import ALL, act_table, act_tables
 from primspace.experiments.intra import run_intra
 from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, judgeable, predicted_subset, projection_seeds
 from primspace.experiments.prediction_table import mean_std_count
-from primspace.experiments.runs import focus_runs, phase_dir
+from primspace.experiments.runs import focus_runs
+from primspace.results.layout import phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 from primspace.predict.metrics import finite_mean

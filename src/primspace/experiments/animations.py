@@ -19,8 +19,9 @@ import numpy as np
 
 from primspace.utils.errors import DataError
 from primspace.experiments import figures
-from primspace.experiments.results import ANIMATION_RESULTS
-from primspace.experiments.runs import focus_runs, intra_run_dir
+from primspace.results.layout import ANIMATION_RESULTS
+from primspace.experiments.runs import focus_runs
+from primspace.results.layout import intra_run_dir
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = ["sample_motion", "replay_note", "write_animations"]

@@ -24,7 +24,7 @@ import numpy as np
 
 from primspace.experiments import figures
 from primspace.experiments.intra import run_intra
-from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
+from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
 from primspace.experiments.runs import focus_runs, initial_codes, load_codes
 from primspace.experiments.workspace import ExperimentDir
 

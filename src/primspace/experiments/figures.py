@@ -1,6 +1,6 @@
 """The experiments' figures, drawn from their results files alone.
 
-Each function reads ``OUT/results`` (JSON and arrays, :mod:`primspace.experiments.results`)
+Each function reads ``OUT/results`` (JSON and arrays, :mod:`primspace.results.readers`)
 and writes PNGs (and the animations' GIFs) to ``OUT/figures``; none loads a model or the data set, so a figure can be
 redrawn from a finished experiment directory. The experiments call them when they end.
 Imports no experiment.
@@ -10,15 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from primspace.experiments.results import (
-    ANIMATION_RESULTS,
-    IMAGE_STRIPS,
-    LATENT_RESULTS,
-    animation_file,
-    figure_file,
-    read_arrays,
-    read_results,
-)
+from primspace.results.layout import ANIMATION_RESULTS, IMAGE_STRIPS, LATENT_RESULTS, animation_file, figure_file
+from primspace.results.readers import read_arrays, read_results
 
 __all__ = ["draw_intra", "draw_latent", "draw_animations", "draw_inter", "draw_latent_accuracy", "draw_composite"]
 
@@ -186,7 +179,7 @@ def _draw_primitive_timelines(out_dir: str | Path, results: dict) -> list[Path]:
     """Per method of the model of single primitives, the timeline of the first seed's
     held-out demonstrations: scaled joints, true and found labels and boundaries."""
     from primspace import plots
-    from primspace.experiments.composite.results import METHODS
+    from primspace.results.composite import METHODS
     from primspace.plots.sequences import plot_code_timeline
     from primspace.segmentation import boundaries_from_segments
 

@@ -23,13 +23,12 @@ from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.runs import (
     curves,
     experiment_scaler,
-    fit_init,
-    fit_point_dir,
     load_run_data,
     shared_fit,
     shared_fits_last,
     train_configs,
 )
+from primspace.results.layout import fit_init, fit_point_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 

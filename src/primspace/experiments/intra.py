@@ -25,20 +25,18 @@ from primspace.experiments.animations import write_animations
 from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.probe import run_probe
-from primspace.experiments.results import LATENT_RESULTS
+from primspace.results.layout import LATENT_RESULTS
 from primspace.experiments.runs import (
     all_frame_losses,
     curves,
     fit_and_infer,
     focus_runs,
-    intra_key,
-    intra_run_dir,
     load_codes,
     load_run_data,
     pack_grid_runs,
-    phase_dir,
     shared_fits_last,
 )
+from primspace.results.layout import intra_key, intra_run_dir, phase_dir
 from primspace.experiments.sweep import GridPoint, complete_result
 from primspace.experiments.workspace import ExperimentDir
 

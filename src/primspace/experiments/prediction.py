@@ -26,7 +26,8 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
-from primspace.experiments.runs import focus_runs, phase_dir
+from primspace.experiments.runs import focus_runs
+from primspace.results.layout import phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 from primspace.experiments.prediction_table import predict_figure, predict_table

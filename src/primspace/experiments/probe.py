@@ -12,7 +12,7 @@ block's position) made quantitative. Written to ``results/probe.json``; data wit
 
 from __future__ import annotations
 
-from primspace.experiments.results import PROBE_RESULTS
+from primspace.results.layout import PROBE_RESULTS
 from primspace.experiments.runs import initial_codes, load_codes
 from primspace.experiments.workspace import ExperimentDir
 

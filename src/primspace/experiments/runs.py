@@ -3,7 +3,8 @@
 Every experiment (intra, clustering, success, inter) builds on the intra-primitive
 grid's runs ``OUT/runs/intra/<init>-q<q>-s<seed>/{fit,infer}``; this module names them,
 derives each run's configurations from the preset, loads a run's data and scaler, and
-reads the codes back. It imports no experiment.
+reads the codes back (the runs' folders are named in :mod:`primspace.results.layout`).
+It imports no experiment.
 
 An inference start that needs a trained run (``calibrated``) has no fit of its own: its
 point infers with the fit of the init it calibrates (:data:`FIT_INIT_OF`), e.g.
@@ -28,16 +29,10 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.experiments.presets import ExperimentPreset
-from primspace.experiments.sweep import RESULT_FILE, run_dir_of
+from primspace.results.layout import FIT_INIT_OF, RESULT_FILE, fit_init, fit_point_dir, phase_dir
 from primspace.experiments.workspace import ExperimentDir
 
 __all__ = [
-    "FIT_INIT_OF",
-    "fit_init",
-    "intra_key",
-    "intra_run_dir",
-    "phase_dir",
-    "fit_point_dir",
     "fit_lock",
     "shared_fit",
     "shared_fits_last",
@@ -56,40 +51,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-#: Starts whose grid point infers with another init's fit.
-FIT_INIT_OF = {"calibrated": "projection"}
-
-
-def fit_init(init: str) -> str:
-    """The init of the fit an init's grid point uses (itself, or :data:`FIT_INIT_OF`'s)."""
-    return FIT_INIT_OF.get(init, init)
-
-
-def intra_key(init: str, latent_dim: int, seed: int) -> str:
-    """The grid key (and ``OUT/runs/`` folder) of one intra-primitive run."""
-    return f"intra/{init}-q{latent_dim}-s{seed}"
-
-
-def intra_run_dir(out_dir: str | Path, init: str, latent_dim: int, seed: int) -> Path:
-    """``OUT/runs/intra/<init>-q<q>-s<seed>``: its ``fit/`` and ``infer/`` run directories."""
-    return run_dir_of(out_dir, intra_key(init, latent_dim, seed))
-
-
-def phase_dir(out_dir: str | Path, init: str, latent_dim: int, seed: int, phase: str) -> Path:
-    """The ``fit`` or ``infer`` run directory of an intra grid point (a calibrated point's
-    ``fit`` is its projection point's)."""
-    return intra_run_dir(out_dir, fit_init(init) if phase == "fit" else init, latent_dim, seed) / phase
-
-
-def fit_point_dir(run_dir: Path, init: str) -> Path:
-    """The grid point whose fit the point ``run_dir`` (of ``init``) uses: itself, or the sibling
-    of :func:`fit_init` (grid keys start with their init: ``calibrated-q40-s0`` ->
-    ``projection-q40-s0``, ``calibrated-fold3-s0`` -> ``projection-fold3-s0``)."""
-    if not run_dir.name.startswith(init):
-        raise ValueError(f"grid point {run_dir.name} is not one of init {init}")
-    return run_dir.with_name(fit_init(init) + run_dir.name[len(init) :])
 
 
 def shared_fits_last(points: list) -> list:

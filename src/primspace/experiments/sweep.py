@@ -18,13 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from primspace.results.layout import ERROR_FILE, RESULT_FILE, run_dir_of
 from primspace.utils.files import atomic_write_json, atomic_write_text
 from primspace.utils.parallel import run_jobs
 
-__all__ = ["GridPoint", "GridResult", "run_grid", "complete_result", "RESULT_FILE", "ERROR_FILE"]
-
-RESULT_FILE = "result.json"
-ERROR_FILE = "error.txt"
+__all__ = ["GridPoint", "GridResult", "run_grid", "complete_result"]
 
 
 @dataclass(frozen=True)
@@ -46,10 +44,6 @@ class GridResult:
     @property
     def ok(self) -> bool:
         return not self.failures
-
-
-def run_dir_of(out_dir: str | Path, key: str) -> Path:
-    return Path(out_dir) / "runs" / key
 
 
 def run_grid(

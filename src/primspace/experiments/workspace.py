@@ -15,8 +15,8 @@ only ``data.h5`` (the data, already made: it is used), in place, never replaced;
 other folder is refused before anything is written, so an experiment never writes over a
 user's files. Re-running a command with the same ``OUT`` reuses what is there: the data
 file, finished runs (skipped), interrupted runs (resumed from their checkpoints). A
-different preset or data file for an existing ``OUT`` is refused. The file names and
-their readers are in :mod:`primspace.experiments.results` (re-exported here).
+different preset or data file for an existing ``OUT`` is refused. The file names are
+:mod:`primspace.results.layout`'s, their readers :mod:`primspace.results.readers`'s (re-exported here).
 """
 
 from __future__ import annotations
@@ -35,14 +35,8 @@ from primspace import __version__
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.experiments.presets import LASA_CHAIN_SEQUENCES, LASA_CHAINS, LASA_DATA, ExperimentPreset
-from primspace.experiments.results import (
-    META_FILE,
-    arrays_file,
-    figure_file,
-    read_meta,
-    read_results,
-    results_file,
-)
+from primspace.results.layout import META_FILE, arrays_file, figure_file, results_file
+from primspace.results.readers import read_meta, read_results
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
 from primspace.utils.files import atomic_path, atomic_write_json, check_outside_inputs, check_writable_directory
 
@@ -130,7 +124,7 @@ class ExperimentDir:
 
     def record_invocation(self, args: Sequence[str]) -> None:
         """Keep ``primspace ARGS`` in experiment.json's ``invocations`` (with the version and
-        the time; written with the next save): :func:`~primspace.experiments.summary.summarize`
+        the time; written with the next save): :func:`~primspace.results.summary.summarize`
         names them when no command is given."""
         self.meta.setdefault("invocations", []).append(
             {

@@ -9,7 +9,7 @@ animated GIFs (one per primitive) are embedded as base64, so the file can be mai
 attached to a paper's supplementary material as it is.
 
 The report reads results and computes nothing; it imports no experiment (only the
-results readers :mod:`primspace.experiments.results` and :mod:`primspace.experiments.claims`).
+results readers of :mod:`primspace.results`).
 
 - :mod:`~primspace.report.page`: :class:`HtmlReport`, the page writer.
 - :mod:`~primspace.report.sections`: one function per section, reading results files.

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from primspace.experiments.act_results import act_latency_text, act_tables
-from primspace.experiments.results import read_results
+from primspace.results.act import act_latency_text, act_tables
+from primspace.results.readers import read_results
 from primspace.report.page import HtmlReport
 
 __all__ = ["act", "ACT_SECTION", "act_animations"]

@@ -11,7 +11,8 @@ import json
 import platform
 from pathlib import Path
 
-from primspace.experiments.results import read_meta, read_results, results_file
+from primspace.results.readers import read_meta, read_results
+from primspace.results.layout import results_file
 from primspace.report.page import HtmlReport
 
 __all__ = ["appendix_a", "environment"]

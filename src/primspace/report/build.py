@@ -7,7 +7,8 @@ from pathlib import Path
 from typing import Callable
 
 from primspace.utils.errors import UserError, first_line
-from primspace.experiments.results import META_FILE, read_meta, results_file
+from primspace.results.layout import META_FILE, results_file
+from primspace.results.readers import read_meta
 from primspace.report import sections
 from primspace.report.page import HtmlReport
 

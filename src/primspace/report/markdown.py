@@ -2,7 +2,7 @@
 docs/reproduce.md, written from the stored summaries.
 
 ``python -m primspace.report.markdown`` (``make docs``) reads every ``docs/results/*.json``
-(experiment summaries, :mod:`primspace.experiments.summary`) and rewrites the generated
+(experiment summaries, :mod:`primspace.results.summary`) and rewrites the generated
 blocks of README.md (the results at a glance), docs/results.md (the tables per summary,
 and the numbers its prose discusses), docs/predict.md (prediction, scene),
 docs/sequences.md (composite segmentation, and its synthesis at a glance; the blocks
@@ -35,10 +35,11 @@ import sys
 from pathlib import Path
 
 
-from primspace.experiments.act_results import act_latency_text, act_tables
-from primspace.experiments.claims import check_claims
-from primspace.experiments.results import projection_lead
-from primspace.experiments.summary import read_summary
+from primspace.results.act import act_latency_text, act_tables
+from primspace.results.claims import check_claims
+from primspace.results.tables import projection_lead
+from primspace.results.summary import read_summary
+from primspace.report.commands import portable_command
 from primspace.report.comparisons import COMPARISONS, render_comparison
 from primspace.report.prose_numbers import render_composite_glance, render_differ
 from primspace.report.reproduce_blocks import (
@@ -199,7 +200,7 @@ def render_act(summary: dict) -> str:
     move = act.get("perturbation") or {}
     (lo, hi), at = move.get("distance_m", [0.02, 0.04]), move.get("at", 0.3)
     n_test = sorted({r.get("n_test") for r in act.get("by_seed", {}).values() if r.get("n_test") is not None})
-    lines = [f"#### {summary['name']}", "", "```", summary["command"].strip(), "```", ""]
+    lines = [f"#### {summary['name']}", "", "```", portable_command(summary["command"].strip()), "```", ""]
     lines.append(
         f"q = {act['latent_dim']}, seeds {', '.join(map(str, seeds))}"
         + (f" ({' or '.join(map(str, n_test))} scenes each)" if n_test else "")

@@ -6,14 +6,14 @@ and the HTML report (:func:`primspace.report.sections.prediction`). Both read th
 results' ``table`` (``{row: {fraction: {"mse" | "success" | "accuracy": [mean, std (ddof 1), n]}}}``,
 :func:`primspace.experiments.prediction_table.predict_table`) and its ``given_rows``; every
 other row is the label-free task. Results before version 4 have one table
-(:func:`primspace.experiments.results.predict_error_table`).
+(:func:`primspace.results.tables.predict_error_table`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from primspace.experiments.results import cell_text
+from primspace.results.tables import cell_text
 
 __all__ = ["PEER_PREFIXES", "TASKS_TEXT", "VERDICT_RULE", "TaskTable", "splits_tasks", "task_tables", "verdict"]
 

@@ -1,8 +1,8 @@
 """The report's sections, each written from an experiment directory's results files.
 
 A section reads ``OUT/experiment.json``, ``OUT/results/*.json`` and the PNGs and GIFs of
-``OUT/figures`` (through :mod:`primspace.experiments.results` and
-:mod:`primspace.experiments.claims`, which import no experiment) and computes nothing:
+``OUT/figures`` (through :mod:`primspace.results`, which imports no
+experiment) and computes nothing:
 no model is loaded, no data set is read, nothing is drawn or sampled. A section whose
 results are absent adds nothing, or a note saying what is missing.
 The closing sections (Appendix A, the environment) live in :mod:`primspace.report.appendices`,
@@ -13,32 +13,33 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from primspace.experiments.calibration_results import calibration_table, calibration_verdict
-from primspace.experiments.claims import check_claims, claims_table
-from primspace.experiments.composite.results import bounds_table, composite_table, primitives_table, recall_table
-from primspace.experiments.results import (
+from primspace.results.calibration import calibration_table, calibration_verdict
+from primspace.results.claims import check_claims, claims_table
+from primspace.results.composite import bounds_table, composite_table, primitives_table, recall_table
+from primspace.results.tables import (
     predict_error_table,
-    ANIMATION_RESULTS,
-    IMAGE_STRIPS,
-    INITIAL_CODES,
-    PROBE_RESULTS,
-    animation_file,
     failed_criteria_table,
     final_loss_table,
-    figure_file,
     inter_table,
     latent_table,
     probe_table,
     qualitative_check,
     spread_table,
     outcome_spread_table,
-    read_meta,
-    read_results,
-    results_file,
     scene_table,
     success_table,
     tuning_table,
 )
+from primspace.results.layout import (
+    ANIMATION_RESULTS,
+    IMAGE_STRIPS,
+    INITIAL_CODES,
+    PROBE_RESULTS,
+    animation_file,
+    figure_file,
+    results_file,
+)
+from primspace.results.readers import read_meta, read_results
 from primspace.report.act_section import act
 from primspace.report.appendices import appendix_a, environment
 from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables

@@ -3,7 +3,7 @@ docs/predict.md and docs/sequences.md show, and the numbers as the docs print th
 
 The markdown counterpart of :mod:`primspace.report.sections` (the HTML report): both read
 results and compute nothing. Each function takes a summary (``docs/results/*.json``,
-:mod:`primspace.experiments.summary`) and returns markdown text;
+:mod:`primspace.results.summary`) and returns markdown text;
 :mod:`primspace.report.markdown` puts the text between the markers of the docs files.
 Standard deviations are sample ones (ddof 1, over the seeds run; :func:`primspace.utils.stats.sample_std`).
 """
@@ -14,15 +14,12 @@ import re
 
 import numpy as np
 
-from primspace.experiments.claims import check_claims, codes_of_summary, eighth_loss, verdict_text
-from primspace.experiments.composite.results import (
-    PEER_RULES,
-    bounds_table,
-    composite_table,
-    primitives_table,
-    recall_table,
-)
-from primspace.experiments.results import LEARNED_CODES, predict_error_table, scene_table, tuning_table
+from primspace.results.claims import check_claims, codes_of_summary, verdict_text
+from primspace.results.measures import eighth_loss
+from primspace.results.composite import PEER_RULES, bounds_table, composite_table, primitives_table, recall_table
+from primspace.results.layout import LEARNED_CODES
+from primspace.results.tables import predict_error_table, scene_table, tuning_table
+from primspace.report.commands import portable_command
 from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
 from primspace.utils.stats import sample_std, t_interval, wilson_interval
 
@@ -206,7 +203,7 @@ def _header(summary: dict) -> list[str]:
         f"#### {summary['name']}",
         "",
         "```",
-        summary["command"].strip(),
+        portable_command(summary["command"].strip()),
         "```",
         "",
         f"primspace {summary.get('primspace')}; preset {preset.get('name')}, "
@@ -287,7 +284,7 @@ def _claims_section(res: dict, codes=None, note: str = "") -> list[str]:
         return []
     return [
         "",
-        "The paper's sentences, checked (`primspace.experiments.claims`):" + note,
+        "The paper's sentences, checked (`primspace.results.claims`):" + note,
         "",
         table(["the paper (verbatim)", "rule (version): what we test", "verdict", "direction", "earlier rule"], claims),
     ]
@@ -341,7 +338,7 @@ def render_composite(summary: dict) -> str:
         f"#### {summary['name']}",
         "",
         "```",
-        summary["command"].strip(),
+        portable_command(summary["command"].strip()),
         "```",
         "",
         f"primspace {summary.get('primspace')}; preset {preset.get('name')}, seeds {', '.join(map(str, seeds))}, "
@@ -387,7 +384,7 @@ def render_scene(summary: dict) -> str:
             f"#### {summary['name']}",
             "",
             "```",
-            summary["command"].strip(),
+            portable_command(summary["command"].strip()),
             "```",
             "",
             f"q = {sc['latent_dim']}, seeds {', '.join(map(str, seeds))}, {sc['epochs']} inference epochs in the "
@@ -410,7 +407,7 @@ def render_predict(summary: dict) -> str:
         f"#### {summary['name']}",
         "",
         "```",
-        summary["command"].strip(),
+        portable_command(summary["command"].strip()),
         "```",
         "",
         f"The experiment directory ran primspace {summary.get('primspace')}; q = {pr['latent_dim']}, seeds {', '.join(map(str, seeds))}, "

@@ -11,7 +11,7 @@ This module imports no experiment (the report may import it).
 
 from __future__ import annotations
 
-from primspace.experiments.results import cell_text
+from primspace.results.tables import cell_text
 
 __all__ = ["ALL", "act_tables", "act_table", "act_latency_text"]
 

@@ -4,12 +4,12 @@ Calibrated projection (:class:`primspace.model.calibration.CodeCalibration`) sta
 a ridge map of ``P m`` instead of ``P m``: :func:`calibration_table` compares its eval loss
 with the other starts' per q, beside how far the fitted codes moved from ``P m`` and how well
 the map predicts them; :func:`calibration_verdict` says whether it never loses. Reads
-results only (through :mod:`primspace.experiments.results`); imports no experiment.
+results only (through :mod:`primspace.results.tables`); imports no experiment.
 """
 
 from __future__ import annotations
 
-from primspace.experiments.results import final, mean_std
+from primspace.results.tables import final, mean_std
 
 __all__ = ["CALIBRATION_COMPARED", "CALIBRATION_TOLERANCE", "calibration_table", "calibration_verdict"]
 

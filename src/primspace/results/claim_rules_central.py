@@ -1,6 +1,6 @@
 """The rules of the paper's central claims: its abstract's two sentences (issue 42).
 
-The claims table (:mod:`primspace.experiments.claims`) first checked the sentences of the
+The claims table (:mod:`primspace.results.claims`) first checked the sentences of the
 paper's *Experimental Results*; the abstract's claims, what a reader takes from the paper,
 were not in it. They are (verbatim, shared/paper.tex):
 
@@ -26,22 +26,16 @@ Reads results only.
 
 from __future__ import annotations
 
-from primspace.experiments.claim_rules_v1 import losses_by_q
-from primspace.experiments.claim_verdicts import AGAINST, PARTLY, Outcome
-from primspace.experiments.results import INITIAL_CODES, LEARNED_CODES
+from primspace.results.claim_verdicts import AGAINST, PARTLY, Outcome
+from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
+from primspace.results.measures import chance_level, losses_by_q
 
-__all__ = ["SUBSTANTIAL", "WELL_SEPARATED_SHARE", "generalisation_improved", "separated_from_the_onset", "chance_level"]
+__all__ = ["SUBSTANTIAL", "WELL_SEPARATED_SHARE", "generalisation_improved", "separated_from_the_onset"]
 
 #: "substantial improvement": the other init's final eval loss at least this many times projection's.
 SUBSTANTIAL = 2.0
 #: "well separated": clustering accuracy at least this share of the way from chance (1/k) to 1.
 WELL_SEPARATED_SHARE = 0.5
-
-
-def chance_level(results: dict) -> float | None:
-    """1/k of a clustering result (k primitives), None when k is not in it."""
-    k = results.get("trajectory", {}).get("data", {}).get("k") or results.get("n_clusters")
-    return 1.0 / k if k else None
 
 
 def generalisation_improved(results: dict) -> Outcome:

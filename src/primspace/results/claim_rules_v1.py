@@ -1,5 +1,5 @@
 """Version 1 of the rules that test the paper's claims (primspace 0.2-0.5), kept so that
-their verdicts stay readable beside the current rules' (:mod:`primspace.experiments.claims`).
+their verdicts stay readable beside the current rules' (:mod:`primspace.results.claims`).
 
 Frozen: a rule that changes gets a new version there; nothing here is edited except to
 keep it running. What was wrong with some of them (issue 23): a tie counted as an
@@ -7,50 +7,28 @@ improvement (success: projection "at least" zero's), "did not converge at all" w
 tested by another sentence (random ends 10x above projection, while its own loss falls
 6-12x), clustering "similar" held when both inits were near chance, and the inter rule
 compared means without their spread.
+
+Its claims are of the one class :class:`~primspace.results.claim_verdicts.Claim` (version 1,
+the rule's threshold in words); the measures its rules read are those of
+:mod:`primspace.results.measures`, which every version shares.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from primspace.experiments.results import LEARNED_CODES
+from primspace.results.claim_verdicts import Claim
+from primspace.results.layout import LEARNED_CODES
+from primspace.results.measures import has_inits, losses_by_q
 
-__all__ = ["Claim", "CLAIMS_V1", "losses_by_q", "has_inits"]
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One sentence of the paper and how we test it."""
-
-    key: str
-    experiment: str  # the results file it reads: intra, clustering, success, inter
-    where: str  # the paper's section / figure
-    quote: str  # verbatim from shared/paper.tex
-    test: str  # what we measure and the rule for "holds"
-    check: Callable[[dict], tuple[bool | None, str]]
+__all__ = ["CLAIMS_V1"]
 
 
 def _final(curve: list) -> float:
     vals = [h["loss"] for h in curve if h.get("loss") is not None]
     return float(vals[-1]) if vals else float("nan")
-
-
-def losses_by_q(results: dict, phase: str, at: int = -1) -> dict[int, dict[str, float]]:
-    """``{q: {init: loss}}`` averaged over seeds, at epoch index ``at`` of ``phase``."""
-    acc: dict[int, dict[str, list]] = {}
-    for r in results["runs"]:
-        curve = [h["loss"] for h in r[phase] if h.get("loss") is not None]
-        if curve:
-            acc.setdefault(r["latent_dim"], {}).setdefault(r["init"], []).append(curve[at])
-    return {q: {i: float(np.mean(v)) for i, v in d.items()} for q, d in sorted(acc.items())}
-
-
-def has_inits(d: dict, *inits: str) -> bool:
-    """Whether ``d`` (by init) holds every one of ``inits``."""
-    return all(i in d for i in inits)
 
 
 #: The largest latent size read as "low-dimensional latent space" (the paper's figure
@@ -168,6 +146,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "Intra-primitive generalisation, Fig. loss_train",
         "random initialization performs very badly for low-dimensional latent space.",
         "final fit loss at the smallest q (at most 20): random at least 5x projection's",
+        ">= 5x",
+        1,
         _random_fit_bad,
     ),
     Claim(
@@ -176,6 +156,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "Intra-primitive generalisation, Fig. loss_train",
         "Zero initialization, on the other hand, differs very slightly from random linear projection case.",
         "final fit loss of zero within a factor of 2 of projection's at every q",
+        "within 2x",
+        1,
         _zero_within_2x("fit", "fit"),
     ),
     Claim(
@@ -184,6 +166,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "Intra-primitive generalisation, Fig. loss_test",
         "Notice that the case with random initialization did not converge at all.",
         "final eval loss (θ frozen) of random at least 10x projection's at every q",
+        ">= 10x",
+        1,
         _random_infer_fails,
     ),
     Claim(
@@ -192,6 +176,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "Intra-primitive generalisation, Fig. loss_test",
         "initialization with random linear projection yields good results already without any training",
         "projection's eval loss before any inference step below zero's after the last, at every q",
+        "strictly below",
+        1,
         _projection_good_untrained,
     ),
     Claim(
@@ -201,6 +187,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "It may look like resulting performance of trained models for zero latent initialization and random "
         "projection latent initialization is very similar",
         "final eval loss of zero within a factor of 2 of projection's at every q",
+        "within 2x",
+        1,
         _zero_within_2x("infer", "eval"),
     ),
     Claim(
@@ -210,6 +198,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "some primitives from the experimental setup require more precision than others. In particular, "
         "pushing and pulling the block as well as grasping is easy to fail if the gripper fingers miss just a bit.",
         "success rate of projection at least zero's for pull, push and grasp (paper: 0.92/0.86, 0.94/0.9, 1.0/0.8)",
+        "at least zero's",
+        1,
         _success_projection_higher,
     ),
     Claim(
@@ -218,6 +208,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "Affine subspace clustering of latent space, Fig. arm_clustering",
         "They yield similar results,",
         "clustering accuracy of zero and projection codes (q = 40, R² = 0.9999) within 0.1",
+        "within 0.1",
+        1,
         _clustering_similar,
     ),
     Claim(
@@ -227,6 +219,8 @@ CLAIMS_V1: tuple[Claim, ...] = (
         "Proposed method shows slightly improved results in terms of convergence speed, final value of the loss "
         "function and robustness of the learning.",
         "phase-2 loss over folds: projection's start and final mean below zero's, its final std not above",
+        "lower mean and std",
+        1,
         _inter_improved,
     ),
 )

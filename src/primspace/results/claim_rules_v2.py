@@ -1,7 +1,7 @@
 """The rules of the paper's *Experimental Results* sentences as of version 2 (0.6), and the
-version-1 rules that version kept (:mod:`primspace.experiments.claims` quotes the sentences).
+version-1 rules that version kept (:mod:`primspace.results.claims` quotes the sentences).
 
-Version 2 changed four rules of version 1 (:mod:`primspace.experiments.claim_rules_v1`):
+Version 2 changed four rules of version 1 (:mod:`primspace.results.claim_rules_v1`):
 
 - a tie never counts as an improvement, and a difference in success rates counts only
   when the Wilson 95 % intervals of the two rates do not overlap;
@@ -25,10 +25,9 @@ from typing import Callable
 
 import numpy as np
 
-from primspace.experiments.claim_rules_central import chance_level
-from primspace.experiments.claim_rules_v1 import has_inits, losses_by_q
-from primspace.experiments.claim_verdicts import AGAINST, IN_FAVOUR, PARTLY, Outcome
-from primspace.experiments.results import LEARNED_CODES
+from primspace.results.claim_verdicts import AGAINST, IN_FAVOUR, PARTLY, Outcome
+from primspace.results.layout import LEARNED_CODES
+from primspace.results.measures import chance_level, has_inits, eighth_loss, losses_by_q, paired_lower
 from primspace.utils.stats import wilson_interval
 
 __all__ = [
@@ -47,7 +46,6 @@ __all__ = [
     "projection_good_untrained",
     "success_projection_higher",
     "clustering_similar",
-    "eighth_loss",
     "inter_measures",
     "inter_improved_v2",
 ]
@@ -233,19 +231,6 @@ def clustering_similar(results: dict) -> Outcome:
     return Outcome(ok, numbers + f"; chance {chance:.2f}, organised from {bar:.2f}", None, direction)
 
 
-def _paired_lower(a: dict, b: dict) -> tuple[float, int]:
-    """Share of the common keys where ``b`` < ``a`` (strictly), and their number."""
-    keys = sorted(set(a) & set(b))
-    return (float(np.mean([b[k] < a[k] for k in keys])) if keys else float("nan")), len(keys)
-
-
-def eighth_loss(curve: list[dict]) -> float:
-    """The loss an eighth of the way through a curve (at least epoch 1): the inter claim's
-    "convergence speed" (a stored summary keeps this epoch)."""
-    eighth = max(1, round(curve[-1]["epoch"] / 8))
-    return min(curve, key=lambda h: abs(h["epoch"] - eighth))["loss"]
-
-
 def inter_measures(results: dict, ddof: int) -> Outcome:
     """Inter "slightly improved results in terms of convergence speed, final value of the loss
     function and robustness": projection's loss after 1/8 of phase 2 and its final loss lower
@@ -261,7 +246,7 @@ def inter_measures(results: dict, ddof: int) -> Outcome:
     measures = []
     for name, which in (("convergence speed (loss after 1/8 of phase 2)", 0), ("final value", 1)):
         za, pa = {k: v[which] for k, v in z.items()}, {k: v[which] for k, v in p.items()}
-        share, n = _paired_lower(za, pa)
+        share, n = paired_lower(za, pa)
         better = np.mean(list(pa.values())) < np.mean(list(za.values())) and share >= PAIRED_SHARE
         measures.append(
             (

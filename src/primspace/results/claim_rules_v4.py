@@ -1,6 +1,6 @@
 """Version 4 of the rules that test the paper's claims (issue 42, "the scoreboard").
 
-Three rules new or changed (:mod:`primspace.experiments.claims` quotes the sentences):
+Three rules new or changed (:mod:`primspace.results.claims` quotes the sentences):
 
 - ``infer_projection`` reads its whole sentence, "... yields good results already without
   any training, which means the initial distribution of projected points did not change
@@ -10,7 +10,7 @@ Three rules new or changed (:mod:`primspace.experiments.claims` quotes the sente
   stay close to their initial ``P m``, the mean over train samples of
   ``‖z_fit − P m‖ / ‖P m‖`` (:func:`code_drift`) below :data:`LITTLE_CHANGE` at every q.
   That needs the codes (an experiment directory's runs, or a summary's ``.codes.npz``,
-  :mod:`primspace.experiments.summary_codes`); without them the second half cannot be
+  :mod:`primspace.results.codes`); without them the second half cannot be
   checked and the verdict is at most "partly". The threshold was named after the stored
   codes had been read (Adam's runs move about 0.06 of ``‖P m‖``, plain SGD's about 0.3).
 - inter (:func:`inter_improved`): robustness compares the sample std (ddof 1,
@@ -20,7 +20,7 @@ Three rules new or changed (:mod:`primspace.experiments.claims` quotes the sente
   improves intra- and inter-primitive generalization capabilities compared to
   conventional initialization methods." (:func:`intra_and_inter_improved`), reading intra
   and inter: holds when the abstract's intra rule
-  (:func:`primspace.experiments.claim_rules_central.generalisation_improved`) and the inter
+  (:func:`primspace.results.claim_rules_central.generalisation_improved`) and the inter
   rule both hold; partly when one of them holds or either holds partly; cannot be
   checked when one of the two experiments did not run.
 
@@ -34,9 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.experiments.claim_rules_central import generalisation_improved
-from primspace.experiments.claim_rules_v2 import inter_measures, projection_good_untrained
-from primspace.experiments.claim_verdicts import AGAINST, PARTLY, UNCHECKABLE, Outcome, verdict_word
+from primspace.results.claim_rules_central import generalisation_improved
+from primspace.results.claim_rules_v2 import inter_measures, projection_good_untrained
+from primspace.results.claim_verdicts import AGAINST, PARTLY, UNCHECKABLE, Outcome, verdict_word
 
 __all__ = [
     "LITTLE_CHANGE",
@@ -50,7 +50,7 @@ __all__ = [
 #: "did not change much": the fitted codes' mean relative distance from their initial
 #: ``P m`` (``‖z_fit − P m‖ / ‖P m‖``, averaged over train samples) below this.
 LITTLE_CHANGE = 0.25
-#: The key under which :func:`primspace.experiments.claims.check_claims` hands the rules the
+#: The key under which :func:`primspace.results.claims.check_claims` hands the rules the
 #: codes' drift with intra's results: ``{"q40-s0": drift}`` of the projection runs.
 CODE_DRIFT = "code_drift"
 

@@ -1,4 +1,5 @@
-"""A rule's outcome and its verdict, seed by seed, counted (:mod:`primspace.experiments.claims`).
+"""A claim (:class:`Claim`: a sentence of the paper, its rule and the rule's earlier versions),
+a rule's outcome and its verdict, seed by seed, counted (:mod:`primspace.results.claims`).
 
 A rule (a claim's ``check``) reads one set of results and says an :class:`Outcome`: True,
 False, :data:`PARTLY` or None (cannot be checked), with the numbers behind it, the
@@ -9,14 +10,18 @@ and for a sentence about every latent size the verdict at each (``by_q``).
 experiments', for a claim that reads more than one): with several seeds, each seed on
 its own (its own split, weights and projection), and the verdicts counted in words
 ("holds in 2 of 3 seeds (not in seed 1)"), at every tolerance of a sweep and every
-latent size too. Reads results only; imports no experiment.
+latent size too. Every rule version's claims are of the one class :class:`Claim`. Reads
+results only; imports no experiment.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
 __all__ = [
+    "Claim",
+    "Earlier",
     "Outcome",
     "PARTLY",
     "AS_SAID",
@@ -193,3 +198,26 @@ def rule_verdict(check: Callable[[dict], Outcome], experiment: str | tuple, resu
     if by_q:
         row["by_q"] = by_q
     return row
+
+
+class Earlier(NamedTuple):
+    """An earlier version of a claim's rule: its version, what it tested, its check."""
+
+    version: int
+    test: str
+    check: Callable[[dict], tuple]
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One or more whole sentences of the paper and how we test them."""
+
+    key: str
+    experiment: str | tuple[str, ...]  # the results it reads: intra, clustering, success, inter (or several)
+    where: str  # the paper's section / figure
+    quote: str  # whole sentences, verbatim from shared/paper.tex
+    test: str  # what we measure and the rule
+    threshold: str  # the effect size the rule asks for, in words
+    version: int
+    check: Callable[[dict], Outcome]
+    previous: tuple[Earlier, ...] = field(default=(), compare=False)  # earlier rules, oldest first

@@ -11,50 +11,49 @@ decides.
 its earlier versions stay in ``previous``: :func:`check_claims` gives every earlier
 verdict beside the current one, so a reader sees what the change did. The versions:
 
-- 1 (0.2-0.5): :mod:`primspace.experiments.claim_rules_v1`, frozen;
+- 1 (0.2-0.5): :mod:`primspace.results.claim_rules_v1`, frozen;
 - 2 (0.6): four rules changed (ties, "did not converge", clustering near chance, inter
-  paired by fold), :mod:`primspace.experiments.claim_rules_v2`, which also holds the
+  paired by fold), :mod:`primspace.results.claim_rules_v2`, which also holds the
   version-1 rules still current;
 - 3 (0.9): the abstract's two central claims, first in the table
-  (:mod:`primspace.experiments.claim_rules_central`);
+  (:mod:`primspace.results.claim_rules_central`);
 - 4: ``infer_projection`` reads its whole sentence (the codes' drift from ``P m``), inter
   compares the sample std over folds, and the Summary's sentence on intra and inter
-  generalisation is checked (:mod:`primspace.experiments.claim_rules_v4`).
+  generalisation is checked (:mod:`primspace.results.claim_rules_v4`).
 
 Verdicts: ``holds``, ``partly`` (the sentence half holds: the numbers say which half),
 ``does not hold``, ``cannot be checked`` (the runs it needs are missing), ``not run``.
-Each verdict has a ``direction`` (:data:`primspace.experiments.claim_verdicts.DIRECTIONS`):
+Each verdict has a ``direction`` (:data:`primspace.results.claim_verdicts.DIRECTIONS`):
 "as the paper says" where it holds; "in the paper's favour" where the sentence fails
 because random-projection initialisation does better than it says; "against the paper"
 where it does worse or the effect is absent; "cannot be checked at this scale" where the
 runs are missing or the sentence speaks of a setting not run. Each rule decides its
 direction from its numbers. With several seeds each seed is checked on its own (its own
 split, weights and P) and the verdict counts them
-(:mod:`primspace.experiments.claim_verdicts`). A rule about every latent size gives its
+(:mod:`primspace.results.claim_verdicts`). A rule about every latent size gives its
 verdict at each (``by_q``); the success rule is also judged at every tolerance of the
 judge's declared sweep (:data:`primspace.sim.success.SEPARATION_SWEEP`), with a
 robustness flag.
 
 :func:`check_claims` reads an experiment directory, or the results held in a stored
-summary (:mod:`primspace.experiments.summary`), through the same readers, and the codes
+summary (:mod:`primspace.results.summary`), through the same readers, and the codes
 (for ``infer_projection``'s second half) where it is given them; :func:`claims_table` is
 the table docs and the report print. This module imports no experiment.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, NamedTuple
+from typing import Callable, Mapping
 
-from primspace.experiments.claim_rules_central import (
+from primspace.results.claim_rules_central import (
     SUBSTANTIAL,
     WELL_SEPARATED_SHARE,
     generalisation_improved,
     separated_from_the_onset,
 )
-from primspace.experiments.claim_rules_v1 import CLAIMS_V1
-from primspace.experiments.claim_rules_v2 import (
+from primspace.results.claim_rules_v1 import CLAIMS_V1
+from primspace.results.claim_rules_v2 import (
     LOW_DIMENSIONAL_Q,
     NO_GENERALISATION,
     NOT_CONVERGED_DROP,
@@ -64,14 +63,14 @@ from primspace.experiments.claim_rules_v2 import (
     SIMILAR_FACTOR,
     VERY_BADLY,
     clustering_similar,
-    eighth_loss,
     inter_improved_v2,
     random_fit_bad,
     random_not_converged,
     success_projection_higher,
     zero_within,
 )
-from primspace.experiments.claim_rules_v4 import (
+from primspace.results.measures import eighth_loss
+from primspace.results.claim_rules_v4 import (
     CODE_DRIFT,
     LITTLE_CHANGE,
     code_drift,
@@ -79,8 +78,8 @@ from primspace.experiments.claim_rules_v4 import (
     intra_and_inter_improved,
     projection_good_and_still,
 )
-from primspace.experiments.claim_verdicts import PARTLY, UNCHECKABLE, Outcome, rule_verdict
-from primspace.experiments.results import read_results
+from primspace.results.claim_verdicts import PARTLY, UNCHECKABLE, Claim, Earlier, Outcome, rule_verdict
+from primspace.results.readers import read_results
 
 __all__ = [
     "Outcome",
@@ -101,29 +100,6 @@ __all__ = [
 RULES_VERSION = 4
 
 
-class Earlier(NamedTuple):
-    """An earlier version of a claim's rule: its version, what it tested, its check."""
-
-    version: int
-    test: str
-    check: Callable[[dict], tuple]
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One or more whole sentences of the paper and how we test them."""
-
-    key: str
-    experiment: str | tuple[str, ...]  # the results it reads: intra, clustering, success, inter (or several)
-    where: str  # the paper's section / figure
-    quote: str  # whole sentences, verbatim from shared/paper.tex
-    test: str  # what we measure and the rule
-    threshold: str  # the effect size the rule asks for, in words
-    version: int
-    check: Callable[[dict], Outcome]
-    previous: tuple[Earlier, ...] = field(default=(), compare=False)  # earlier rules, oldest first
-
-
 def _v1(key: str) -> tuple[Earlier, ...]:
     return tuple(Earlier(1, c.test, c.check) for c in CLAIMS_V1 if c.key == key)
 
@@ -141,8 +117,8 @@ _INFER_SIMILAR = (
 )
 
 #: The paper's sentences (verbatim, whole) and our rules: the central claims of its abstract
-#: and Summary first (:mod:`primspace.experiments.claim_rules_central`,
-#: :mod:`primspace.experiments.claim_rules_v4`), then *Experimental Results* in order.
+#: and Summary first (:mod:`primspace.results.claim_rules_central`,
+#: :mod:`primspace.results.claim_rules_v4`), then *Experimental Results* in order.
 CLAIMS: tuple[Claim, ...] = (
     Claim(
         "central_generalisation",

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.experiments.results import final, mean_std
+from primspace.results.tables import final, mean_std
 
 __all__ = [
     "METHODS",

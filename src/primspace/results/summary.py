@@ -8,10 +8,10 @@ accuracy of each clustering, the inter folds. ``docs/results/NAME.json`` holds o
 run we report; ``python -m primspace.report.markdown`` writes the tables of README and
 docs/results.md from them, and a test keeps the committed text equal to what it writes.
 Beside each, ``docs/results/NAME.codes.npz`` keeps the codes of the directory's runs
-(:mod:`primspace.experiments.summary_codes`, written by ``primspace summarize``), so that
+(:mod:`primspace.results.codes`, written by ``primspace summarize``), so that
 clustering can be re-checked without training again.
 
-The claims (:func:`primspace.experiments.claims.check_claims`) read a summary's
+The claims (:func:`primspace.results.claims.check_claims`) read a summary's
 ``results`` exactly as they read a directory, so a rule that changes is re-judged from
 the stored summaries without re-running anything.
 """
@@ -23,8 +23,8 @@ import platform
 from pathlib import Path
 
 from primspace.utils.errors import UserError
-from primspace.experiments.act_results import ALL
-from primspace.experiments.results import read_meta, read_results
+from primspace.results.act import ALL
+from primspace.results.readers import read_meta, read_results
 
 __all__ = [
     "SUMMARY_VERSION",

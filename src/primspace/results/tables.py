@@ -1,49 +1,14 @@
-"""Reading an experiment directory's results, and the tables and verdicts they give.
-
-The one module of :mod:`primspace.experiments` that the report layer
-(:mod:`primspace.report`) and the figures (:mod:`primspace.experiments.figures`) read
-through: it names the files an experiment writes and turns their numbers into tables,
-and it imports no experiment (nothing here trains, clusters, judges or draws).
-
-Files of ``OUT``::
-
-    experiment.json        preset, data file, backend, timings per stage, versions
-    results/<name>.json    each experiment's numbers (intra, clustering, success, inter,
-                           data, appendix_a)
-    results/<name>.npz     arrays the figures are drawn from (intra_latent: codes, reconstructions;
-                           intra_animation: each primitive's recorded, generated and replayed motion)
-    figures/<name>.png     each experiment's figures (figures/animation_<primitive>.gif: animations)
-"""
+"""The tables and the qualitative verdict an experiment folder's results give (read by
+:mod:`primspace.results.readers`); the report prints them and computes nothing else."""
 
 from __future__ import annotations
 
-import hashlib
-import json
-import re
-from pathlib import Path
-from typing import Any
-
 import numpy as np
 
-from primspace.utils.errors import UserError, first_line
+from primspace.results.layout import LEARNED_CODES
 from primspace.utils.stats import sample_std
 
 __all__ = [
-    "file_stem",
-    "META_FILE",
-    "LATENT_RESULTS",
-    "ANIMATION_RESULTS",
-    "PROBE_RESULTS",
-    "IMAGE_STRIPS",
-    "LEARNED_CODES",
-    "INITIAL_CODES",
-    "results_file",
-    "arrays_file",
-    "figure_file",
-    "animation_file",
-    "read_results",
-    "read_arrays",
-    "read_meta",
     "final",
     "mean_std",
     "final_loss_table",
@@ -60,107 +25,6 @@ __all__ = [
     "scene_table",
     "cell_text",
 ]
-
-META_FILE = "experiment.json"
-
-#: The results (JSON + arrays) the latent-space and reconstruction figures are drawn from.
-LATENT_RESULTS = "intra_latent"
-
-#: The results (JSON + arrays) the per-primitive animations are drawn from.
-ANIMATION_RESULTS = "intra_animation"
-
-#: The linear probe of the codes (:mod:`primspace.experiments.probe`).
-PROBE_RESULTS = "probe"
-
-#: The figure of generated against recorded frames per primitive (drawn with the animations).
-IMAGE_STRIPS = "image_strips"
-
-# the "codes" of a latent clustering row: codes after training, or the projection before it
-LEARNED_CODES = "learned"
-INITIAL_CODES = "initial (P m, untrained)"
-
-
-# ----------------------------------------------------------------------- files
-
-
-def results_file(out_dir: str | Path, name: str) -> Path:
-    """Where experiment ``name`` keeps its numbers: ``OUT/results/<name>.json``."""
-    return Path(out_dir) / "results" / f"{name}.json"
-
-
-def arrays_file(out_dir: str | Path, name: str) -> Path:
-    """Where arrays ``name`` are kept: ``OUT/results/<name>.npz``."""
-    return Path(out_dir) / "results" / f"{name}.npz"
-
-
-def file_stem(name) -> str:
-    """``name`` as the stem of a file name: it may come from data (a label, a LeRobot task, a
-    primitive's name), so it never reaches a path. Letters, digits, ``-``, ``_`` and ``.``
-    are kept, every other character (``/``, NUL, a newline) becomes ``_`` and a leading dot
-    too; a name this changed, or longer than 80 characters, is cut to 80 and gets the first
-    8 hex digits of its SHA-1, so two names never share a file."""
-    text = str(name)
-    safe = re.sub(r"^\.", "_", re.sub(r"[^A-Za-z0-9_.-]", "_", text))
-    if safe != text or len(safe) > 80:
-        digest = hashlib.sha1(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]
-        safe = f"{safe[:80]}-{digest}"
-    return safe
-
-
-def figure_file(out_dir: str | Path, name: str) -> Path:
-    """Where figure ``name`` is drawn: ``OUT/figures/<name>.png`` (:func:`file_stem` of ``name``)."""
-    return Path(out_dir) / "figures" / f"{file_stem(name)}.png"
-
-
-def animation_file(out_dir: str | Path, name: str) -> Path:
-    """Where the animation of ``name`` (a primitive) is drawn: ``OUT/figures/animation_<name>.gif``
-    (:func:`file_stem` of ``name``)."""
-    return Path(out_dir) / "figures" / f"animation_{file_stem(name)}.gif"
-
-
-def _read_json(path: Path, what: str) -> Any:
-    if path.is_symlink() or (path.exists() and not path.is_file()):
-        # an experiment folder's results are its own files: a link could put any readable file into a report
-        raise UserError(
-            f"{path}: not a regular file (a link or something else); {what} are read from the "
-            "experiment folder's own files only"
-        )
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise UserError(f"{path}: cannot read {what} ({first_line(exc)})") from None
-
-
-def read_results(out_dir: str | Path, name: str) -> Any | None:
-    """The results of experiment ``name`` in ``out_dir``, or None if it has not run."""
-    path = results_file(out_dir, name)
-    if not path.exists():
-        return None
-    results = _read_json(path, "the results")
-    if not isinstance(results, dict):
-        raise UserError(f"{path}: not a results file (a JSON object was expected)")
-    return results
-
-
-def read_arrays(out_dir: str | Path, name: str) -> dict[str, np.ndarray] | None:
-    """The arrays ``OUT/results/<name>.npz`` as a dict, or None if they were not written."""
-    path = arrays_file(out_dir, name)
-    if not path.exists():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            return {key: npz[key] for key in npz.files}
-    except (OSError, ValueError) as exc:
-        raise UserError(f"{path}: cannot read the arrays ({first_line(exc)})") from None
-
-
-def read_meta(out_dir: str | Path) -> dict:
-    """``OUT/experiment.json``: preset, settings, data file, timings, failures."""
-    meta = _read_json(Path(out_dir) / META_FILE, "the experiment description")
-    if not isinstance(meta, dict):
-        raise UserError(f"{Path(out_dir) / META_FILE}: not an experiment description (a JSON object was expected)")
-    return meta
-
 
 # ---------------------------------------------------------------------- tables
 

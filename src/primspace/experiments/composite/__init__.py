@@ -8,9 +8,8 @@
 - :mod:`~primspace.experiments.composite.primitives`: segmentation by a model of single
   primitives (synthesis and surprise) per seed.
 - :mod:`~primspace.experiments.composite.timeline`: the arrays of the timeline figures.
-- :mod:`~primspace.experiments.composite.results`: the tables (read by the report, the
-  command line and the docs; imports no experiment).
 
-Each module imports only those listed after it (``results`` and ``timeline`` none of them).
-This package's ``__init__`` imports nothing, so reading its tables never loads the experiment.
+Each module imports only those listed after it (``timeline`` none of them). The tables of
+its results are :mod:`primspace.results.composite` (read by the report, the command line
+and the docs). This package's ``__init__`` imports nothing.
 """

@@ -33,7 +33,7 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
-from primspace.experiments.composite.results import METHODS
+from primspace.results.composite import METHODS
 from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries
 from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_preset
 from primspace.experiments.sweep import GridPoint
@@ -210,7 +210,7 @@ def run_primitives(exp: ExperimentDir, splits: dict) -> list[dict]:
         grid = exp.grid(run_primitives_point, points, "single-primitive segmentation")
     done = [grid.results[p.key] for p in points if p.key in grid.results]
     if done:  # the first finished seed's timeline, where the figures read it
-        from primspace.experiments.sweep import run_dir_of
+        from primspace.results.layout import run_dir_of
 
         with np.load(run_dir_of(exp.path, primitives_key(done[0]["seed"])) / TIMELINE_FILE) as npz:
             exp.write_arrays("composite_primitives", {k: npz[k] for k in npz.files})
