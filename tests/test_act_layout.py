@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 PREDICT = Path(__file__).resolve().parents[1] / "src" / "primspace" / "predict"
@@ -68,3 +69,30 @@ def test_act_exports_the_scene_policy_and_one_planner_interface():
     with pytest.raises(TypeError):
         Planner(None)  # abstract: a planner says how it plans
     assert ScenePolicy.planner.__annotations__["return"] in (PolicyPlanner, "PolicyPlanner")
+
+
+class _Policy:
+    """A stand-in for a fitted scene policy: the belief is the frame's mean, every later look surprises."""
+
+    def see(self, frames):
+        return np.asarray(frames, dtype=float).mean(axis=(1, 2, 3))[:, None]
+
+    def correct(self, primitive, step, belief, seen):
+        return seen
+
+    def replan(self, primitive, belief, executed):
+        return np.full((6, 2), float(belief[0]) + len(executed))
+
+
+def test_the_policy_planner_is_reset_before_each_episode():
+    from primspace.act.planners import PolicyPlanner
+
+    planner = PolicyPlanner(_Policy(), 0, every=2)
+    assert [s for s in range(6) if planner.due(s)] == [0, 2, 4]
+    frame = np.ones((4, 4, 3))
+    assert planner.plan(0, frame, np.zeros((1, 2)))[0, 0] == 2.0 and planner.corrections == []
+    assert planner.plan(2, 3 * frame, np.zeros((3, 2)))[0, 0] == 6.0 and planner.corrections == [2]
+    planner.reset()
+    assert planner.belief is None and planner.current is None and planner.corrections == []
+    assert planner.plan(0, frame, np.zeros((1, 2)))[0, 0] == 2.0  # a new episode starts from its first frame
+    assert not any(PolicyPlanner(_Policy(), 0, every=None).due(s) for s in range(1, 6))  # open loop
