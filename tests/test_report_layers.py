@@ -93,6 +93,25 @@ def test_readers_and_figures_import_no_experiment():
     assert not others, others
 
 
+def test_every_experiment_command_prints_a_table_of_the_results_package():
+    """``primspace experiment NAME`` prints ``table``: a function of ``results.tables``, or
+    ``module:function`` of another module of ``primspace.results`` (cli/experiments.py)."""
+    tree = ast.parse((SRC / "cli" / "experiments.py").read_text(encoding="utf-8"))
+    tables = [
+        node.args[3].value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call)
+        and getattr(node.func, "id", None) == "_experiment_command"
+        and len(node.args) > 3
+        and isinstance(node.args[3], ast.Constant)
+        and node.args[3].value is not None
+    ]
+    assert {"final_loss_table", "composite:composite_table", "act:act_table"} <= set(tables), tables
+    for table in tables:
+        module, _, function = table.rpartition(":")
+        assert callable(getattr(importlib.import_module(f"{RESULTS}.{module or 'tables'}"), function)), table
+
+
 def test_figures_never_run_a_model():
     for module in _modules("primspace.plots"):
         bad = {

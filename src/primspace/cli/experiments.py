@@ -144,9 +144,9 @@ def _run_steps(exp, name: str, steps: tuple[str, ...], table: str | None) -> Non
     for step in _judgeable_steps(exp, name, steps):
         module, function = step.split(":")
         results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
-    if table is not None:  # "function" of experiments.results, or "module:function" of another reader
+    if table is not None:  # "function" of results.tables, or "module:function" of another module of results
         module, _, function = table.rpartition(":")
-        tables = importlib.import_module(f"primspace.experiments.{module or 'results'}")
+        tables = importlib.import_module(f"primspace.results.{module or 'tables'}")
         echo_table(*getattr(tables, function)(results[0]))
 
 
@@ -180,7 +180,8 @@ def _experiment_command(
     name: str, doc: str, steps: tuple[str, ...], table: str | None, preset_names: str | None = None
 ) -> None:
     """Register ``primspace experiment NAME``: run ``steps`` (``primspace.experiments.<module>:<function>``),
-    then print ``table`` (a function of :mod:`primspace.results.tables`) of the first step's results.
+    then print ``table`` (a function of :mod:`primspace.results.tables`, or ``module:function`` of another
+    module of :mod:`primspace.results`) of the first step's results.
     ``preset_names`` names the map in :mod:`primspace.experiments.presets` from the
     ``--preset`` a user gives to the preset this experiment runs (composite:
     ``COMPOSITE_PRESET_OF``, ``demo`` -> ``composite-demo``; read when the command runs, so
@@ -269,7 +270,7 @@ _experiment_command(
     "Long demonstrations of several primitives: a code per window, inferred with θ frozen, then "
     "segmented and labelled without labels (--preset demo or paper; docs/sequences.md).",
     ("composite.experiment:run_composite",),
-    "composite.results:composite_table",
+    "composite:composite_table",
     preset_names="COMPOSITE_PRESET_OF",
 )
 _experiment_command(
