@@ -35,7 +35,7 @@ from primspace import __version__
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.experiments.presets import LASA_CHAIN_SEQUENCES, LASA_CHAINS, LASA_DATA, ExperimentPreset
-from primspace.results.layout import META_FILE, arrays_file, figure_file, results_file
+from primspace.results.layout import DATA_FILE, META_FILE, arrays_file, figure_file, results_file
 from primspace.results.readers import read_meta, read_results
 from primspace.experiments.sweep import GridPoint, GridResult, run_grid
 from primspace.utils.files import atomic_path, atomic_write_json, check_outside_inputs, check_writable_directory
@@ -84,10 +84,10 @@ class ExperimentDir:
         self.pack = pack
         if self.path.exists() and not self.path.is_dir():
             raise UserError(f"{self.path}: exists and is not a directory")
-        data_path = Path(data).resolve() if data is not None else (self.path / "data.h5").resolve()
+        data_path = Path(data).resolve() if data is not None else (self.path / DATA_FILE).resolve()
         if data is not None and not data_path.is_file():
             raise UserError(f"{data}: no such data file")
-        if data is not None and data_path != (self.path / "data.h5").resolve():
+        if data is not None and data_path != (self.path / DATA_FILE).resolve():
             # the experiment's own generated data.h5 may be named again; any other input stays outside OUT
             check_outside_inputs(self.path, (data,))
         meta_file = self.path / META_FILE
@@ -263,7 +263,7 @@ def _check_new_folder(path: Path) -> None:
     into (it is used in place, never replaced)."""
     if not path.is_dir():
         return
-    if any(entry.name != "data.h5" for entry in path.iterdir()):
+    if any(entry.name != DATA_FILE for entry in path.iterdir()):
         raise UserError(
             f"{path}: exists and is not an experiment directory (no {META_FILE}); an experiment writes only into "
             "a new or empty folder or its own: choose another --out"

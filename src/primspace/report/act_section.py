@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from primspace.results.act import act_latency_text, act_tables
+from primspace.results.layout import figures_dir
 from primspace.results.readers import read_results
 from primspace.report.page import HtmlReport
 
@@ -47,7 +48,7 @@ def _what(results: dict) -> str:
 
 def act_animations(out_dir: Path) -> list[Path]:
     """The act animations an experiment directory holds: ``figures/act*.gif`` and ``figures/animation_act*.gif``."""
-    figures = Path(out_dir) / "figures"
+    figures = figures_dir(out_dir)
     return sorted(set(figures.glob("act*.gif")) | set(figures.glob("animation_act*.gif")))
 
 

@@ -7,14 +7,13 @@ from pathlib import Path
 from typing import Callable
 
 from primspace.utils.errors import UserError, first_line
-from primspace.results.layout import META_FILE, results_file
+from primspace.results.layout import META_FILE, REPORT_FILE, results_file
 from primspace.results.readers import read_meta
 from primspace.report import sections
 from primspace.report.page import HtmlReport
 
 __all__ = ["build_report", "REPORT_FILE", "SECTIONS"]
 
-REPORT_FILE = "report.html"
 
 #: The report's sections in order, each with the results file it reads (named in the
 #: error when that file is not one this version can read). Each adds itself only if its

@@ -37,6 +37,7 @@ from primspace.results.layout import (
     PROBE_RESULTS,
     animation_file,
     figure_file,
+    figures_dir,
     results_file,
 )
 from primspace.results.readers import read_meta, read_results
@@ -408,7 +409,7 @@ def composite(out_dir: Path, report: HtmlReport) -> None:
     _composite_bounds(results, report)
     for phase in ("fit", "infer"):
         report.figure(figure_file(out_dir, f"composite_loss_{phase}"), f"Loss per epoch ({phase}), per init.")
-    for path in sorted((out_dir / "figures").glob("composite_timeline_*.png")):
+    for path in sorted(figures_dir(out_dir).glob("composite_timeline_*.png")):
         report.figure(
             path,
             "Held-out demonstrations: the heat map shows code values per window (window codes) or "
@@ -438,8 +439,8 @@ def _composite_bounds(results: dict, report: HtmlReport) -> None:
 
 def latent_figures(out_dir: Path, report: HtmlReport) -> None:
     """The latent-encoding figures and the Appendix B reconstructions, as drawn."""
-    figs = sorted((out_dir / "figures").glob("latent_pca*.png")) + sorted(
-        (out_dir / "figures").glob("reconstruction_*.png")
+    figs = sorted(figures_dir(out_dir).glob("latent_pca*.png")) + sorted(
+        figures_dir(out_dir).glob("reconstruction_*.png")
     )
     if not figs:
         return

@@ -5,6 +5,8 @@ reads with it).
 Files of ``OUT``::
 
     experiment.json        preset, data file, backend, timings per stage, versions
+    data.h5                the simulated data (when no --data was given)
+    report.html            the report (primspace.report)
     results/<name>.json    each experiment's numbers (intra, clustering, success, inter,
                            data, appendix_a)
     results/<name>.npz     arrays the figures are drawn from (intra_latent: codes, reconstructions;
@@ -25,6 +27,8 @@ from pathlib import Path
 
 __all__ = [
     "META_FILE",
+    "DATA_FILE",
+    "REPORT_FILE",
     "LATENT_RESULTS",
     "ANIMATION_RESULTS",
     "PROBE_RESULTS",
@@ -36,6 +40,7 @@ __all__ = [
     "file_stem",
     "results_file",
     "arrays_file",
+    "figures_dir",
     "figure_file",
     "animation_file",
     "run_dir_of",
@@ -48,6 +53,10 @@ __all__ = [
 ]
 
 META_FILE = "experiment.json"
+#: The experiment's own data, made when no data file was given.
+DATA_FILE = "data.h5"
+#: The HTML report (:func:`primspace.report.build_report`).
+REPORT_FILE = "report.html"
 
 #: The results (JSON + arrays) the latent-space and reconstruction figures are drawn from.
 LATENT_RESULTS = "intra_latent"
@@ -98,15 +107,20 @@ def file_stem(name) -> str:
     return safe
 
 
+def figures_dir(out_dir: str | Path) -> Path:
+    """Where the figures and animations are drawn: ``OUT/figures``."""
+    return Path(out_dir) / "figures"
+
+
 def figure_file(out_dir: str | Path, name: str) -> Path:
     """Where figure ``name`` is drawn: ``OUT/figures/<name>.png`` (:func:`file_stem` of ``name``)."""
-    return Path(out_dir) / "figures" / f"{file_stem(name)}.png"
+    return figures_dir(out_dir) / f"{file_stem(name)}.png"
 
 
 def animation_file(out_dir: str | Path, name: str) -> Path:
     """Where the animation of ``name`` (a primitive) is drawn: ``OUT/figures/animation_<name>.gif``
     (:func:`file_stem` of ``name``)."""
-    return Path(out_dir) / "figures" / f"animation_{file_stem(name)}.gif"
+    return figures_dir(out_dir) / f"animation_{file_stem(name)}.gif"
 
 
 # ------------------------------------------------------------------------ runs
