@@ -10,7 +10,7 @@ TORCH  ?= torch==2.13.0
 # Panda model files it bundles (it would otherwise pull gymnasium and friends).
 ROBOT_ASSETS := gymnasium-robotics==1.4.2
 
-.PHONY: demo test lint docs install install-test bench clean
+.PHONY: demo test test-fast lint docs install install-test bench clean
 
 $(VENV)/bin/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -36,8 +36,18 @@ lint: install-test
 	$(VENV)/bin/ruff check src tests benchmarks docs
 	$(VENV)/bin/ruff format --check src tests benchmarks docs
 
+# pytest-xdist: one worker per core; each test module runs whole on one worker (its module
+# fixtures built once), the modules with the most `slow` tests first (tests/conftest.py).
+# PYTEST_WORKERS=0 runs every test in one process; PYTEST_ARGS adds options (-k, a path, -x).
+PYTEST_WORKERS ?= auto
+PYTEST_XDIST   ?= -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder
+
 test: install-test lint
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(PY) -m pytest $(PYTEST_XDIST) $(PYTEST_ARGS)
+
+# the edit-and-check loop: every test not marked `slow` (under 3 minutes on 2 cores)
+test-fast: install-test lint
+	$(PY) -m pytest -m "not slow" $(PYTEST_XDIST) $(PYTEST_ARGS)
 
 # the docs' generated numbers (from docs/results/*.json) and the API reference (build/api/index.html)
 docs: install-test
