@@ -129,6 +129,7 @@ def test_predict_measures_the_unobserved_steps_only(trained, train_set, eval_set
     assert np.isfinite(p.errors["motor_mse"]).all() and p.summary()["mean"]["motor_mse"] > 0
 
 
+@pytest.mark.slow
 def test_more_observed_predicts_better_with_the_mixture(trained, train_set, eval_set):
     early = predict(trained, eval_set, observe=0.1, init=MIXTURE, fitted_data=train_set, frames=False)
     late = predict(trained, eval_set, observe=0.6, init=MIXTURE, fitted_data=train_set, frames=False)
@@ -188,6 +189,7 @@ def test_bad_requests_are_refused_in_one_line(trained, eval_set, kw, match):
 # ------------------------------------------------------------------ the command
 
 
+@pytest.mark.slow
 def test_predict_command_writes_data_result_and_figure(run_cli, train_set, eval_set, tmp_path):
     run_dir, data = tmp_path / "run", tmp_path / "data.h5"
     train_set.save(tmp_path / "train.h5")
@@ -424,14 +426,14 @@ def test_the_best_predictor_is_the_default_of_python_the_estimator_and_the_comma
 
     from primspace import AutoDecoder
     from primspace.cli.predict import predict_command
-    from primspace.predict import DEFAULT_PREDICTOR
+    from primspace.predict import DEFAULT_PREDICTOR, PredictRequest
 
     assert DEFAULT_PREDICTOR == MIXTURE
-    python = inspect.signature(predict).parameters
+    python = PredictRequest()  # predict's keywords are a request's fields
     estimator = inspect.signature(AutoDecoder.predict).parameters
     cli = inspect.signature(predict_command).parameters
-    assert python["init"].default == estimator["init"].default == MIXTURE
-    assert python["continuity"].default is estimator["continuity"].default is True
+    assert python.init == estimator["init"].default == MIXTURE
+    assert python.continuity is estimator["continuity"].default is True
     assert cli["init"].default.default is None and cli["continuity"].default.default is True  # None: DEFAULT_PREDICTOR
 
 

@@ -15,7 +15,7 @@ sequences from their observed steps (:mod:`primspace.predict.base`):
   primitive="push")`` asks it for every motion as that primitive (:mod:`primspace.predict.posterior`);
 * the peers (:mod:`primspace.predict.peers`): ProMP conditioning, nearest neighbour, mean motion.
 
-:func:`predict` runs one on a data set and scores it (:func:`~primspace.predict.metrics.unobserved_mse`,
+:data:`REGISTRY` names them all (:mod:`primspace.predict.registry`); :func:`predict` runs one on a data set and scores it (:func:`~primspace.predict.metrics.unobserved_mse`,
 the one error); :func:`grid_predictions` runs the experiment's rows on one split.
 """
 
@@ -23,13 +23,14 @@ from primspace.predict.api import (
     DEFAULT_PREDICTOR,
     MIXTURE,
     PREDICT_STARTS,
+    PredictRequest,
     Prediction,
     fit_predictor,
     make_predictor,
     predict,
     run_predictor,
 )
-from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
+from primspace.predict.base import Forecast, MotionPredictor, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CodeMixture, continuity_correction
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS, GradientPredictor
 from primspace.predict.grid import grid_predictions
@@ -40,9 +41,16 @@ from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.prior import PRIOR, PriorPredictor
+from primspace.predict.registry import REGISTRY, PredictorSpec
+from primspace.predict.stream import OnlineResult
 
 __all__ = [
     "Predictor",
+    "MotionPredictor",
+    "PredictRequest",
+    "REGISTRY",
+    "PredictorSpec",
+    "OnlineResult",
     "Forecast",
     "observed_mask",
     "observation_rule",

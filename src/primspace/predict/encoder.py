@@ -46,8 +46,8 @@ from torch import nn
 from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
-from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
-from primspace.predict.online import OnlineResult, online_steps
+from primspace.predict.metrics import check_labels, check_lengths, check_motor, valid_mask
+from primspace.predict.stream import Stream
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import map_refine, prior_terms
 from primspace.utils.progress import progress_bar, stage
@@ -55,7 +55,7 @@ from primspace.train.api import as_run, reconstruct
 from primspace.train.config import thread_limit
 from primspace.train.observe import NOTHING, Observation
 
-__all__ = ["EncoderPredictor", "ENCODER", "MaskedEncoder"]
+__all__ = ["EncoderPredictor", "EncoderStream", "ENCODER", "MaskedEncoder"]
 
 #: The name of the encoder predictor (the ``init`` of its :class:`OnlineResult`).
 ENCODER = "encoder"
@@ -148,6 +148,8 @@ class EncoderPredictor(Predictor):
         Seed of the draws, the prefixes and the network (default: the run's seed).
     progress : bool, optional
     """
+
+    name = ENCODER
 
     def __init__(
         self,
@@ -345,7 +347,7 @@ class EncoderPredictor(Predictor):
             raise UserError("an encoder given the primitive reads each motion's label: pass labels")
         return self.primitives_.for_labels(labels)
 
-    def _predict(self, motor, mask, ids, valid, rule) -> tuple[np.ndarray, np.ndarray]:
+    def predict_prefix(self, motor, mask, ids, valid, rule) -> tuple[np.ndarray, np.ndarray]:
         """Encode (and refine), decode and correct: motions (n, T, J) scaled and their codes;
         ``rule`` the observation whose noise ``r`` the refinement reads (None: no refinement)."""
         codes = self._encode(motor, mask, ids)
@@ -388,7 +390,7 @@ class EncoderPredictor(Predictor):
         rule = None
         if self.refine > 0:
             rule = observed if isinstance(observed, Observation) else observation_rule(observed, lengths, (n, steps))
-        out, codes = self._predict(motor, mask, ids, valid_mask(check_lengths(lengths, n, steps), steps), rule)
+        out, codes = self.predict_prefix(motor, mask, ids, valid_mask(check_lengths(lengths, n, steps), steps), rule)
         details = {"encoder": self.summary()}
         if ids is not None:
             details["posterior"] = np.eye(self.primitives_.count)[ids].tolist()
@@ -409,58 +411,28 @@ class EncoderPredictor(Predictor):
         }
 
     # -- online -----------------------------------------------------------------------------
-    def predict_online(
-        self,
-        motor,
-        lengths=None,
-        labels=None,
-        *,
-        start_step: int = 1,
-        prediction_after: int | None = None,
-        progress: bool | None = None,
-    ) -> OnlineResult:
-        """The prediction after each arriving step ``start_step..T``: one forward pass of the
-        prefix seen so far, one decode and the correction; equal after step ``t`` to
-        :meth:`forecast` of that prefix.
-
-        Returns
-        -------
-        OnlineResult
-            ``codes`` the encoder's code after each step; ``latency`` the seconds of each step's
-            encode, decode and correction for the whole batch; ``prediction`` after step
-            ``prediction_after`` (default T), physical units.
-        """
-        truth = check_motor(motor)
-        n, length, joints = truth.shape
-        if (length, joints) != self.shape_:
-            raise UserError(f"motor must have the run's (T, J) = {self.shape_}, got {(length, joints)}")
-        steps, keep = online_steps(start_step, prediction_after, length)
+    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> "EncoderStream":
+        """One forward pass of the prefix seen so far, one decode and the correction per arriving step;
+        equal after step ``t`` to :meth:`forecast` of that prefix. The refinement's ``r`` (for a prefix
+        of ``keep`` steps) is chosen before the first step arrives."""
+        if tuple(truth.shape[1:]) != self.shape_:
+            raise UserError(f"motor must have the run's (T, J) = {self.shape_}, got {tuple(truth.shape[1:])}")
         rule = Observation.build(int(keep))
         if self.refine > 0:
             self.prior_.choice(rule)  # chosen before the first step arrives, not in the latency
-        ids = self._given_ids(labels, n)
-        lengths = check_lengths(lengths, n, length)
-        valid = valid_mask(lengths, length)
-        codes = np.empty((n, len(steps), self.run_.model_config.code_size), dtype=np.float32)
-        errors, latency, kept = np.empty((n, len(steps))), np.empty(len(steps)), None
-        with progress_bar(len(steps), "online encoder", enabled=progress) as advance:
-            for s, t in enumerate(steps):
-                t0 = time.perf_counter()
-                mask = np.arange(length)[None, :] < np.minimum(lengths, t)[:, None]
-                out, codes[:, s] = self._predict(truth, mask, ids, valid, rule)
-                latency[s] = time.perf_counter() - t0
-                errors[:, s] = unobserved_mse(out, truth, mask, lengths)
-                if t == keep:
-                    kept = out
-                advance()
-        return OnlineResult(
-            steps=steps,
-            codes=codes,
-            start_codes=codes[:, 0].copy(),
-            errors=errors,
-            latency=latency,
-            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32),
-            iterations=0,
-            init=ENCODER,
-            latent_lr=float("nan"),
-        )
+        return EncoderStream(self, truth, lengths, self._given_ids(labels, len(truth)), rule)
+
+
+class EncoderStream(Stream):
+    """The encoder read again on each longer prefix."""
+
+    init = ENCODER
+
+    def __init__(self, predictor: EncoderPredictor, truth, lengths, ids, rule: Observation):
+        self.predictor, self.truth, self.lengths, self.ids, self.rule = predictor, truth, lengths, ids, rule
+        self.scaler = predictor.run_.scaler
+        self.valid = valid_mask(lengths, truth.shape[1])
+
+    def arrive(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        mask = np.arange(self.truth.shape[1])[None, :] < np.minimum(self.lengths, t)[:, None]
+        return self.predictor.predict_prefix(self.truth, mask, self.ids, self.valid, self.rule)

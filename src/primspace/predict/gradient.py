@@ -5,7 +5,7 @@ of the starts of :mod:`primspace.train.starts` (``zero``, ``random``, ``projecti
 ``calibrated``, ``nearest``) and follows ``epochs`` of :func:`primspace.train.infer` on the
 observed entries (θ frozen); the decoder's whole sequence is the prediction. Online
 (:meth:`GradientPredictor.predict_online`): the steps arrive one at a time, ``iterations``
-Adam steps after each (:mod:`primspace.predict.online`).
+Adam steps after each (:class:`~primspace.predict.online.OnlineInference`).
 
 The starts that read the fitted demonstrations (``calibrated``, ``nearest``) read them from
 what :meth:`GradientPredictor.fit` was given; their calibrations per observation rule are
@@ -22,7 +22,8 @@ from primspace.model.latent import INFER_STARTS
 from primspace.predict.base import Forecast, Predictor, motions_as_dataset, observation_rule
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask
-from primspace.predict.online import OnlineResult, infer_online
+from primspace.predict.online import OnlineInference
+from primspace.predict.stream import OnlineResult
 from primspace.train.api import as_run, infer, reconstruct
 from primspace.train.observe import Observation
 from primspace.train.starts import STARTS_FROM_FITTED, FittedDemonstrations, fitted_start
@@ -51,6 +52,8 @@ class GradientPredictor(Predictor):
         ``device`` ...).
     progress : bool, optional
         A progress bar for the inference (default: when stderr is a terminal).
+    iterations : int
+        Adam iterations after each arriving step of :meth:`predict_online`.
     """
 
     def __init__(
@@ -61,6 +64,7 @@ class GradientPredictor(Predictor):
         continuity: bool = True,
         overrides: dict | None = None,
         progress: bool | None = None,
+        iterations: int = 1,
     ):
         self.run = run
         self.start = start
@@ -68,6 +72,24 @@ class GradientPredictor(Predictor):
         self.continuity = continuity
         self.overrides = overrides
         self.progress = progress
+        self.iterations = iterations
+
+    #: :meth:`forecast` takes the samples as a data set (``data=``; frames read lazily).
+    reads_dataset = True
+
+    @property
+    def name(self) -> str:
+        """The gradient start (the run's init until fitted without one)."""
+        return getattr(self, "start_", None) or self.start or getattr(self.run, "init", "")
+
+    @property
+    def epochs_run(self) -> int:
+        """The inference epochs of :meth:`forecast`."""
+        return int(self.epochs)
+
+    def reads_fitted(self, run) -> bool:
+        """Whether :meth:`fit` reads the fitted demonstrations (the starts that read them)."""
+        return (self.start or run.init) in STARTS_FROM_FITTED
 
     def fit(self, motor, labels=None, lengths=None, frames=None) -> "GradientPredictor":
         """Keep the fitted demonstrations (scaled, in the run's order) for the starts that read them
@@ -132,30 +154,29 @@ class GradientPredictor(Predictor):
         observed = rule.masks(lengths, data.length)[0]
         return continuity_correction(scaled, motor, observed, valid_mask(lengths, data.length))
 
-    def predict_online(
-        self,
-        motor,
-        lengths=None,
-        *,
-        iterations: int,
-        frames=None,
-        progress: bool | None = None,
-        data: MotionDataset | None = None,
-    ) -> OnlineResult:
-        """The steps arrive one at a time from the first, ``iterations`` Adam steps after each
-        (:func:`~primspace.predict.online.infer_online`); the start reads step 1. The continuity
-        correction is not applied (the caller applies it to the codes it keeps)."""
-        motor = check_motor(motor)
-        data = self._dataset(motor, lengths, frames) if data is None else data
-        start = self.start_codes(data, motor, Observation.build(1))
+    def stream(self, truth, lengths, labels, frames, steps, keep, data: MotionDataset | None = None):
+        """:class:`~primspace.predict.online.OnlineInference` from ``steps[0]``: ``iterations`` Adam steps
+        after each arriving step (:mod:`~primspace.predict.online`); the start reads the steps up to
+        ``steps[0]``. ``data``: the same motions as a data set (default: built from the arrays). The
+        continuity correction is not applied online (:meth:`online_forecast` applies it to the codes kept)."""
+        data = self._dataset(truth, lengths, frames) if data is None else data
+        start = self.start_codes(data, truth, Observation.build(int(steps[0])))
         overrides = self.overrides or {}
-        return infer_online(
+        return OnlineInference(
             self.run_,
             data,
-            iterations=iterations,
+            iterations=self.iterations,
             init=self.start_,
+            start_step=int(steps[0]),
             start_codes=start,
             latent_lr=overrides.get("latent_lr"),
             seed=overrides.get("seed"),
-            progress=progress,
         )
+
+    def online_forecast(self, result: OnlineResult, truth, observed, lengths, seen: int) -> Forecast:
+        """The codes after step ``seen`` decoded, with the continuity correction at ``observed`` when asked for."""
+        codes = result.codes[:, result.column(seen)]
+        scaled = self.run_.scaler.transform(reconstruct(self.run_, codes, images=False)[0])
+        if self.continuity:
+            scaled = continuity_correction(scaled, truth, observed, valid_mask(lengths, truth.shape[1]))
+        return Forecast(scaled, codes)

@@ -15,7 +15,8 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
-from primspace.predict.api import fit_predictor, make_predictor, predict, run_predictor
+from primspace.predict.api import predict
+from primspace.predict.registry import fit_predictor, make_predictor, run_predictor
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.metrics import finite_mean, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
@@ -33,6 +34,7 @@ __all__ = [
     "grid_forecasts",
     "grid_predictions",
     "PEERS",
+    "NOISE_ON_THE_ANSWER",
     "POSTERIOR_MEAN",
     "LABELS_DIAGNOSTIC",
     "MIXTURE_ROWS",
@@ -44,6 +46,8 @@ __all__ = [
 
 #: The peers' rows (labels: the peer is given the test sample's primitive).
 PEERS = ("promp (labels)", "promp (one for all)", "nearest neighbour", "mean motion (labels)")
+#: The rows whose observation noise is chosen on the answer (:func:`~primspace.predict.peers.best_noise`).
+NOISE_ON_THE_ANSWER = ("promp (labels)", "promp (one for all)")
 #: The mixture's posterior mean alone (no ensemble conditioning).
 POSTERIOR_MEAN = "mixture (posterior mean)"
 #: The mixture given the labels: candidates of the sample's own primitive only (a diagnostic).
@@ -165,7 +169,7 @@ def grid_forecasts(rows: dict[str, Predictor], run: TrainedRun, test: MotionData
     left = (np.arange(test.length)[None, :] < lengths[:, None]) & ~observed
     out = {}
     for name, predictor in rows.items():
-        if isinstance(predictor, ProMPPeer) and left.any():
+        if name in NOISE_ON_THE_ANSWER and left.any():
             out[name] = Forecast(best_noise(predictor, scaled, observed, test.labels, lengths).predicted)
         else:  # at 100 % observed there is no answer to choose the ProMPs' noise on: their default
             out[name] = run_predictor(predictor, run, test, rule)

@@ -7,7 +7,7 @@ its posterior mean or its ensemble conditioned on the observed entries, whicheve
 leave-one-out prediction of the fitted demonstrations prefers, then the continuity
 correction (:func:`~primspace.predict.candidates.continuity_correction`).
 
-**Online** (:meth:`MixturePredictor.predict_online`): after step ``t`` the prediction is a
+**Online** (:meth:`MixturePredictor.predict_online`, the one loop of :mod:`~primspace.predict.stream`): after step ``t`` the prediction is a
 function of the prefix ``1..t`` alone, so following a motion online gives exactly the
 offline prediction of the same prefix *without the ensemble conditioning*
 (``condition=False``; tested), and an arriving step costs one update of the squared
@@ -26,20 +26,18 @@ and ``σ²`` (and ``r``) per observation rule or prefix length.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
-from primspace.predict.metrics import check_lengths, check_motor, unobserved_mse, valid_mask
-from primspace.predict.online import OnlineResult, online_steps
-from primspace.utils.progress import progress_bar, stage
+from primspace.predict.metrics import check_lengths, check_motor, valid_mask
+from primspace.predict.stream import Stream
+from primspace.utils.progress import stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
 
-__all__ = ["MixturePredictor", "MIXTURE"]
+__all__ = ["MixturePredictor", "MixtureStream", "MIXTURE"]
 
 #: The name of the mixture among the starts of :func:`primspace.predict.predict`.
 MIXTURE = "mixture"
@@ -69,6 +67,8 @@ class MixturePredictor(Predictor):
         Show the decoding and the leave-one-out choices (a spinner in a terminal, a line per
         stage in a log; default: as :func:`primspace.utils.progress.stage`).
     """
+
+    name = MIXTURE
 
     def __init__(
         self,
@@ -133,7 +133,7 @@ class MixturePredictor(Predictor):
 
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
         """Posterior (or conditioned) sequences, the posterior-mode codes and the choice."""
-        motor = check_motor(motor)
+        motor = self.check_query(motor)
         rule = observation_rule(observed, lengths, motor.shape[:2])
         if rule.motor == NOTHING:
             raise UserError(
@@ -171,77 +171,49 @@ class MixturePredictor(Predictor):
             ]
         return self.noises_[t]
 
-    def predict_online(
-        self,
-        motor,
-        lengths=None,
-        *,
-        start_step: int = 1,
-        prediction_after: int | None = None,
-        progress: bool | None = None,
-    ) -> OnlineResult:
-        """The prediction after each arriving step ``start_step..T`` (module docstring).
-
-        Equal, after step ``t``, to ``forecast(motor, Observation.build(t))`` of a predictor
-        with ``condition=False`` (tested). ``σ²`` for every prefix length is chosen before the
-        first step arrives and not counted in the latency.
-
-        Returns
-        -------
-        OnlineResult
-            ``iterations`` 0, ``latent_lr`` NaN (no gradient); ``codes`` the posterior mode
-            after each step (``start_codes``: after the first); ``latency`` the seconds of
-            each step's update, weights, mean and correction for the whole batch;
-            ``prediction`` after step ``prediction_after`` (default T), physical units.
-        """
-        truth = check_motor(motor)
-        n, length, _ = truth.shape
-        steps, keep = online_steps(start_step, prediction_after, length)
+    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> "MixtureStream":
+        """The posterior followed a step at a time (module docstring): equal, after step ``t``, to
+        ``forecast(motor, Observation.build(t))`` of a predictor with ``condition=False`` (tested).
+        ``σ²`` for every prefix length is chosen before the first step arrives; the result's
+        ``codes`` are the posterior mode after each step."""
         with stage(f"mixture: choosing its noise for {len(steps)} prefix lengths", enabled=self.progress):
             noises = {int(t): self.online_noise(int(t)) for t in steps}
-        lengths = check_lengths(lengths, n, length)
-        valid = valid_mask(lengths, length)
-        mixture = self.mixture_
-        by_step = np.ascontiguousarray(mixture.decoded.transpose(1, 0, 2))  # (T, c, J): a step's candidates together
-        squares = (by_step**2).sum(axis=2)  # (T, c)
+        return MixtureStream(self, truth, valid_mask(lengths, truth.shape[1]), noises, int(steps[0]))
 
-        def arrive(t: int) -> np.ndarray:  # (n, c): the squared distances of step t (1-based), valid samples only
-            x = truth[:, t - 1]
-            step = (x**2).sum(axis=1)[:, None] + squares[t - 1][None] - 2.0 * x @ by_step[t - 1].T
-            return valid[:, t - 1, None] * np.maximum(step, 0.0)
 
-        d2 = np.zeros((n, by_step.shape[1]))
-        for t in range(1, int(start_step)):  # the steps before the first arrival
-            d2 += arrive(t)
-        codes = np.empty((n, len(steps), mixture.candidates.shape[1]), dtype=np.float32)
-        errors, latency, kept = np.empty((n, len(steps))), np.empty(len(steps)), None
-        with progress_bar(len(steps), "online mixture", enabled=progress) as advance:
-            for s, t in enumerate(steps):
-                t0 = time.perf_counter()
-                d2 += arrive(int(t))
-                energy = d2 / (2.0 * noises[int(t)])
-                w = np.exp(-(energy - energy.min(axis=1, keepdims=True)))
-                w /= w.sum(axis=1, keepdims=True)
-                predicted = mixture.posterior_mean(w)
-                observed = (np.arange(length) < t)[None, :] & valid
-                if self.continuity:
-                    predicted = continuity_correction(predicted, truth, observed, valid)
-                latency[s] = time.perf_counter() - t0
-                codes[:, s] = mixture.candidates[np.argmax(w, axis=1)]
-                kept = predicted if t == keep else kept
-                errors[:, s] = unobserved_mse(predicted, truth, observed, lengths)
-                advance()
-        return OnlineResult(
-            steps=steps,
-            codes=codes,
-            start_codes=codes[:, 0].copy(),
-            errors=errors,
-            latency=latency,
-            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32),
-            iterations=0,
-            init=MIXTURE,
-            latent_lr=float("nan"),
-        )
+class MixtureStream(Stream):
+    """The squared distances to the decoded candidates, updated as each step arrives (``c x J``
+    numbers per motion), the posterior weights and mean, the continuity correction."""
+
+    init = MIXTURE
+
+    def __init__(self, predictor: MixturePredictor, truth, valid, noises: dict, start_step: int):
+        self.predictor, self.truth, self.valid, self.noises = predictor, truth, valid, noises
+        self.scaler = predictor.run_.scaler
+        mixture = predictor.mixture_
+        self.by_step = np.ascontiguousarray(mixture.decoded.transpose(1, 0, 2))  # (T, c, J): a step's candidates
+        self.squares = (self.by_step**2).sum(axis=2)  # (T, c)
+        self.d2 = np.zeros((len(truth), self.by_step.shape[1]))
+        for t in range(1, start_step):  # the steps before the first arrival
+            self.d2 += self._distances(t)
+
+    def _distances(self, t: int) -> np.ndarray:
+        """(n, c): the squared distances of step ``t`` (1-based), valid samples only."""
+        x = self.truth[:, t - 1]
+        step = (x**2).sum(axis=1)[:, None] + self.squares[t - 1][None] - 2.0 * x @ self.by_step[t - 1].T
+        return self.valid[:, t - 1, None] * np.maximum(step, 0.0)
+
+    def arrive(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        self.d2 += self._distances(t)
+        energy = self.d2 / (2.0 * self.noises[t])
+        w = np.exp(-(energy - energy.min(axis=1, keepdims=True)))
+        w /= w.sum(axis=1, keepdims=True)
+        mixture = self.predictor.mixture_
+        predicted = mixture.posterior_mean(w)
+        if self.predictor.continuity:
+            observed = (np.arange(self.truth.shape[1]) < t)[None, :] & self.valid
+            predicted = continuity_correction(predicted, self.truth, observed, self.valid)
+        return predicted, mixture.candidates[np.argmax(w, axis=1)]
 
 
 def code_mixture(run) -> CodeMixture:

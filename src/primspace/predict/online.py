@@ -41,8 +41,7 @@ from __future__ import annotations
 import copy
 import math
 import os
-import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -51,7 +50,7 @@ from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.model.latent import INFER_STARTS, LatentTable
 from primspace.predict.metrics import unobserved_mse
-from primspace.utils.progress import progress_bar
+from primspace.predict.stream import OnlineResult, Stream, follow, mean_over_samples, online_steps
 from primspace.train.api import as_run, infer, uses_images
 from primspace.train.checks import check_calibrated, check_data_fits, check_init
 from primspace.train.config import resolve_device
@@ -63,86 +62,10 @@ from primspace.train.starts import inference_start
 __all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors", "online_steps"]
 
 
-# ----------------------------------------------------------------------- the measure
-
-
-def _mean_over_samples(errors: np.ndarray) -> np.ndarray:
-    """The mean over samples (axis 0) of the finite errors; NaN where there are none."""
-    finite = np.isfinite(errors)
-    counts = finite.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, np.where(finite, errors, 0.0).sum(axis=0) / counts, np.nan)
-
-
-# --------------------------------------------------------------------------- results
-
-
-@dataclass
-class OnlineResult:
-    """What :func:`infer_online` returns: codes, forecast errors and latency after each step.
-
-    Attributes
-    ----------
-    steps : ndarray (S,) int
-        The steps observed, ``start_step..T``: column ``s`` is "after step ``steps[s]``".
-    codes : ndarray (n, S, q) float32
-        Each sample's code after each step (the internal state, corrected by the error).
-    start_codes : ndarray (n, q) float32
-        The codes before the first step (the chosen start).
-    errors : ndarray (n, S) float64
-        Motor MSE (scaled units) of the prediction of the remaining valid steps ``> t``
-        (:func:`~primspace.predict.metrics.unobserved_mse`); NaN for a sample with none left.
-    latency : ndarray (S,) float64
-        Seconds of each arriving step: its ``k`` iterations and the decode
-        (``time.perf_counter``; CUDA synchronised).
-    prediction : ndarray (n, T, J) float32
-        The final prediction, in physical units (the run's scaler inverted).
-    iterations : int
-    init : str
-    latent_lr : float
-    """
-
-    steps: np.ndarray
-    codes: np.ndarray
-    start_codes: np.ndarray
-    errors: np.ndarray
-    latency: np.ndarray
-    prediction: np.ndarray
-    iterations: int
-    init: str
-    latent_lr: float
-
-    @property
-    def mean_error(self) -> np.ndarray:
-        """(S,) the mean over samples of :attr:`errors` (samples with steps left; NaN if none)."""
-        return _mean_over_samples(self.errors)
-
-    @property
-    def latency_mean(self) -> float:
-        """Mean seconds per arriving step."""
-        return float(np.mean(self.latency))
-
-    @property
-    def latency_p95(self) -> float:
-        """95th percentile of the seconds per arriving step."""
-        return float(np.percentile(self.latency, 95))
-
-    def column(self, t: int) -> int:
-        """The column of :attr:`codes` / :attr:`errors` after step ``t``."""
-        hits = np.flatnonzero(self.steps == int(t))
-        if not hits.size:
-            raise UserError(f"step {t} was not recorded (steps {int(self.steps[0])}..{int(self.steps[-1])})")
-        return int(hits[0])
-
-    def error_at(self, t: int) -> float:
-        """The mean error of the remaining steps after step ``t``."""
-        return float(self.mean_error[self.column(t)])
-
-
 # ------------------------------------------------------------------------- the loop
 
 
-class OnlineInference:
+class OnlineInference(Stream):
     """The codes of a batch of demonstrations, corrected as their steps arrive (predictive coding).
 
     "Predicted information is compared with the real one and internal state is corrected
@@ -245,6 +168,27 @@ class OnlineInference:
         """The current codes (n, q) float32."""
         return self.table.numpy()
 
+    @property
+    def scaler(self):
+        """The run's scaler."""
+        return self.run.scaler
+
+    @property
+    def latent_lr(self) -> float:
+        """The codes' constant learning rate."""
+        return self.tc.latent_lr
+
+    def sync(self) -> None:
+        """Wait for the device's work (CUDA), so that a step's latency counts it."""
+        if self.device.type == "cuda":
+            torch.cuda.synchronize()
+
+    def arrive(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        """Observe step ``t`` (the next one, :meth:`step`): the prediction (n, T, J) scaled and the codes."""
+        if t != self.t + 1:
+            raise UserError(f"step {t} arrived after step {self.t}: the steps arrive in order")
+        return self.step().cpu().numpy(), self.codes
+
     def step(self) -> torch.Tensor:
         """Observe step ``t + 1``: correct the codes on the error of steps ``1..t+1``, then predict.
 
@@ -340,35 +284,7 @@ def infer_online(
         start_codes=start_codes,
     )
     steps = np.arange(online.start_step, online.length + 1)
-    codes = np.empty((online.n, len(steps), online.start_codes.shape[1]), dtype=np.float32)
-    errors = np.empty((online.n, len(steps)))
-    latency = np.empty(len(steps))
-    sync = torch.cuda.synchronize if online.device.type == "cuda" else (lambda: None)
-    with progress_bar(len(steps), "online", enabled=progress) as advance:
-        for s, t in enumerate(steps):
-            sync()
-            t0 = time.perf_counter()
-            predicted = online.step()
-            sync()
-            latency[s] = time.perf_counter() - t0
-            predicted = predicted.cpu().numpy()
-            codes[:, s] = online.codes
-            errors[:, s] = unobserved_mse(
-                predicted, online.truth, _prefix_mask(online.n, online.length, t), online.lengths
-            )
-            advance()
-    prediction = online.run.scaler.inverse_transform(predicted).astype(np.float32)
-    return OnlineResult(
-        steps=steps,
-        codes=codes,
-        start_codes=online.start_codes,
-        errors=errors,
-        latency=latency,
-        prediction=prediction,
-        iterations=online.iterations,
-        init=online.init,
-        latent_lr=online.tc.latent_lr,
-    )
+    return follow(online, online.truth, online.lengths, steps, online.length, label="online", progress=progress)
 
 
 # ---------------------------------------------------------------- the offline figure
@@ -433,7 +349,7 @@ def offline_errors(
     return {
         "steps": steps,
         "errors": errors,
-        "mean_error": _mean_over_samples(errors),
+        "mean_error": mean_over_samples(errors),
         "codes": np.stack(codes, axis=1),
     }
 
@@ -478,15 +394,3 @@ def _check_lr(value) -> float:
     ):
         raise UserError(f"latent_lr must be a finite number > 0, got {value!r}")
     return float(value)
-
-
-def online_steps(start_step, prediction_after, length: int) -> tuple[np.ndarray, int]:
-    """The arriving steps ``start_step..T`` (1-based) and the step after which the prediction is kept
-    (``prediction_after``, default T), or one UserError."""
-    if isinstance(start_step, bool) or not isinstance(start_step, (int, np.integer)) or not 1 <= start_step <= length:
-        raise UserError(f"start_step must be a whole number in 1..T={length}, got {start_step!r}")
-    steps = np.arange(int(start_step), length + 1)
-    keep = length if prediction_after is None else prediction_after
-    if keep not in steps:
-        raise UserError(f"prediction_after must be a step in {int(start_step)}..{length}, got {prediction_after!r}")
-    return steps, int(keep)

@@ -30,7 +30,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from primspace.utils.errors import UserError
-from primspace.predict.base import Predictor, observed_mask
+from primspace.predict.base import MotionPredictor, observed_mask
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 
 __all__ = ["ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise", "LabelledPeer", "phase"]
@@ -52,7 +52,7 @@ def phase(length: int) -> np.ndarray:
     return np.linspace(0.0, 1.0, int(length))
 
 
-class LabelledPeer(Predictor):
+class LabelledPeer(MotionPredictor):
     """What the peers share: checking the fitted and the queried data, label groups.
 
     A subclass's ``fit`` checks its data with ``_fit_data`` and ends with ``_fitted``;
@@ -167,6 +167,8 @@ class ProMPPeer(LabelledPeer):
         Most EM iterations of ``imitate``.
     """
 
+    name = "promp"
+
     def __init__(
         self, n_basis: int = 15, noise: float = 1e-3, per_label: bool = True, ridge: float = 0.0, n_iter: int = 1000
     ) -> None:
@@ -270,6 +272,8 @@ class NearestPeer(LabelledPeer):
         Search only the test sample's own label (labels needed), default all.
     """
 
+    name = "nearest"
+
     def __init__(self, per_label: bool = False) -> None:
         self.per_label = bool(per_label)
 
@@ -313,6 +317,8 @@ class MeanMotionPeer(LabelledPeer):
     per_label : bool
         The mean of the sample's own label (labels needed, default) or of all.
     """
+
+    name = "mean_motion"
 
     def __init__(self, per_label: bool = True) -> None:
         self.per_label = bool(per_label)

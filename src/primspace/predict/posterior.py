@@ -15,6 +15,7 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
+from primspace.predict.primitives import top1_accuracy
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
 
@@ -24,39 +25,10 @@ __all__ = ["prior_details", "posterior_by_fraction", "top1_accuracy", "POSTERIOR
 POSTERIOR_FRACTIONS = tuple(round(0.1 * k, 1) for k in range(1, 11))
 
 
-def top1_accuracy(posterior, stands_for, labels) -> float | None:
-    """Share of the labelled samples (``labels`` >= 0) whose most probable primitive (``posterior``
-    (n, P)) stands for their label (``stands_for``: the label of each primitive, None for none);
-    None without labels."""
-    if labels is None:
-        return None
-    labels = np.asarray(labels)
-    scored = labels >= 0
-    if not scored.any():
-        return None
-    table = np.array([-2 if v is None else int(v) for v in stands_for])
-    top = np.asarray(posterior).argmax(axis=1)
-    return float(np.mean(table[top[scored]] == labels[scored]))
-
-
 def prior_details(predictor: PriorPredictor, details: dict, labels=None) -> dict:
-    """``Prediction.details`` of the prior's forecast (``details``): its ``prior`` summary and the
-    ``primitive`` asked (None: none); with none asked (nor each motion's label), the ``posterior``
-    (n, P) over ``primitives`` (their names), each sample's ``top_primitive`` and
-    ``posterior_accuracy`` (:func:`top1_accuracy` against ``labels``)."""
-    summary = details["prior"]
-    out = {"prior": summary, "primitive": summary["primitive"]}
-    if summary["primitive"] is not None or predictor.given:
-        return out
-    names = list(summary["primitives"]["names"])
-    posterior = np.asarray(details["posterior"], dtype=np.float64)
-    return {
-        **out,
-        "primitives": names,
-        "posterior": posterior.tolist(),
-        "top_primitive": [names[k] for k in posterior.argmax(axis=1)],
-        "posterior_accuracy": top1_accuracy(posterior, summary["primitives"]["labels"], labels),
-    }
+    """``Prediction.details`` of the prior's forecast (``details``):
+    :meth:`~primspace.predict.prior.PriorPredictor.describe`."""
+    return predictor.describe(details, labels)
 
 
 def posterior_by_fraction(predictor, data: MotionDataset, fractions=POSTERIOR_FRACTIONS) -> np.ndarray:

@@ -16,7 +16,14 @@ import numpy as np
 
 from primspace.utils.errors import UserError
 
-__all__ = ["Primitives", "primitives_from_labels", "primitives_from_clusters", "cluster_codes", "PRIMITIVE_SOURCES", "top1_accuracy"]
+__all__ = [
+    "Primitives",
+    "primitives_from_labels",
+    "primitives_from_clusters",
+    "cluster_codes",
+    "PRIMITIVE_SOURCES",
+    "top1_accuracy",
+]
 
 #: Where the primitives come from.
 PRIMITIVE_SOURCES = ("labels", "clusters")

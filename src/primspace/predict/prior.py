@@ -36,7 +36,6 @@ to the offline forecast of that prefix with the same ``r`` and ``T`` (tested).
 from __future__ import annotations
 
 import copy
-import time
 
 import numpy as np
 
@@ -45,16 +44,19 @@ from primspace.predict.base import Forecast, Predictor, observation_rule, observ
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.code_prior import (
     DecodedGaussian,
-    SequentialGaussian,
-    StepGains,
     choose_prior,
     condition_primitives,
     fit_gaussian,
 )
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
-from primspace.predict.online import OnlineResult, online_steps
-from primspace.predict.primitives import PRIMITIVE_SOURCES, primitives_from_clusters, primitives_from_labels
-from primspace.utils.progress import progress_bar, stage
+from primspace.predict.prior_stream import PriorStream
+from primspace.predict.primitives import (
+    PRIMITIVE_SOURCES,
+    primitives_from_clusters,
+    primitives_from_labels,
+    top1_accuracy,
+)
+from primspace.utils.progress import stage
 from primspace.train.api import as_run, reconstruct
 from primspace.train.observe import NOTHING, Observation
 
@@ -107,6 +109,8 @@ class PriorPredictor(Predictor):
         Seed of the draws and folds (default: the run's seed).
     progress : bool, optional
     """
+
+    name = PRIOR
 
     def __init__(
         self,
@@ -242,7 +246,7 @@ class PriorPredictor(Predictor):
         return other
 
     # -- conditioning ---------------------------------------------------------------------
-    def _posterior(self, evidence: np.ndarray, temperature: float) -> np.ndarray:
+    def posterior_weights(self, evidence: np.ndarray, temperature: float) -> np.ndarray:
         """(n, P) posterior over primitives from the evidences and the fitted codes' shares."""
         logits = evidence / temperature + np.log(self.shares_)[None]
         logits -= logits.max(axis=1, keepdims=True)
@@ -252,7 +256,7 @@ class PriorPredictor(Predictor):
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
         """The conditioned (given) or posterior-weighted (not given) motions, their codes, and
         ``details["prior"]`` (the choices, and per motion the posterior over primitives)."""
-        motor = check_motor(motor)
+        motor = self.check_query(motor)
         n, steps, joints = motor.shape
         rule = observation_rule(observed, lengths, (n, steps))
         if rule.motor == NOTHING:
@@ -267,8 +271,8 @@ class PriorPredictor(Predictor):
         if ids is not None:
             weights = np.eye(self.primitives_.count)[ids]
         else:
-            weights = self._posterior(evidence, choice["temperature"])
-        out, codes = self._mix(means, weights, seen.shape)
+            weights = self.posterior_weights(evidence, choice["temperature"])
+        out, codes = self.mix(means, weights, seen.shape)
         if self.continuity:
             out = continuity_correction(out, seen, mask, valid_mask(check_lengths(lengths, n, steps), steps))
         details = {"prior": self.summary(choice), "posterior": weights.tolist()}
@@ -295,7 +299,7 @@ class PriorPredictor(Predictor):
             raise UserError("a prior given the primitive reads each motion's label: pass labels")
         return self.primitives_.for_labels(labels)
 
-    def _mix(self, means: np.ndarray, weights: np.ndarray, shape: tuple):
+    def mix(self, means: np.ndarray, weights: np.ndarray, shape: tuple):
         """Posterior-weighted motions (n, T, J) and the codes of each motion's top primitive."""
         motion = self.ensembles_[0].n_motion
         safe = np.nan_to_num(means)
@@ -389,9 +393,11 @@ class PriorPredictor(Predictor):
                 scores["given"][key] = given
                 best_given = min(best_given, (given, r, weight), key=lambda x: x[0])
                 rows = np.arange(len(truth))
-                logloss = {t: -np.log(self._posterior(evidence[scored], t)[rows, truth] + 1e-300).mean() for t in temps}
+                logloss = {
+                    t: -np.log(self.posterior_weights(evidence[scored], t)[rows, truth] + 1e-300).mean() for t in temps
+                }
                 t = min(logloss, key=logloss.get)
-                free = self._fold_error(self._posterior(evidence[scored], t), *args)
+                free = self._fold_error(self.posterior_weights(evidence[scored], t), *args)
                 scores["posterior"][key] = {"temperature": t, "log_loss": float(logloss[t]), "mse": free}
                 # nothing left to predict (every step observed): the log-loss decides
                 best_free = min(best_free, (free, float(logloss[t]), r, weight, t), key=lambda x: x[:2])
@@ -409,87 +415,42 @@ class PriorPredictor(Predictor):
         idx = np.flatnonzero(valid.any(axis=1))
         truth = self.fitted_[np.flatnonzero(self.primitives_.assignment >= 0)][idx]
         seen = np.where(observed[idx, :, None], truth, 0.0)
-        out, _ = self._mix(means[idx], weights[idx], truth.shape)
+        out, _ = self.mix(means[idx], weights[idx], truth.shape)
         out = continuity_correction(out, seen, observed[idx], valid[idx])
         errors = unobserved_mse(out, truth, observed[idx], valid[idx].sum(axis=1))
         errors = errors[np.isfinite(errors)]
         return float(errors.mean()) if errors.size else 0.0
 
     # -- online -----------------------------------------------------------------------------
-    def predict_online(
-        self,
-        motor,
-        lengths=None,
-        labels=None,
-        *,
-        start_step: int = 1,
-        prediction_after: int | None = None,
-        progress: bool | None = None,
-    ) -> OnlineResult:
-        """The prediction after each arriving step ``start_step..T``: the priors filtered a step at
-        a time (module docstring), with the ``r`` and ``T`` chosen for a prefix of
-        ``prediction_after`` steps (default T) before the first step arrives (not counted in the
-        latency); equal after step ``t`` to ``forecast`` of that prefix with the same ``r`` and ``T``.
-
-        Returns
-        -------
-        OnlineResult
-            ``codes`` the top primitive's conditioned code after each step; ``latency`` the seconds
-            of each step's update, posterior, mixture and correction for the whole batch;
-            ``prediction`` after step ``prediction_after``, physical units.
-        """
-        truth = check_motor(motor)
-        n, length, joints = truth.shape
-        steps, keep = online_steps(start_step, prediction_after, length)
+    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> "PriorStream":
+        """The priors filtered a step at a time (module docstring), with the ``r`` and ``T`` chosen for
+        a prefix of ``keep`` steps before the first step arrives; equal after step ``t`` to ``forecast``
+        of that prefix with the same ``r`` and ``T``. The result's ``codes`` are the top primitive's
+        conditioned code after each step."""
         choice = self.choice(Observation.build(int(keep)))
-        ids = self._given_ids(labels, n)
+        ids = self._given_ids(labels, len(truth))
         r, weight = self._setting(choice, ids is not None)
-        lengths = check_lengths(lengths, n, length)
-        valid = valid_mask(lengths, length)
-        wanted = sorted(set(ids.tolist())) if ids is not None else range(self.primitives_.count)
-        groups = {int(v): np.flatnonzero(lengths == v) for v in np.unique(lengths)}
-        gains = {k: StepGains(self.blended(weight)[k], r, joints, length) for k in wanted}  # before the stream
-        filters = {(v, k): SequentialGaussian(gains[k], len(g)) for v, g in groups.items() for k in wanted}
-        d = self.ensembles_[0].mean.shape[0]
+        return PriorStream(self, truth, lengths, ids, r, weight, choice["temperature"], int(steps[0]))
 
-        def arrive(t: int) -> tuple[np.ndarray, np.ndarray]:  # (n, P, D) means, (n, P) evidence after step t
-            means, evidence = np.zeros((n, self.primitives_.count, d)), np.full((n, self.primitives_.count), -np.inf)
-            for (v, k), f in filters.items():
-                if t <= v:
-                    f.observe(t - 1, truth[groups[v], t - 1])
-                means[groups[v], k], evidence[groups[v], k] = f.means, f.evidence
-            return means, evidence
-
-        for t in range(1, int(start_step)):
-            arrive(t)
-        codes = np.empty((n, len(steps), self.run_.latents.shape[1]), dtype=np.float32)
-        errors, latency, kept = np.empty((n, len(steps))), np.empty(len(steps)), None
-        with progress_bar(len(steps), "online prior", enabled=progress) as advance:
-            for s, t in enumerate(steps):
-                t0 = time.perf_counter()
-                means, evidence = arrive(int(t))
-                weights = (
-                    np.eye(self.primitives_.count)[ids]
-                    if ids is not None
-                    else self._posterior(evidence, choice["temperature"])
-                )
-                out, codes[:, s] = self._mix(means, weights, truth.shape)
-                mask = np.arange(length)[None, :] < np.minimum(lengths, t)[:, None]
-                if self.continuity:
-                    out = continuity_correction(out, np.where(mask[..., None], truth, 0.0), mask, valid)
-                latency[s] = time.perf_counter() - t0
-                errors[:, s] = unobserved_mse(out, truth, mask, lengths)
-                if t == keep:
-                    kept = out
-                advance()
-        return OnlineResult(
-            steps=steps,
-            codes=codes,
-            start_codes=codes[:, 0].copy(),
-            errors=errors,
-            latency=latency,
-            prediction=self.run_.scaler.inverse_transform(kept).astype(np.float32),
-            iterations=0,
-            init=PRIOR,
-            latent_lr=float("nan"),
-        )
+    def describe(self, details: dict, labels=None) -> dict:
+        """What ``result.json`` records of a forecast's ``details``: the prior's summary and the
+        ``primitive`` asked (None: none); with none asked (nor each motion's label), the ``posterior``
+        (n, P) over ``primitives`` (their names), each sample's ``top_primitive`` and
+        ``posterior_accuracy`` (:func:`~primspace.predict.primitives.top1_accuracy` against ``labels``).
+        Online (no forecast's ``prior`` in ``details``): ``details`` with the summary and the primitive."""
+        if "prior" not in details:
+            summary = self.summary()
+            return {**details, "prior": summary, "primitive": summary["primitive"]}
+        summary = details["prior"]
+        out = {"prior": summary, "primitive": summary["primitive"]}
+        if summary["primitive"] is not None or self.given:
+            return out
+        names = list(summary["primitives"]["names"])
+        posterior = np.asarray(details["posterior"], dtype=np.float64)
+        return {
+            **out,
+            "primitives": names,
+            "posterior": posterior.tolist(),
+            "top_primitive": [names[k] for k in posterior.argmax(axis=1)],
+            "posterior_accuracy": top1_accuracy(posterior, summary["primitives"]["labels"], labels),
+        }

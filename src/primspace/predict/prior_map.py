@@ -40,7 +40,7 @@ from primspace.utils.errors import UserError
 from primspace.model.latent import LatentTable
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
-from primspace.predict.metrics import check_lengths, check_motor, valid_mask
+from primspace.predict.metrics import check_lengths, valid_mask
 from primspace.predict.prior import PriorPredictor
 from primspace.train.api import as_run, reconstruct
 from primspace.train.config import resolve_device, thread_limit
@@ -274,7 +274,7 @@ class PriorMapPredictor(Predictor):
 
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None) -> Forecast:
         """The decoded MAP codes (continuity-corrected), the codes, and the prior's details with ``map``."""
-        motor = check_motor(motor)
+        motor = self.check_query(motor)
         n, steps, _ = motor.shape
         inner = self.prior_.forecast(motor, observed, labels, lengths, frames)
         rule = observation_rule(observed, lengths, (n, steps))
