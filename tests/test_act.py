@@ -47,6 +47,7 @@ def files(tmp_path_factory):
 # ------------------------------------------------------------------------ run_episode
 
 
+@pytest.mark.slow
 def test_an_episode_looks_at_0_every_2_every_and_the_open_loop_once(files):
     from primspace.act.command import fit_planners
     from primspace.sim.execute import Executor
@@ -94,6 +95,7 @@ def _scene(files, name="push"):
     return f"{files['data']}:{files['held'][name]}"
 
 
+@pytest.mark.slow
 def test_act_writes_the_three_episodes_the_animation_and_the_result(run_cli, files, tmp_path):
     out = tmp_path / "out"
     res = _act(run_cli, files, out, "--scene", _scene(files), "--perturb")
@@ -131,6 +133,7 @@ def _without_latency(result: dict) -> dict:
     return result
 
 
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_result_and_overwrite_replaces_an_earlier_act(run_cli, files, tmp_path):
     out = tmp_path / "out"
     args = ("--scene", _scene(files), "--perturb", "--seed", "3")
@@ -148,6 +151,7 @@ def test_the_same_seed_gives_the_same_result_and_overwrite_replaces_an_earlier_a
     assert json.loads((other / "result.json").read_text())["move"] != first["move"]  # the seed draws the move
 
 
+@pytest.mark.slow
 def test_a_scene_given_as_x_y_size(run_cli, files, tmp_path):
     out = tmp_path / "out"
     res = _act(run_cli, files, out, "--scene", "0.5,0.02,0.05")

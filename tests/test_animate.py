@@ -278,6 +278,7 @@ def test_the_cli_default_is_the_plots_bound():
 # ---------------------------------------------------------------------- experiment and report
 
 
+@pytest.mark.slow
 def test_one_animation_per_primitive_in_the_report(sim_file, tmp_path):
     """The intra experiment writes each primitive's arrays and GIF; figures redraw them from
     the results alone; the report embeds the GIFs that exist and leaves out a missing one."""

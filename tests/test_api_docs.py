@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 pytest.importorskip("pdoc")
 
 
+@pytest.mark.slow
 def test_the_api_reference_builds_and_names_the_public_classes(tmp_path):
     out = tmp_path / "api"
     result = subprocess.run(

@@ -51,6 +51,7 @@ def _words(text: str) -> set[str]:
     return set(_BORDER.sub(" ", text).split())
 
 
+@pytest.mark.slow
 def test_no_help_text_is_folded_mid_word(run_cli, monkeypatch):
     """Every word of the help at 100 columns is a word of the unwrapped help (a word folded
     across lines, "calib / rated", leaves pieces that are not); at 80 columns typer's table

@@ -44,6 +44,7 @@ def accuracy(y, labels):
 
 @pytest.mark.parametrize("criterion", AUTO_CRITERIA)
 @pytest.mark.parametrize("noise", [0.05, 0.2, 0.3, 0.5])
+@pytest.mark.slow
 def test_auto_recovers_planted_affine_subspaces(noise, criterion):
     """At every noise level auto reaches (nearly) the oracle's accuracy over the grid; where
     the noise is large the default 0.99 keeps noise directions and fails, auto does not."""
@@ -79,6 +80,7 @@ def test_auto_records_candidates_and_matches_the_fixed_fit():
 
 
 @pytest.mark.parametrize("criterion", AUTO_CRITERIA)
+@pytest.mark.slow
 def test_auto_is_deterministic(criterion):
     X, _ = planted(0.3, seed=1)
     fits = [
@@ -160,6 +162,7 @@ def noisy_latents(tmp_path):
     return tmp_path / "z.npy", tmp_path / "y.npy"
 
 
+@pytest.mark.slow
 def test_cli_r2_auto(run_cli, noisy_latents, tmp_path):
     z, y = noisy_latents
     res = run_cli("cluster", z, "--k", 4, "--labels", y, "--r2", "auto", "--out", tmp_path / "a")

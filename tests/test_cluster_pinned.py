@@ -408,6 +408,7 @@ def test_sweep_numbers_are_pinned():
     assert_same(record_sweeps(), pinned()["sweep"], "sweep")
 
 
+@pytest.mark.slow
 def test_cluster_command_outputs_are_pinned(tmp_path, monkeypatch):
     assert_same(record_cli(tmp_path, monkeypatch), pinned()["cli"], "cli")
 

@@ -51,6 +51,7 @@ def test_split_is_seeded_and_keeps_both_sides():
     assert len(split_sequences(2, 0.01, seed=0)[0]) == 1
 
 
+@pytest.mark.slow
 def test_runs_are_segmented_and_scored(finished):
     exp, results = finished
     assert [r["init"] for r in results["runs"]] == ["zero", "projection"]
@@ -69,6 +70,7 @@ def test_runs_are_segmented_and_scored(finished):
         assert (exp.path / "figures" / f"{name}.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
     from primspace.results.composite import bounds_table, composite_table, recall_table
     from primspace.segmentation.peers import PEERS
@@ -95,6 +97,7 @@ def test_peers_and_bounds_run_on_the_same_held_out_demonstrations(finished):
     assert recall_table(results) is not None or all(b["supervised"] is None for b in block["bounds"].values())
 
 
+@pytest.mark.slow
 def test_the_summary_keeps_the_peers_and_the_docs_render_them(finished):
     from primspace.report.markdown import render_composite
     from primspace.results.summary import summarize
@@ -107,6 +110,7 @@ def test_the_summary_keeps_the_peers_and_the_docs_render_them(finished):
     assert all(f"peer: {name}" in text for name in results["peers"]["0"]["methods"])
 
 
+@pytest.mark.slow
 def test_rerun_skips_finished_runs_and_the_report_shows_them(finished):
     from primspace.report import build_report
 
@@ -135,6 +139,7 @@ def test_segment_codes_scores_planted_sequences(long_data):
     assert scores["boundary"]["f1"] == 1.0 and scores["accuracy"] > 0.9
 
 
+@pytest.mark.slow
 def test_segment_command(finished, tmp_path, run_cli):
     exp, _ = finished
     run = exp.path / "runs" / "composite" / "projection-q4-s0" / "infer"
@@ -238,6 +243,7 @@ def by_primitives(long_data, tmp_path_factory):
         yield exp, run_composite(exp)
 
 
+@pytest.mark.slow
 def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_primitives):
     from primspace.results.composite import composite_table
     from primspace.report.markdown import render_composite

@@ -102,6 +102,7 @@ def two_processes(tmp_path_factory):
     return ranks, folder
 
 
+@pytest.mark.slow
 def test_the_processes_hold_the_same_model_and_codes(two_processes):
     (a, b), _ = two_processes
     for key in ("fit", "motor", "infer"):
@@ -109,6 +110,7 @@ def test_the_processes_hold_the_same_model_and_codes(two_processes):
     assert a["fit_history"] == b["fit_history"]
 
 
+@pytest.mark.slow
 def test_two_processes_give_the_numbers_of_two_parts_in_one_bit_for_bit(two_processes):
     """Uneven batches (13 samples, batches of 4: the last one leaves a process empty),
     streamed frames with K drawn per sequence, the paper's summed loss."""
@@ -121,6 +123,7 @@ def test_two_processes_give_the_numbers_of_two_parts_in_one_bit_for_bit(two_proc
     assert same_state(inferred.state, ddp["infer"])
 
 
+@pytest.mark.slow
 def test_motor_only_training_with_an_unused_image_head(two_processes):
     (ddp, _), folder = two_processes
     ds = MotionDataset.load(folder / "data.h5")
@@ -132,6 +135,7 @@ def test_motor_only_training_with_an_unused_image_head(two_processes):
     )
 
 
+@pytest.mark.slow
 def test_one_process_at_once_agrees_within_rounding(two_processes):
     """Summing the samples' gradients in one pass changes only the rounding: after two
     epochs the codes and weights agree to 1e-4 relative (float32 sums of a few dozen
@@ -146,6 +150,7 @@ def test_one_process_at_once_agrees_within_rounding(two_processes):
         assert mine == pytest.approx(theirs, rel=1e-4)
 
 
+@pytest.mark.slow
 def test_a_checkpoint_of_two_processes_resumes_in_one(two_processes, tmp_path):
     """The run directory written by process 0 is today's format; one process continues it
     exactly as two would (the same batch order, the same frame draws)."""
@@ -160,6 +165,7 @@ def test_a_checkpoint_of_two_processes_resumes_in_one(two_processes, tmp_path):
     assert [h["epoch"] for h in resumed.history] == [0, 1, 2, 3]
 
 
+@pytest.mark.slow
 def test_a_divergence_stops_every_process(two_processes):
     (a, b), _ = two_processes
     assert "became" in a["diverged"] and a["diverged"] == b["diverged"]
@@ -175,6 +181,7 @@ def test_parts_split_a_batch_without_padding():
 
 
 @pytest.mark.skipif(shutil.which("torchrun", path=os.path.dirname(sys.executable)) is None, reason="no torchrun")
+@pytest.mark.slow
 def test_torchrun_launches_the_command(two_processes, tmp_path):
     _, folder = two_processes
     torchrun = os.path.join(os.path.dirname(sys.executable), "torchrun")

@@ -46,6 +46,7 @@ def free(trained, train_set, prior):
 
 
 @pytest.mark.parametrize("primitive_given", [True, False])
+@pytest.mark.slow
 def test_the_encoder_recovers_codes_of_its_training_distribution(primitive_given, prior, trained, train_set):
     """Fresh draws from the priors, decoded and half observed: the encoder trained on the
     decoder's samples as they are finds codes nearer the drawn ones than the prior's mean of

@@ -35,6 +35,7 @@ def finished(tmp_path_factory):
     return exp, run_intra(exp)
 
 
+@pytest.mark.slow
 def test_final_losses_are_the_exact_all_frame_losses(finished):
     from primspace.train import evaluate, load_run
 
@@ -54,6 +55,7 @@ def test_final_losses_are_the_exact_all_frame_losses(finished):
             assert got["psnr"] == pytest.approx(10 * np.log10(1 / got["vision"]))
 
 
+@pytest.mark.slow
 def test_the_loss_table_shows_vision_and_psnr(finished):
     _, results = finished
     columns, rows = final_loss_table(results)
@@ -62,6 +64,7 @@ def test_the_loss_table_shows_vision_and_psnr(finished):
         assert row[-3:] == [r["final"]["infer"]["motor"], r["final"]["infer"]["vision"], r["final"]["infer"]["psnr"]]
 
 
+@pytest.mark.slow
 def test_frame_strips_are_drawn_and_reported(finished):
     from conftest import read_png
 
@@ -74,6 +77,7 @@ def test_frame_strips_are_drawn_and_reported(finished):
     assert "PSNR dB" in html
 
 
+@pytest.mark.slow
 def test_old_runs_are_completed_once_without_retraining(finished):
     exp, results = finished
     key = results["runs"][0]["key"]

@@ -58,6 +58,7 @@ def test_pack_zero_is_refused(run_cli, tmp_path):
     assert not (tmp_path / "e").exists()
 
 
+@pytest.mark.slow
 def test_a_packed_grid_gives_the_results_of_each_run_alone(tiny_data, tmp_path):
     import primspace.train.packed as packed
 

@@ -58,6 +58,7 @@ def test_split_is_random_per_primitive_and_seeded():
     assert not set(train) & set(evaluation)
 
 
+@pytest.mark.slow
 def test_intra_grid_results_and_figures(finished):
     exp, intra, _, _ = finished
     assert intra["failures"] == {}
@@ -93,6 +94,7 @@ def _hungarian_accuracy(true, pred) -> float:
     return counts[rows, cols].sum() / len(true)
 
 
+@pytest.mark.slow
 def test_clustering_and_success_results(finished):
     from primspace.cluster import LowRankSubspaceClustering
     from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
@@ -153,6 +155,7 @@ def test_clustering_and_success_results(finished):
             assert bool(res["failed_criteria"][p]) == (rate < 1), (init, p, res["failed_criteria"][p])
 
 
+@pytest.mark.slow
 def test_report_embeds_every_section(finished):
     exp = finished[0]
     html = build_report(exp.path).read_text()
@@ -171,6 +174,7 @@ def test_report_embeds_every_section(finished):
     assert "trains on joint angles only" in html  # the preset's lack of a vision loss is said
 
 
+@pytest.mark.slow
 def test_figures_are_drawn_from_the_results_alone(finished, tmp_path):
     """Copied without its runs and data, a directory's results redraw the same figures."""
     import shutil
@@ -200,6 +204,7 @@ def test_figures_are_drawn_from_the_results_alone(finished, tmp_path):
         assert np.array_equal(read_png(path), read_png(exp.figure(path.stem))), path.name
 
 
+@pytest.mark.slow
 def test_rerun_skips_finished_runs(finished):
     exp = finished[0]
     metrics = sorted(exp.path.glob("runs/intra/*/*/metrics.jsonl"))
@@ -209,6 +214,7 @@ def test_rerun_skips_finished_runs(finished):
     assert len(again["runs"]) == 2
 
 
+@pytest.mark.slow
 def test_a_failed_run_is_reported_and_the_others_finish(tiny_data, tmp_path, run_cli, monkeypatch):
     broken = ExperimentPreset(**{**TINY.to_dict(), "name": "broken", "inits": ("zero", "bogus")})
     monkeypatch.setitem(experiment_presets.PRESETS, "broken", broken)
@@ -222,6 +228,7 @@ def test_a_failed_run_is_reported_and_the_others_finish(tiny_data, tmp_path, run
     assert [r["init"] for r in results["runs"]] == ["zero"]
 
 
+@pytest.mark.slow
 def test_experiment_dir_refuses_another_preset_or_data(finished, tmp_path):
     from primspace.utils.errors import UserError
 
@@ -234,6 +241,7 @@ def test_experiment_dir_refuses_another_preset_or_data(finished, tmp_path):
         ExperimentDir(exp.path, TINY, data=other)
 
 
+@pytest.mark.slow
 def test_inter_primitive_folds(tiny_data, tmp_path):
     exp = ExperimentDir(tmp_path / "inter", TINY, data=tiny_data, workers=1, progress=False)
     results = run_inter(exp)
@@ -253,6 +261,7 @@ def _scaled_targets(run_dir, data):
     return run.scaler.transform(data.motor[run.indices])
 
 
+@pytest.mark.slow
 def test_every_fold_scales_its_targets_into_the_unit_range(tiny_data, tmp_path):
     """The paper scales each joint "over all motions": a phase-2 primitive whose joints did
     not move in phase 1 (grasp's fingers) must not keep its targets in physical units."""
@@ -273,6 +282,7 @@ def test_every_fold_scales_its_targets_into_the_unit_range(tiny_data, tmp_path):
             assert np.ptp(y[..., fingers]) > 1.0
 
 
+@pytest.mark.slow
 def test_intra_fit_and_infer_targets_lie_in_the_unit_range(finished, tiny_data):
     from primspace.data import MotionDataset
 
@@ -287,6 +297,7 @@ def test_intra_fit_and_infer_targets_lie_in_the_unit_range(finished, tiny_data):
 
 
 @pytest.mark.ray
+@pytest.mark.slow
 def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path):
     from test_parallel import _ray_or_skip
 
@@ -299,6 +310,7 @@ def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path):
     assert [r["infer"] for r in local["runs"]] == [r["infer"] for r in ray["runs"]]
 
 
+@pytest.mark.slow
 def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_path, monkeypatch):
     from primspace.demo import run_demo
 
@@ -323,6 +335,7 @@ def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_pa
     assert f"projection codes before training (initial (P m, untrained)): {initial:.3f}" in summary
 
 
+@pytest.mark.slow
 def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, monkeypatch):
     monkeypatch.setitem(experiment_presets.PRESETS, "tiny", TINY)
     out = tmp_path / "exp"
@@ -386,6 +399,7 @@ def test_preset_json_roundtrip_and_unknown_field():
         ExperimentPreset.from_dict({**TINY.to_dict(), "warmup": 3})
 
 
+@pytest.mark.slow
 def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
     """Every quoted sentence appears word for word in the paper; every claim whose
     experiment ran gets a verdict, and a rule can fail."""
@@ -420,6 +434,7 @@ def test_the_papers_claims_are_quoted_verbatim_and_checked(finished):
     assert "claims, checked" in html and "differs very slightly from random linear projection case." in html
 
 
+@pytest.mark.slow
 def test_a_summary_holds_what_the_claims_and_docs_read(finished):
     """The stored summary of a directory gives the same verdicts and numbers as the
     directory itself (the docs are generated from summaries), and stays small."""
@@ -452,6 +467,7 @@ def test_a_summary_holds_what_the_claims_and_docs_read(finished):
         read_summary(path)
 
 
+@pytest.mark.slow
 def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp_path):
     """Fair baselines: each init is tuned over the same settings and epochs on a validation
     part carved from the fitted part (never the evaluation part), and the intra protocol
@@ -547,6 +563,7 @@ def test_tuning_table_names_the_tuned_q_on_rows_of_another_q():
     assert rows[3][-1] == "—"
 
 
+@pytest.mark.slow
 def test_tiny_experiment_numbers_are_pinned(finished):
     """Same seed, same numbers: the tiny grid's losses, clustering accuracies and success
     rates as of 0.2 (CPU). A refactor that changes any of them changes results, and must
@@ -572,6 +589,7 @@ def test_tiny_experiment_numbers_are_pinned(finished):
     assert success["recorded"]["overall"] == 1.0
 
 
+@pytest.mark.slow
 def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path):
     """The intra-primitive protocol on LASA (issue 14): the preset imports the data itself
     (offline), fits 2 of each shape's 7 demonstrations and infers the other 5."""
@@ -591,6 +609,7 @@ def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path)
     assert {r["init"] for r in clustering["latent"]} >= {"zero", "projection"}
 
 
+@pytest.mark.slow
 def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tmp_path, run_cli):
     from primspace.cli.experiments import _judgeable_steps
     from primspace.data import import_lasa
@@ -608,6 +627,7 @@ def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tm
     assert res.code == 2 and "judging needs" in res.err and len(res.err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tmp_path):
     """The intra grid's calibrated point has no fit of its own: it and the projection point
     share ``projection-q4-s0/fit`` under a lock (two workers: trained once, every epoch logged
@@ -641,6 +661,7 @@ def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tm
     assert "Calibrated projection (beyond the paper)" in html
 
 
+@pytest.mark.slow
 def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
     from primspace.train import load_run
 
@@ -659,6 +680,7 @@ def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
     np.testing.assert_allclose(phase2.initial_latents[: len(new)], start, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_path):
     """A directory of an older version (four inits) gains calibrated runs beside its own;
     dropping an init or changing any other setting is still refused."""
@@ -678,6 +700,7 @@ def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_p
         ExperimentDir(exp.path, replace(more, fit_epochs=4))
 
 
+@pytest.mark.slow
 def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     """`experiment predict`: every start and peer at every fraction, judged on simulator data, resumable."""
     from primspace.experiments.prediction import PEERS, PREDICT_VERSION, run_predict
@@ -712,6 +735,7 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     assert points and all(p.name.endswith("-e2") for p in points)  # other epochs than the grid's: other points
 
 
+@pytest.mark.slow
 def test_clustering_again_after_rescaling_the_codes(finished):
     # issue 42: is the gap between inits a matter of the codes' scale? every run, both rescalings
     from primspace.experiments.clustering import RESCALINGS, rescale

@@ -323,6 +323,7 @@ def _ray_or_skip():
 
 
 @pytest.mark.ray
+@pytest.mark.slow
 def test_ray_backend_gives_the_same_file_as_local(tmp_path, reference):
     _ray_or_skip()
     ds = generate_dataset(TINY, seed=5, backend="ray", workers=2, out=tmp_path / "d.h5", progress=False)

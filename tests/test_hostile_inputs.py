@@ -228,6 +228,7 @@ def test_segment_names_the_file_field_and_sample_of_a_short_demonstration(run_cl
     assert not (tmp_path / "seg").exists()
 
 
+@pytest.mark.slow
 def test_an_experiment_on_data_with_hostile_names_writes_inside_its_folder_only(tmp_path, tiny_data):
     """Issue 38, item 1, end to end: label names that are paths ('/../../../victim', '../up', an
     absolute path, a newline, 300 characters, markup) go through the intra experiment, its

@@ -298,12 +298,14 @@ def decoder():
         ([[0.0] * 6, [0.0] * 5], "array of numbers"),
     ],
 )
+@pytest.mark.slow
 def test_inverse_transform_checks_its_codes(decoder, Z, fragment):
     with pytest.raises(UserError) as caught:
         decoder.inverse_transform(Z)
     assert fragment in str(caught.value) and len(str(caught.value).splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_inverse_transform_still_decodes(decoder):
     motor, frames = decoder.inverse_transform(decoder.codes_.astype(np.float64))
     assert motor.shape[0] == len(decoder.codes_) and frames is None

@@ -72,6 +72,7 @@ def test_a_code_window_model_steps_as_infer(eval_set):
     assert np.isfinite(result.codes).all() and result.codes.shape == (9, 30, 9)
 
 
+@pytest.mark.slow
 def test_all_observed_reconstructs_about_as_well_as_infer(trained, eval_set):
     result = infer_online(trained, eval_set, iterations=10)
     assert result.steps.tolist() == list(range(1, 31)) and result.codes.shape == (9, 30, MODEL.latent_dim)

@@ -299,6 +299,7 @@ def test_check_outside_inputs_compares_resolved_paths(tmp_path):
 # ----------------------------------------------------------------------- experiments
 
 
+@pytest.mark.slow
 def test_success_on_data_not_from_the_simulator_fails_before_training(run_cli, data_file, tmp_path):
     out = tmp_path / "exp"
     res = run_cli("experiment", "success", "--data", data_file, "--out", out)

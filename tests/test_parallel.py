@@ -109,6 +109,7 @@ def _ray_or_skip():
 
 
 @pytest.mark.ray
+@pytest.mark.slow
 def test_ray_backend_on_a_local_instance_matches_local():
     _ray_or_skip()
     assert outcomes(backend="ray", workers=2) == EXPECTED

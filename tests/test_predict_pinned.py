@@ -50,6 +50,7 @@ def grid_numbers(run, train, test) -> dict:
     return grid_predictions(run, train, test, FRACTIONS, epochs=5, online_iterations=2, prior_settings=CHEAP_PRIORS)
 
 
+@pytest.mark.slow
 def test_the_prediction_grid_keeps_its_numbers(case):
     pinned = pinned_for_this_cpu(json.loads(PINNED.read_text()), "prediction numbers", vendor=True)
     numbers = grid_numbers(*case)

@@ -156,6 +156,7 @@ def _cli(run_cli, files, out, *flags):
     )
 
 
+@pytest.mark.slow
 def test_the_command_predicts_every_motion_as_the_primitive_asked(run_cli, files, tmp_path):
     res = _cli(run_cli, files, tmp_path / "push", "--primitive", "push")
     assert res.code == 0, res.err
@@ -171,6 +172,7 @@ def test_the_command_predicts_every_motion_as_the_primitive_asked(run_cli, files
     assert json.loads((tmp_path / "lift" / "result.json").read_text())["primitive"] == "lift"
 
 
+@pytest.mark.slow
 def test_the_command_without_a_primitive_writes_the_posterior_and_its_figure(run_cli, files, tmp_path):
     out = tmp_path / "posterior"
     res = _cli(run_cli, files, out, "--init", "prior")
@@ -184,6 +186,7 @@ def test_the_command_without_a_primitive_writes_the_posterior_and_its_figure(run
     assert sorted(p.name for p in out.iterdir()) == ["posterior.png", "predicted.h5", "prediction.png", "result.json"]
 
 
+@pytest.mark.slow
 def test_the_command_takes_clusters_of_the_codes(run_cli, files, tmp_path):
     res = _cli(run_cli, files, tmp_path / "k", "--primitives", "clusters", "--clusters", "2")
     assert res.code == 0, res.err
@@ -214,6 +217,7 @@ def test_bad_primitives_exit_2_and_write_nothing(run_cli, files, tmp_path, flags
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_data_without_labels_asks_for_clusters_and_draws_each_top_primitive(run_cli, files, tmp_path):
     """Fitted data without labels: the prior needs clusters of the codes (said with the flags), and
     posterior.png then has one panel, each motion's top primitive."""
@@ -251,6 +255,7 @@ def test_the_primitives_option_parses_labels_clusters_and_a_number():
 # ------------------------------------------------------------------------ real data
 
 
+@pytest.mark.slow
 def test_lasa_shapes_by_name(run_cli, tmp_path):
     shapes = ["Sine", "Angle", "CShape"]
     data = tmp_path / "lasa.h5"
@@ -273,6 +278,7 @@ def test_lasa_shapes_by_name(run_cli, tmp_path):
     assert np.abs(angle - free).max() > 1e-3  # every motion as an Angle, or each weighed by its posterior
 
 
+@pytest.mark.slow
 def test_an_imported_csv_folder_by_its_folder_names(run_cli, tmp_path):
     """Labels from the subfolders' names are the primitives a user names."""
     data = primitives(4, seed=7, T=20, J=3)

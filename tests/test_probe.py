@@ -83,6 +83,7 @@ def test_bad_input_is_one_line(args, message):
     assert message in str(info.value) and "\n" not in str(info.value)
 
 
+@pytest.mark.slow
 def test_the_intra_experiment_probes_every_run_and_reports_it(tmp_path):
     from test_experiments import TINY
 

@@ -4,6 +4,8 @@ intra results whose numbers we choose."""
 
 import json
 
+import pytest
+
 from primspace.results.claims import check_claims
 
 
@@ -118,6 +120,7 @@ def test_spread_table_is_mean_and_std_over_seeds():
     assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
 
 
+@pytest.mark.slow
 def test_clustering_and_success_over_seeds(tmp_path, tiny_data):
     """Two seeds: the first seed's results are those of a one-seed experiment, bit for
     bit; the second's are under ``by_seed``; the outcome table averages both."""

@@ -41,6 +41,7 @@ def test_generate_without_images(run_cli, tiny_preset, tmp_path):
     assert "no images" in res.out and MotionDataset.load(out).images is None
 
 
+@pytest.mark.slow
 def test_show_draws_a_png(run_cli, tiny_preset, tmp_path):
     data, png = tmp_path / "sim.h5", tmp_path / "fig" / "sample.png"
     assert run_cli("generate", "--preset", tiny_preset, "--out", data, "--workers", 1).code == 0

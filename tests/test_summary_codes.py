@@ -55,6 +55,7 @@ def stored(exp, tmp_path_factory):
     return out, summary
 
 
+@pytest.mark.slow
 def test_the_codes_of_every_run_are_kept_exactly(exp, stored):
     out, summary = stored
     path = out.with_name("tiny.codes.npz")
@@ -83,6 +84,7 @@ def test_the_codes_of_every_run_are_kept_exactly(exp, stored):
     assert codes["label_names"] == list(data.label_names) and codes["n_samples"] == len(data)
 
 
+@pytest.mark.slow
 def test_clustering_is_checked_again_from_the_codes_alone(exp, stored):
     """The codes in data-set order are the directory's, so the clustering of the codes (as the
     clustering experiment runs it) comes out the same from the file alone, labels included."""
@@ -102,6 +104,7 @@ def test_clustering_is_checked_again_from_the_codes_alone(exp, stored):
         assert 0 < clustering_accuracy(codes["labels"], fitted[0].labels_) <= 1
 
 
+@pytest.mark.slow
 def test_a_codes_file_is_replaced_only_when_asked_and_only_its_own(exp, tmp_path):
     out = tmp_path / "tiny.json"
     summary = summarize(exp.path, "tiny", COMMAND)
@@ -129,6 +132,7 @@ def test_a_codes_file_is_replaced_only_when_asked_and_only_its_own(exp, tmp_path
     assert not list(tmp_path.glob(".*.tmp"))  # nothing half-written left behind
 
 
+@pytest.mark.slow
 def test_runs_whose_folders_are_gone_are_named_and_labels_kept_when_readable(exp, tmp_path):
     copy = tmp_path / "exp"
     shutil.copytree(exp.path, copy)
@@ -143,6 +147,7 @@ def test_runs_whose_folders_are_gone_are_named_and_labels_kept_when_readable(exp
     assert codes["labels"] is None and codes["label_names"] is None and codes["n_samples"] is None
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_codes_beside_the_summary(exp, tmp_path, run_cli):
     out = tmp_path / "docs" / "tiny.json"
     result = run_cli("summarize", exp.path, "--name", "tiny", "--command", COMMAND, "--out", out)

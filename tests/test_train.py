@@ -96,6 +96,7 @@ def test_fit_reaches_a_low_loss(train_set, tmp_path):
     np.testing.assert_allclose(scaled_mse, evaluate(run, train_set)["motor"], rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_infer_from_projection_ends_lower_than_from_random(train_set, eval_set, tmp_path):
     """The paper's intra-primitive result: trained (theta, Z) from a random-projection init
     encodes held-out samples of known primitives; from a random init it does not."""
