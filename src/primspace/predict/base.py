@@ -108,6 +108,14 @@ class Predictor(BaseEstimator, metaclass=ABCMeta):
         """The whole sequences ``(n, T, J)`` (scaled units) from the observed steps: ``forecast(...).motor``."""
         return self.forecast(motor, observed, labels, lengths, frames, **options).motor
 
+    def resolve_run(self):
+        """``run_``: the run this predictor is built on (``self.run``), read once from its directory when
+        given as a path (:func:`~primspace.train.as_run`); :meth:`fit` of a predictor built on a run calls it."""
+        from primspace.train.sessions import as_run
+
+        self.run_ = as_run(self.run)
+        return self.run_
+
     def check_query(self, motor) -> np.ndarray:
         """``motor`` as float64 ``(n, T, J)`` with the run's T and J (a predictor built on a run), or one UserError."""
         motor = check_motor(motor)

@@ -51,7 +51,7 @@ from primspace.predict.stream import Stream
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import map_refine, prior_terms
 from primspace.utils.progress import progress_bar, stage
-from primspace.train.api import as_run, reconstruct
+from primspace.train.api import reconstruct
 from primspace.train.config import thread_limit
 from primspace.train.observe import NOTHING, Observation
 
@@ -195,7 +195,7 @@ class EncoderPredictor(Predictor):
     # -- fit ------------------------------------------------------------------------------
     def fit(self, motor, labels=None, lengths=None, frames=None) -> "EncoderPredictor":
         """Fit the prior (unless fitted), draw and decode its training set, train the encoder."""
-        run = self.run_ = as_run(self.run)
+        run = self.resolve_run()
         self._check_params()
         self.seed_ = int(run.train_config.seed) if self.random_state is None else int(self.random_state)
         self.prior_ = self._fitted_prior(motor, labels, lengths)

@@ -24,7 +24,7 @@ from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask
 from primspace.predict.online import OnlineInference
 from primspace.predict.stream import OnlineResult
-from primspace.train.api import as_run, infer, reconstruct
+from primspace.train.api import infer, reconstruct
 from primspace.train.observe import Observation
 from primspace.train.starts import STARTS_FROM_FITTED, FittedDemonstrations, fitted_start
 
@@ -94,7 +94,7 @@ class GradientPredictor(Predictor):
     def fit(self, motor, labels=None, lengths=None, frames=None) -> "GradientPredictor":
         """Keep the fitted demonstrations (scaled, in the run's order) for the starts that read them
         (``motor`` may be None for the others)."""
-        self.run_ = as_run(self.run)
+        self.resolve_run()
         self.start_ = self.start or self.run_.init
         if self.start_ not in INFER_STARTS:
             raise UserError(f"unknown start {self.start_!r}: choose one of {', '.join(INFER_STARTS)}")

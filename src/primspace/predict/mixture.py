@@ -34,7 +34,8 @@ from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask
 from primspace.predict.stream import Stream
 from primspace.utils.progress import stage
-from primspace.train.api import as_run, reconstruct
+from primspace.train.api import reconstruct
+from primspace.train.run import require_run
 from primspace.train.observe import NOTHING, Observation
 
 __all__ = ["MixturePredictor", "MixtureStream", "MIXTURE"]
@@ -94,7 +95,7 @@ class MixturePredictor(Predictor):
     def fit(self, motor, labels=None, lengths=None, frames=None) -> "MixturePredictor":
         """Decode the candidates (unless given) and keep the fitted demonstrations ``motor``
         (scaled, the run's fitted samples in its order) for the leave-one-out choices."""
-        self.run_ = as_run(self.run)
+        self.resolve_run()
         motor = check_motor(motor)
         if len(motor) != len(self.run_.latents):
             raise UserError(
@@ -219,7 +220,7 @@ class MixtureStream(Stream):
 def code_mixture(run) -> CodeMixture:
     """The run's :class:`~primspace.predict.candidates.CodeMixture`: its fitted codes' candidates,
     decoded once (scaled motor). Build it once and share it between predictors of one run."""
-    parent = as_run(run)
+    parent = require_run(run)
     scaler = parent.scaler
 
     def decode(codes):

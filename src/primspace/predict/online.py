@@ -56,7 +56,7 @@ from primspace.train.checks import check_calibrated, check_data_fits, check_init
 from primspace.train.config import resolve_device
 from primspace.train.loss import DataTensors, autocast_for, code_step
 from primspace.train.observe import Observation
-from primspace.train.run import TrainedRun
+from primspace.train.run import TrainedRun, require_run
 from primspace.train.starts import inference_start
 
 __all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors", "online_steps"]
@@ -75,8 +75,9 @@ class OnlineInference(Stream):
 
     Parameters
     ----------
-    run : TrainedRun or path-like
-        The trained run (θ frozen; its scaler, initialiser, ``latent_lr`` and loss).
+    run : TrainedRun
+        The trained run (θ frozen; its scaler, initialiser, ``latent_lr`` and loss), resolved
+        (:func:`infer_online` reads a run directory).
     data : MotionDataset
         The demonstrations, with the run's T and J (and frames of its size if used). Only
         the steps observed so far ever reach the loss; padding never does.
@@ -125,7 +126,7 @@ class OnlineInference(Stream):
         carry_moments: bool = False,
         start_codes: np.ndarray | None = None,
     ) -> None:
-        parent = as_run(run)
+        parent = require_run(run)
         if not isinstance(data, MotionDataset):
             raise UserError(f"expected a MotionDataset, got {type(data).__name__}")
         self.iterations = _check_whole("iterations", iterations, 0)
@@ -270,7 +271,7 @@ def infer_online(
     OnlineResult
     """
     online = OnlineInference(
-        run,
+        as_run(run),
         data,
         iterations=iterations,
         init=init,

@@ -57,7 +57,7 @@ from primspace.predict.primitives import (
     top1_accuracy,
 )
 from primspace.utils.progress import stage
-from primspace.train.api import as_run, reconstruct
+from primspace.train.api import reconstruct
 from primspace.train.observe import NOTHING, Observation
 
 __all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "BLEND_GRID", "CV_SAMPLES"]
@@ -153,7 +153,7 @@ class PriorPredictor(Predictor):
     def fit(self, motor, labels=None, lengths=None, frames=None) -> "PriorPredictor":
         """Group the run's fitted codes into primitives, choose and fit their priors, draw and decode.
         ``motor`` (scaled, the run's fitted samples in its order) is kept for the choices of ``r`` and ``T``."""
-        run = self.run_ = as_run(self.run)
+        run = self.resolve_run()
         self._check_params()
         motor = check_motor(motor)
         codes = np.asarray(run.latents, dtype=np.float64)

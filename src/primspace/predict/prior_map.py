@@ -42,7 +42,8 @@ from primspace.predict.base import Forecast, Predictor, observation_rule, observ
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, valid_mask
 from primspace.predict.prior import PriorPredictor
-from primspace.train.api import as_run, reconstruct
+from primspace.train.api import reconstruct
+from primspace.train.run import require_run
 from primspace.train.config import resolve_device, thread_limit
 
 __all__ = ["PriorMapPredictor", "PRIOR_MAP", "MAP_STARTS", "map_refine", "map_objective", "prior_terms", "best_members"]
@@ -98,7 +99,7 @@ def map_objective(run, codes, seen, mask, means, precisions, r, *, device: str =
 
     Parameters are those of :func:`map_refine`.
     """
-    run = as_run(run)
+    run = require_run(run)
     _check_r(r, len(codes))
     with thread_limit(threads), torch.no_grad():
         objective = _Objective(run, seen, mask, means, precisions, r, device)
@@ -113,7 +114,7 @@ def map_refine(
 
     Parameters
     ----------
-    run : TrainedRun or path-like
+    run : TrainedRun
     codes : ndarray (n, q)
         The start of each motion's code.
     seen : ndarray (n, T, J)
@@ -138,7 +139,7 @@ def map_refine(
     -------
     ndarray (n, q) float32
     """
-    run = as_run(run)
+    run = require_run(run)
     codes = np.asarray(codes, dtype=np.float32)
     if codes.ndim != 2 or not np.isfinite(codes).all():
         raise UserError(f"codes must be a finite (n, q) array, got shape {codes.shape}")
@@ -257,7 +258,7 @@ class PriorMapPredictor(Predictor):
 
     def fit(self, motor, labels=None, lengths=None, frames=None) -> "PriorMapPredictor":
         """Fit the inner prior predictor (unless it is fitted already)."""
-        self.run_ = as_run(self.run)
+        self.resolve_run()
         if self.start not in MAP_STARTS:
             raise UserError(f"start must be one of {', '.join(MAP_STARTS)}, got {self.start!r}")
         prior = self.prior

@@ -29,7 +29,15 @@ from primspace.train.loop import epoch_values, evaluate_loop, opened_stream
 from primspace.train.loss import DataTensors
 from primspace.train.checks import select
 from primspace.train.run import TrainedRun
-from primspace.train.sessions import as_run, fit_session, infer_session, run_session, uses_images
+from primspace.train.sessions import (
+    FitRequest,
+    InferRequest,
+    as_run,
+    fit_session,
+    infer_session,
+    run_session,
+    uses_images,
+)
 
 __all__ = [
     "fit",
@@ -128,9 +136,9 @@ def fit(
     TrainingDivergedError
         The loss became NaN/inf (the last good checkpoint is kept).
     """
-    args = dict(locals())  # fit_session takes every argument but progress
+    args = dict(locals())  # a FitRequest of every argument but progress
     progress = args.pop("progress")
-    session, ckpt = fit_session(**args)
+    session, ckpt = fit_session(FitRequest(**args))
     return run_session(session, ckpt, progress, "fit")
 
 
@@ -201,9 +209,9 @@ def infer(
     -------
     TrainedRun
     """
-    args = dict(locals())  # infer_session takes every argument but progress
+    args = dict(locals())  # an InferRequest of every argument but progress
     progress = args.pop("progress")
-    session, ckpt = infer_session(**args.pop("overrides"), **args)
+    session, ckpt = infer_session(InferRequest(**args))
     return run_session(session, ckpt, progress, "infer")
 
 

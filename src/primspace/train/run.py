@@ -14,8 +14,9 @@ from primspace.data import JointScaler
 from primspace.model.latent import LatentInitializer
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train.config import TrainConfig
+from primspace.utils.errors import UserError
 
-__all__ = ["TrainedRun"]
+__all__ = ["TrainedRun", "require_run"]
 
 
 @dataclass
@@ -88,3 +89,14 @@ class TrainedRun:
     def final_loss(self) -> float | None:
         """The last logged epoch's total loss."""
         return self.history[-1]["loss"] if self.history else None
+
+
+def require_run(run) -> "TrainedRun":
+    """``run`` when it is a :class:`TrainedRun`, or one UserError: the functions inside a prediction or a
+    training take the run resolved (a run directory is read once, at the entry points:
+    :func:`~primspace.train.as_run`)."""
+    if not isinstance(run, TrainedRun):
+        raise UserError(
+            f"expected a TrainedRun (read a run directory with primspace.train.load_run), got {type(run).__name__}"
+        )
+    return run

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import os
-from dataclasses import replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,28 +43,86 @@ from primspace.train.run import TrainedRun
 from primspace.train.rundir import load_run, open_run_dir, run_config, run_from_state
 from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
 
-__all__ = ["fit_session", "infer_session", "run_session", "theta_optimizer", "uses_images", "as_run"]
+__all__ = [
+    "FitRequest",
+    "InferRequest",
+    "fit_session",
+    "infer_session",
+    "run_session",
+    "theta_optimizer",
+    "uses_images",
+    "as_run",
+]
 
 
-def fit_session(
-    dataset: MotionDataset,
-    out_dir: str | os.PathLike | None = None,
-    *,
-    model_config: ModelConfig | None = None,
-    train_config: TrainConfig | None = None,
-    init: str = "projection",
-    indices=None,
-    resume: bool = False,
-    overwrite: bool = False,
-    weights_from: TrainedRun | str | os.PathLike | None = None,
-    initial_latents: np.ndarray | None = None,
-    images: bool | None = None,
-    scaler: JointScaler | None = None,
-    log_to: tuple | None = None,
-) -> tuple[Session, dict | None]:
-    """The :class:`~primspace.train.loop.Session` that :func:`fit` runs (same arguments), not
-    yet run, and the checkpoint it resumes from (None: from the start); :func:`run_session`
-    runs it, :func:`primspace.train.packed.train_packed` runs several together."""
+@dataclass(frozen=True)
+class FitRequest:
+    """The arguments of :func:`~primspace.train.api.fit` (its docstring gives each), as one value."""
+
+    dataset: MotionDataset
+    out_dir: str | os.PathLike | None = None
+    model_config: ModelConfig | None = None
+    train_config: TrainConfig | None = None
+    init: str = "projection"
+    indices: Any = None
+    resume: bool = False
+    overwrite: bool = False
+    weights_from: TrainedRun | str | os.PathLike | None = None
+    initial_latents: np.ndarray | None = None
+    images: bool | None = None
+    scaler: JointScaler | None = None
+    log_to: tuple | None = None
+
+
+@dataclass(frozen=True)
+class InferRequest:
+    """The arguments of :func:`~primspace.train.api.infer` (its docstring gives each), as one value;
+    ``overrides`` the train-config overrides."""
+
+    run: TrainedRun | str | os.PathLike
+    dataset: MotionDataset
+    out_dir: str | os.PathLike | None = None
+    epochs: int | None = None
+    init: str | None = None
+    indices: Any = None
+    train_config: TrainConfig | None = None
+    initial_latents: np.ndarray | None = None
+    resume: bool = False
+    overwrite: bool = False
+    observe: Any = None
+    observe_frames: Any = None
+    fitted_data: MotionDataset | None = None
+    log_to: tuple | None = None
+    overrides: dict = field(default_factory=dict)
+
+
+def _request(cls, args: tuple, kwargs: dict):
+    """A request of ``cls``: the one given, or built of the arguments (unknown keywords: ``overrides``
+    where the request has them)."""
+    if len(args) == 1 and not kwargs and isinstance(args[0], cls):
+        return args[0]
+    names = {f.name for f in fields(cls)}
+    extra = {k: v for k, v in kwargs.items() if k not in names}
+    if extra and "overrides" in names:
+        kwargs = {k: v for k, v in kwargs.items() if k in names} | {
+            "overrides": {**kwargs.get("overrides", {}), **extra}
+        }
+    try:
+        return cls(*args, **kwargs)
+    except TypeError as exc:
+        raise UserError(f"{cls.__name__}: {exc}") from None
+
+
+def fit_session(*args, **kwargs) -> tuple[Session, dict | None]:
+    """The :class:`~primspace.train.loop.Session` that :func:`fit` runs (a :class:`FitRequest`, or its
+    fields as arguments), not yet run, and the checkpoint it resumes from (None: from the start);
+    :func:`run_session` runs it, :func:`primspace.train.packed.train_packed` runs several together.
+    A ``weights_from`` directory is read here (the one place for ``fit`` and packed jobs)."""
+    request = _request(FitRequest, args, kwargs)
+    dataset, out_dir, model_config = request.dataset, request.out_dir, request.model_config
+    init, indices, resume, overwrite = request.init, request.indices, request.resume, request.overwrite
+    weights_from, initial_latents, images = request.weights_from, request.initial_latents, request.images
+    scaler, log_to, train_config = request.scaler, request.log_to, request.train_config
     tc = (train_config or TrainConfig()).validate()
     check_init(init)
     data, _ = select(dataset, indices)
@@ -127,35 +185,24 @@ def run_session(session: Session, ckpt: dict | None, progress: bool | None, labe
     return run_from_state(session.state(), session.history, None if session.run_dir is None else session.run_dir.path)
 
 
-def infer_session(
-    run: TrainedRun | str | os.PathLike,
-    dataset: MotionDataset,
-    out_dir: str | os.PathLike | None = None,
-    *,
-    epochs: int,
-    init: str | None = None,
-    indices=None,
-    train_config: TrainConfig | None = None,
-    initial_latents: np.ndarray | None = None,
-    resume: bool = False,
-    overwrite: bool = False,
-    observe=None,
-    observe_frames=None,
-    fitted_data: MotionDataset | None = None,
-    log_to: tuple | None = None,
-    **overrides: Any,
-) -> tuple[Session, dict | None]:
-    """The session that :func:`infer` runs (same arguments), not yet run, and its checkpoint (:func:`fit_session`)."""
-    parent = as_run(run)
-    base = train_config or replace(parent.train_config, threads=TrainConfig.threads)  # not the fit's machine's
-    try:
-        tc = replace(base, epochs=epochs, **overrides).validate()
-    except TypeError as exc:
-        raise UserError(f"unknown train config override ({exc})") from None
-    init = init or parent.init
+def infer_session(*args, **kwargs) -> tuple[Session, dict | None]:
+    """The session that :func:`infer` runs (an :class:`InferRequest`, or its fields as arguments, unknown
+    keywords the train-config overrides), not yet run, and its checkpoint (:func:`fit_session`). A run
+    directory is read here (the one place for ``infer`` and packed jobs)."""
+    request = _request(InferRequest, args, kwargs)
+    dataset, out_dir, indices, initial_latents = (
+        request.dataset,
+        request.out_dir,
+        request.indices,
+        request.initial_latents,
+    )
+    resume, overwrite, fitted_data, log_to = request.resume, request.overwrite, request.fitted_data, request.log_to
+    parent = as_run(request.run)
+    tc = _infer_config(parent, request)
+    init = request.init or parent.init
     check_init(init, INFER_STARTS)
     check_calibrated(init, parent)
-    observation = Observation.build(observe, observe_frames)
+    observation = Observation.build(request.observe, request.observe_frames)
     data, _ = select(dataset, indices)
     mc = parent.model_config
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
@@ -199,6 +246,18 @@ def infer_session(
         log_to=log_to,
     )
     return session, ckpt
+
+
+def _infer_config(parent: TrainedRun, request: InferRequest) -> TrainConfig:
+    """The train config of an inference: the request's, or the run's with the default ``threads`` (not the
+    fit's machine's), with ``epochs`` and the overrides."""
+    if request.epochs is None:
+        raise UserError("infer needs epochs=")
+    base = request.train_config or replace(parent.train_config, threads=TrainConfig.threads)
+    try:
+        return replace(base, epochs=request.epochs, **request.overrides).validate()
+    except TypeError as exc:
+        raise UserError(f"unknown train config override ({exc})") from None
 
 
 def theta_optimizer(model: MTRNNDecoder, tc: TrainConfig) -> torch.optim.Optimizer:
