@@ -48,8 +48,6 @@ __all__ = [
 GRADIENT = "gradient"
 #: The registry's name of the MAP code under the prior.
 PRIOR_MAP = "prior_map"
-#: What :func:`~primspace.predict.predict` accepts as ``init``: the gradient starts, the mixture and the prior.
-PREDICT_STARTS = INFER_STARTS + (MIXTURE, PRIOR)
 #: The predictor of :func:`~primspace.predict.predict` and ``primspace predict`` when none is named: the best
 #: we have measured (docs/predict.md: below every gradient start on the demo, LASA and real recordings).
 DEFAULT_PREDICTOR = MIXTURE
@@ -145,6 +143,11 @@ REGISTRY: dict[str, PredictorSpec] = {
         PredictorSpec(MeanMotionPeer.name, MeanMotionPeer, False, False, False, _peer(MeanMotionPeer)),
     )
 }
+
+
+#: What :func:`~primspace.predict.predict` accepts as ``init``: the gradient starts, then the registered
+#: predictors the command offers (the mixture and the prior).
+PREDICT_STARTS = INFER_STARTS + tuple(name for name, spec in REGISTRY.items() if spec.command and name != GRADIENT)
 
 
 def spec_for(init: str) -> PredictorSpec:
