@@ -189,7 +189,7 @@ class AutoDecoder(BaseEstimator):
         n_clusters: int | None = None,
         **overrides,
     ):
-        """The rest of each motion of ``X`` from its observed beginning (issue 25; docs/predict.md).
+        """The rest of each motion of ``X`` from its observed beginning (docs/predict.md).
 
         The code is found from the observed entries only (``init``: ``"mixture"``, the
         posterior mean over the fitted codes, or a start followed by ``epochs`` of

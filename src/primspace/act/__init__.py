@@ -1,4 +1,4 @@
-"""Acting in the simulator: plan a motion from the scene, execute it, observe, re-plan (issue 40).
+"""Acting in the simulator: plan a motion from the scene, execute it, observe, re-plan.
 
 * :mod:`primspace.act.planner`: the one interface of a planner (:class:`Planner`: ``reset``,
   ``due``, ``plan``);

@@ -1,4 +1,4 @@
-"""Features of camera frames for the predictors that read the scene (issue 40).
+"""Features of camera frames for the predictors that read the scene.
 
 A scene is its first camera frame, ``(H, W, 3)`` uint8 (48x64 in the simulated presets: a
 Franka arm at its home pose over a table, and a small red block). The transformers here turn

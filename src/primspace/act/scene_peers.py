@@ -1,4 +1,4 @@
-"""The peers of the scene mode: the whole motion from the first frame and the primitive (issue 40).
+"""The peers of the scene mode: the whole motion from the first frame and the primitive.
 
 primspace's :class:`~primspace.act.scene_policy.ScenePolicy` predicts a motion from its first
 camera frame and the primitive to do; these two predictors (:class:`~primspace.predict.base.Predictor`)

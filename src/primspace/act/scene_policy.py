@@ -1,4 +1,4 @@
-"""See the block, do the primitive: a motion from what the camera sees (issue 40; docs/act.md).
+"""See the block, do the primitive: a motion from what the camera sees (docs/act.md).
 
 The paper leaves this as future work: "Another point is visual perception information is not
 used to initialize encodings." Given the primitive (its label) and a camera frame, the policy

@@ -353,7 +353,7 @@ def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_sa
 
 
 def _check_ignored(iterations, online: bool, fitted, init, scene: bool) -> None:
-    """One line for an option that would be ignored (issue 38: they were, without a word)."""
+    """One line for an option that would be ignored (rather than ignoring it without a word)."""
     from primspace.predict import DEFAULT_PREDICTOR, PRIOR
     from primspace.train.starts import STARTS_FROM_FITTED
 

@@ -16,8 +16,8 @@ part of the training." This module tests that reading. The fitted codes do move
 (``‖Z − P m‖_F / ‖P m‖_F`` 5-7 % on the paper preset, 11-53 % on the smaller demo, LASA
 and wrist-sensor data: CHANGELOG.md, 0.5.0, *Beyond the paper: the calibrated start*); where
 they move most, and not linearly in ``P m`` (the wrist-sensor recordings, 46-53 %), the raw
-projection ends above zero init. (The LASA example reported in issue 16, projection ending
-above zero, did not reproduce: docs/model.md, *When the raw projection loses*.)
+projection ends above zero init. (A LASA run with projection ending above zero did not
+reproduce: docs/model.md, *When the raw projection loses*.)
 
 :class:`CodeCalibration` learns the correction from the training part itself. After ``fit``
 the run has, for each training sample, its initial code ``x_i = P m_i`` (the initialiser's

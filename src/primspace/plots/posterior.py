@@ -1,4 +1,4 @@
-"""The primitive as an input (issue 39; docs/predict.md): the prior's posterior over primitives
+"""The primitive as an input (docs/predict.md): the prior's posterior over primitives
 against the observed fraction of each motion (``posterior.png`` of ``primspace predict``).
 
 The paper has no such figure: it names a primitive's cluster only after the whole

@@ -1,4 +1,4 @@
-"""Predicting the rest of a motion (issue 25; docs/predict.md): observed, predicted and
+"""Predicting the rest of a motion (docs/predict.md): observed, predicted and
 recorded joints of a few samples, and errors against the observed fraction.
 
 The paper has no such figure: it reconstructs whole demonstrations only.

@@ -1,4 +1,4 @@
-"""Predicting the rest of a motion: predictors with one surface, ours and the peers' (issue 37).
+"""Predicting the rest of a motion: predictors with one surface, ours and the peers'.
 
 Every predictor is fitted once on the fitted demonstrations and then predicts whole
 sequences from their observed steps (:mod:`primspace.predict.base`):

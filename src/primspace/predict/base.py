@@ -1,4 +1,4 @@
-"""The one surface of every predictor: fit once, then predict the rest of each motion (issue 37).
+"""The one surface of every predictor: fit once, then predict the rest of each motion.
 
 Every predictor of :mod:`primspace.predict`, primspace's own and the peers alike, is an
 object with the same two methods, as the maintained peers are (ProMP in

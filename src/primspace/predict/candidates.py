@@ -1,4 +1,4 @@
-"""The fitted codes as a prior for prediction: a mixture over decoded candidates (issue 25).
+"""The fitted codes as a prior for prediction: a mixture over decoded candidates.
 
 The maths of :class:`~primspace.predict.mixture.MixturePredictor` (the predictor that uses it).
 

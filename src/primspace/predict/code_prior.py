@@ -1,4 +1,4 @@
-"""A Gaussian prior in code space per primitive, chosen by held-out likelihood, and its decoded moments (issue 39).
+"""A Gaussian prior in code space per primitive, chosen by held-out likelihood, and its decoded moments.
 
 The paper: "Specific motions within each primitive are determined by location of the
 object in space. Hence, each primitive is a low-dimensional manifold in trajectory space",

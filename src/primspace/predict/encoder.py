@@ -1,4 +1,4 @@
-"""An amortised encoder from the observed steps to the code, trained on the decoder's own samples (issue 39).
+"""An amortised encoder from the observed steps to the code, trained on the decoder's own samples.
 
 :class:`~primspace.predict.prior.PriorPredictor` conditions each primitive's prior on the
 observed steps at prediction time. :class:`EncoderPredictor` learns that map once instead

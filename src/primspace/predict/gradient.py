@@ -1,4 +1,4 @@
-"""Gradient inference from a start as a predictor (issue 25; issue 37).
+"""Gradient inference from a start as a predictor.
 
 The paper's inference, on the observed part only: each new motion's code starts from one
 of the starts of :mod:`primspace.train.starts` (``zero``, ``random``, ``projection``, ``pca``,

@@ -1,4 +1,4 @@
-"""The rows of the prediction experiment on one split: ours and the peers, one loop (issue 37).
+"""The rows of the prediction experiment on one split: ours and the peers, one loop.
 
 :func:`grid_predictors` builds every row as a :class:`~primspace.predict.base.Predictor`
 (primspace's gradient starts, the mixture's variants sharing one set of decoded candidates,
@@ -60,7 +60,7 @@ MIXTURE_ROWS = (
     (LABELS_DIAGNOSTIC, True, False, True),
 )
 
-#: The priors' rows (issue 39): given the test motion's primitive (the fitted labels' priors);
+#: The priors' rows: given the test motion's primitive (the fitted labels' priors);
 #: not given, the posterior over the fitted labels' priors; not given and without any label, the
 #: posterior over clusters of the fitted codes (as many as the labels).
 PRIOR_ROWS = (

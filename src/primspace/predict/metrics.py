@@ -1,4 +1,4 @@
-"""The measure of a prediction, and the checks of the arrays every predictor reads (issue 37).
+"""The measure of a prediction, and the checks of the arrays every predictor reads.
 
 The task of every predictor of :mod:`primspace.predict`: a demonstration's first steps are
 observed (a boolean mask ``observed`` ``(n, T)``, a prefix of its valid steps); predict the

@@ -1,4 +1,4 @@
-"""The mixture over the fitted codes as a predictor, offline and online (issue 25; issue 37).
+"""The mixture over the fitted codes as a predictor, offline and online.
 
 :class:`MixturePredictor` predicts the rest of a motion without a gradient step: the
 posterior over decoded candidates built from the run's fitted codes

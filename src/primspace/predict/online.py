@@ -1,4 +1,4 @@
-"""Online inference as predictive coding (issue 25, item 3): the code follows a motion as its steps arrive.
+"""Online inference as predictive coding: the code follows a motion as its steps arrive.
 
 The paper's Background describes predictive coding: "Predicted information is compared
 with the real one and internal state is corrected based on the error". Here the internal

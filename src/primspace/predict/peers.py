@@ -1,4 +1,4 @@
-"""The peers that primspace's motion prediction is measured against (issue 25).
+"""The peers that primspace's motion prediction is measured against.
 
 Each is a :class:`~primspace.predict.base.Predictor` (the one surface of every predictor):
 fitted on motor arrays ``(n, T, J)`` (already scaled by the caller, e.g. to [-1, 1]) with

@@ -1,4 +1,4 @@
-"""The primitive as an input (issue 39): what a prediction by the prior says of its primitives.
+"""The primitive as an input: what a prediction by the prior says of its primitives.
 
 :func:`~primspace.predict.predict` with the prior (:class:`~primspace.predict.prior.PriorPredictor`)
 either is told the primitive of every motion (``primitive="push"``) or weighs its primitives by

@@ -1,4 +1,4 @@
-"""The primitives of a run: which of its fitted codes make each one, and their names (issue 39).
+"""The primitives of a run: which of its fitted codes make each one, and their names.
 
 A primitive is either a label of the fitted demonstrations (when the user has labels) or a
 cluster of the fitted codes found without labels, by the paper's affine low-rank subspace

@@ -1,4 +1,4 @@
-"""Priors in code space per primitive, and the primitive as an input (issue 39).
+"""Priors in code space per primitive, and the primitive as an input.
 
 The paper's latent space is structured: codes of one primitive lie near a common affine
 subspace (*Clustering*). :class:`PriorPredictor` makes each primitive a distribution

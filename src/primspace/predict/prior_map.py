@@ -1,4 +1,4 @@
-"""MAP through the decoder under a code prior per primitive (issue 39, deliverable 2b).
+"""MAP through the decoder under a code prior per primitive.
 
 :class:`~primspace.predict.prior.PriorPredictor` conditions the decoded draws of each
 primitive's prior linearly (the ensemble Kalman update): its conditioned code is the best

@@ -44,7 +44,7 @@ from primspace.segmentation.windows import (
 #: The segmentation methods by name (``primspace segment --method``).
 METHODS = ("synthesis", "surprise", "windows")
 #: The default method: synthesis found the boundaries with F1 0.76 where the window codes got
-#: 0.18 on the same long demonstrations (issue 37), and needs no run trained with a code window.
+#: 0.18 on the same long demonstrations, and needs no run trained with a code window.
 DEFAULT_METHOD = "synthesis"
 
 __all__ = [

@@ -4,8 +4,8 @@ gets a code of its own, and the segments are labelled by clustering those codes.
 Synthesis and surprise (:mod:`~primspace.segmentation.synthesis`,
 :mod:`~primspace.segmentation.surprise`) give each segment the code of its nearest template:
 a few dozen distinct codes (one per fitted primitive) stand for hundreds of segments, and a
-segment is labelled by which template it is nearest. Issue 27 asks instead for "inferred
-code, segment resampled to the model's length ... warm-started": the paper's evaluation
+segment is labelled by which template it is nearest. This module gives each segment an inferred
+code instead (the segment resampled to the model's length, warm-started): the paper's evaluation
 (``infer``, θ frozen) run on the segments themselves, so that each segment's code places it
 in the single-primitive latent space, where the paper's clustering works (Summary and
 Discussion, verbatim: "Moreover, these manifolds are close enough to affine subspaces, which

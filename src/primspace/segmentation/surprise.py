@@ -1,5 +1,5 @@
 """Boundaries from prediction error: a single-primitive model follows a long demonstration
-step by step, and a boundary is where its prediction of the next steps fails (issue 27, item 1).
+step by step, and a boundary is where its prediction of the next steps fails.
 
 The paper's Background describes predictive coding (shared/paper.tex, verbatim):
 "Predicted information is compared with the real one and internal state is corrected based
@@ -24,8 +24,8 @@ continuation the model can generate and the error jumps: the model is *surprised
 3. **Boundaries**: the first ``k >= min_steps`` whose surprise exceeds the threshold ends
    the segment at ``s + k`` (and only where the rest can still hold a segment); without one
    by ``max_steps``, the segment ends where the surprise was largest. The next segment
-   starts there and the following restarts (issue 27: "restart the inference window after
-   each boundary").
+   starts there and the following restarts (the inference window restarts after each
+   boundary).
 4. **The threshold, chosen without labels** (:func:`surprise_threshold`): the model is run
    on its own primitives, each template followed (resampled to durations spread over the
    bounds) by the hypotheses of the *other* templates; the threshold is the

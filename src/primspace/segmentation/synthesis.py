@@ -1,5 +1,5 @@
 """Boundaries by synthesis: the partition of a long demonstration into segments that a
-single-primitive model explains best (issue 27, item 2).
+single-primitive model explains best.
 
 The paper's future work names the difficulty (shared/paper.tex, Summary and Discussion,
 verbatim): "There are some challenges such as primitives might have different number of

@@ -1,6 +1,6 @@
 """Execute a joint trajectory step by step in the scene, with the block moved during it.
 
-A closed loop in the simulator (issue 40): :class:`Executor` runs one primitive's joint
+A closed loop in the simulator: :class:`Executor` runs one primitive's joint
 values one step at a time, as a controller would send them, and the block may be moved
 between two steps by something other than the robot (:meth:`Executor.move_block`, a
 perturbation). Each step is the kinematic model of :func:`primspace.sim.rollout.replay`

@@ -67,7 +67,7 @@ class TrainConfig:
         fraction of it in the last (1.0: constant). Default 0.1, the experiment presets'
         (:func:`primspace.experiments.presets.default_train`): on the paper preset (343
         fitted, q = 40, 800 epochs, motor only) a constant rate ended at loss 2.4e-4, the
-        decay at 2.0e-5 (issue 37). The factor depends only on the epoch
+        decay at 2.0e-5. The factor depends only on the epoch
         index and ``epochs``, so a resumed run continues the same schedule (unless
         ``epochs`` is changed on resume, which stretches the rest of it).
     motor_weight, vision_weight : float

@@ -1,4 +1,4 @@
-"""The frames-only start: codes from the observed camera frames, no joints seen (issue 25, item 1).
+"""The frames-only start: codes from the observed camera frames, no joints seen.
 
 The paper names this as future work (*Summary and Discussion*): "Another point is visual
 perception information is not used to initialize encodings." and gives the difficulty:
