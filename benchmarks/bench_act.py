@@ -117,11 +117,11 @@ def main() -> None:
 
     from primspace.act.command import fit_planners
     from primspace.act.planners import ProMPPlanner
-    from primspace.data import MotionDataset
-    from primspace.utils.errors import UserError
     from primspace.act.scene_policy import ScenePolicy
+    from primspace.data import MotionDataset
     from primspace.train import load_run
     from primspace.train.starts import fitted_samples
+    from primspace.utils.errors import UserError
 
     try:
         run = load_run(args.run)

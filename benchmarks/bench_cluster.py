@@ -154,7 +154,7 @@ def fit_worker(args, x, y) -> dict:
     phases["eigen (" + emb.method + ")"] = time.perf_counter() - t
     t = time.perf_counter()
     njw_labels(emb.vectors, 7, n_init=args.n_init, random_state=0)
-    phases["kmeans x%d" % args.n_init] = time.perf_counter() - t
+    phases[f"kmeans x{args.n_init}"] = time.perf_counter() - t
     out["phases"] = phases
     if n == args.sklearn_n:
         from sklearn.cluster import SpectralClustering

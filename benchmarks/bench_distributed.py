@@ -225,7 +225,7 @@ def main() -> None:
             f"{path}: {len(data)} motions, T = {data.length}, frames {data.image_size}, {per_sample / 1e6:.3f} MB "
             f"per motion decoded, {os.path.getsize(path) / len(data) / 1e3:.1f} kB stored; {os.cpu_count()} cores"
         )
-        print("\nloader (batches of %d, a pass after a warm-up pass)" % args.batch)
+        print(f"\nloader (batches of {args.batch}, a pass after a warm-up pass)")
         print(f"{'workers':>8} {'samples/s':>10} {'MB/s':>8} {'decode ms/sample':>17}")
         rates = _loader_rates(path, args.batch, [int(w) for w in args.loader_workers.split(",")])
         for r in rates:

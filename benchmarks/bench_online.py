@@ -48,8 +48,8 @@ from threadpoolctl import threadpool_limits
 
 from primspace.data import MotionDataset
 from primspace.model.config import ModelConfig
-from primspace.train import TrainConfig, fit
 from primspace.predict.online import OnlineInference, infer_online, offline_errors
+from primspace.train import TrainConfig, fit
 
 T, J, Q, H, W = 61, 9, 40, 48, 64
 WITHIN = 1.10  # "reaches the offline error within 10 %"

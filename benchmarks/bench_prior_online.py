@@ -38,9 +38,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from bench_online import J, Q, T, _fit
 from threadpoolctl import threadpool_limits
 
-from bench_online import Q, T, J, _fit
 from primspace.predict import fit_predictor, predict, unobserved_mse
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation

@@ -147,7 +147,7 @@ def timed_epochs(dataset, cfg: ModelConfig, tc: TrainConfig, workdir: Path, *, e
 def bench_device(device: torch.device, args, workdir: Path) -> dict:
     print(
         f"\n=== {device} "
-        + ("(%d threads)" % torch.get_num_threads() if device.type == "cpu" else torch.cuda.get_device_name(device))
+        + (f"({torch.get_num_threads()} threads)" if device.type == "cpu" else torch.cuda.get_device_name(device))
     )
     rate = matmul_rate(device)
     print(f"dense fp32 matmul 2048^3: {rate / 1e9:.1f} GFLOP/s")

@@ -26,8 +26,8 @@ from primspace.data import MotionDataset
 from primspace.experiments.composite.experiment import split_sequences
 from primspace.segmentation import segmentation_scores
 from primspace.segmentation.synthesis import segment_by_synthesis
-from primspace.utils.stats import sample_std
 from primspace.train import load_run
+from primspace.utils.stats import sample_std
 
 
 def main() -> None:

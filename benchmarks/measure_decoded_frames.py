@@ -137,11 +137,11 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    from primspace.data import MotionDataset
-    from primspace.utils.errors import UserError
     from primspace.act.frame_features import ColourBlob
+    from primspace.data import MotionDataset
     from primspace.train import load_run
     from primspace.train.starts import fitted_samples
+    from primspace.utils.errors import UserError
 
     try:
         run = load_run(args.run)

@@ -86,7 +86,7 @@ def tiny_data(tmp_path_factory):
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-def read_png(path) -> "np.ndarray":
+def read_png(path) -> np.ndarray:
     """The PNG at ``path`` as an (H, W, 3) uint8 RGB array, transparency composited on white."""
     import matplotlib.image as mpimg
     import numpy as np
@@ -135,7 +135,7 @@ def assert_figure(
     min_colours: int = 300,
     colours=(),
     min_colour_pixels: int = 100,
-) -> "np.ndarray":
+) -> np.ndarray:
     """The PNG at ``path`` is a drawn figure, not a blank or empty one: its pixel size lies in the
     given ranges, at least ``min_ink`` of it is not white (a matplotlib figure with empty, labelled
     axes measured 0.03), at least ``min_coloured`` pixels are chromatic (an empty one has none) and

@@ -10,15 +10,15 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
-from test_scene_policy import T, held_out, simulate
-from test_train import SMALL
 
+from conftest import assert_user_error
 from primspace.act import PLANNERS, PolicyPlanner, run_episode
 from primspace.act.episode import BlockMove
 from primspace.act.planner import DEFAULT_EVERY
 from primspace.data import MotionDataset
 from primspace.train import TrainConfig, fit
+from test_scene_policy import T, held_out, simulate
+from test_train import SMALL
 
 EVERY = 6
 LOOKS = [0, 6, 12, 18, 24]  # 0, every, 2 every, ... before the last step (30)

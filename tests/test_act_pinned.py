@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import pinned_for_this_cpu
-from test_scene_policy import T, held_out, simulate
 
+from conftest import pinned_for_this_cpu
 from primspace.data.scaling import JointScaler
+from test_scene_policy import T, held_out, simulate
 
 PINNED = Path(__file__).with_suffix(".json")
 STEPS = (0, 6, 12)
@@ -49,10 +49,10 @@ def numbers(case) -> dict:
     from primspace.act import ProMPPlanner, run_episode
     from primspace.act.episode import BlockMove
     from primspace.act.planners import PolicyPlanner
-    from primspace.predict.peers import ProMPPeer
-    from primspace.predict.primitives import primitives_from_clusters
     from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
     from primspace.act.scene_policy import ScenePolicy
+    from primspace.predict.peers import ProMPPeer
+    from primspace.predict.primitives import primitives_from_clusters
     from primspace.sim.execute import Executor
     from primspace.sim.scene import Scene
 

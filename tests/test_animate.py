@@ -7,9 +7,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
 from PIL import Image
 
+from conftest import assert_user_error
 from primspace.plots.animation import FRAME_MS, MAX_FRAMES, MAX_SIZE, animation_frames, frame_steps, save_gif
 
 # flat panel colours that nothing else in the figure has
@@ -282,12 +282,11 @@ def test_the_cli_default_is_the_plots_bound():
 def test_one_animation_per_primitive_in_the_report(sim_file, tmp_path):
     """The intra experiment writes each primitive's arrays and GIF; figures redraw them from
     the results alone; the report embeds the GIFs that exist and leaves out a missing one."""
-    from test_experiments import TINY
-
     from primspace.experiments import figures
     from primspace.experiments.intra import run_intra
     from primspace.experiments.workspace import ExperimentDir
     from primspace.report import build_report
+    from test_experiments import TINY
 
     exp = ExperimentDir(
         tmp_path / "out", replace(TINY, inits=("projection",)), data=sim_file, workers=1, progress=False

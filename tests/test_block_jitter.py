@@ -9,12 +9,12 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.sim import generate
 from primspace.sim.config import BLOCK_JITTERS, PRESETS, GenerationConfig, sample_params
+from primspace.utils.errors import UserError
 
 PAPER = PRESETS["paper"]
 SHARED = dataclasses.replace(PAPER, block_jitter="shared")

@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 import torch
-from conftest import assert_user_error
-from test_train import SMALL, _tc, eval_set, primitives, train_set  # noqa: F401 (the fixtures, shared)
 
+from conftest import assert_user_error
 from primspace.model.calibration import CodeCalibration
-from primspace.utils.errors import UserError
 from primspace.train import evaluate, fit, infer, load_run
+from primspace.utils.errors import UserError
+from test_train import SMALL, _tc, eval_set, primitives, train_set  # noqa: F401 (the fixtures, shared)
 
 
 @pytest.fixture(scope="module")

@@ -5,15 +5,13 @@ import numpy as np
 import pytest
 import torch
 
-from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.model.latent import LatentTable
+from primspace.data import JointScaler, MotionDataset
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
-from primspace.train import TrainConfig, fit, infer
-from primspace.train import captured
+from primspace.model.latent import LatentTable
+from primspace.train import TrainConfig, captured, fit, infer
 from primspace.train.captured import padded_rows
 from primspace.train.loss import DataTensors, batch_loss
-from primspace.data import JointScaler
+from primspace.utils.errors import UserError
 
 MC = ModelConfig(latent_dim=3, layer_sizes=(6, 4), image_channels=(8, 4))
 TOL = 1e-5

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.cluster import (
     R2_GRID,
     LowRankSubspaceClustering,

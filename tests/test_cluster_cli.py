@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_figure, assert_user_error, figure_stats, read_png
 
+from conftest import assert_figure, assert_user_error, figure_stats, read_png
 from primspace.data import MotionDataset
 
 

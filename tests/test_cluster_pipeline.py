@@ -10,7 +10,6 @@ import pytest
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
 from sklearn.utils.validation import check_is_fitted
-from test_cluster_pinned import planted
 
 import primspace.cluster.estimator as estimator_module
 from primspace.cluster import (
@@ -25,6 +24,7 @@ from primspace.cluster import (
     tau_sweep,
 )
 from primspace.utils.errors import UserError
+from test_cluster_pinned import planted
 
 
 @pytest.fixture

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import DataError, UserError
 from primspace.sim.composite import (
     ALLOWED,
     COMPOSITE_PRESETS,
@@ -23,6 +22,7 @@ from primspace.sim.composite import (
 )
 from primspace.sim.primitives import PRIMITIVES, SCRIPT, get_primitive
 from primspace.sim.scene import FINGERTIP_RADIUS
+from primspace.utils.errors import DataError, UserError
 
 TINY = CompositeConfig(n_sequences=6, min_primitives=2, max_primitives=3, duration=(31, 34), transition_steps=8)
 
@@ -182,7 +182,6 @@ def test_presets_and_settings_are_checked():
 
 def test_generate_command_takes_composite_presets(run_cli, monkeypatch, tmp_path):
     from conftest import assert_user_error
-
     from primspace.sim import composite
 
     tiny = CompositeConfig(n_sequences=2, max_primitives=2, duration=(31, 32), transition_steps=4)

@@ -8,13 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from conftest import assert_user_error
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.composite.experiment import run_composite, segment_codes, split_sequences
 from primspace.experiments.presets import ExperimentPreset, default_model, default_train
 from primspace.experiments.workspace import ExperimentDir
 from primspace.sim.composite import CompositeConfig, generate_composite
-
-from conftest import assert_user_error
 
 TINY = ExperimentPreset(
     name="composite-tiny",
@@ -245,8 +244,8 @@ def by_primitives(long_data, tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_model_of_single_primitives_segments_by_synthesis_and_surprise(by_primitives):
-    from primspace.results.composite import composite_table
     from primspace.report.markdown import render_composite
+    from primspace.results.composite import composite_table
     from primspace.results.summary import summarize
 
     exp, results = by_primitives

@@ -22,13 +22,12 @@ from pathlib import Path
 
 import pytest
 
+from conftest import pinned_for_this_cpu
 from primspace.experiments.clustering import run_clustering
 from primspace.experiments.intra import run_intra
 from primspace.experiments.presets import PRESETS
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
-
-from conftest import pinned_for_this_cpu
 
 #: The recorded numbers per CPU class (``conftest.cpu_class(vendor=True)``): "avx512" on an
 #: Intel AVX-512 CPU (before the reshape), "avx2" on an AVX2-only AMD EPYC (0.3.1 and 0.4

@@ -57,11 +57,10 @@ def test_without_an_act_summary_docs_act_says_so():
 def test_the_act_tables_are_written_into_docs_act_md(tmp_path):
     """A summary of an experiment directory with act results (built from a fake results
     dict) gives docs/act.md its three tables and the latency line."""
-    from test_report_layers import ACT_LOOP_ROWS, ACT_SCENE_ROWS, act_experiment_dir
-
-    from primspace.results.summary import summarize, write_summary
     from primspace.report.markdown import NO_ACT, blocks
+    from primspace.results.summary import summarize, write_summary
     from primspace.utils.stats import spread_convention
+    from test_report_layers import ACT_LOOP_ROWS, ACT_SCENE_ROWS, act_experiment_dir
 
     summary = summarize(act_experiment_dir(tmp_path / "exp"), "act-test", "primspace experiment act --out exp")
     text = blocks({"act-test": summary})["act"]

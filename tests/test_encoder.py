@@ -5,12 +5,12 @@ import copy
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import map_objective, prior_terms
 from primspace.train.api import reconstruct
 from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
 
 # the small runs of the observation tests, shared (pytest registers the imported fixtures here)
 from test_observe import eval_set, train_set, trained  # noqa: F401

@@ -6,9 +6,9 @@ import pytest
 import torch
 from sklearn.base import clone
 
-from primspace.utils.errors import OutputExistsError, UserError
 from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer, load_run, reconstruct
+from primspace.utils.errors import OutputExistsError, UserError
 from test_train import SMALL, primitives
 
 # a constant rate: a saved run is extended on resume below, which stretches a decay (fit's docstring)

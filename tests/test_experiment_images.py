@@ -8,15 +8,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_experiments import TINY
 
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
-from primspace.results.tables import final_loss_table
-from primspace.results.layout import intra_run_dir
 from primspace.experiments.runs import psnr
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
+from primspace.results.layout import intra_run_dir
+from primspace.results.tables import final_loss_table
+from test_experiments import TINY
 
 TINY_IMAGES = replace(
     TINY, name="tiny-images", fit_epochs=2, infer_epochs=2, images=True, train=replace(TINY.train, vision_frames=3)

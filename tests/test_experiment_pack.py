@@ -12,8 +12,8 @@ from primspace.experiments import figures, intra
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
 from primspace.experiments.runs import fit_and_infer, load_run_data, pack_grid_runs
-from primspace.results.layout import intra_run_dir, phase_dir
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import intra_run_dir, phase_dir
 from primspace.train import load_run
 
 #: 14 motions, 7 fitted and 7 inferred per seed; calibrated infers with projection's fit (shared).

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.act.frame_features import (
     BLOCK_COLOUR,
     ColourBlob,
@@ -13,6 +12,7 @@ from primspace.act.frame_features import (
     PixelVector,
     frame_features,
 )
+from primspace.utils.errors import UserError
 
 H, W = 48, 64
 TABLE = (184, 153, 115)  # rgba 0.72 0.60 0.45

@@ -9,12 +9,12 @@ import os
 import h5py
 import numpy as np
 import pytest
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import DatasetWriter, MotionDataset
-from primspace.utils.errors import DataError, OutputExistsError, UserError
 from primspace.sim import generate
 from primspace.sim.generate import GenerationConfig, generate_dataset, shard_dir, shard_ranges, shard_size
+from primspace.utils.errors import DataError, OutputExistsError, UserError
 
 # 14 samples in shards (0, 4), (4, 8), (8, 12), (12, 14)
 TINY = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, height=12, width=16)

@@ -207,9 +207,8 @@ def test_a_write_error_names_the_output_not_its_temporary(tmp_path):
 
 def test_segment_names_the_file_field_and_sample_of_a_short_demonstration(run_cli, tmp_path):
     """Issue 38, item 8: segment named a demonstration but not the file or field."""
-    from test_segmentation_synthesis import single_primitive_run
-
     from primspace.data import MotionDataset
+    from test_segmentation_synthesis import single_primitive_run
 
     pieces = single_primitive_run(run_cli, tmp_path)
     steps = np.full((2, 60), -1)
@@ -236,12 +235,11 @@ def test_an_experiment_on_data_with_hostile_names_writes_inside_its_folder_only(
     beside it is untouched."""
     import dataclasses
 
-    from test_experiments import TINY
-
     from primspace.data import MotionDataset
     from primspace.experiments.intra import run_intra
     from primspace.experiments.workspace import ExperimentDir
     from primspace.report import build_report
+    from test_experiments import TINY
 
     data = MotionDataset.load(tiny_data)
     hostile = ["/../../../victim", "../up", "/abs/x", "new\nline", "x" * 300, "<script>alert(1)</script>", "a/b"]

@@ -20,8 +20,8 @@ import sys
 import h5py
 import numpy as np
 import pytest
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import DatasetWriter, MotionDataset
 from primspace.utils.errors import DataError, UserError
 
@@ -275,10 +275,9 @@ def test_train_with_nothing_to_learn_is_refused(run_cli, tmp_path, data_file, ex
 
 @pytest.fixture(scope="module")
 def decoder():
-    from test_train import SMALL, primitives
-
     from primspace import AutoDecoder
     from primspace.train import TrainConfig
+    from test_train import SMALL, primitives
 
     model = AutoDecoder(SMALL, TrainConfig(epochs=0, threads=1, seed=0), progress=False)
     model.fit(primitives(2, seed=0))
@@ -313,9 +312,8 @@ def test_inverse_transform_still_decodes(decoder):
 
 def test_fit_with_nothing_to_learn_is_refused_from_python_too(tmp_path):
     """The library refuses what the command line refuses: motor_weight 0 and no vision loss."""
-    from test_train import SMALL, primitives
-
     from primspace.train import TrainConfig, fit
+    from test_train import SMALL, primitives
 
     with pytest.raises(UserError, match="motor_weight is 0 and no vision loss"):
         fit(

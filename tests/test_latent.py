@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from primspace.utils.errors import UserError
 from primspace.model.latent import LatentInitializer, LatentTable, appendix_a_check
+from primspace.utils.errors import UserError
 
 
 def _motor(n=12, t=10, j=3, seed=0):

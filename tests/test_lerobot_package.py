@@ -32,6 +32,7 @@ LeRobotDataset = pytest.importorskip(
     "lerobot.datasets.lerobot_dataset", reason="LeRobot >= 0.4 (v3.0 data sets)"
 ).LeRobotDataset
 
+from primspace.data import import_lerobot  # noqa: E402
 from test_import_lerobot import (
     CAMERA,
     FPS,
@@ -45,8 +46,6 @@ from test_import_lerobot import (
     write_v2,
     write_v3,
 )  # noqa: E402
-
-from primspace.data import import_lerobot  # noqa: E402
 
 
 def backends():

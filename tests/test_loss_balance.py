@@ -12,14 +12,14 @@ import math
 import numpy as np
 import pytest
 import torch
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.experiments.loss_balance import loss_balance
 from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig, fit, reconstruct
 from primspace.train.loss import DataTensors, batch_loss
+from primspace.utils.errors import UserError
 from test_train import primitives
 
 IMAGE_MODEL = ModelConfig(

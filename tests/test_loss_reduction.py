@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import JointScaler
-from primspace.utils.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.presets import default_train, resolve_preset
 from primspace.experiments.workspace import ExperimentDir
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loss import DataTensors, batch_loss
+from primspace.utils.errors import UserError
 from test_train import SMALL, primitives
 
 IMAGE_MODEL = ModelConfig(

@@ -7,8 +7,8 @@ import pytest
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from primspace.utils.errors import UserError
 from primspace.model.decoder import ImageDecoder, ModelConfig, MTRNNDecoder, MTRNNLayer
+from primspace.utils.errors import UserError
 
 
 def _randomise(module: torch.nn.Module, seed: int = 0) -> None:

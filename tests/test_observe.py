@@ -4,13 +4,13 @@ masked loss, the starts under observation and Appendix A for the observed part."
 import numpy as np
 import pytest
 
-from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.model.latent import appendix_a_observed
 from primspace import AutoDecoder
+from primspace.data import MotionDataset
+from primspace.model.latent import appendix_a_observed
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.loss import DataTensors
 from primspace.train.observe import Observation, observation_masks
+from primspace.utils.errors import UserError
 from test_train import SMALL, primitives
 
 FAST = dict(batch_size=12, threads=1)

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.train import TrainConfig, fit, infer, reconstruct
-from primspace.predict.online import OnlineInference, infer_online, offline_errors
 from primspace.model.config import ModelConfig
+from primspace.predict.online import OnlineInference, infer_online, offline_errors
+from primspace.train import TrainConfig, fit, infer, reconstruct
+from primspace.utils.errors import UserError
 from test_train import SMALL, primitives
 
 FAST = dict(batch_size=12, threads=1, final_lr_fraction=1.0)  # online steps at a constant rate, as infer here

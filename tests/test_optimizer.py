@@ -5,12 +5,12 @@ import pytest
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.utils.errors import UserError
-from primspace.model.latent import LatentTable
 from primspace.model.config import ModelConfig
+from primspace.model.latent import LatentTable
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.loss import DataTensors, batch_loss
 from primspace.train.packed import fit_packed
+from primspace.utils.errors import UserError
 
 MC = ModelConfig(latent_dim=3, layer_sizes=(6, 4))
 

@@ -22,11 +22,11 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
-from test_output_safety import data_file  # noqa: F401 (the shared fixture: a small motor-only data set)
 
+from conftest import assert_user_error
 from primspace.data import MotionDataset
 from primspace.utils.errors import OutputExistsError
+from test_output_safety import data_file  # noqa: F401 (the shared fixture: a small motor-only data set)
 
 TRAIN = ("--layers", "8,4", "--threads", "1", "--batch-size", "4", "--latent-dim", "3", "--no-images")
 
@@ -187,8 +187,8 @@ def test_atomic_directory_publishes_without_replacing_and_never_mixes_two_writer
     in place, and if another writer's file lands there first, ours are taken back."""
     from pathlib import Path
 
-    from primspace.utils import files
     from primspace.cluster.outputs import CLUSTER_OUTPUT
+    from primspace.utils import files
     from primspace.utils.folders import atomic_directory
 
     for fallback in (False, True):
@@ -342,9 +342,9 @@ def test_marks_are_read_back(tmp_path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from primspace.utils.outputs import describe, file_writer
     from primspace.plots import save_figure
     from primspace.plots.animation import save_gif
+    from primspace.utils.outputs import describe, file_writer
 
     png, gif, plain = tmp_path / "f.png", tmp_path / "f.gif", tmp_path / "g.png"
     save_figure(plt.figure(), png, writer="primspace show")

@@ -14,8 +14,8 @@ import stat
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import MotionDataset
 from primspace.utils.errors import UserError
 from primspace.utils.files import atomic_write_text, check_outside_inputs, remove_stale_temporaries, temp_prefix

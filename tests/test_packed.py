@@ -5,10 +5,10 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig, TrainingDivergedError, fit, infer, load_run
 from primspace.train.packed import fit_packed, infer_packed
+from primspace.utils.errors import UserError
 
 MC = ModelConfig(latent_dim=3, layer_sizes=(6, 4), image_channels=(8, 4))
 TOL = 1e-5  # batched matrix products round differently: about 1e-7 after three epochs

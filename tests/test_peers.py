@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.predict.metrics import observed_prefix, unobserved_mse
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.utils.errors import UserError
 
 T = 40
 

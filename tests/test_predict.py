@@ -6,19 +6,18 @@ import json
 import numpy as np
 import pytest
 
+from conftest import assert_user_error
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
+from primspace.predict import MIXTURE, predict
+from primspace.predict.candidates import NOISE_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import unobserved_mse
 from primspace.train import TrainConfig, fit
-from primspace.predict.candidates import NOISE_GRID, CodeMixture, continuity_correction
-from primspace.predict import MIXTURE, predict
-from conftest import assert_user_error
+from primspace.utils.errors import UserError
 from test_train import SMALL, primitives
 
 FAST = dict(batch_size=12, threads=1)
 # the small runs of the observation tests, shared (pytest registers the imported fixtures here)
 from test_observe import eval_set, image_run, image_set, train_set, trained  # noqa: E402, F401
-
 
 # ------------------------------------------------------------------ the mixture
 

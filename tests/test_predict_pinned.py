@@ -61,8 +61,8 @@ def test_the_prediction_grid_keeps_its_numbers(case):
 
 
 def test_the_priors_settings_name_their_kinds():
-    from primspace.utils.errors import UserError
     from primspace.predict.grid import grid_predictors
+    from primspace.utils.errors import UserError
 
     with pytest.raises(UserError, match="prior_settings takes prior, map, encoder, got 'mixture'"):
         grid_predictors(None, None, (), 1, prior_settings={"mixture": {}})

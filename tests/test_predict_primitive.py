@@ -12,10 +12,10 @@ import pytest
 
 from conftest import assert_figure, assert_user_error
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.predict import PRIOR, predict
 from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction, top1_accuracy
 from primspace.train import TrainConfig, fit
+from primspace.utils.errors import UserError
 from test_train import SMALL, primitives
 
 NAMES = ["reach", "push", "lift"]

@@ -12,11 +12,11 @@ import json
 import numpy as np
 import pytest
 
-from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.act.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
-from primspace.train import TrainConfig, fit
 from conftest import assert_user_error
+from primspace.act.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene
+from primspace.data import MotionDataset
+from primspace.train import TrainConfig, fit
+from primspace.utils.errors import UserError
 from test_train import SMALL
 
 FAST = dict(batch_size=12, threads=1)

@@ -5,12 +5,12 @@ weighted by the posterior over primitives, the K-fold choices, and online filter
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.predict import unobserved_mse
 from primspace.predict.code_prior import DecodedGaussian, SequentialGaussian, StepGains, choose_prior, fit_gaussian
 from primspace.predict.primitives import primitives_from_clusters, primitives_from_labels
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
 
 # the small runs of the observation tests, shared (pytest registers the imported fixtures here)
 from test_observe import eval_set, train_set, trained  # noqa: F401

@@ -7,7 +7,6 @@ import copy
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.predict import unobserved_mse
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.code_prior import GaussianCode
@@ -15,6 +14,7 @@ from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor, map_objective, map_refine, prior_terms
 from primspace.train import reconstruct
 from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
 
 # the small runs of the observation tests, shared (pytest registers the imported fixtures here)
 from test_observe import eval_set, train_set, trained  # noqa: F401

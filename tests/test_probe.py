@@ -6,8 +6,8 @@ line; and the intra experiment writes its table into the results and the report.
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.probe import linear_probe
+from primspace.utils.errors import UserError
 
 
 def _planted(n=120, q=10, seed=0, noise=0.01):
@@ -85,15 +85,14 @@ def test_bad_input_is_one_line(args, message):
 
 @pytest.mark.slow
 def test_the_intra_experiment_probes_every_run_and_reports_it(tmp_path):
-    from test_experiments import TINY
-
     from primspace.experiments.intra import run_intra
-    from primspace.results.tables import probe_table
-    from primspace.results.readers import read_results
     from primspace.experiments.runs import initial_codes
     from primspace.experiments.workspace import ExperimentDir
     from primspace.report import build_report
+    from primspace.results.readers import read_results
+    from primspace.results.tables import probe_table
     from primspace.sim.generate import GenerationConfig, generate_dataset
+    from test_experiments import TINY
 
     config = GenerationConfig(
         block_x=(0.45, 0.5, 0.55), block_y=(-0.05, 0.05), block_size=(0.05,), length=31, images=False

@@ -268,8 +268,8 @@ def test_an_old_flat_preset_reads_as_the_same_configurations():
 
 def test_a_results_file_that_is_a_link_is_refused(tmp_path):
     """A results file linked to another file would put that file's text into the report."""
-    from primspace.utils.errors import UserError
     from primspace.results.readers import read_results
+    from primspace.utils.errors import UserError
 
     (tmp_path / "results").mkdir()
     secret = tmp_path / "secret.json"

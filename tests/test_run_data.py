@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import DataError, UserError
 from primspace.train import TrainConfig, check_run_data, fit, infer, load_run
 from primspace.train.rundata import load_fitted_data
+from primspace.utils.errors import DataError, UserError
 from test_train import SMALL, primitives
 
 TC = TrainConfig(epochs=1, batch_size=12, threads=1, seed=3)

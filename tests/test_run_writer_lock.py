@@ -12,9 +12,9 @@ import time
 import pytest
 
 from conftest import assert_user_error
-from primspace.utils.errors import UserError
 from primspace.train import TrainConfig, fit, load_run
 from primspace.train.rundir import LOCK_NAME, WriterLock
+from primspace.utils.errors import UserError
 from test_train import SMALL, primitives
 
 TINY = dict(model_config=SMALL, progress=False)

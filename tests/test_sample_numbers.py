@@ -4,6 +4,7 @@ file, and `reconstruct --sample` speaks of the data file's numbers."""
 
 import csv
 import json
+
 import numpy as np
 import pytest
 

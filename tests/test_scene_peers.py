@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
+from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
 from primspace.predict.base import Predictor
 from primspace.predict.metrics import observed_prefix, unobserved_mse
 from primspace.predict.peers import MeanMotionPeer
-from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
+from primspace.utils.errors import UserError
 
 H, W, T, J = 48, 64, 30, 3
 TABLE = (184, 153, 115)

@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from primspace.act.scene_policy import ScenePolicy, continue_from
 from primspace.data import MotionDataset
 from primspace.data.scaling import JointScaler
 from primspace.utils.errors import UserError
-from primspace.act.scene_policy import ScenePolicy, continue_from
 
 #: The primitives simulated (labels 0 and 2 of the simulator's seven).
 PRIMS = ("touch", "push")

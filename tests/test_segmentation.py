@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from primspace.utils.errors import UserError
 from primspace.segmentation import (
     boundaries_from_segments,
     boundary_f1,
@@ -19,6 +18,7 @@ from primspace.segmentation import (
     segment_sequences,
     step_labelling_accuracy,
 )
+from primspace.utils.errors import UserError
 
 W = 10
 

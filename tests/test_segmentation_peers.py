@@ -6,7 +6,6 @@ import sys
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.segmentation import boundary_f1, step_labelling_accuracy
 from primspace.segmentation.bounds import (
     clustered_bound,
@@ -24,6 +23,7 @@ from primspace.segmentation.peers import (
     resample_segment,
     run_peers,
 )
+from primspace.utils.errors import UserError
 
 CENTRES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 

@@ -109,11 +109,10 @@ def test_segment_by_surprise_on_the_command_line(run_cli, tmp_path):
 def test_segment_codes_inferred_with_the_weights_frozen(tmp_path):
     """Each found segment gets a code of its own, inferred from its nearest template's code."""
     from primspace.data import MotionDataset
+    from primspace.model.config import ModelConfig
     from primspace.segmentation.inferred import in_model_frame
     from primspace.segmentation.synthesis import segment_by_synthesis
-    from primspace.train import fit
-    from primspace.model.config import ModelConfig
-    from primspace.train import TrainConfig
+    from primspace.train import TrainConfig, fit
     from test_train import primitives
 
     single = primitives(6, seed=0, T=30, J=3)

@@ -7,10 +7,10 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
+from primspace.model.decoder import ModelConfig, MTRNNDecoder, code_interpolation
 from primspace.model.latent import LatentInitializer
-from primspace.model.decoder import MTRNNDecoder, ModelConfig, code_interpolation
 from primspace.train import TrainConfig, evaluate, fit, infer
+from primspace.utils.errors import UserError
 
 SMALL = dict(layer_sizes=(12, 6), p_hidden=16, motor_hidden=16)
 

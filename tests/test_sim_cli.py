@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import assert_figure, assert_user_error
 
+from conftest import assert_figure, assert_user_error
 from primspace.data import MotionDataset
 from primspace.sim import generate
 

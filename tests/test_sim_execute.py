@@ -7,13 +7,13 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.sim.execute import WORKSPACE, Executor, Perturbation, check_block
 from primspace.sim.ik import solve_path
 from primspace.sim.primitives import PRIMITIVES, R_DOWN, finger_geometry, get_primitive, script_motion
 from primspace.sim.rollout import Rollout, replay
 from primspace.sim.scene import Scene
 from primspace.sim.success import evaluate
+from primspace.utils.errors import UserError
 
 T = 61
 SIZE = 0.05

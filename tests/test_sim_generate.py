@@ -7,7 +7,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from primspace.utils.errors import DataError, OutputExistsError, UserError
 from primspace.sim.generate import (
     PARAM_NAMES,
     PRESETS,
@@ -20,6 +19,7 @@ from primspace.sim.generate import (
 from primspace.sim.primitives import PRIMITIVES, script_motion
 from primspace.sim.render import Camera
 from primspace.sim.scene import JOINT_NAMES, Scene
+from primspace.utils.errors import DataError, OutputExistsError, UserError
 
 TINY = GenerationConfig(block_x=(0.45, 0.55), block_y=(0.0,), block_size=(0.05,), length=31, height=24, width=32)
 

@@ -15,12 +15,11 @@ import json
 import numpy as np
 import pytest
 
+from conftest import pinned_for_this_cpu
 from primspace.sim.generate import GenerationConfig, generate_dataset
 from primspace.sim.primitives import PRIMITIVES, script_motion
 from primspace.sim.scene import Scene
 from primspace.sim.success import JUDGE_VERSION, evaluate
-
-from conftest import pinned_for_this_cpu
 
 #: 7 primitives x 2 x positions x 2 sizes = 28 motions, jittered by seed 0, with 24 x 32 frames.
 WITH_IMAGES = GenerationConfig(

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from primspace.utils.errors import UserError
 from primspace.sim.primitives import (
     PRIMITIVES,
     PUSH_AXIS,
@@ -25,6 +24,7 @@ from primspace.sim.primitives import (
     primitive_index,
 )
 from primspace.sim.rollout import Rollout
+from primspace.utils.errors import UserError
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "simulator.md"
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 import primspace.sim
-from primspace.utils.errors import UserError
 from primspace.sim import scene as scene_module
 from primspace.sim.ik import solve_path
 from primspace.sim.primitives import (
@@ -21,6 +20,7 @@ from primspace.sim.primitives import (
     script_motion,
 )
 from primspace.sim.scene import FINGER_MAX, JOINT_NAMES, Scene
+from primspace.utils.errors import UserError
 
 
 @pytest.fixture(scope="module")

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import DataError, UserError
 from primspace.sim.ik import solve_path
 from primspace.sim.primitives import PRIMITIVES, R_DOWN, Script, finger_geometry, script_motion
 from primspace.sim.scene import JOINT_NAMES, Scene
 from primspace.sim.success import SuccessResult, evaluate, evaluate_batch, evaluate_dataset, success_rates
+from primspace.utils.errors import DataError, UserError
 
 # corners and centre of the paper grid, smallest and largest paper block
 BLOCKS = [(0.42, -0.15, 0.035), (0.60, 0.15, 0.065), (0.51, 0.0, 0.05)]

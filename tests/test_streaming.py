@@ -5,13 +5,12 @@ command line's options."""
 import numpy as np
 import pytest
 import torch
-from conftest import assert_user_error
 
+from conftest import assert_user_error
 from primspace.data import MotionDataset
-from primspace.utils.errors import DataError, UserError
-from primspace.train import TrainConfig, evaluate, fit, infer
-from primspace.train import streaming
+from primspace.train import TrainConfig, evaluate, fit, infer, streaming
 from primspace.train.streaming import FrameReader, frames_bytes, should_stream
+from primspace.utils.errors import DataError, UserError
 from test_train import primitives
 from test_vision_frames import SMALL
 

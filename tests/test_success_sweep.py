@@ -10,9 +10,7 @@ import math
 import numpy as np
 import pytest
 
-
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.experiments.success import (
     point_by_tolerance,
     point_intervals,
@@ -32,6 +30,7 @@ from primspace.sim.success import (
     evaluate_dataset_sweep,
     success_rates,
 )
+from primspace.utils.errors import UserError
 from primspace.utils.stats import normal_quantile, wilson_interval
 from test_sim_success import BLOCKS, joints_of, scene  # noqa: F401 (scene: the shared fixture)
 

@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 
 from conftest import assert_user_error
-from primspace.utils.errors import OutputExistsError, UserError
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
 from primspace.experiments.runs import load_codes
-from primspace.results.layout import phase_dir
-from primspace.results.summary import read_summary, summarize
-from primspace.results.codes import VERSION_KEY, codes_in_data_order, codes_path, read_codes
 from primspace.experiments.summary_codes import write_summary_with_codes
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.codes import VERSION_KEY, codes_in_data_order, codes_path, read_codes
+from primspace.results.layout import phase_dir
+from primspace.results.summary import read_summary, summarize
+from primspace.utils.errors import OutputExistsError, UserError
 
 #: test_experiments.py's tiny grid, with the calibrated start (an inference from projection's fit)
 TINY = ExperimentPreset(

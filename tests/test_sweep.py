@@ -2,8 +2,8 @@
 
 import json
 
-from primspace.results.layout import ERROR_FILE, RESULT_FILE
 from primspace.experiments.sweep import GridPoint, run_grid
+from primspace.results.layout import ERROR_FILE, RESULT_FILE
 
 
 def square_job(run_dir, x):

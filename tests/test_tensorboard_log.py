@@ -6,17 +6,16 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import assert_user_error
 from sklearn.base import clone
-
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
-from test_train import SMALL, primitives
 
-from primspace.utils.errors import UserError
+from conftest import assert_user_error
 from primspace import AutoDecoder
 from primspace.train import TrainConfig, fit, infer
 from primspace.train.logger import TensorBoardLogger, scalars
+from primspace.utils.errors import UserError
+from test_train import SMALL, primitives
 
 TC = TrainConfig(epochs=3, batch_size=4, threads=1)
 CLI_ARGS = ("--layers", "12,6", "--threads", "1", "--batch-size", "4", "--no-images", "--latent-dim", "3")

@@ -9,7 +9,6 @@ import pytest
 import torch
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import OutputExistsError, UserError
 from primspace.model.config import ModelConfig
 from primspace.train import (
     TrainConfig,
@@ -21,6 +20,7 @@ from primspace.train import (
     read_indices,
     reconstruct,
 )
+from primspace.utils.errors import OutputExistsError, UserError
 
 SMALL = ModelConfig(latent_dim=6, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=32, motor_hidden=32)
 FAST = dict(batch_size=12, threads=1)

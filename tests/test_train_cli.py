@@ -5,8 +5,8 @@ import json
 import h5py
 import numpy as np
 import pytest
-from conftest import assert_figure, assert_user_error
 
+from conftest import assert_figure, assert_user_error
 from primspace.data import MotionDataset
 
 SMALL_ARGS = ("--layers", "12,6", "--image-channels", "4,4,4", "--threads", "1", "--batch-size", "4")

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from primspace.utils.errors import UserError
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loss import DataTensors, batch_loss
+from primspace.utils.errors import UserError
 from test_train import primitives
 
 SMALL = ModelConfig(

@@ -21,12 +21,12 @@ from pathlib import Path
 from primspace.experiments.clustering import run_clustering
 from primspace.experiments.intra import run_intra
 from primspace.experiments.presets import PRESETS
-from primspace.results.layout import LEARNED_CODES
-from primspace.results.tables import final, qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
-from primspace.utils.progress import announce
 from primspace.report import build_report
+from primspace.results.layout import LEARNED_CODES
+from primspace.results.tables import final, qualitative_check
+from primspace.utils.progress import announce
 
 __all__ = ["run_demo"]
 

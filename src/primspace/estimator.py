@@ -20,13 +20,13 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError, first_line
 from primspace.model.config import ModelConfig
 from primspace.predict import DEFAULT_PREDICT_EPOCHS, DEFAULT_PREDICTOR, predict
 from primspace.train.api import evaluate, fit, infer, reconstruct
 from primspace.train.config import TrainConfig
 from primspace.train.run import TrainedRun
 from primspace.train.rundir import load_run, write_run
+from primspace.utils.errors import UserError, first_line
 
 __all__ = ["AutoDecoder"]
 
@@ -94,7 +94,7 @@ class AutoDecoder(BaseEstimator):
         self.log_to = log_to
 
     # ------------------------------------------------------------------ training
-    def fit(self, X: MotionDataset, y=None, *, resume: bool = False, overwrite: bool = False) -> "AutoDecoder":
+    def fit(self, X: MotionDataset, y=None, *, resume: bool = False, overwrite: bool = False) -> AutoDecoder:
         """Train θ and one code per sample of ``X`` (``y`` is ignored).
 
         ``resume`` / ``overwrite`` apply to ``checkpoint_dir`` (as in :func:`~primspace.train.fit`).
@@ -251,7 +251,7 @@ class AutoDecoder(BaseEstimator):
         return write_run(path, self._fitted(), overwrite=overwrite)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, *, progress: bool | None = None) -> "AutoDecoder":
+    def load(cls, path: str | os.PathLike, *, progress: bool | None = None) -> AutoDecoder:
         """An AutoDecoder fitted from a run directory (written by :meth:`save`, ``fit`` or ``primspace train``)."""
         run = load_run(path)
         model = cls(

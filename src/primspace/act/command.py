@@ -93,8 +93,8 @@ def parse_scene(text: str, fitted, primitive_rows: np.ndarray) -> ActScene:
 def fit_planners(run, fitted, every: int):
     """The scene policy (maps at steps ``0, every, 2·every, ...``) and the ProMP peer, fitted on
     ``fitted`` (the run's fitted demonstrations, with frames), scaled by the run's scaler."""
-    from primspace.predict.peers import ProMPPeer
     from primspace.act.scene_policy import ScenePolicy
+    from primspace.predict.peers import ProMPPeer
 
     motor = run.scaler.transform(fitted.motor)
     length = motor.shape[1]

@@ -78,7 +78,7 @@ def _flat(frames: np.ndarray) -> np.ndarray:
 class PixelVector(_FrameTransformer):
     """The flattened pixels scaled to [0, 1], ``(n, H*W*3)``; ``fit`` records the frame size."""
 
-    def fit(self, frames, y=None) -> "PixelVector":
+    def fit(self, frames, y=None) -> PixelVector:
         """Record the frame size; returns self."""
         self._remember(check_frames(frames))
         return self
@@ -112,7 +112,7 @@ class PixelPCA(_FrameTransformer):
         self.n_components = n_components
         self.random_state = random_state
 
-    def fit(self, frames, y=None) -> "PixelPCA":
+    def fit(self, frames, y=None) -> PixelPCA:
         """Fit the PCA on ``frames`` ``(n, H, W, 3)`` uint8 (n >= 2); returns self."""
         frames = check_frames(frames)
         if len(frames) < 2:
@@ -193,7 +193,7 @@ class ColourBlob(_FrameTransformer):
         centroid = np.where(mass[:, None] > 0, np.stack([u, v], axis=1), np.nan)
         return mass, centroid
 
-    def fit(self, frames, y=None) -> "ColourBlob":
+    def fit(self, frames, y=None) -> ColourBlob:
         """Record the mean centroid of ``frames`` (for frames without the colour); returns self."""
         frames = check_frames(frames)
         self.channel_ = int(np.argmax(_check_colour(self.colour)))

@@ -24,9 +24,9 @@ from sklearn.linear_model import Ridge, RidgeCV
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from primspace.utils.errors import UserError
 from primspace.act.frame_features import frame_features
 from primspace.predict.peers import LabelledPeer, phase
+from primspace.utils.errors import UserError
 
 __all__ = ["ContextualProMPPeer", "NearestFramePeer", "RIDGE_ALPHAS"]
 
@@ -142,7 +142,7 @@ class ContextualProMPPeer(_ScenePeer):
         self.n_basis, self.features, self.alpha = int(n_basis), features, alpha
         self.per_label, self.n_iter = bool(per_label), int(n_iter)
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "ContextualProMPPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> ContextualProMPPeer:
         """Fit the ProMPs, the features and the regressions (class docstring); returns self."""
         try:
             from movement_primitives.promp import ProMP
@@ -260,7 +260,7 @@ class NearestFramePeer(_ScenePeer):
         rows = np.asarray(self.features_.transform(first), dtype=np.float64)
         return (rows - self.mean_) / self.scale_
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "NearestFramePeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> NearestFramePeer:
         """Keep the demonstrations and their first frames' features; returns self."""
         motor, labels, lengths, first = self._fit_data(motor, labels, lengths, frames)
         self.features_ = frame_features(self.features)

@@ -50,15 +50,14 @@ import warnings
 
 import numpy as np
 
-from primspace.data import MotionDataset
-from primspace.data.images import as_view
+from primspace.act.frame_features import ColourBlob, frame_features
 from primspace.act.planner import DEFAULT_EVERY
 from primspace.act.planners import PolicyPlanner
-from primspace.utils.errors import UserError
+from primspace.data import MotionDataset
+from primspace.data.images import as_view
 from primspace.predict.api import Prediction
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.candidates import continuity_correction
-from primspace.act.frame_features import ColourBlob, frame_features
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
 from primspace.predict.primitives import (
     PRIMITIVE_SOURCES,
@@ -70,6 +69,7 @@ from primspace.train.api import as_run
 from primspace.train.checks import select
 from primspace.train.observe import FIRST, Observation, observation_masks
 from primspace.train.starts import fitted_samples
+from primspace.utils.errors import UserError
 
 __all__ = [
     "ScenePolicy",
@@ -190,7 +190,7 @@ class ScenePolicy(Predictor):
         self.n_clusters = n_clusters
 
     # -- fit ------------------------------------------------------------------------------
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "ScenePolicy":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> ScenePolicy:
         """Fit each primitive's maps on the demonstrations ``motor`` (m, T, J) scaled, their
         ``labels`` and camera ``frames`` (m, T, H, W, 3) uint8 (the steps of :attr:`steps` are read)."""
         motor = check_motor(motor)

@@ -4,7 +4,6 @@ loop and ProMP re-conditioned; docs/act.md)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -28,18 +27,18 @@ def act_command(
         DEFAULT_EVERY, "--every", help="Steps between two looks of the closed loop (camera and joints)."
     ),
     seed: int = typer.Option(0, "--seed", help="Seed of the perturbation."),
-    data: Optional[Path] = typer.Option(
+    data: Path | None = typer.Option(
         None, "--data", help="The run's fitted demonstrations with frames (default: the run's data file)."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier act output."),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
 ) -> None:
     """Execute the primitive in the scene in MuJoCo: planned from the camera, re-planned in closed loop when a frame
     surprises the plan; the open loop and ProMP re-conditioned on the executed joints run the same scene."""
     from primspace.act.command import ACT_FILES, ACT_MARK, act, write_outputs
-    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory
-    from primspace.utils.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
+    from primspace.utils.files import check_outside_inputs
+    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory
 
     inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])
     check_outside_inputs(out, inputs)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -23,7 +22,7 @@ def animate_command(
     run: Path = typer.Argument(..., help="A run directory (fit or infer)."),
     sample: int = typer.Option(..., "--sample", help="Sample index in the data file (one the run used)."),
     out: str = typer.Option(..., "--out", "-o", help="The GIF to write."),
-    data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
+    data: Path | None = typer.Option(None, "--data", help="The data file (default: the run's)."),
     frames: int = typer.Option(
         _MAX_FRAMES, "--frames", help="Most frames in the GIF (time is subsampled evenly; at least 2)."
     ),
@@ -32,7 +31,7 @@ def animate_command(
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier animate output."),
     device: str = device_option("cpu"),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
 ) -> None:
     """Animate one sample as a GIF: recorded, generated and simulator-replayed frames beside a joint trace.
 

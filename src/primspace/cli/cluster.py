@@ -4,14 +4,12 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from primspace.utils.errors import UserError, first_line
-
 from primspace.cli.app import app
 from primspace.cli.options import echo_json
+from primspace.utils.errors import UserError, first_line
 
 
 class ClusterAffinity(str, Enum):
@@ -39,16 +37,16 @@ def cluster_command(
         help="A MotionDataset .h5 (raw trajectories: joints scaled to [-1, 1], flattened), an (N, q) .npy of "
         "latents, or a run directory (its codes, scored with the labels of its samples in its data file).",
     ),
-    k: Optional[int] = typer.Option(
+    k: int | None = typer.Option(
         None, "--primitives", "-k", help="Number of primitives K: the clusters to find (required)."
     ),
-    k_deprecated: Optional[int] = typer.Option(None, "--k", hidden=True, help="Deprecated name of --primitives."),
+    k_deprecated: int | None = typer.Option(None, "--k", hidden=True, help="Deprecated name of --primitives."),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (labels.csv, result.json, clustering.png)."),
-    tau: Optional[float] = typer.Option(None, "--tau", help="The paper's tau, absolute (> 0)."),
-    tau_relative: Optional[float] = typer.Option(
+    tau: float | None = typer.Option(None, "--tau", help="The paper's tau, absolute (> 0)."),
+    tau_relative: float | None = typer.Option(
         None, "--tau-relative", help="Scale-free tau: tau = R / sigma_1^2 (keeps sigma_k / sigma_1 > 1/sqrt(R))."
     ),
-    r2: Optional[str] = typer.Option(
+    r2: str | None = typer.Option(
         None,
         "--r2",
         metavar="TARGET|auto",
@@ -69,11 +67,11 @@ def cluster_command(
     ),
     n_init: int = typer.Option(20, help="k-means restarts."),
     seed: int = typer.Option(0, help="Random seed (k-means; same seed, same labels)."),
-    labels: Optional[Path] = typer.Option(
+    labels: Path | None = typer.Option(
         None, "--labels", help="(N,) integer .npy of true labels (-1 = unknown) for scoring."
     ),
     do_sweep: bool = typer.Option(False, "--sweep", help="Also print and save R^2, rank and scores over a tau grid."),
-    sweep_taus: Optional[str] = typer.Option(
+    sweep_taus: str | None = typer.Option(
         None, "--sweep-taus", help="Comma-separated absolute taus for --sweep (default: R^2 targets 0.5 ... 0.9999)."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the result JSON instead of text."),
@@ -81,8 +79,8 @@ def cluster_command(
 ) -> None:
     """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
     from primspace.cluster.outputs import CLUSTER_OUTPUT
-    from primspace.utils.folders import check_output_directory
     from primspace.utils.files import check_outside_inputs
+    from primspace.utils.folders import check_output_directory
 
     k, k_flag = _primitives_option(k, k_deprecated)
     check_outside_inputs(out, (src, labels))
@@ -114,7 +112,7 @@ def cluster_command(
     _print_summary(out, result)
 
 
-def _points(src: Path, labels: Optional[Path]):
+def _points(src: Path, labels: Path | None):
     """The points: a data file's trajectories, an ``.npy`` of codes, or a run's codes (a run
     directory, or the ``latents.npy`` in one) numbered by its samples' indices in the data
     file and labelled from it (``--labels``: one label per code, in the run's order)."""
@@ -175,8 +173,8 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
     ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
     from primspace.cluster import clustering_figure, sweep_figure
     from primspace.cluster.outputs import CLUSTER_OUTPUT, write_labels_csv, write_sweep_csv
-    from primspace.utils.folders import atomic_directory, write_json
     from primspace.plots import save_figure
+    from primspace.utils.folders import atomic_directory, write_json
 
     n, scores = result.n_samples, result.scores
     shown = "" if result.figure_indices.size == n else f" ({result.figure_indices.size} of {n} samples)"
@@ -226,7 +224,7 @@ def _print_summary(out: Path, result) -> None:
     )
 
 
-def _primitives_option(k: Optional[int], deprecated: Optional[int]) -> tuple[int, str]:
+def _primitives_option(k: int | None, deprecated: int | None) -> tuple[int, str]:
     """``--primitives`` (``-k``) or its deprecated name ``--k``, and the flag to name in errors."""
     if k is not None and deprecated is not None:
         raise UserError("give --primitives (-k) once; --k is its deprecated name")

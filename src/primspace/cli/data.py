@@ -4,15 +4,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from primspace.utils.errors import UserError
-
 from primspace.cli.app import app
 from primspace.cli.options import check_workers, echo_json
-
+from primspace.utils.errors import UserError
 
 # the marks these commands write into their outputs (primspace.utils.outputs): --overwrite replaces only their own
 _GENERATE_MARK, _SHOW_MARK = "primspace generate", "primspace show"
@@ -90,22 +87,20 @@ def generate_command(
         help="demo (126 motions) or paper (1715 motions, as in the paper); composite-demo "
         "or composite: long demonstrations of 2-4 primitives in a row, with per-step labels (joints only by default).",
     ),
-    workers: Optional[int] = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
+    workers: int | None = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
     backend: str = typer.Option("local", "--backend", help="local (process pool) or ray (identical data)."),
-    address: Optional[str] = typer.Option(
-        None, "--address", help="Ray cluster address (default: a local Ray instance)."
-    ),
+    address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray instance)."),
     seed: int = typer.Option(0, "--seed", help="Moves each block within its grid cell; same seed, same data."),
-    height: Optional[int] = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
-    width: Optional[int] = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
+    height: int | None = typer.Option(None, "--height", help="Frame height in pixels (default 48)."),
+    width: int | None = typer.Option(None, "--width", help="Frame width in pixels (default 64)."),
     no_images: bool = typer.Option(False, "--no-images", help="Joint values only (no rendering)."),
-    block_jitter: Optional[str] = typer.Option(
+    block_jitter: str | None = typer.Option(
         None,
         "--block-jitter",
         help="each: every sample's block jittered on its own (every preset's default); shared: one jitter "
         "per primitive and grid cell, shared by the cell's block sizes (the paper's layout). Grid presets only.",
     ),
-    config_file: Optional[Path] = typer.Option(
+    config_file: Path | None = typer.Option(
         None,
         "--config",
         help="JSON object of generation settings over the preset's (block_x, block_y, "
@@ -125,10 +120,10 @@ def generate_command(
     """
     import time
 
-    from primspace.utils.outputs import output_file
     from primspace.sim import generate
     from primspace.sim.composite import COMPOSITE_PRESETS
     from primspace.sim.generate import generate_dataset
+    from primspace.utils.outputs import output_file
 
     out = output_file(out, inputs=(config_file,), overwrite=overwrite, writer=_GENERATE_MARK)
     if preset in COMPOSITE_PRESETS:
@@ -256,8 +251,8 @@ def show_command(
 ) -> None:
     """Draw one sample: a strip of camera frames and its joint curves."""
     from primspace.data.dataset import MotionDataset
-    from primspace.utils.outputs import output_file
     from primspace.plots import plot_sim_sample, save_figure
+    from primspace.utils.outputs import output_file
 
     if frames < 1:
         raise UserError(f"--frames {frames}: must be at least 1")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -24,12 +23,12 @@ _LOSS_BALANCE_MARK = "primspace diagnose loss-balance"
 @diagnose_app.command("loss-balance")
 def loss_balance_command(
     run: Path = typer.Argument(..., help="A run directory (fit or infer)."),
-    data: Optional[Path] = typer.Option(None, "--data", help="The data file, with labels (default: the run's)."),
-    json_out: Optional[str] = typer.Option(None, "--json", help="Also write the full result to this JSON file."),
+    data: Path | None = typer.Option(None, "--data", help="The data file, with labels (default: the run's)."),
+    json_out: str | None = typer.Option(None, "--json", help="Also write the full result to this JSON file."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier loss-balance JSON at --json."),
     batch_size: int = typer.Option(8, "--batch-size", help="Samples per forward and backward pass (bounds memory)."),
     no_gradients: bool = typer.Option(False, "--no-gradients", help="Leave out the gradients (faster)."),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
 ) -> None:
     """How the loss's motor and vision terms share the training signal, on the run's own samples.
 
@@ -39,9 +38,9 @@ def loss_balance_command(
     """
     from primspace.data import MotionDataset
     from primspace.experiments.loss_balance import loss_balance
+    from primspace.train import load_run
     from primspace.utils.files import atomic_write_json
     from primspace.utils.outputs import output_file
-    from primspace.train import load_run
 
     configure_threads(threads, "cpu")
     if not run.is_dir():

@@ -4,17 +4,14 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import typer
-
-from primspace.utils.seeds import check_seed
-from primspace.utils.errors import UserError
 
 from primspace.cli.app import app
 from primspace.cli.options import check_workers, device_option, echo_table, int_list, name_list, threads_option
 from primspace.cli.train import OPTIMIZER_HELP, LossReduction, Optimizer
-
+from primspace.utils.errors import UserError
+from primspace.utils.seeds import check_seed
 
 # ============================================================ experiments, report
 
@@ -32,11 +29,10 @@ class Backend(str, Enum):
 
 
 def _experiment(preset: str | None, data, out, backend, address, workers, seed, overrides: dict, pack: int = 1):
+    from primspace.cli.app import invocation
     from primspace.experiments.presets import DEFAULT_PRESET, resolve_preset
     from primspace.experiments.workspace import ExperimentDir
     from primspace.utils.parallel import default_workers
-
-    from primspace.cli.app import invocation
 
     check_workers(workers)
     if pack < 1:
@@ -78,8 +74,8 @@ def _judgeable_steps(exp, name: str, steps: tuple[str, ...]) -> tuple[str, ...]:
     imported demonstrations) leaves the success step out, with a note, instead of failing."""
     if "success:run_success" not in steps:
         return steps
-    from primspace.utils.errors import DataError
     from primspace.sim.success import check_judgeable
+    from primspace.utils.errors import DataError
 
     try:
         check_judgeable(exp.dataset())
@@ -188,44 +184,44 @@ def _experiment_command(
     the CLI starts without importing torch)."""
 
     def command(
-        preset: Optional[str] = typer.Option(
+        preset: str | None = typer.Option(
             None,
             "--preset",
             help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU); composite takes demo, paper or lasa too.",
         ),
-        data: Optional[Path] = typer.Option(
+        data: Path | None = typer.Option(
             None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."
         ),
         out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
         backend: Backend = typer.Option(Backend.local, "--backend", help="local (process pool) or ray."),
-        address: Optional[str] = typer.Option(
+        address: str | None = typer.Option(
             None, "--address", help="Ray cluster address (default: start a local Ray instance)."
         ),
-        workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+        workers: int | None = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
         pack: int = typer.Option(1, "--pack", metavar="N", help=_PACK_HELP),
-        seed: Optional[int] = typer.Option(
+        seed: int | None = typer.Option(
             None, "--seed", help="Seed of the generated data (default: the experiment's, 0)."
         ),
-        latent_dims: Optional[str] = typer.Option(
+        latent_dims: str | None = typer.Option(
             None, "--latent-dims", help="Override the preset's latent sizes, e.g. 10,20,40."
         ),
-        inits: Optional[str] = typer.Option(None, "--inits", help=_INITS_HELP),
-        seeds: Optional[str] = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
-        epochs: Optional[str] = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
-        images: Optional[bool] = typer.Option(
+        inits: str | None = typer.Option(None, "--inits", help=_INITS_HELP),
+        seeds: str | None = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
+        epochs: str | None = typer.Option(None, "--epochs", help="Override the fit and infer epochs, e.g. 800,600."),
+        images: bool | None = typer.Option(
             None, "--images/--no-images", help="Override whether the vision loss is trained."
         ),
-        vision_frames: Optional[int] = typer.Option(None, "--vision-frames", help=_VISION_FRAMES_HELP),
-        loss_reduction: Optional[LossReduction] = typer.Option(
+        vision_frames: int | None = typer.Option(None, "--vision-frames", help=_VISION_FRAMES_HELP),
+        loss_reduction: LossReduction | None = typer.Option(
             None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."
         ),
-        optimizer: Optional[Optimizer] = _STEPPING["optimizer"],
-        lr: Optional[float] = _STEPPING["lr"],
-        latent_lr: Optional[float] = _STEPPING["latent_lr"],
-        step: Optional[str] = _STEPPING["step"],
+        optimizer: Optimizer | None = _STEPPING["optimizer"],
+        lr: float | None = _STEPPING["lr"],
+        latent_lr: float | None = _STEPPING["latent_lr"],
+        step: str | None = _STEPPING["step"],
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
-        device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
-        threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
+        device: str | None = device_option(None, _RUN_DEVICE_HELP),
+        threads: int | None = threads_option(None, _RUN_THREADS_HELP),
     ) -> None:
         stepping = (optimizer, lr, latent_lr, step)
         overrides = _overrides(
@@ -310,7 +306,7 @@ _experiment_command(
 def summarize_command(
     directory: Path = typer.Argument(..., help="An experiment directory."),
     name: str = typer.Option(..., "--name", help="The summary's name (its heading in the docs)."),
-    command: Optional[str] = typer.Option(
+    command: str | None = typer.Option(
         None,
         "--command",
         help="The command(s) that made DIRECTORY, exactly as run (default: the ones its experiment.json recorded).",
@@ -323,9 +319,9 @@ def summarize_command(
     (`python -m primspace.report.markdown`), and beside it (OUT with suffix .codes.npz) the
     codes of its runs, compressed (`primspace.results.codes.read_codes` reads them);
     run it on the machine that ran the experiment (it records the CPU)."""
-    from primspace.results.summary import summarize
-    from primspace.results.codes import check_codes_output, codes_path
     from primspace.experiments.summary_codes import write_summary_with_codes
+    from primspace.results.codes import check_codes_output, codes_path
+    from primspace.results.summary import summarize
     from primspace.utils.outputs import output_file
 
     # --overwrite replaces a summary only (recognised by its summary_version), never another file,
@@ -348,9 +344,9 @@ def report_command(directory: Path = typer.Argument(..., help="An experiment dir
 @app.command("demo")
 def demo_command(
     out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Where the demo writes its data, runs and report."),
-    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
-    device: Optional[str] = device_option(None, _RUN_DEVICE_HELP),
-    threads: Optional[int] = threads_option(None, _RUN_THREADS_HELP),
+    workers: int | None = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+    device: str | None = device_option(None, _RUN_DEVICE_HELP),
+    threads: int | None = threads_option(None, _RUN_THREADS_HELP),
 ) -> None:
     """The main demo: simulate data, run intra + clustering + success at demo scale, write the report."""
     from primspace.demo import run_demo

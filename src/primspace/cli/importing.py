@@ -8,14 +8,12 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from primspace.utils.errors import UserError
-
 from primspace.cli.app import app
 from primspace.cli.options import name_list
+from primspace.utils.errors import UserError
 
 
 class ImportFormat(str, Enum):
@@ -102,18 +100,18 @@ _OVERWRITE = typer.Option(False, help="Replace OUT if it is an earlier import ou
 
 @app.command("import")
 def import_command(
-    src: Optional[Path] = _SRC,
-    format: Optional[ImportFormat] = _FORMAT,
+    src: Path | None = _SRC,
+    format: ImportFormat | None = _FORMAT,
     length: str = _LENGTH,
     out: str = _OUT,
-    joints: Optional[str] = _JOINTS,
-    images: Optional[str] = _IMAGES,
-    image_size: Optional[str] = _IMAGE_SIZE,
+    joints: str | None = _JOINTS,
+    images: str | None = _IMAGES,
+    image_size: str | None = _IMAGE_SIZE,
     image_fit: ImageFit = _IMAGE_FIT,
-    episodes: Optional[str] = _EPISODES,
-    filter_key: Optional[str] = _FILTER_KEY,
+    episodes: str | None = _EPISODES,
+    filter_key: str | None = _FILTER_KEY,
     keep_padding: bool = _KEEP_PADDING,
-    shapes: Optional[str] = _SHAPES,
+    shapes: str | None = _SHAPES,
     velocities: bool = _VELOCITIES,
     overwrite: bool = _OVERWRITE,
 ) -> None:
@@ -218,7 +216,7 @@ def _parse_length(text: str) -> int:
     return int(value)
 
 
-def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
+def _parse_image_size(text: str | None) -> tuple[int, int]:
     """``"48x64"`` -> ``(48, 64)``, a size the decoder's image head can produce."""
     from primspace.data.importers import DEFAULT_IMAGE_SIZE
     from primspace.model.config import ModelConfig, check_image_size
@@ -238,7 +236,7 @@ def _parse_image_size(text: Optional[str]) -> tuple[int, int]:
     return size
 
 
-def _guess_format(src: Optional[Path]) -> str:
+def _guess_format(src: Path | None) -> str:
     """The format of ``src``; an HDF5 file is robomimic only when it is a ``.hdf5`` file with
     ``data/demo_N`` groups (a ``.h5`` file is usually a primspace data set already)."""
     if src is None or str(src).lower() == "lasa":

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-from typing import Optional
 
 import typer
 
-from primspace.utils.errors import UserError
 from primspace.train.config import TrainConfig
+from primspace.utils.errors import UserError
 
 #: ``--threads``'s help, the same wherever torch runs (the default is ``TrainConfig.threads``).
 THREADS_HELP = (
@@ -28,7 +27,7 @@ def device_option(default: str = TrainConfig.device, help: str = DEVICE_HELP):
     return typer.Option(default, "--device", help=help)
 
 
-def configure_threads(threads: Optional[int], device: str = "cpu") -> None:
+def configure_threads(threads: int | None, device: str = "cpu") -> None:
     """An entry point's process-wide settings for commands that run a model without training it."""
     from primspace.train import configure_process
 
@@ -50,7 +49,7 @@ def name_list(text: str, option: str) -> tuple[str, ...]:
     return values
 
 
-def check_workers(workers: Optional[int]) -> None:
+def check_workers(workers: int | None) -> None:
     """The same rule for every command's --workers: absent means every core, else >= 1."""
     if workers is not None and workers < 1:
         raise UserError(f"--workers {workers}: must be at least 1")

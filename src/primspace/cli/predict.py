@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -52,8 +51,8 @@ def _shown_titles(dataset, indices) -> list[str]:
 
 def _judged(predicted_dataset) -> dict | None:
     """Success of the predicted motions in the simulator, when the data can be judged (else None)."""
-    from primspace.utils.errors import DataError
     from primspace.sim.success import check_judgeable, evaluate_dataset, success_rates
+    from primspace.utils.errors import DataError
 
     try:
         check_judgeable(predicted_dataset)
@@ -84,8 +83,11 @@ def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | Non
         name: [None if not float(v) == float(v) else float(v) for v in values]
         for name, values in prediction.errors.items()
     }
+    from primspace.predict.registry import model_share
+
     result = {
         **prediction.summary(),
+        "model_share": model_share(prediction.init, prediction.details),
         "command": command,
         "indices": [int(i) for i in prediction.indices],
         "source_ids": None if data.source_ids is None else [str(v) for v in data.source_ids],
@@ -108,18 +110,18 @@ def predict_command(
         help="The folder to write (predicted.h5, result.json, prediction.png; posterior.png with the prior "
         "and no --primitive).",
     ),
-    observe: Optional[str] = typer.Option(
+    observe: str | None = typer.Option(
         None,
         "--observe",
         help="Observed joints: a fraction of each motion's valid "
         "steps (0.25, the default), a number of steps (10), or none (frames only).",
     ),
-    observe_frames: Optional[str] = typer.Option(
+    observe_frames: str | None = typer.Option(
         None,
         "--observe-frames",
         help="Observed frames: a fraction, a number of steps, first (the first frame) or none. Default: as --observe.",
     ),
-    init: Optional[str] = typer.Option(
+    init: str | None = typer.Option(
         None,
         "--init",
         help="The predictor: mixture (the default and the best: the "
@@ -135,20 +137,20 @@ def predict_command(
     epochs: int = typer.Option(
         100, "--epochs", help="Gradient starts: inference epochs on the observed entries (0: the start as it is)."
     ),
-    indices: Optional[Path] = typer.Option(None, "--indices", help="Samples of FILE to predict (.npy or text)."),
-    fitted: Optional[Path] = typer.Option(
+    indices: Path | None = typer.Option(None, "--indices", help="Samples of FILE to predict (.npy or text)."),
+    fitted: Path | None = typer.Option(
         None,
         "--fitted-data",
         help="The data file the run was fitted on (default: the run's own), read by mixture, prior, nearest, "
         "calibrated and --scene (the scene policy learns from its frames).",
     ),
-    latent_lr: Optional[float] = typer.Option(
+    latent_lr: float | None = typer.Option(
         None, "--latent-lr", help="Gradient starts: the codes' learning rate (default: the run's)."
     ),
-    seed: Optional[int] = typer.Option(
+    seed: int | None = typer.Option(
         None, "--seed", help="Seed of a random start, or of the scene policy (default: the run's)."
     ),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
     online: bool = typer.Option(
         False,
         "--online",
@@ -156,7 +158,7 @@ def predict_command(
         "after each, warm-started (predictive coding); result.json gets the latency per step "
         "and the error of the rest after each step.",
     ),
-    iterations: Optional[int] = typer.Option(
+    iterations: int | None = typer.Option(
         None, "--iterations", help="With --online: inference iterations per arriving step (default 5)."
     ),
     scene: bool = typer.Option(
@@ -167,7 +169,7 @@ def predict_command(
         "frame to the motion, fitted on the run's fitted demonstrations and their frames). Not with --observe, "
         "--observe-frames, --init, --online, --latent-lr; --epochs is not read.",
     ),
-    primitive: Optional[str] = typer.Option(
+    primitive: str | None = typer.Option(
         None,
         "--primitive",
         help="The primitive of every motion, a name (push) or an id: the prior "
@@ -175,7 +177,7 @@ def predict_command(
         "primitives by their posterior. With --scene: the primitive to perform, a name (a label "
         "name, or 'cluster 2') or an id of --primitives (result.json lists them).",
     ),
-    primitives: Optional[str] = typer.Option(
+    primitives: str | None = typer.Option(
         None,
         "--primitives",
         "-k",
@@ -183,10 +185,10 @@ def predict_command(
         "clusters (of the fitted codes, as many as the labels) or a number K of clusters. With "
         "--scene the same; default: labels when the fitted data has labels, else clusters (give K).",
     ),
-    clusters: Optional[int] = typer.Option(
+    clusters: int | None = typer.Option(
         None, "--clusters", hidden=True, help="The number of clusters K of --primitives clusters (as --primitives K)."
     ),
-    prior_samples: Optional[int] = typer.Option(
+    prior_samples: int | None = typer.Option(
         None, "--prior-samples", help="The prior: codes drawn and decoded per primitive (default 2000)."
     ),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
@@ -194,9 +196,9 @@ def predict_command(
 ) -> None:
     """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded
     (with --scene: the whole motion from the first frame and joints, as the named primitive, by the scene policy)."""
-    from primspace.utils.folders import OutputKind, atomic_directory
-    from primspace.utils.files import check_outside_inputs
     from primspace.train import TrainConfig, configure_process
+    from primspace.utils.files import check_outside_inputs
+    from primspace.utils.folders import OutputKind, atomic_directory
 
     source, clusters = parse_primitives(primitives, clusters, scene)
     motor, frames = _amounts(scene, primitive, observe, observe_frames, init, online)

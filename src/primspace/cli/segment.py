@@ -4,14 +4,12 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from primspace.utils.errors import UserError
-
 from primspace.cli.app import app
 from primspace.cli.options import configure_threads, threads_option
+from primspace.utils.errors import UserError
 
 #: ``primspace segment``'s output directory.
 SEGMENT_FILES = ("segments.csv", "step_labels.npy", "result.json", "timeline.png")
@@ -57,17 +55,17 @@ def segment_command(
     out: Path = typer.Option(
         ..., "--out", "-o", help="Output directory (segments.csv, step_labels.npy, result.json, timeline.png)."
     ),
-    method: Optional[SegmentMethod] = _SEGMENT_METHOD,
-    primitives: Optional[int] = typer.Option(
+    method: SegmentMethod | None = _SEGMENT_METHOD,
+    primitives: int | None = typer.Option(
         None, "--primitives", "-k", help="Number of primitives K (default: the data's label names)."
     ),
-    tolerance: Optional[int] = typer.Option(
+    tolerance: int | None = typer.Option(
         None,
         "--tolerance",
         help="Steps within which a found boundary matches a true one (default: the code window; surprise, synthesis: 8).",
     ),
-    min_steps: Optional[int] = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
-    max_steps: Optional[int] = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
+    min_steps: int | None = typer.Option(None, "--min-steps", help=_STEPS.format("fewest", "0.4")),
+    max_steps: int | None = typer.Option(None, "--max-steps", help=_STEPS.format("most", "0.85")),
     infer_epochs: int = typer.Option(
         0,
         "--infer-epochs",
@@ -83,17 +81,17 @@ def segment_command(
         "out), translate (kept throughout), auto (the one that explains DATA better).",
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an earlier segment output in OUT."),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
 ) -> None:
     """Find the primitives in long demonstrations: boundaries (change points of a run's window
     codes, or the segments a single-primitive run generates best) and labels (affine subspace
     clustering of segment codes); scored against the data's step_segments / step_labels when it has them."""
     import numpy as np
 
-    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory, write_json
     from primspace.data import MotionDataset
-    from primspace.utils.files import check_outside_inputs
     from primspace.train import load_run
+    from primspace.utils.files import check_outside_inputs
+    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory, write_json
 
     kind = OutputKind("primspace segment", SEGMENT_FILES, frozenset({"window", "boundaries", "scores"}))
     check_outside_inputs(out, (run, data))
@@ -128,7 +126,7 @@ def segment_command(
     typer.echo(f"wrote {out}")
 
 
-def segment_method(method: Optional[SegmentMethod], trained) -> SegmentMethod:
+def segment_method(method: SegmentMethod | None, trained) -> SegmentMethod:
     """``--method``, or its default: ``primspace.segmentation.DEFAULT_METHOD`` (synthesis), and
     windows for a run trained with --code-window (the one method such a run can use)."""
     from primspace.segmentation import DEFAULT_METHOD
@@ -151,7 +149,7 @@ def _check_segment_options(method: SegmentMethod, min_steps, max_steps, offset, 
         raise UserError(f"tolerance (--tolerance) must be at least 0 steps, got {tolerance}")
 
 
-def _primitives(held, primitives: Optional[int], data: Path) -> int:
+def _primitives(held, primitives: int | None, data: Path) -> int:
     if primitives is None and not held.label_names:
         raise UserError(f"{data}: no label names to count the primitives; pass --primitives K")
     if primitives is not None and primitives < 1:
@@ -188,7 +186,6 @@ def _segment_by_primitives(trained, ds, run: Path, data: Path, primitives, toler
     from primspace.segmentation.surprise import segment_by_surprise
     from primspace.segmentation.synthesis import segment_by_synthesis
     from primspace.sim.composite import transition_steps
-
     from primspace.utils.progress import stage
 
     k = _primitives(ds, primitives, data)

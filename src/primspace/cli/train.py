@@ -5,17 +5,14 @@ from __future__ import annotations
 from dataclasses import replace
 from enum import Enum
 from pathlib import Path
-from typing import Optional, Tuple
 
 import typer
 
-from primspace.utils.errors import UserError
-
 from primspace.cli.app import app
+from primspace.cli.options import configure_threads, device_option, float_list, int_list, threads_option
 from primspace.model.config import ModelConfig
 from primspace.train.config import TrainConfig
-from primspace.cli.options import configure_threads, device_option, float_list, int_list, threads_option
-
+from primspace.utils.errors import UserError
 
 # =================================================================== model, train
 
@@ -114,7 +111,7 @@ def _csv(values) -> str:
     return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
 
 
-def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path]):
+def _inputs(out: Path, file: Path, indices: Path | None, other: Path | None):
     """The data set and its --indices selection, once --out is known to lie outside every input."""
     from primspace.data.dataset import MotionDataset
     from primspace.data.indices import read_indices
@@ -125,9 +122,7 @@ def _inputs(out: Path, file: Path, indices: Optional[Path], other: Optional[Path
     return ds, (read_indices(indices, ds) if indices is not None else None)
 
 
-def _train_inputs(
-    out: Path, file: Path, indices: Optional[Path], other: Optional[Path], tc: TrainConfig, no_images: bool
-):
+def _train_inputs(out: Path, file: Path, indices: Path | None, other: Path | None, tc: TrainConfig, no_images: bool):
     """:func:`_inputs`, refusing a run with no loss left: ``--motor-weight 0`` without the
     vision loss (``--no-images``, or data without images) trains on a loss that is 0."""
     ds, idx = _inputs(out, file, indices, other)
@@ -224,7 +219,7 @@ def train_command(
     latent_dim: int = typer.Option(_MC.latent_dim, "--latent-dim", "-q", help="q, the size of each latent code."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs (with --resume: train up to this many)."),
     no_images: bool = typer.Option(False, "--no-images", help="Motor only: no image head, images ignored."),
-    indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to train on (.npy or text)."),
+    indices: Path | None = typer.Option(None, "--indices", help="Sample indices to train on (.npy or text)."),
     batch_size: int = typer.Option(_TC.batch_size, "--batch-size", help=_HELP["batch_size"]),
     lr: float = typer.Option(_TC.lr, "--lr", help="Learning rate of the weights."),
     latent_lr: float = typer.Option(_TC.latent_lr, "--latent-lr", help="Learning rate of the latent codes."),
@@ -235,14 +230,14 @@ def train_command(
     ),
     motor_weight: float = typer.Option(_TC.motor_weight, "--motor-weight", help=_HELP["motor_weight"]),
     vision_weight: float = typer.Option(_TC.vision_weight, "--vision-weight", help=_HELP["vision_weight"]),
-    vision_frames: Optional[int] = typer.Option(
+    vision_frames: int | None = typer.Option(
         _TC.vision_frames,
         "--vision-frames",
         help="Vision loss on K randomly drawn frames per sequence and step (unbiased; default: every frame).",
     ),
     loss_reduction: LossReduction = typer.Option(_TC.loss_reduction, "--loss-reduction", help=_LOSS_REDUCTION_HELP),
     optimizer: Optimizer = typer.Option(_TC.optimizer, "--optimizer", help=OPTIMIZER_HELP),
-    code_window: Optional[int] = typer.Option(
+    code_window: int | None = typer.Option(
         None,
         "--code-window",
         help="One code per window of W steps (a sequence of codes, for long demonstrations of several primitives).",
@@ -260,24 +255,24 @@ def train_command(
     seed: int = typer.Option(_TC.seed, "--seed", help=_HELP["seed"]),
     device: str = device_option(),
     amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
-    threads: Optional[int] = threads_option(),
-    checkpoint_every: Optional[int] = typer.Option(
+    threads: int | None = threads_option(),
+    checkpoint_every: int | None = typer.Option(
         _TC.checkpoint_every, "--checkpoint-every", help="Also checkpoint every N epochs."
     ),
     checkpoint_seconds: float = typer.Option(
         _TC.checkpoint_seconds, "--checkpoint-seconds", help="Checkpoint at least this often."
     ),
-    weights_from: Optional[Path] = typer.Option(
+    weights_from: Path | None = typer.Option(
         None,
         "--weights-from",
         help="Start from this run's weights, scaler and initialiser (its model config: model flags are ignored).",
     ),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
-    log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
-    stream_frames: Optional[bool] = _TRAIN_SCALE["stream_frames"],
+    log_to: tuple[LogTarget, Path] | None = _log_to_option(),
+    stream_frames: bool | None = _TRAIN_SCALE["stream_frames"],
     loader_workers: int = _TRAIN_SCALE["loader_workers"],
-    frames_memory_gb: Optional[float] = _TRAIN_SCALE["frames_memory_gb"],
+    frames_memory_gb: float | None = _TRAIN_SCALE["frames_memory_gb"],
     micro_batches: int = _TRAIN_SCALE["micro_batches"],
     step: str = _TRAIN_SCALE["step"],
 ) -> None:
@@ -323,30 +318,30 @@ def infer_command(
     file: Path = typer.Argument(..., metavar="DATA", help="A MotionDataset HDF5 file with the new samples."),
     out: Path = typer.Option(..., "--out", "-o", help="The run directory to create for the new codes."),
     epochs: int = typer.Option(_TC.epochs, "--epochs", help="Total epochs of code optimisation."),
-    init: Optional[LatentInit] = typer.Option(
+    init: LatentInit | None = typer.Option(
         None,
         "--init",
         help="How the codes start (default: the run's). calibrated: the run's projection mapped by its ridge "
         "calibration onto where its fitted codes ended (runs fitted with projection or pca init).",
     ),
-    indices: Optional[Path] = typer.Option(None, "--indices", help="Sample indices to use (.npy or text)."),
-    batch_size: Optional[int] = typer.Option(None, "--batch-size", help="Default: the run's."),
-    latent_lr: Optional[float] = typer.Option(None, "--latent-lr", help="Default: the run's."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Default: the run's."),
-    loss_reduction: Optional[LossReduction] = typer.Option(
+    indices: Path | None = typer.Option(None, "--indices", help="Sample indices to use (.npy or text)."),
+    batch_size: int | None = typer.Option(None, "--batch-size", help="Default: the run's."),
+    latent_lr: float | None = typer.Option(None, "--latent-lr", help="Default: the run's."),
+    seed: int | None = typer.Option(None, "--seed", help="Default: the run's."),
+    loss_reduction: LossReduction | None = typer.Option(
         None, "--loss-reduction", help="Default: the run's. " + _LOSS_REDUCTION_HELP
     ),
     device: str = device_option(),
     amp: bool = typer.Option(_TC.amp, "--amp", help="bfloat16 mixed precision (CUDA only)."),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
     resume: bool = typer.Option(False, "--resume", help="Continue the inference in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier infer run."),
-    log_to: Optional[Tuple[LogTarget, Path]] = _log_to_option(),
-    stream_frames: Optional[bool] = _INFER_SCALE["stream_frames"],
-    frames_memory_gb: Optional[float] = _INFER_SCALE["frames_memory_gb"],
-    loader_workers: Optional[int] = _INFER_SCALE["loader_workers"],
-    micro_batches: Optional[int] = _INFER_SCALE["micro_batches"],
-    step: Optional[str] = _INFER_SCALE["step"],
+    log_to: tuple[LogTarget, Path] | None = _log_to_option(),
+    stream_frames: bool | None = _INFER_SCALE["stream_frames"],
+    frames_memory_gb: float | None = _INFER_SCALE["frames_memory_gb"],
+    loader_workers: int | None = _INFER_SCALE["loader_workers"],
+    micro_batches: int | None = _INFER_SCALE["micro_batches"],
+    step: str | None = _INFER_SCALE["step"],
 ) -> None:
     """Find latent codes for new samples with the trained weights frozen (under torchrun:
     each batch's samples split across the processes)."""
@@ -391,11 +386,11 @@ def reconstruct_command(
     run: Path = typer.Argument(..., help="A run directory (fit or infer)."),
     sample: int = typer.Option(..., "--sample", help="Sample index in the data file (one the run used)."),
     out: str = typer.Option(..., "--out", "-o", help="The PNG to write."),
-    data: Optional[Path] = typer.Option(None, "--data", help="The data file (default: the run's)."),
+    data: Path | None = typer.Option(None, "--data", help="The data file (default: the run's)."),
     frames: int = typer.Option(8, "--frames", help="Camera frames shown in the strip (data with images)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier reconstruct output."),
     device: str = device_option("cpu"),
-    threads: Optional[int] = threads_option(),
+    threads: int | None = threads_option(),
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
     import numpy as np
@@ -427,7 +422,7 @@ def run_sample(
     run: Path,
     sample: int,
     out: str,
-    data: Optional[Path],
+    data: Path | None,
     frames: int,
     overwrite: bool,
     min_frames: int = 1,
@@ -446,8 +441,8 @@ def run_sample(
     import numpy as np
 
     from primspace.data.dataset import MotionDataset
-    from primspace.utils.outputs import output_file
     from primspace.train import check_run_data, load_run
+    from primspace.utils.outputs import output_file
 
     if frames < min_frames:
         raise UserError(f"--frames {frames}: must be at least {min_frames}")

@@ -31,10 +31,10 @@ from sklearn.utils import check_array
 from primspace.cluster.estimator import LowRankSubspaceClustering, tau_option_from
 from primspace.cluster.metrics import clustering_scores
 from primspace.cluster.outputs import figure_indices
-from primspace.utils.folders import to_jsonable
 from primspace.cluster.spectral import affinity_from_factor
 from primspace.cluster.sweep import R2_GRID, checked_grid, tau_sweep
 from primspace.utils.errors import UserError
+from primspace.utils.folders import to_jsonable
 
 __all__ = ["ClusteringResult", "cluster_points", "clustering_figure", "sweep_figure", "SINGULAR_VALUES_SHOWN"]
 

@@ -9,8 +9,8 @@ and checked, and in which order, is the schema table's (:data:`~primspace.data.s
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from types import SimpleNamespace
-from typing import Mapping
 
 from primspace.data.schema import ARRAYS, ATTRIBUTES, names_of
 

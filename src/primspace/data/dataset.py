@@ -32,8 +32,8 @@ import numpy as np
 from primspace.data.checks import convert_fields, validate_fields
 from primspace.data.images import LazyImages, as_view
 from primspace.data.indices import check_indices, mask_indices
-from primspace.data.schema import ARRAYS, SCHEMA_VERSION, names_of
 from primspace.data.reading import read_fields
+from primspace.data.schema import ARRAYS, SCHEMA_VERSION, names_of
 from primspace.data.storage import DatasetWriter, write_dataset
 from primspace.utils.errors import DataError
 
@@ -156,7 +156,7 @@ class MotionDataset:
         validate_fields(self)
 
     # ----------------------------------------------------------------------- subsets
-    def subset(self, indices) -> "MotionDataset":
+    def subset(self, indices) -> MotionDataset:
         """The samples at ``indices`` (ints or a boolean mask), in that order.
 
         Motor, labels and params are copied (they are small); images stay a lazy view
@@ -186,7 +186,7 @@ class MotionDataset:
         found = [row.get(int(i)) for i in np.asarray(file_indices).reshape(-1)]
         return None if any(r is None for r in found) else np.asarray(found, dtype=np.int64)
 
-    def without_images(self) -> "MotionDataset":
+    def without_images(self) -> MotionDataset:
         """The same samples with the images dropped."""
         return dataclasses.replace(self, **{array.name: None for array in ARRAYS if array.lazy})
 
@@ -209,7 +209,7 @@ class MotionDataset:
         return write_dataset(self, Path(path), overwrite, compression_level, writer=writer)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "MotionDataset":
+    def load(cls, path: str | os.PathLike) -> MotionDataset:
         """Read and validate a data set file; images stay on disk until accessed.
 
         Raises
@@ -224,7 +224,7 @@ class MotionDataset:
         except DataError as exc:
             raise exc.located(path=path) from None
 
-    def load_images(self) -> "MotionDataset":
+    def load_images(self) -> MotionDataset:
         """Return a copy whose images are read into memory once (for fast training)."""
         if self.images is None or not isinstance(self.images, LazyImages):
             return self

@@ -147,7 +147,7 @@ class LazyImages:
         base = local if self._index is None else self._index[local]
         return base, single
 
-    def subset(self, indices) -> "LazyImages":
+    def subset(self, indices) -> LazyImages:
         """A view of the selected samples (no image data is read or copied)."""
         base, _ = self._resolve(indices)
         view = LazyImages.__new__(LazyImages)

@@ -26,7 +26,7 @@ What is exact (to float precision):
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

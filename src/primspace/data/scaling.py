@@ -59,7 +59,7 @@ class JointScaler:
             raise UserError("JointScaler is not fitted; call fit first")
 
     # ------------------------------------------------------------------- transform
-    def fit(self, x) -> "JointScaler":
+    def fit(self, x) -> JointScaler:
         """Record each joint's minimum and maximum over all samples and steps."""
         x = _as_joints(x)
         flat = x.reshape(-1, x.shape[-1])
@@ -99,7 +99,7 @@ class JointScaler:
         return {"data_min": self.data_min_.tolist(), "data_max": self.data_max_.tolist()}
 
     @classmethod
-    def from_dict(cls, state: dict) -> "JointScaler":
+    def from_dict(cls, state: dict) -> JointScaler:
         try:
             lo = np.asarray(state["data_min"], dtype=np.float64)
             hi = np.asarray(state["data_max"], dtype=np.float64)

@@ -12,15 +12,16 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Sequence
 
 import h5py
 import numpy as np
 
 from primspace.data.checks import checked_fields
 from primspace.data.images import IMAGE_BLOCK, as_view, read_samples
+from primspace.data.reading import read_fields
 from primspace.data.schema import (
     ARRAYS,
     ATTRIBUTES,
@@ -31,7 +32,6 @@ from primspace.data.schema import (
     dims_of,
     field,
 )
-from primspace.data.reading import read_fields
 from primspace.data.values import as_float32
 from primspace.utils.errors import DataError, first_line
 from primspace.utils.files import atomic_path, check_free_space
@@ -192,7 +192,7 @@ class DatasetWriter:
             dims["H"], dims["W"] = self.image_size
         return dims
 
-    def __enter__(self) -> "DatasetWriter":
+    def __enter__(self) -> DatasetWriter:
         stack = contextlib.ExitStack()
         tmp = stack.enter_context(atomic_path(self.path, overwrite=self.overwrite))
         try:

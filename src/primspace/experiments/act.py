@@ -31,21 +31,20 @@ without the perturbation.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from primspace.act.planners import DEFAULT_EVERY, PLANNERS
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.results.act import ALL, act_table, act_tables
 from primspace.experiments.intra import run_intra
 from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, judgeable, predicted_subset, projection_seeds
 from primspace.experiments.prediction_table import mean_std_count
 from primspace.experiments.runs import focus_runs
-from primspace.results.layout import phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 from primspace.predict.metrics import finite_mean
+from primspace.results.act import ALL, act_table, act_tables
+from primspace.results.layout import phase_dir
+from primspace.utils.errors import UserError
 
 __all__ = [
     "ACT_EVERY",
@@ -83,9 +82,9 @@ def _first_step(n: int, length: int) -> np.ndarray:
 def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.ndarray, infer_dir: str, policy) -> dict:
     """{row: motor (n, T, J) physical} of the scene-only rows; ``policy``: the closed loop's, fitted
     (its first frame's map is the scene-only plan)."""
-    from primspace.predict.peers import MeanMotionPeer
     from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
     from primspace.act.scene_policy import ScenePolicy
+    from primspace.predict.peers import MeanMotionPeer
     from primspace.train import load_run, reconstruct
 
     scaler = fit.scaler

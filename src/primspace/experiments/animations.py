@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.utils.errors import DataError
 from primspace.experiments import figures
-from primspace.results.layout import ANIMATION_RESULTS
 from primspace.experiments.runs import focus_runs
-from primspace.results.layout import intra_run_dir
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import ANIMATION_RESULTS, intra_run_dir
+from primspace.utils.errors import DataError
 
 __all__ = ["sample_motion", "replay_note", "write_animations"]
 

@@ -24,9 +24,9 @@ import numpy as np
 
 from primspace.experiments import figures
 from primspace.experiments.intra import run_intra
-from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
 from primspace.experiments.runs import focus_runs, initial_codes, load_codes
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
 
 __all__ = ["run_clustering", "rescaled_rows", "rescale", "RESCALINGS", "LEARNED_CODES", "INITIAL_CODES"]
 

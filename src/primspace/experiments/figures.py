@@ -179,8 +179,8 @@ def _draw_primitive_timelines(out_dir: str | Path, results: dict) -> list[Path]:
     """Per method of the model of single primitives, the timeline of the first seed's
     held-out demonstrations: scaled joints, true and found labels and boundaries."""
     from primspace import plots
-    from primspace.results.composite import METHODS
     from primspace.plots.sequences import plot_code_timeline
+    from primspace.results.composite import METHODS
     from primspace.segmentation import boundaries_from_segments
 
     arrays, rows = read_arrays(out_dir, "composite_primitives"), results.get("primitives") or []

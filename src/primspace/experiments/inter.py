@@ -28,9 +28,9 @@ from primspace.experiments.runs import (
     shared_fits_last,
     train_configs,
 )
-from primspace.results.layout import fit_init, fit_point_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import fit_init, fit_point_dir
 
 __all__ = ["run_inter", "run_inter_point", "replay_indices", "inter_key"]
 

@@ -25,7 +25,6 @@ from primspace.experiments.animations import write_animations
 from primspace.experiments.appendix_a import run_appendix_a
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.probe import run_probe
-from primspace.results.layout import LATENT_RESULTS
 from primspace.experiments.runs import (
     all_frame_losses,
     curves,
@@ -36,9 +35,9 @@ from primspace.experiments.runs import (
     pack_grid_runs,
     shared_fits_last,
 )
-from primspace.results.layout import intra_key, intra_run_dir, phase_dir
 from primspace.experiments.sweep import GridPoint, complete_result
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import LATENT_RESULTS, intra_key, intra_run_dir, phase_dir
 
 __all__ = ["split_indices", "run_intra", "run_intra_point"]
 

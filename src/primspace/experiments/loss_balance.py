@@ -43,11 +43,11 @@ import torch
 from primspace.data import MotionDataset
 from primspace.data.indices import check_indices
 from primspace.data.steps import valid_steps
-from primspace.utils.errors import UserError
 from primspace.train.loss import DataTensors, batch_loss, code_variation
 from primspace.train.observe import Observation
 from primspace.train.rundata import load_fitted_data
 from primspace.train.sessions import as_run, uses_images
+from primspace.utils.errors import UserError
 
 __all__ = ["loss_balance", "THETA_PARTS", "UNLABELLED"]
 
@@ -168,7 +168,7 @@ def _terms(model, z: torch.Tensor, tensors: DataTensors, tc) -> tuple[dict, dict
     return terms, mse
 
 
-def _measure(setup: dict, z: torch.Tensor, batch: np.ndarray, group: int, totals: "_Totals", gradients: bool) -> None:
+def _measure(setup: dict, z: torch.Tensor, batch: np.ndarray, group: int, totals: _Totals, gradients: bool) -> None:
     """Add one batch (rows ``batch`` of one primitive, codes ``z``) to ``totals``."""
     model, part = setup["model"], setup["data"].subset(batch)
     tensors = DataTensors.build(part, setup["scaler"], setup["use_images"], _CPU, observation=setup["observation"])

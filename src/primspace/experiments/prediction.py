@@ -26,12 +26,12 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
+from primspace.experiments.prediction_table import predict_figure, predict_table
 from primspace.experiments.runs import focus_runs
-from primspace.results.layout import phase_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
-from primspace.experiments.prediction_table import predict_figure, predict_table
 from primspace.predict.grid import GIVEN_ROWS, LABELS_DIAGNOSTIC, PEERS
+from primspace.results.layout import phase_dir
 
 __all__ = [
     "PREDICT_FRACTIONS",
@@ -52,8 +52,9 @@ PREDICT_FRACTIONS = (0.1, 0.25, 0.5)
 PREDICT_STARTS_GRID = ("zero", "projection", "calibrated", "nearest", "mixture")
 #: Bumped when a grid point's content changes: points of another version are not reused
 #: (3: the mixture may condition its ensemble; its posterior mean alone is a row of its own;
-#: 4: the priors in code space per primitive, and the posterior's top-1 accuracy).
-PREDICT_VERSION = 4
+#: 4: the priors in code space per primitive, and the posterior's top-1 accuracy;
+#: 5: the Gaussian peers tuned on the fitted demonstrations, and each row's model share).
+PREDICT_VERSION = 5
 #: Inference epochs of the gradient starts.
 PREDICT_EPOCHS = 200
 #: Evaluation samples predicted per seed at most: a subset stratified by label, drawn with
@@ -102,6 +103,7 @@ def run_predict_point(
     keywords of the priors' rows; None: their defaults) at every fraction; mean unobserved MSE (and
     success) over the run's evaluation samples (at most ``max_samples``: :func:`predicted_subset`)."""
     from primspace.predict.grid import grid_forecasts, grid_predictors, posterior_accuracy
+    from primspace.predict.registry import model_share
     from primspace.predict.metrics import finite_mean, unobserved_mse
     from primspace.train import TrainConfig, configure_process, load_run
     from primspace.train.observe import Observation
@@ -124,6 +126,7 @@ def run_predict_point(
             accuracy = posterior_accuracy(forecast, test.labels)
             if accuracy is not None and name not in GIVEN_ROWS:
                 entry["accuracy"] = accuracy
+            entry["model_share"] = model_share(rows[name].name, forecast.details)
             if "mixture" in forecast.details:
                 entry["noise"] = forecast.details["mixture"]["noise"]
                 entry["condition"] = forecast.details["mixture"]["condition"]
@@ -212,8 +215,8 @@ def run_predict(
 
 def judgeable(data: MotionDataset) -> bool:
     """Whether the simulator's judge can replay ``data`` (simulated data with its scene)."""
-    from primspace.utils.errors import DataError
     from primspace.sim.success import check_judgeable
+    from primspace.utils.errors import DataError
 
     try:
         check_judgeable(data)

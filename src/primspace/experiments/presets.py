@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 
-from primspace.utils.errors import UserError, config_from_dict
 from primspace.model.config import ModelConfig
 from primspace.train import TrainConfig
+from primspace.utils.errors import UserError, config_from_dict
 
 __all__ = [
     "ExperimentPreset",
@@ -177,7 +177,7 @@ class ExperimentPreset:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()} | {"extra": dict(self.extra)}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "ExperimentPreset":
+    def from_dict(cls, d: dict) -> ExperimentPreset:
         """Read :meth:`to_dict`'s form, or the flat form of older experiment directories.
 
         The old form repeated the decoder's and the optimiser's fields at the top
@@ -202,7 +202,7 @@ class ExperimentPreset:
             cls, d | {"model": ModelConfig.from_dict(model), "train": TrainConfig.from_dict(train)}, "experiment preset"
         )
 
-    def with_overrides(self, **changes) -> "ExperimentPreset":
+    def with_overrides(self, **changes) -> ExperimentPreset:
         """A copy with some fields changed (``None`` values are ignored), checked.
 
         ``vision_frames``, ``loss_reduction``, ``device``, ``threads``, ``optimizer``, ``lr``,

@@ -12,9 +12,9 @@ block's position) made quantitative. Written to ``results/probe.json``; data wit
 
 from __future__ import annotations
 
-from primspace.results.layout import PROBE_RESULTS
 from primspace.experiments.runs import initial_codes, load_codes
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import PROBE_RESULTS
 
 __all__ = ["run_probe"]
 

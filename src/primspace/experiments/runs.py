@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.experiments.presets import ExperimentPreset
-from primspace.results.layout import FIT_INIT_OF, RESULT_FILE, fit_init, fit_point_dir, phase_dir
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import FIT_INIT_OF, RESULT_FILE, fit_init, fit_point_dir, phase_dir
+from primspace.utils.errors import UserError
 
 __all__ = [
     "fit_lock",

@@ -24,9 +24,9 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
 from primspace.experiments.runs import focus_runs
-from primspace.results.layout import intra_run_dir
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import intra_run_dir
 from primspace.utils.stats import wilson_interval
 
 __all__ = [

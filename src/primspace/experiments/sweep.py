@@ -14,9 +14,10 @@ each run writes its own directory there, atomically.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from primspace.results.layout import ERROR_FILE, RESULT_FILE, run_dir_of
 from primspace.utils.files import atomic_write_json, atomic_write_text

@@ -34,11 +34,11 @@ from itertools import product
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.experiments.intra import run_intra, run_intra_point, split_indices
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
+from primspace.utils.errors import UserError
 
 __all__ = [
     "TUNED_INITS",

@@ -26,18 +26,19 @@ import datetime as _dt
 import json
 import shlex
 import time
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
 from primspace import __version__
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.experiments.presets import LASA_CHAIN_SEQUENCES, LASA_CHAINS, LASA_DATA, ExperimentPreset
+from primspace.experiments.sweep import GridPoint, GridResult, run_grid
 from primspace.results.layout import DATA_FILE, META_FILE, arrays_file, figure_file, results_file
 from primspace.results.readers import read_meta, read_results
-from primspace.experiments.sweep import GridPoint, GridResult, run_grid
+from primspace.utils.errors import UserError
 from primspace.utils.files import atomic_path, atomic_write_json, check_outside_inputs, check_writable_directory
 
 __all__ = ["ExperimentDir", "results_file", "read_results", "read_meta"]

@@ -114,7 +114,7 @@ class CodeCalibration:
         self.random_state = random_state
 
     # ---------------------------------------------------------------------------- fit
-    def fit(self, initial, fitted) -> "CodeCalibration":
+    def fit(self, initial, fitted) -> CodeCalibration:
         """Fit ``B``, ``c`` and ``α`` on the training part's codes.
 
         Parameters
@@ -209,7 +209,7 @@ class CodeCalibration:
         }
 
     @classmethod
-    def from_state_dict(cls, state: dict) -> "CodeCalibration":
+    def from_state_dict(cls, state: dict) -> CodeCalibration:
         try:
             cal = cls(int(state["latent_dim"]), prior=state.get("prior", "zero"))  # early 0.5 maps: towards zero
             cal.coef_ = np.asarray(state["coef"], dtype=np.float64)
@@ -228,7 +228,7 @@ class CodeCalibration:
             )
         return cal
 
-    def same_map(self, other: "CodeCalibration | None") -> bool:
+    def same_map(self, other: CodeCalibration | None) -> bool:
         """Whether ``other`` is this very map (same prior, ``B``, ``c``)."""
         return (
             other is not None

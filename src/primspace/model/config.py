@@ -85,7 +85,7 @@ class ModelConfig:
         """The values of one sample's codes, ``K * q`` (a row of the code table)."""
         return self.n_codes * self.latent_dim
 
-    def validate(self) -> "ModelConfig":
+    def validate(self) -> ModelConfig:
         """Check every field; raise :class:`UserError` naming the field."""
         if not isinstance(self.latent_dim, int) or self.latent_dim < 1:
             raise UserError(f"latent size (latent_dim, --latent-dim) must be at least 1, got {self.latent_dim}")
@@ -119,16 +119,16 @@ class ModelConfig:
         return out
 
     @classmethod
-    def from_dict(cls, d: dict) -> "ModelConfig":
+    def from_dict(cls, d: dict) -> ModelConfig:
         return config_from_dict(cls, d, "model config")
 
     @classmethod
-    def for_dataset(cls, dataset, *, images: bool = True, **overrides) -> "ModelConfig":
+    def for_dataset(cls, dataset, *, images: bool = True, **overrides) -> ModelConfig:
         """A config sized for ``dataset`` (J, T, and its image size unless ``images=False``)."""
         cfg = cls(**overrides)
         return cfg.fitted_to(dataset, images=images)
 
-    def fitted_to(self, dataset, *, images: bool | None = None) -> "ModelConfig":
+    def fitted_to(self, dataset, *, images: bool | None = None) -> ModelConfig:
         """A copy with ``n_joints``, ``length`` (and ``image_size``) taken from ``dataset``.
 
         ``images=None`` keeps this config's choice (image head or not); ``True`` / ``False``

@@ -141,7 +141,7 @@ class LatentInitializer:
         }
 
     # --------------------------------------------------------------------------- fit
-    def fit(self, scaled_motor) -> "LatentInitializer":
+    def fit(self, scaled_motor) -> LatentInitializer:
         """Draw ``P`` (projection) or find the principal directions (pca).
 
         Parameters
@@ -242,7 +242,7 @@ class LatentInitializer:
         }
 
     @classmethod
-    def from_state_dict(cls, state: dict) -> "LatentInitializer":
+    def from_state_dict(cls, state: dict) -> LatentInitializer:
         try:
             window = state.get("window")  # runs saved before code windows have none
             init = cls(
@@ -389,7 +389,7 @@ class LatentTable:
         }
 
     @classmethod
-    def from_state_dict(cls, state: dict, device: torch.device | str = "cpu") -> "LatentTable":
+    def from_state_dict(cls, state: dict, device: torch.device | str = "cpu") -> LatentTable:
         optimizer = state.get("optimizer", "adam")  # tables saved before primspace 0.9: Adam
         table = cls(state["codes"].to(device), state["lr"], tuple(state["betas"]), state["eps"], optimizer)
         table.exp_avg = state["exp_avg"].to(device, torch.float32).clone()

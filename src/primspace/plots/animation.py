@@ -21,8 +21,8 @@ redraws only the panels' images and the cursor (blitting).
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np

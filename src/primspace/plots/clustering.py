@@ -3,7 +3,7 @@ clustering figures), τ sweeps, and accuracy against the R² target that picks �
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np

@@ -6,7 +6,7 @@ The paper has no such figure: it reconstructs whole demonstrations only.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np

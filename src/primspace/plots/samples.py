@@ -7,7 +7,7 @@ the generated motion is decoded by the caller (:func:`primspace.train.reconstruc
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np

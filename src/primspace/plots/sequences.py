@@ -3,7 +3,7 @@ found primitive boundaries and labels (docs/sequences.md)."""
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np

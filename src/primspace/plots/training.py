@@ -3,7 +3,7 @@ figures) and the first principal components of the codes (its latent-encoding fi
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np

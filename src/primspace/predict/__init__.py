@@ -23,8 +23,8 @@ from primspace.predict.api import (
     DEFAULT_PREDICTOR,
     MIXTURE,
     PREDICT_STARTS,
-    PredictRequest,
     Prediction,
+    PredictRequest,
     fit_predictor,
     make_predictor,
     predict,
@@ -32,15 +32,15 @@ from primspace.predict.api import (
 )
 from primspace.predict.base import Forecast, MotionPredictor, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CodeMixture, continuity_correction
+from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS, GradientPredictor
 from primspace.predict.grid import grid_predictions
 from primspace.predict.metrics import finite_mean, frame_errors, observed_prefix, unobserved_mse
 from primspace.predict.mixture import MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
-from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
-from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.prior import PRIOR, PriorPredictor
+from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.registry import REGISTRY, PredictorSpec
 from primspace.predict.stream import OnlineResult
 

@@ -33,7 +33,6 @@ import numpy as np
 
 from primspace.data import MotionDataset
 from primspace.data.steps import valid_steps
-from primspace.utils.errors import UserError
 from primspace.predict.base import Predictor
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS
 from primspace.predict.metrics import frame_errors, unobserved_mse
@@ -53,6 +52,7 @@ from primspace.train.api import as_run, reconstruct
 from primspace.train.checks import select
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
+from primspace.utils.errors import UserError
 
 __all__ = [
     "Prediction",

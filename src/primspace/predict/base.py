@@ -47,10 +47,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from primspace.utils.errors import UserError
 from primspace.predict.metrics import check_lengths, check_motor, check_observed, valid_mask
 from primspace.predict.stream import OnlineResult, follow, online_steps
 from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
 
 __all__ = [
     "Predictor",
@@ -96,7 +96,7 @@ class Predictor(BaseEstimator, metaclass=ABCMeta):
     epochs_run = 0
 
     @abstractmethod
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "Predictor":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> Predictor:
         """Fit once on the fitted demonstrations; returns self."""
 
     @abstractmethod

@@ -43,17 +43,17 @@ import numpy as np
 import torch
 from torch import nn
 
-from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, valid_mask
-from primspace.predict.stream import Stream
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import map_refine, prior_terms
-from primspace.utils.progress import progress_bar, stage
+from primspace.predict.stream import Stream
 from primspace.train.api import reconstruct
 from primspace.train.config import thread_limit
 from primspace.train.observe import NOTHING, Observation
+from primspace.utils.errors import UserError
+from primspace.utils.progress import progress_bar, stage
 
 __all__ = ["EncoderPredictor", "EncoderStream", "ENCODER", "MaskedEncoder"]
 
@@ -193,7 +193,7 @@ class EncoderPredictor(Predictor):
         return bool(self.given)
 
     # -- fit ------------------------------------------------------------------------------
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "EncoderPredictor":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> EncoderPredictor:
         """Fit the prior (unless fitted), draw and decode its training set, train the encoder."""
         run = self.resolve_run()
         self._check_params()
@@ -411,7 +411,7 @@ class EncoderPredictor(Predictor):
         }
 
     # -- online -----------------------------------------------------------------------------
-    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> "EncoderStream":
+    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> EncoderStream:
         """One forward pass of the prefix seen so far, one decode and the correction per arriving step;
         equal after step ``t`` to :meth:`forecast` of that prefix. The refinement's ``r`` (for a prefix
         of ``keep`` steps) is chosen before the first step arrives."""

@@ -17,7 +17,6 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.model.latent import INFER_STARTS
 from primspace.predict.base import Forecast, Predictor, motions_as_dataset, observation_rule
 from primspace.predict.candidates import continuity_correction
@@ -27,6 +26,7 @@ from primspace.predict.stream import OnlineResult
 from primspace.train.api import infer, reconstruct
 from primspace.train.observe import Observation
 from primspace.train.starts import STARTS_FROM_FITTED, FittedDemonstrations, fitted_start
+from primspace.utils.errors import UserError
 
 __all__ = ["GradientPredictor", "DEFAULT_PREDICT_EPOCHS"]
 
@@ -91,7 +91,7 @@ class GradientPredictor(Predictor):
         """Whether :meth:`fit` reads the fitted demonstrations (the starts that read them)."""
         return (self.start or run.init) in STARTS_FROM_FITTED
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "GradientPredictor":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> GradientPredictor:
         """Keep the fitted demonstrations (scaled, in the run's order) for the starts that read them
         (``motor`` may be None for the others)."""
         self.resolve_run()

@@ -3,10 +3,14 @@
 :func:`grid_predictors` builds every row as a :class:`~primspace.predict.base.Predictor`
 (primspace's gradient starts, the mixture's variants sharing one set of decoded candidates,
 the mixture given the labels as a diagnostic, and the peers: ProMP given the labels and one
-for all, the nearest neighbour, the mean motion given the labels) and fits each once on the
-run's fitted demonstrations; :func:`grid_forecasts` runs them all on the same samples
-under one observation rule. The ProMPs' observation noise is chosen on the answer
-(:func:`~primspace.predict.peers.best_noise`: flattering them), as docs/predict.md says.
+for all, the nearest neighbour, the mean motion given the labels, and the Gaussian peers of
+:mod:`~primspace.predict.gaussian_peers`: the ProMP with its basis count, ridge and noise tuned
+and the Gaussian over the raw trajectories, each given the labels and one for all) and fits each
+once on the run's fitted demonstrations; :func:`grid_forecasts` runs them all on the same samples
+under one observation rule. The first two ProMP rows' observation noise is chosen on the answer
+(:func:`~primspace.predict.peers.best_noise`: flattering them), as docs/predict.md says; the
+Gaussian peers' settings are chosen by K-fold prediction of the fitted demonstrations, as the
+prior's are.
 """
 
 from __future__ import annotations
@@ -14,20 +18,21 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.predict.api import predict
-from primspace.predict.registry import fit_predictor, make_predictor, run_predictor
 from primspace.predict.base import Forecast, Predictor
+from primspace.predict.encoder import EncoderPredictor
+from primspace.predict.gaussian_peers import RawGaussianPeer, TunedProMPPeer
 from primspace.predict.metrics import finite_mean, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor, code_mixture
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
-from primspace.predict.encoder import EncoderPredictor
 from primspace.predict.posterior import top1_accuracy
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor
+from primspace.predict.registry import fit_predictor, make_predictor, run_predictor
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import fitted_samples
+from primspace.utils.errors import UserError
 
 __all__ = [
     "grid_predictors",
@@ -41,11 +46,24 @@ __all__ = [
     "PRIOR_ROWS",
     "PRIOR_SETTINGS",
     "GIVEN_ROWS",
+    "TUNED_PEERS",
+    "PEER_SETTINGS",
     "posterior_accuracy",
 ]
 
+#: The Gaussian peers' rows, their settings chosen on the fitted demonstrations: (row, class, given the labels).
+TUNED_PEERS = (
+    ("promp tuned (labels)", TunedProMPPeer, True),
+    ("promp tuned (one for all)", TunedProMPPeer, False),
+    ("raw gaussian (labels)", RawGaussianPeer, True),
+    ("raw gaussian", RawGaussianPeer, False),
+)
 #: The peers' rows (labels: the peer is given the test sample's primitive).
-PEERS = ("promp (labels)", "promp (one for all)", "nearest neighbour", "mean motion (labels)")
+PEERS = ("promp (labels)", "promp (one for all)", "nearest neighbour", "mean motion (labels)") + tuple(
+    row for row, _, _ in TUNED_PEERS
+)
+#: The Gaussian peers' kinds whose constructors ``peer_settings`` may set (their registry names).
+PEER_SETTINGS = {TunedProMPPeer.name: TunedProMPPeer, RawGaussianPeer.name: RawGaussianPeer}
 #: The rows whose observation noise is chosen on the answer (:func:`~primspace.predict.peers.best_noise`).
 NOISE_ON_THE_ANSWER = ("promp (labels)", "promp (one for all)")
 #: The mixture's posterior mean alone (no ensemble conditioning).
@@ -80,6 +98,8 @@ GIVEN_ROWS = (
     "promp (labels)",
     "mean motion (labels)",
     LABELS_DIAGNOSTIC,
+    "promp tuned (labels)",
+    "raw gaussian (labels)",
 )
 
 
@@ -122,14 +142,36 @@ def posterior_accuracy(forecast: Forecast, labels) -> float | None:
     return top1_accuracy(forecast.details["posterior"], forecast.details["prior"]["primitives"]["labels"], labels)
 
 
+def _tuned_peers(run: TrainedRun, has_labels: bool, peer_settings: dict | None) -> dict[str, Predictor]:
+    """The Gaussian peers' rows (:data:`TUNED_PEERS`; those given the labels only when the fitted data has
+    them), their folds seeded by the run's seed; ``peer_settings``: keywords by kind (:data:`PEER_SETTINGS`)."""
+    settings = dict(peer_settings or {})
+    unknown = sorted(set(settings) - set(PEER_SETTINGS))
+    if unknown:
+        raise UserError(f"peer_settings takes {', '.join(PEER_SETTINGS)}, got {', '.join(map(repr, unknown))}")
+    seed = int(run.train_config.seed)
+    return {
+        row: cls(per_label=given, random_state=seed, **dict(settings.get(cls.name) or {}))
+        for row, cls, given in TUNED_PEERS
+        if has_labels or not given
+    }
+
+
 def grid_predictors(
-    run: TrainedRun, fitted_data: MotionDataset, starts, epochs: int, *, prior_settings: dict | None = None
+    run: TrainedRun,
+    fitted_data: MotionDataset,
+    starts,
+    epochs: int,
+    *,
+    prior_settings: dict | None = None,
+    peer_settings: dict | None = None,
 ) -> dict[str, Predictor]:
     """Every row, fitted once on ``run``'s fitted demonstrations (read from ``fitted_data``, the
     data set it was fitted on): ``starts`` (gradient starts and ``mixture``: all its rows), then the
     peers, then (with labels) the priors' rows; ``prior_settings``: keywords of the priors' rows'
     constructors by kind, ``{"prior": {...}, "map": {...}, "encoder": {...}}`` (:data:`PRIOR_SETTINGS`;
-    default: the predictors' own, as the experiment runs them; tests pass smaller ones)."""
+    default: the predictors' own, as the experiment runs them; tests pass smaller ones); ``peer_settings``
+    the same for the Gaussian peers (:data:`PEER_SETTINGS`)."""
     _check_prior_settings(prior_settings)
     fitted = fitted_samples(run, fitted_data)
     rows: dict[str, Predictor] = {}
@@ -150,6 +192,7 @@ def grid_predictors(
             "promp (one for all)": ProMPPeer(per_label=False),
             "nearest neighbour": NearestPeer(),
             "mean motion (labels)": MeanMotionPeer(),
+            **_tuned_peers(run, fitted.labels is not None, peer_settings),
         }
     )
     for predictor in rows.values():
@@ -186,11 +229,12 @@ def grid_predictions(
     epochs: int,
     online_iterations: int | None = None,
     prior_settings: dict | None = None,
+    peer_settings: dict | None = None,
 ) -> dict:
     """``{row: {fraction: mean unobserved MSE}}`` of every row (and, with ``online_iterations``,
-    the online gradient start ``projection`` and the online mixture) on ``test``; ``prior_settings``
-    as :func:`grid_predictors`'s."""
-    rows = grid_predictors(run, fitted_data, starts, epochs, prior_settings=prior_settings)
+    the online gradient start ``projection`` and the online mixture) on ``test``; ``prior_settings`` and
+    ``peer_settings`` as :func:`grid_predictors`'s."""
+    rows = grid_predictors(run, fitted_data, starts, epochs, prior_settings=prior_settings, peer_settings=peer_settings)
     scaled, lengths = run.scaler.transform(test.motor), test.valid_lengths
     table: dict = {}
     for f in fractions:

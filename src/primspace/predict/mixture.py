@@ -28,15 +28,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask
 from primspace.predict.stream import Stream
-from primspace.utils.progress import stage
 from primspace.train.api import reconstruct
-from primspace.train.run import require_run
 from primspace.train.observe import NOTHING, Observation
+from primspace.train.run import require_run
+from primspace.utils.errors import UserError
+from primspace.utils.progress import stage
 
 __all__ = ["MixturePredictor", "MixtureStream", "MIXTURE"]
 
@@ -92,7 +92,7 @@ class MixturePredictor(Predictor):
         """Given the primitive: the samples' labels are read."""
         return bool(self.per_label)
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "MixturePredictor":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> MixturePredictor:
         """Decode the candidates (unless given) and keep the fitted demonstrations ``motor``
         (scaled, the run's fitted samples in its order) for the leave-one-out choices."""
         self.resolve_run()
@@ -172,7 +172,7 @@ class MixturePredictor(Predictor):
             ]
         return self.noises_[t]
 
-    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> "MixtureStream":
+    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> MixtureStream:
         """The posterior followed a step at a time (module docstring): equal, after step ``t``, to
         ``forecast(motor, Observation.build(t))`` of a predictor with ``condition=False`` (tested).
         ``σ²`` for every prefix length is chosen before the first step arrives; the result's

@@ -47,7 +47,6 @@ import numpy as np
 import torch
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.model.latent import INFER_STARTS, LatentTable
 from primspace.predict.metrics import unobserved_mse
 from primspace.predict.stream import OnlineResult, Stream, follow, mean_over_samples, online_steps
@@ -58,6 +57,7 @@ from primspace.train.loss import DataTensors, autocast_for, code_step
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun, require_run
 from primspace.train.starts import inference_start
+from primspace.utils.errors import UserError
 
 __all__ = ["OnlineInference", "OnlineResult", "infer_online", "offline_errors", "online_steps"]
 

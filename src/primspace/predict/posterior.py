@@ -14,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.predict.primitives import top1_accuracy
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
 
 __all__ = ["prior_details", "posterior_by_fraction", "top1_accuracy", "POSTERIOR_FRACTIONS"]
 

@@ -12,13 +12,14 @@ predictors is asked of the predictor itself (:class:`~primspace.predict.base.Pre
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from primspace.data import MotionDataset
 from primspace.model.latent import INFER_STARTS
 from primspace.predict.base import Forecast, Predictor
 from primspace.predict.encoder import ENCODER, EncoderPredictor
+from primspace.predict.gaussian_peers import RawGaussianPeer, TunedProMPPeer
 from primspace.predict.gradient import GradientPredictor
 from primspace.predict.mixture import MIXTURE, MixturePredictor
 from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer
@@ -42,6 +43,7 @@ __all__ = [
     "fit_predictor",
     "run_predictor",
     "predictor_for",
+    "model_share",
 ]
 
 #: The registry's name of gradient inference from a start (the starts name it in a request).
@@ -141,6 +143,8 @@ REGISTRY: dict[str, PredictorSpec] = {
         PredictorSpec(ProMPPeer.name, ProMPPeer, False, False, False, _peer(ProMPPeer)),
         PredictorSpec(NearestPeer.name, NearestPeer, False, False, False, _peer(NearestPeer)),
         PredictorSpec(MeanMotionPeer.name, MeanMotionPeer, False, False, False, _peer(MeanMotionPeer)),
+        PredictorSpec(RawGaussianPeer.name, RawGaussianPeer, False, False, False, _peer(RawGaussianPeer)),
+        PredictorSpec(TunedProMPPeer.name, TunedProMPPeer, False, False, False, _peer(TunedProMPPeer)),
     )
 }
 
@@ -216,3 +220,14 @@ def run_predictor(predictor: Predictor, run: TrainedRun, data: MotionDataset, ob
     extra = {"data": data} if predictor.reads_dataset else {}
     frames = data.images if data.has_images and not extra else None
     return predictor.forecast(scaled, observation, data.labels, data.valid_lengths, frames, **extra)
+
+
+def model_share(name: str, details: dict) -> float:
+    """The share of a prediction that comes through the run's decoder, for ``result.json`` and the tables:
+    ``details["model_share"]`` where the predictor named ``name`` reports one (the prior: the weight of its
+    decoded draws, ``1 - blend``); else 1.0 for a predictor built on a run (it decodes codes) and 0.0 for a
+    peer (it never reads the run)."""
+    share = details.get("model_share")
+    if share is not None:
+        return float(share)
+    return 1.0 if spec_for(name).needs_run else 0.0

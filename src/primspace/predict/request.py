@@ -93,7 +93,7 @@ class PredictRequest:
     overrides: dict = field(default_factory=dict)
 
     @classmethod
-    def of(cls, **settings) -> "PredictRequest":
+    def of(cls, **settings) -> PredictRequest:
         """A request of keyword ``settings``: the fields by name, the rest train-config overrides."""
         names = {f.name for f in dataclasses.fields(cls)} - {"overrides"}
         overrides = {k: v for k, v in settings.items() if k not in names}
@@ -101,6 +101,6 @@ class PredictRequest:
             raise UserError("pass train-config overrides as keywords, not as overrides=")
         return cls(**{k: v for k, v in settings.items() if k in names}, overrides=overrides)
 
-    def replace(self, **changes) -> "PredictRequest":
+    def replace(self, **changes) -> PredictRequest:
         """This request with ``changes``."""
         return dataclasses.replace(self, **changes)

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from primspace.report.page import HtmlReport
 from primspace.results.act import act_latency_text, act_tables
 from primspace.results.layout import figures_dir
 from primspace.results.readers import read_results
-from primspace.report.page import HtmlReport
 
 __all__ = ["act", "ACT_SECTION", "act_animations"]
 

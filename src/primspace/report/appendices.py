@@ -11,9 +11,9 @@ import json
 import platform
 from pathlib import Path
 
-from primspace.results.readers import read_meta, read_results
-from primspace.results.layout import results_file
 from primspace.report.page import HtmlReport
+from primspace.results.layout import results_file
+from primspace.results.readers import read_meta, read_results
 
 __all__ = ["appendix_a", "environment"]
 

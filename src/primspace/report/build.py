@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import datetime as _dt
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
-from primspace.utils.errors import UserError, first_line
-from primspace.results.layout import META_FILE, REPORT_FILE, results_file
-from primspace.results.readers import read_meta
 from primspace.report import sections
 from primspace.report.page import HtmlReport
+from primspace.results.layout import META_FILE, REPORT_FILE, results_file
+from primspace.results.readers import read_meta
+from primspace.utils.errors import UserError, first_line
 
 __all__ = ["build_report", "REPORT_FILE", "SECTIONS"]
 

@@ -34,13 +34,8 @@ import re
 import sys
 from pathlib import Path
 
-
-from primspace.results.act import act_latency_text, act_tables
-from primspace.results.claims import check_claims
-from primspace.results.tables import projection_lead
-from primspace.results.summary import read_summary
 from primspace.report.commands import portable_command
-from primspace.report.comparisons import COMPARISONS, render_comparison
+from primspace.report.comparisons import COMPARISONS, merged, render_comparison, side_names
 from primspace.report.prose_numbers import render_composite_glance, render_differ
 from primspace.report.reproduce_blocks import (
     ABLATION,
@@ -50,8 +45,6 @@ from primspace.report.reproduce_blocks import (
     load_balances,
     paper_setting,
 )
-from primspace.report.comparisons import merged, side_names
-from primspace.utils.stats import spread_convention
 from primspace.report.summary_tables import (
     final_losses,
     g,
@@ -63,6 +56,11 @@ from primspace.report.summary_tables import (
     render_summary,
     table,
 )
+from primspace.results.act import act_latency_text, act_tables
+from primspace.results.claims import check_claims
+from primspace.results.summary import read_summary
+from primspace.results.tables import projection_lead
+from primspace.utils.stats import spread_convention
 
 __all__ = [
     "merged",

@@ -11,8 +11,9 @@ import base64
 import html
 import os
 import stat
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from primspace.utils.files import atomic_write_text
 

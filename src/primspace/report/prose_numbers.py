@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.results.layout import LEARNED_CODES
 from primspace.report.summary_tables import mean_spread, table
+from primspace.results.layout import LEARNED_CODES
 
 __all__ = ["render_differ", "render_composite_glance", "TARGET_27", "DIFFER_SUMMARY"]
 

@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import spearmanr
 
-from primspace.results.layout import LEARNED_CODES
 from primspace.report.comparisons import merged, render_comparison, side_names
 from primspace.report.summary_tables import g, mean_spread, table
+from primspace.results.layout import LEARNED_CODES
 from primspace.utils.stats import sample_std, wilson_interval
 
 __all__ = [

@@ -13,23 +13,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from primspace.report.act_section import act
+from primspace.report.appendices import appendix_a, environment
+from primspace.report.page import HtmlReport
+from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
 from primspace.results.calibration import calibration_table, calibration_verdict
 from primspace.results.claims import check_claims, claims_table
 from primspace.results.composite import bounds_table, composite_table, primitives_table, recall_table
-from primspace.results.tables import (
-    predict_error_table,
-    failed_criteria_table,
-    final_loss_table,
-    inter_table,
-    latent_table,
-    probe_table,
-    qualitative_check,
-    spread_table,
-    outcome_spread_table,
-    scene_table,
-    success_table,
-    tuning_table,
-)
 from primspace.results.layout import (
     ANIMATION_RESULTS,
     IMAGE_STRIPS,
@@ -41,10 +31,20 @@ from primspace.results.layout import (
     results_file,
 )
 from primspace.results.readers import read_meta, read_results
-from primspace.report.act_section import act
-from primspace.report.appendices import appendix_a, environment
-from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
-from primspace.report.page import HtmlReport
+from primspace.results.tables import (
+    failed_criteria_table,
+    final_loss_table,
+    inter_table,
+    latent_table,
+    outcome_spread_table,
+    predict_error_table,
+    probe_table,
+    qualitative_check,
+    scene_table,
+    spread_table,
+    success_table,
+    tuning_table,
+)
 
 __all__ = [
     "summary",

@@ -14,13 +14,13 @@ import re
 
 import numpy as np
 
-from primspace.results.claims import check_claims, codes_of_summary, verdict_text
-from primspace.results.measures import eighth_loss
-from primspace.results.composite import PEER_RULES, bounds_table, composite_table, primitives_table, recall_table
-from primspace.results.layout import LEARNED_CODES
-from primspace.results.tables import predict_error_table, scene_table, tuning_table
 from primspace.report.commands import portable_command
 from primspace.report.predict_tables import TASKS_TEXT, VERDICT_RULE, splits_tasks, task_tables
+from primspace.results.claims import check_claims, codes_of_summary, verdict_text
+from primspace.results.composite import PEER_RULES, bounds_table, composite_table, primitives_table, recall_table
+from primspace.results.layout import LEARNED_CODES
+from primspace.results.measures import eighth_loss
+from primspace.results.tables import predict_error_table, scene_table, tuning_table
 from primspace.utils.stats import sample_std, t_interval, wilson_interval
 
 __all__ = [

@@ -15,7 +15,7 @@ the rule's threshold in words); the measures its rules read are those of
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -21,13 +21,13 @@ Since version 4 every rule here also says the ``direction`` of a verdict other t
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from primspace.results.claim_verdicts import AGAINST, IN_FAVOUR, PARTLY, Outcome
 from primspace.results.layout import LEARNED_CODES
-from primspace.results.measures import chance_level, has_inits, eighth_loss, losses_by_q, paired_lower
+from primspace.results.measures import chance_level, eighth_loss, has_inits, losses_by_q, paired_lower
 from primspace.utils.stats import wilson_interval
 
 __all__ = [

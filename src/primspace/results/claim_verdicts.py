@@ -16,8 +16,9 @@ results only; imports no experiment.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 __all__ = [
     "Claim",

@@ -43,8 +43,8 @@ the table docs and the report print. This module imports no experiment.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Callable, Mapping
 
 from primspace.results.claim_rules_central import (
     SUBSTANTIAL,
@@ -69,7 +69,6 @@ from primspace.results.claim_rules_v2 import (
     success_projection_higher,
     zero_within,
 )
-from primspace.results.measures import eighth_loss
 from primspace.results.claim_rules_v4 import (
     CODE_DRIFT,
     LITTLE_CHANGE,
@@ -79,6 +78,7 @@ from primspace.results.claim_rules_v4 import (
     projection_good_and_still,
 )
 from primspace.results.claim_verdicts import PARTLY, UNCHECKABLE, Claim, Earlier, Outcome, rule_verdict
+from primspace.results.measures import eighth_loss
 from primspace.results.readers import read_results
 
 __all__ = [

@@ -22,9 +22,9 @@ import json
 import platform
 from pathlib import Path
 
-from primspace.utils.errors import UserError
 from primspace.results.act import ALL
 from primspace.results.readers import read_meta, read_results
+from primspace.utils.errors import UserError
 
 __all__ = [
     "SUMMARY_VERSION",

@@ -36,10 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.utils.errors import UserError
+from primspace.segmentation.peers import LABEL_STEPS, resample_segment
 from primspace.segmentation.result import label_segments
 from primspace.segmentation.scores import step_labelling_accuracy
-from primspace.segmentation.peers import LABEL_STEPS, resample_segment
+from primspace.utils.errors import UserError
 
 __all__ = [
     "FOLDS",

@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.utils.errors import UserError
 from primspace.segmentation.result import SegmentationResult, label_segments
+from primspace.utils.errors import UserError
 
 __all__ = ["in_model_frame", "infer_segment_codes", "relabel_by_inference"]
 

@@ -48,9 +48,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.segmentation.result import label_segments
 from primspace.segmentation.windows import auto_penalty, noise_variances
+from primspace.utils.errors import UserError
 
 __all__ = [
     "ChangePointPeer",

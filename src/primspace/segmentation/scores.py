@@ -9,8 +9,8 @@ from numbers import Real
 import numpy as np
 
 from primspace.cluster.metrics import clustering_accuracy
-from primspace.utils.errors import UserError
 from primspace.segmentation.result import SegmentationResult
+from primspace.utils.errors import UserError
 
 __all__ = ["boundaries_from_segments", "boundary_f1", "step_labelling_accuracy", "segmentation_scores", "valid_lengths"]
 

@@ -50,7 +50,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.utils.errors import UserError
 from primspace.segmentation.result import SegmentationResult
 from primspace.segmentation.synthesis import (
     DEFAULT_GRID,
@@ -63,6 +62,7 @@ from primspace.segmentation.synthesis import (
     model_inputs,
     with_codes,
 )
+from primspace.utils.errors import UserError
 
 __all__ = [
     "HORIZON",
@@ -93,7 +93,7 @@ class Hypotheses:
     duration: np.ndarray
     template: np.ndarray
 
-    def without(self, template: int) -> "Hypotheses":
+    def without(self, template: int) -> Hypotheses:
         keep = self.template != template
         return Hypotheses(self.motion[keep], self.duration[keep], self.template[keep])
 

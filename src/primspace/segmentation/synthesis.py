@@ -46,9 +46,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from primspace.data import MotionDataset, resample
-from primspace.utils.errors import DataError, UserError
 from primspace.segmentation.inferred import relabel_by_inference
 from primspace.segmentation.result import SegmentationResult, label_segments
+from primspace.utils.errors import DataError, UserError
 
 __all__ = [
     "FADE",
@@ -92,7 +92,7 @@ class SynthesisSettings:
     @classmethod
     def for_model(
         cls, model_steps: int, min_steps=None, max_steps=None, grid: int = DEFAULT_GRID, fade: float = FADE
-    ) -> "SynthesisSettings":
+    ) -> SynthesisSettings:
         """Defaults from the model's ``T1``: 0.4 T1 to 0.85 T1 steps per primitive."""
         lo = int(round(0.4 * model_steps)) if min_steps is None else int(min_steps)
         hi = int(round(0.85 * model_steps)) if max_steps is None else int(max_steps)
@@ -102,7 +102,7 @@ class SynthesisSettings:
             raise UserError(f"grid must be >= 1 step and fade in (0, 1] or inf (translate), got {grid} and {fade}")
         return cls(lo, hi, int(grid), float(fade))
 
-    def capped(self, length: int) -> "SynthesisSettings":
+    def capped(self, length: int) -> SynthesisSettings:
         """These settings for data of ``length`` (T) steps: no segment outlasts the data, so a larger
         ``max_steps`` only made candidates to skip (a hang at 1e20) and surprise's memory grow."""
         return replace(self, max_steps=max(self.min_steps, min(self.max_steps, int(length))))

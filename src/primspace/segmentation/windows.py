@@ -42,9 +42,9 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.segmentation.result import SEGMENT_R2_TARGET, SegmentationResult, label_segments
 from primspace.segmentation.scores import valid_lengths
+from primspace.utils.errors import UserError
 
 __all__ = [
     "AUTO_PENALTY_FACTOR",

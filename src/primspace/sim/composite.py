@@ -24,8 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.utils.seeds import check_seed
-from primspace.utils.errors import DataError
 from primspace.sim.composite_config import (
     ALLOWED,
     COMPOSITE_PRESETS,
@@ -38,6 +36,8 @@ from primspace.sim.config import PARAM_NAMES
 from primspace.sim.primitives import PRIMITIVES, R_DOWN, SCRIPT, KeyPath, finger_geometry, get_primitive
 from primspace.sim.primitives.judging import TOLERANCES, mm
 from primspace.sim.scene import FINGER_MAX, FINGERTIP_RADIUS
+from primspace.utils.errors import DataError
+from primspace.utils.seeds import check_seed
 
 __all__ = [
     "CompositeConfig",
@@ -322,10 +322,10 @@ def generate_composite(
     """
     from primspace.data import DatasetWriter, MotionDataset
     from primspace.data.schema import arrays_of
-    from primspace.utils.files import check_output
-    from primspace.utils.parallel import default_workers, run_jobs
     from primspace.sim.generate import finished_shards
     from primspace.sim.shards import shard_ranges
+    from primspace.utils.files import check_output
+    from primspace.utils.parallel import default_workers, run_jobs
 
     config, seed = resolve_composite(config_or_preset), check_seed(seed)
     if out is not None:

@@ -12,12 +12,12 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import asdict, dataclass, fields
-from functools import lru_cache
+from functools import cache
 
-from primspace.utils.errors import UserError
 from primspace.sim.config import MIN_LENGTH
 from primspace.sim.primitives import PRIMITIVES, primitive_index
 from primspace.sim.scene import TABLE
+from primspace.utils.errors import UserError
 
 __all__ = ["CompositeConfig", "COMPOSITE_PRESETS", "ALLOWED", "MOVES_TO", "resolve_composite", "valid_chains"]
 
@@ -90,7 +90,7 @@ class CompositeConfig:
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
-    def validate(self) -> "CompositeConfig":
+    def validate(self) -> CompositeConfig:
         """Check every field; raise :class:`UserError` naming the field. Returns self."""
         from primspace.sim.render import MAX_IMAGE_SIZE
 
@@ -171,7 +171,7 @@ def resolve_composite(config_or_preset) -> CompositeConfig:
         raise UserError(f"composite settings: a value of the wrong kind ({exc})") from None
 
 
-@lru_cache(maxsize=None)
+@cache
 def valid_chains(primitives: tuple[str, ...], k: int) -> tuple[tuple[str, ...], ...]:
     """Every chain of ``k`` names from ``primitives`` with no immediate repeat that
     :data:`ALLOWED` permits (the block's zone follows :data:`MOVES_TO`), in a fixed order."""

@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.sim.primitives import PRIMITIVES, primitive_index
+from primspace.utils.errors import UserError
 
 __all__ = [
     "GenerationConfig",
@@ -138,7 +138,7 @@ class GenerationConfig:
         return float(np.min(np.diff(values))) if len(values) > 1 else 0.0
 
     # ---------------------------------------------------------------- validation
-    def validate(self) -> "GenerationConfig":
+    def validate(self) -> GenerationConfig:
         """Check every field; raise :class:`UserError` naming the field. Returns self."""
         from primspace.sim.render import MAX_IMAGE_SIZE
         from primspace.sim.scene import TABLE
@@ -189,7 +189,7 @@ class GenerationConfig:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], base: "GenerationConfig | None" = None) -> "GenerationConfig":
+    def from_dict(cls, d: dict[str, Any], base: GenerationConfig | None = None) -> GenerationConfig:
         """A configuration from JSON-like values (over ``base``'s, default: the defaults).
 
         Raises

@@ -19,18 +19,18 @@ reach (x 0.4125..0.6075 m, y -0.1625..0.1625 m), edges 0.035..0.065 m
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.sim.config import PRESETS
 from primspace.sim.primitives import get_primitive
 from primspace.sim.primitives.judging import TOLERANCES, SuccessResult, Tolerances
 from primspace.sim.render import MAX_IMAGE_SIZE, Camera
 from primspace.sim.rollout import BlockPusher, Rollout
 from primspace.sim.scene import JOINT_NAMES, Scene
+from primspace.utils.errors import UserError
 
 __all__ = ["Executor", "Perturbation", "WORKSPACE", "check_block"]
 
@@ -279,7 +279,7 @@ class Executor:
             self._camera.close()
             self._camera = None
 
-    def __enter__(self) -> "Executor":
+    def __enter__(self) -> Executor:
         return self
 
     def __exit__(self, *exc) -> None:

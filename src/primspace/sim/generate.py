@@ -32,14 +32,12 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from primspace.data.schema import arrays_of, empty_arrays
-from primspace.utils.seeds import check_seed
-from primspace.utils.errors import DataError, UserError
 from primspace.sim.config import MIN_LENGTH, PARAM_NAMES, PRESETS, GenerationConfig, resolve_config, sample_params
 from primspace.sim.primitives import R_DOWN, finger_geometry, get_primitive
 from primspace.sim.shards import (
@@ -53,6 +51,8 @@ from primspace.sim.shards import (
     shard_ranges,
     shard_size,
 )
+from primspace.utils.errors import DataError, UserError
+from primspace.utils.seeds import check_seed
 
 # The settings (primspace.sim.config) and the shard layout (primspace.sim.shards) are
 # re-exported: the CLI, the experiments, tests and benchmarks import them from here.

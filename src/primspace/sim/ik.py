@@ -20,11 +20,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from primspace.sim.scene import Scene  # noqa: E402
 
 __all__ = ["IKResult", "solve_pose", "solve_path", "rotation_error"]

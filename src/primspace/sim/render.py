@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import os
 
-import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from primspace.utils.errors import UserError, first_line  # noqa: E402
+import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from primspace.sim.scene import Scene  # noqa: E402
+from primspace.utils.errors import UserError, first_line  # noqa: E402
 
 __all__ = ["Camera", "MAX_IMAGE_SIZE", "replay_frames"]
 
@@ -78,7 +77,7 @@ class Camera:
             self._renderer.close()
             self._renderer = None
 
-    def __enter__(self) -> "Camera":
+    def __enter__(self) -> Camera:
         return self
 
     def __exit__(self, *exc) -> None:

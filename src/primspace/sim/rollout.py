@@ -24,11 +24,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from primspace.sim.scene import Scene  # noqa: E402
 
 __all__ = ["Rollout", "BlockPusher", "replay", "geom_interval", "pusher_front"]

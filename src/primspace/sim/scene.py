@@ -25,11 +25,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
-
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+import primspace.sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from primspace.utils.errors import UserError  # noqa: E402
 
 __all__ = [

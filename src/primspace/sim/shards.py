@@ -17,9 +17,9 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from primspace.utils.errors import DataError, UserError
 from primspace.sim.config import PARAM_NAMES, PRESETS, GenerationConfig
 from primspace.sim.primitives import PRIMITIVES
+from primspace.utils.errors import DataError, UserError
 
 __all__ = [
     "MANIFEST_NAME",

@@ -65,16 +65,16 @@ do not depend on it. At the default distance the verdicts are :func:`evaluate_da
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
-from typing import Iterator, Sequence
 
 import numpy as np
 
-from primspace.utils.errors import DataError, UserError
 from primspace.sim.primitives import PRIMITIVES, Primitive, get_primitive
 from primspace.sim.primitives.judging import TOLERANCES, SuccessResult, Tolerances
 from primspace.sim.rollout import Rollout, replay
 from primspace.sim.scene import JOINT_NAMES, Scene
+from primspace.utils.errors import DataError, UserError
 
 __all__ = [
     "SuccessResult",

@@ -98,6 +98,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs
         resolve_device,
     )
     from primspace.train.run import TrainedRun  # noqa: F401
-    from primspace.train.sessions import as_run, uses_images  # noqa: F401
     from primspace.train.rundata import check_run_data, load_fitted_data  # noqa: F401
     from primspace.train.rundir import load_run, write_run  # noqa: F401
+    from primspace.train.sessions import as_run, uses_images  # noqa: F401

@@ -21,13 +21,12 @@ import numpy as np
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.utils.errors import UserError
-from primspace.model.latent import LatentTable
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
+from primspace.model.latent import LatentTable
+from primspace.train.checks import select
 from primspace.train.config import TrainConfig, resolve_device
 from primspace.train.loop import epoch_values, evaluate_loop, opened_stream
 from primspace.train.loss import DataTensors
-from primspace.train.checks import select
 from primspace.train.run import TrainedRun
 from primspace.train.sessions import (
     FitRequest,
@@ -38,6 +37,7 @@ from primspace.train.sessions import (
     run_session,
     uses_images,
 )
+from primspace.utils.errors import UserError
 
 __all__ = [
     "fit",

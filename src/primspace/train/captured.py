@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import torch
 
-from primspace.utils.errors import UserError
 from primspace.train.loss import batch_loss
+from primspace.utils.errors import UserError
 
 __all__ = [
     "CompiledDecoder",

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from primspace.model.calibration import CodeCalibration
 from primspace.data import JointScaler
-from primspace.utils.errors import UserError
+from primspace.model.calibration import CodeCalibration
 from primspace.model.latent import LatentInitializer
+from primspace.utils.errors import UserError
 
 __all__ = [
     "CHECKPOINT_FORMAT",

@@ -7,10 +7,10 @@ import numpy as np
 
 from primspace.data import JointScaler, MotionDataset
 from primspace.data.indices import check_indices
-from primspace.utils.errors import UserError
-from primspace.model.latent import CALIBRATABLE, CALIBRATED, START_METHODS
 from primspace.model.config import ModelConfig
+from primspace.model.latent import CALIBRATABLE, CALIBRATED, START_METHODS
 from primspace.train.run import TrainedRun
+from primspace.utils.errors import UserError
 
 __all__ = [
     "check_init",

@@ -11,9 +11,8 @@ import contextlib
 import ctypes
 import math
 import sys
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
-from typing import Iterator
-
 
 from primspace.utils.errors import UserError, config_from_dict
 from primspace.utils.seeds import check_seed
@@ -192,7 +191,7 @@ class TrainConfig:
     micro_batches: int = 1
     step: str = "eager"
 
-    def validate(self) -> "TrainConfig":
+    def validate(self) -> TrainConfig:
         """This config, checked: one UserError naming the first field out of its range."""
         if not isinstance(self.epochs, int) or self.epochs < 0:
             raise UserError(f"epochs must be a whole number >= 0, got {self.epochs}")
@@ -252,7 +251,7 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "TrainConfig":
+    def from_dict(cls, d: dict) -> TrainConfig:
         return config_from_dict(cls, d, "train config")
 
 
@@ -264,7 +263,7 @@ def lr_factor(epoch: int, epochs: int, final_fraction: float) -> float:
     return final_fraction + (1.0 - final_fraction) * 0.5 * (1.0 + math.cos(math.pi * progress))
 
 
-def resolve_device(device: str = "auto", amp: bool = False) -> "torch.device":  # noqa: F821
+def resolve_device(device: str = "auto", amp: bool = False) -> torch.device:  # noqa: F821
     """``auto`` -> CUDA when available, else CPU. Raises :class:`UserError` for a device
     that is not there, or ``amp`` off CUDA."""
     import torch

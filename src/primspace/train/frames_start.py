@@ -37,11 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.model.calibration import CodeCalibration
 from primspace.data import MotionDataset
 from primspace.data.images import IMAGE_BLOCK, as_view
-from primspace.utils.errors import UserError
+from primspace.model.calibration import CodeCalibration
 from primspace.train.observe import Observation, observation_masks
+from primspace.utils.errors import UserError
 
 __all__ = [
     "FRAMES_PROJECTION_KEY",

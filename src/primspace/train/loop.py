@@ -18,17 +18,17 @@ from dataclasses import dataclass
 import torch
 
 from primspace.data import JointScaler, MotionDataset
-from primspace.model.latent import LatentInitializer, LatentTable
 from primspace.model.decoder import MTRNNDecoder
-from primspace.utils.progress import progress_bar
+from primspace.model.latent import LatentInitializer, LatentTable
 from primspace.train.captured import CapturedStep, CompiledDecoder, check_single_process
+from primspace.train.checkpoint import checkpoint_state, restore_rng, unpack_checkpoint
 from primspace.train.config import TrainConfig, TrainingDivergedError, lr_factor
 from primspace.train.distributed import World, current_world, data_parallel, no_sync
 from primspace.train.logger import open_logger
 from primspace.train.loss import DataTensors, autocast_for, batch_loss
-from primspace.train.checkpoint import checkpoint_state, restore_rng, unpack_checkpoint
 from primspace.train.rundir import RunDirectory
 from primspace.train.streaming import FrameStream, should_stream
+from primspace.utils.progress import progress_bar
 
 __all__ = [
     "Session",
@@ -259,7 +259,7 @@ class Session:
             self._log(0, epoch_values(sums, self.n, self.use_images), time.perf_counter() - t0)
         self._checkpoint()
 
-    def begin_epoch(self) -> "Epoch":
+    def begin_epoch(self) -> Epoch:
         """The next epoch's learning rates set and its draws made (:class:`Epoch`)."""
         tc = self.tc
         factor = lr_factor(self.epoch, tc.epochs, tc.final_lr_fraction)

@@ -50,7 +50,7 @@ class DataTensors:
     @classmethod
     def build(
         cls, data: MotionDataset, scaler: JointScaler, use_images: bool, device, observation=None, stream: bool = False
-    ) -> "DataTensors":
+    ) -> DataTensors:
         """The tensors of ``data``; ``observation`` (:class:`~primspace.train.observe.Observation`)
         sets the observed masks (a modality observed at every valid step keeps ``mask``);
         ``stream``: the frames are left in the file (:mod:`primspace.train.streaming`)."""

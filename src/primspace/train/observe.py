@@ -88,7 +88,7 @@ class Observation:
     frames_given: bool = field(default=False, compare=False)  # observe_frames asked for explicitly
 
     @classmethod
-    def build(cls, observe, observe_frames=None) -> "Observation | None":
+    def build(cls, observe, observe_frames=None) -> Observation | None:
         """The rule for ``infer(observe=, observe_frames=)``; None when nothing is masked
         (``observe`` and ``observe_frames`` both None: every step observed, today's inference).
 

@@ -32,15 +32,15 @@ from dataclasses import astuple
 import torch
 from torch.func import functional_call, vmap
 
-from primspace.utils.errors import UserError
-from primspace.utils.progress import progress_bar
 from primspace.train.captured import StepGraph, check_graphable, float_rates, padded_rows, tensor_rates
 from primspace.train.config import TrainingDivergedError, thread_limit
 from primspace.train.loop import Session
 from primspace.train.loss import DataTensors, batch_loss
-from primspace.train.rundir import run_from_state
 from primspace.train.run import TrainedRun
+from primspace.train.rundir import run_from_state
 from primspace.train.sessions import fit_session, infer_session
+from primspace.utils.errors import UserError
+from primspace.utils.progress import progress_bar
 
 __all__ = ["PackedStep", "pack_key", "train_packed", "fit_packed", "infer_packed"]
 

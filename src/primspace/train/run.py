@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from primspace.model.calibration import CodeCalibration
 from primspace.data import JointScaler
-from primspace.model.latent import LatentInitializer
+from primspace.model.calibration import CodeCalibration
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
+from primspace.model.latent import LatentInitializer
 from primspace.train.config import TrainConfig
 from primspace.utils.errors import UserError
 
@@ -91,7 +91,7 @@ class TrainedRun:
         return self.history[-1]["loss"] if self.history else None
 
 
-def require_run(run) -> "TrainedRun":
+def require_run(run) -> TrainedRun:
     """``run`` when it is a :class:`TrainedRun`, or one UserError: the functions inside a prediction or a
     training take the run resolved (a run directory is read once, at the entry points:
     :func:`~primspace.train.as_run`)."""

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.train.run import TrainedRun
+from primspace.utils.errors import UserError
 
 __all__ = ["fingerprint", "check_run_data", "load_fitted_data", "recorded_data"]
 

@@ -35,6 +35,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from primspace.model.decoder import ModelConfig, MTRNNDecoder
+from primspace.train.checkpoint import read_checkpoint, unpack_checkpoint
+from primspace.train.config import TrainConfig
+from primspace.train.run import TrainedRun
+from primspace.train.rundata import check_run_data, fingerprint
 from primspace.utils.errors import OutputExistsError, UserError
 from primspace.utils.files import (
     atomic_path,
@@ -44,11 +49,6 @@ from primspace.utils.files import (
     check_writable_directory,
     os_error,
 )
-from primspace.model.decoder import ModelConfig, MTRNNDecoder
-from primspace.train.checkpoint import read_checkpoint, unpack_checkpoint
-from primspace.train.config import TrainConfig
-from primspace.train.run import TrainedRun
-from primspace.train.rundata import check_run_data, fingerprint
 
 __all__ = [
     "CONFIG_NAME",
@@ -182,7 +182,7 @@ class WriterLock:
     def __init__(self, run_dir: Path) -> None:
         self.run_dir, self.handle = Path(run_dir), None
 
-    def acquire(self) -> "WriterLock":
+    def acquire(self) -> WriterLock:
         """Take the lock (a no-op when held, or while the folder does not exist yet); one
         UserError when another process holds it."""
         import fcntl

@@ -17,11 +17,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from primspace.model.calibration import CodeCalibration
 from primspace.data import JointScaler, MotionDataset
-from primspace.utils.errors import UserError
-from primspace.model.latent import CALIBRATABLE, INFER_STARTS, LatentInitializer, LatentTable
+from primspace.model.calibration import CodeCalibration
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
+from primspace.model.latent import CALIBRATABLE, INFER_STARTS, LatentInitializer, LatentTable
 from primspace.train.checkpoint import unpack_checkpoint
 from primspace.train.checks import (
     check_calibrated,
@@ -42,6 +41,7 @@ from primspace.train.observe import Observation, observation_record
 from primspace.train.run import TrainedRun
 from primspace.train.rundir import load_run, open_run_dir, run_config, run_from_state
 from primspace.train.starts import derived_seeds, inference_start, initial_codes, run_initializer
+from primspace.utils.errors import UserError
 
 __all__ = [
     "FitRequest",

@@ -31,14 +31,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from primspace.model.calibration import CodeCalibration
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.model.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitializer
+from primspace.model.calibration import CodeCalibration
 from primspace.model.config import ModelConfig
+from primspace.model.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitializer
 from primspace.train.frames_start import check_frames_start, frames_start, frames_start_codes
 from primspace.train.observe import NOTHING, Observation, observation_masks
 from primspace.train.rundata import load_fitted_data
+from primspace.utils.errors import UserError
 
 __all__ = [
     "FittedDemonstrations",
@@ -76,7 +76,7 @@ class FittedDemonstrations:
     images: object = None
 
     @classmethod
-    def of(cls, parent, fitted: MotionDataset) -> "FittedDemonstrations":
+    def of(cls, parent, fitted: MotionDataset) -> FittedDemonstrations:
         """From ``fitted``, the run's fitted samples in its order (:func:`fitted_samples`)."""
         lengths = fitted.valid_lengths
         return cls(

@@ -64,7 +64,7 @@ class DataError(UserError):
         path: str | os.PathLike | None = None,
         field: str | None = None,
         index: int | None = None,
-    ) -> "DataError":
+    ) -> DataError:
         """Return a copy with missing location parts filled in (existing ones win)."""
         return DataError(
             self.reason,

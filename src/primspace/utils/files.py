@@ -38,8 +38,9 @@ import os
 import shutil
 import socket
 import tempfile
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any
 
 from primspace.utils.errors import OutputExistsError, UserError
 

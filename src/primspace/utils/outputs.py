@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from primspace.utils.errors import OutputExistsError, UserError
 from primspace.utils.files import check_output, check_outside_inputs

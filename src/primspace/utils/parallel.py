@@ -16,9 +16,10 @@ import os
 import threading
 import time
 import traceback
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any
 
 from primspace.utils.errors import UserError, first_line
 from primspace.utils.progress import progress_bar

@@ -20,8 +20,8 @@ import re
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from types import SimpleNamespace
-from typing import Callable, Iterator
 
 from rich.console import Console
 from rich.progress import (

@@ -44,7 +44,7 @@ are read: :meth:`AlignedFrames.collect`.
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -214,7 +214,7 @@ class AlignedFrames:
         """
         self._pending.append((int(n_frames), read))
 
-    def collect(self) -> "AlignedFrames":
+    def collect(self) -> AlignedFrames:
         """Read, fit and resize the frames of every demonstration added (a progress bar on a terminal)."""
         from primspace.utils.progress import progress_bar
 

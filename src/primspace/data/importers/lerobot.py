@@ -55,8 +55,8 @@ Needs pyarrow and PyAV, the ``video`` extra: ``pip install 'primspace[video]'``.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 

@@ -50,8 +50,8 @@ import json
 import os
 import posixpath
 import re
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import h5py
 import numpy as np

@@ -34,15 +34,15 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
 from primspace.experiments import figures
 from primspace.experiments.composite.primitives import run_primitives
 from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries
 from primspace.experiments.presets import ExperimentPreset
 from primspace.experiments.runs import curves, fit_and_infer, load_run_data, shared_fits_last
 from primspace.experiments.sweep import GridPoint
-from primspace.results.layout import run_dir_of
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.layout import run_dir_of
+from primspace.utils.errors import UserError
 
 __all__ = ["composite_key", "split_sequences", "segment_codes", "run_composite_point", "run_composite"]
 

@@ -32,12 +32,12 @@ from pathlib import Path
 import numpy as np
 
 from primspace.data import MotionDataset
-from primspace.utils.errors import UserError
-from primspace.results.composite import METHODS
 from primspace.experiments.composite.timeline import TIMELINE_SAMPLES, padded_boundaries
 from primspace.experiments.presets import LASA_DATA, ExperimentPreset, resolve_preset
 from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
+from primspace.results.composite import METHODS
+from primspace.utils.errors import UserError
 
 __all__ = [
     "PRIMITIVES_FILE",

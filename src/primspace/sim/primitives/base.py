@@ -63,7 +63,7 @@ class Primitive:
     # ------------------------------------------------------------------ script
     def script(
         self,
-        scene: "Scene",
+        scene: Scene,
         block_x: float,
         block_y: float,
         size: float,
@@ -118,7 +118,7 @@ class Primitive:
         raise NotImplementedError
 
     # ---------------------------------------------------------------- criteria
-    def judge(self, rollout: "Rollout", tol: Tolerances = TOLERANCES) -> SuccessResult:
+    def judge(self, rollout: Rollout, tol: Tolerances = TOLERANCES) -> SuccessResult:
         """Apply this primitive's criteria to a replayed trajectory.
 
         First the criteria every primitive shares: ``no_penetration`` (no finger, hand or

@@ -122,7 +122,7 @@ class Observed:
         :data:`~primspace.sim.scene.FINGERTIP_RADIUS` (m).
     """
 
-    rollout: "Rollout"
+    rollout: Rollout
     t: np.ndarray
     hold: np.ndarray
     offset: np.ndarray
@@ -132,7 +132,7 @@ class Observed:
     z_top: float
 
     @classmethod
-    def of(cls, r: "Rollout", tol: Tolerances) -> "Observed":
+    def of(cls, r: Rollout, tol: Tolerances) -> Observed:
         """Observe the replay ``r`` with the hold window of ``tol``."""
         t = np.linspace(0.0, 1.0, len(r.tcp))
         return cls(

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.sim.primitives.base import Primitive
 from primspace.sim.primitives.circle import CircleCCW, CircleCW
 from primspace.sim.primitives.contact import Grasp, Touch, TouchRight
 from primspace.sim.primitives.move import Pull, Push
 from primspace.sim.primitives.script import SCRIPT, Script, ScriptConstants
 from primspace.sim.scene import Scene
+from primspace.utils.errors import UserError
 
 __all__ = ["REGISTRY", "PRIMITIVES", "PUSH_AXIS", "get_primitive", "primitive_index", "script_motion"]
 

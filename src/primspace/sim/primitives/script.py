@@ -87,7 +87,7 @@ class KeyPath:
         self.t = 0.0
         self.segments: list = []  # (t0, t1, f(u) -> (pos, finger))
 
-    def move(self, t1: float, pos=None, finger: float | None = None) -> "KeyPath":
+    def move(self, t1: float, pos=None, finger: float | None = None) -> KeyPath:
         """Straight to ``pos`` with the fingers to ``finger`` by ``t1`` (None: stay)."""
         p0, p1 = self.pos, self.pos if pos is None else np.asarray(pos, dtype=float)
         f0, f1 = self.finger, self.finger if finger is None else float(finger)
@@ -95,7 +95,7 @@ class KeyPath:
         self.t, self.pos, self.finger = t1, p1, f1
         return self
 
-    def circle(self, t1: float, centre, direction: int) -> "KeyPath":
+    def circle(self, t1: float, centre, direction: int) -> KeyPath:
         """One full turn around ``centre`` (x, y) from the current point; +1 counter-clockwise."""
         c = np.asarray(centre, dtype=float)
         rel = self.pos[:2] - c
@@ -162,7 +162,7 @@ class Script:
         """(T,) bool: steps in the contact phase."""
         return np.linspace(0.0, 1.0, len(self.tcp)) >= self.contact_start - 1e-12
 
-    def displaced(self, offset, ramp: float = 0.1) -> "Script":
+    def displaced(self, offset, ramp: float = 0.1) -> Script:
         """The same script with its contact phase moved by ``offset`` (3,) metres.
 
         The offset is blended in with a minimum-jerk ramp over the ``ramp`` fraction of
