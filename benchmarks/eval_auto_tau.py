@@ -19,9 +19,10 @@ Data sets (every one read from files on this machine; nothing is downloaded):
     [-1, 1], flattened), as ``primspace cluster FILE.h5`` does.
 ``sim``
     Simulated raw trajectories of the paper's preset (``--sim``, default
-    /work/paper-exp/data.h5: 1715 motions x 61 steps x 9 joints, 7 primitives), read only.
+    ``paper-exp/data.h5``: 1715 motions x 61 steps x 9 joints, 7 primitives), read only.
 ``codes-<init>-q<q>``
-    Learned codes of the paper-preset experiment at ``--experiment`` (default /work/paper-exp;
+    Learned codes of the paper-preset experiment at ``--experiment`` (default ``paper-exp``, the folder of
+    ``primspace experiment intra --preset paper --out paper-exp``;
     read only, through :func:`primspace.experiments.runs.load_codes`).
 ``basicmotions``
     UEA BasicMotions as bundled with sktime (``pip install -e '.[eval]'``): smartwatch 3-axis
@@ -35,7 +36,7 @@ Data sets (every one read from files on this machine; nothing is downloaded):
 Run (about 3 minutes on one core)::
 
     python benchmarks/eval_auto_tau.py
-    python benchmarks/eval_auto_tau.py --datasets lasa,basicmotions,watch --json /tmp/auto.json
+    python benchmarks/eval_auto_tau.py --datasets lasa,basicmotions,watch --json auto.json
 """
 
 from __future__ import annotations
@@ -207,8 +208,8 @@ def format_table(results: dict) -> str:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--datasets", default=",".join(DATASETS), help=f"comma-separated: {', '.join(DATASETS)}")
-    parser.add_argument("--sim", default="/work/paper-exp/data.h5", help="simulated MotionDataset .h5 (read only)")
-    parser.add_argument("--experiment", default="/work/paper-exp", help="paper-preset experiment directory (read only)")
+    parser.add_argument("--sim", default="paper-exp/data.h5", help="simulated MotionDataset .h5 (read only)")
+    parser.add_argument("--experiment", default="paper-exp", help="paper-preset experiment directory (read only)")
     parser.add_argument("--lasa-length", type=int, default=50)
     parser.add_argument("--watch-length", type=int, default=50)
     parser.add_argument("--json", default=None, help="also write the results (with every sweep row) here")
