@@ -44,6 +44,8 @@ SETTINGS = {
     "promp": lambda run: dict(per_label=False),
     "nearest": lambda run: dict(),
     "mean_motion": lambda run: dict(),
+    "raw_gaussian": lambda run: dict(per_label=False),
+    "promp_tuned": lambda run: dict(per_label=False, n_basis=5, n_iter=20),
 }
 #: The online predictors whose prediction after step t is the offline one of that prefix.
 ONLINE_IS_OFFLINE = ("mixture", "prior", "encoder")

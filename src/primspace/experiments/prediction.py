@@ -103,8 +103,8 @@ def run_predict_point(
     keywords of the priors' rows; None: their defaults) at every fraction; mean unobserved MSE (and
     success) over the run's evaluation samples (at most ``max_samples``: :func:`predicted_subset`)."""
     from primspace.predict.grid import grid_forecasts, grid_predictors, posterior_accuracy
-    from primspace.predict.registry import model_share
     from primspace.predict.metrics import finite_mean, unobserved_mse
+    from primspace.predict.registry import model_share
     from primspace.train import TrainConfig, configure_process, load_run
     from primspace.train.observe import Observation
 

@@ -9,19 +9,25 @@ __all__ = ["predict_table", "predict_figure", "mean_std_count"]
 
 
 def predict_table(by_seed: dict) -> dict:
-    """{method: {fraction: {"mse": [mean, std, n], "success": [mean, std, n], "accuracy": [mean, std, n]}}}
-    over seeds ("success" where judged, "accuracy" (the posterior's top-1) where the row has one; absent otherwise)."""
+    """{method: {fraction: {"mse": [mean, std, n], "success": [mean, std, n], "accuracy": [mean, std, n],
+    "model_share": [mean, std, n]}}} over seeds ("success" where judged, "accuracy" (the posterior's top-1)
+    where the row has one, "model_share" (the share of the prediction through the decoder) where recorded;
+    absent otherwise)."""
     table: dict = {}
     for result in by_seed.values():
         for method, fractions in result["methods"].items():
             for key, entry in fractions.items():
-                cell = table.setdefault(method, {}).setdefault(key, {"mse": [], "success": [], "accuracy": []})
+                cell = table.setdefault(method, {}).setdefault(
+                    key, {"mse": [], "success": [], "accuracy": [], "model_share": []}
+                )
                 if entry.get("mse") is not None:
                     cell["mse"].append(entry["mse"])
                 if "success" in entry:
                     cell["success"].append(entry["success"]["overall"])
                 if entry.get("accuracy") is not None:
                     cell["accuracy"].append(entry["accuracy"])
+                if entry.get("model_share") is not None:
+                    cell["model_share"].append(entry["model_share"])
     return {
         m: {k: {name: mean_std_count(v) for name, v in cell.items() if v} for k, cell in fr.items()}
         for m, fr in table.items()

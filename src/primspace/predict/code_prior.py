@@ -48,6 +48,8 @@ __all__ = [
     "SequentialGaussian",
     "StepGains",
     "condition_primitives",
+    "CV_FOLDS",
+    "fold_split",
 ]
 
 #: The prior families and settings :func:`choose_prior` tries (name, setting).
@@ -66,6 +68,21 @@ PRIOR_GRID = (
 )
 #: Folds of the held-out likelihood within each primitive (fewer when a primitive has fewer codes).
 PRIOR_FOLDS = 5
+#: Folds of the K-fold prediction of the fitted demonstrations that chooses the predictors' settings
+#: (the prior's noise, blend and temperature; the Gaussian peers' settings).
+CV_FOLDS = 5
+
+
+def fold_split(groups, n: int, seed, folds: int = CV_FOLDS) -> np.ndarray:
+    """The fold (0 to ``folds - 1``) of each of ``n`` fitted demonstrations, -1 for those in no group:
+    each group's indices (``groups``: a list of index arrays, e.g. a primitive's demonstrations) in the
+    order of a permutation by ``np.random.default_rng(seed)``, dealt to the folds in turn."""
+    rng = np.random.default_rng(seed)
+    fold_of = np.full(int(n), -1)
+    for members in groups:
+        own = rng.permutation(members)
+        fold_of[own] = np.arange(len(own)) % int(folds)
+    return fold_of
 
 
 @dataclass
@@ -182,14 +199,14 @@ class DecodedGaussian:
         self.deviations = (members - self.mean) / math.sqrt(len(members) - 1)  # Σ = AᵀA
 
     @classmethod
-    def from_moments(cls, mean: np.ndarray, deviations: np.ndarray, n_motion: int) -> "DecodedGaussian":
+    def from_moments(cls, mean: np.ndarray, deviations: np.ndarray, n_motion: int) -> DecodedGaussian:
         """The Gaussian of ``mean`` (D,) and ``deviations`` (M, D) (``Σ = AᵀA``)."""
         out = cls.__new__(cls)
         out.n_motion, out.mean, out.deviations = int(n_motion), np.asarray(mean), np.asarray(deviations)
         return out
 
     @classmethod
-    def blend(cls, data: "DecodedGaussian | None", model: "DecodedGaussian", weight: float) -> "DecodedGaussian":
+    def blend(cls, data: DecodedGaussian | None, model: DecodedGaussian, weight: float) -> DecodedGaussian:
         """The moments of the mixture ``weight · data + (1 - weight) · model`` (``model`` alone when
         ``data`` is None): its mean, and deviations ``[√w A_data; √(1-w) A_model; √(w(1-w)) (μ_data - μ_model)]``."""
         w = float(weight) if data is not None else 0.0
@@ -201,7 +218,7 @@ class DecodedGaussian:
         deviations = np.concatenate([np.sqrt(w) * data.deviations, np.sqrt(1.0 - w) * model.deviations, gap])
         return cls.from_moments(w * data.mean + (1.0 - w) * model.mean, deviations, model.n_motion)
 
-    def conditioned(self, mask: np.ndarray, r: float) -> "ConditionedGaussian":
+    def conditioned(self, mask: np.ndarray, r: float) -> ConditionedGaussian:
         """The conditioning on the motion's entries where ``mask`` (T·J,) is set, noise ``r`` per entry."""
         return ConditionedGaussian(self, np.asarray(mask, dtype=bool), float(r))
 

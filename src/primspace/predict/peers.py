@@ -25,20 +25,30 @@ peers and primspace's predictors alike.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.predict.base import MotionPredictor, observed_mask
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
+from primspace.utils.errors import UserError
 
-__all__ = ["ProMPPeer", "NearestPeer", "MeanMotionPeer", "NoiseChoice", "best_noise", "LabelledPeer", "phase"]
+__all__ = [
+    "ProMPPeer",
+    "NearestPeer",
+    "MeanMotionPeer",
+    "NoiseChoice",
+    "best_noise",
+    "LabelledPeer",
+    "phase",
+    "promp_class",
+]
 
 _PROMP_MISSING = "the ProMP peer needs the movement-primitives package: pip install 'primspace[predict]'"
 
 
-def _promp_class():
+def promp_class():
     """The package's ``ProMP`` class, imported on first use."""
     try:
         from movement_primitives.promp import ProMP
@@ -180,9 +190,9 @@ class ProMPPeer(LabelledPeer):
         self.n_basis, self.noise, self.per_label = int(n_basis), float(noise), bool(per_label)
         self.ridge, self.n_iter = float(ridge), int(n_iter)
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "ProMPPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> ProMPPeer:
         """Fit one ProMP per label (or one for all) on the valid steps; returns self."""
-        promp_cls = _promp_class()
+        promp_cls = promp_class()
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         if lengths.min() < 2:
             raise UserError("the ProMP peer needs at least 2 valid steps per demonstration")
@@ -277,7 +287,7 @@ class NearestPeer(LabelledPeer):
     def __init__(self, per_label: bool = False) -> None:
         self.per_label = bool(per_label)
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "NearestPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> NearestPeer:
         """Keep the demonstrations (valid steps and labels); returns self."""
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         self.motor_, self.labels_, self.lengths_ = motor.copy(), labels, lengths
@@ -323,7 +333,7 @@ class MeanMotionPeer(LabelledPeer):
     def __init__(self, per_label: bool = True) -> None:
         self.per_label = bool(per_label)
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "MeanMotionPeer":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> MeanMotionPeer:
         """Compute the mean motion per label (or of all); returns self."""
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         steps = motor.shape[1]

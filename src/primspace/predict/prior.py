@@ -39,26 +39,28 @@ import copy
 
 import numpy as np
 
-from primspace.utils.errors import UserError
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.code_prior import (
+    CV_FOLDS,
     DecodedGaussian,
     choose_prior,
     condition_primitives,
     fit_gaussian,
+    fold_split,
 )
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse, valid_mask
-from primspace.predict.prior_stream import PriorStream
 from primspace.predict.primitives import (
     PRIMITIVE_SOURCES,
     primitives_from_clusters,
     primitives_from_labels,
     top1_accuracy,
 )
-from primspace.utils.progress import stage
+from primspace.predict.prior_stream import PriorStream
 from primspace.train.api import reconstruct
 from primspace.train.observe import NOTHING, Observation
+from primspace.utils.errors import UserError
+from primspace.utils.progress import stage
 
 __all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "BLEND_GRID", "CV_SAMPLES"]
 
@@ -72,8 +74,6 @@ TEMPERATURE_GRID = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0)
 BLEND_GRID = (0.0, 0.5, 0.9, 1.0)
 #: Draws per primitive of each fold's priors in the K-fold choice (at most ``n_samples``).
 CV_SAMPLES = 500
-#: Folds of the choice of ``r`` and ``T``.
-CV_FOLDS = 5
 
 
 class PriorPredictor(Predictor):
@@ -150,7 +150,7 @@ class PriorPredictor(Predictor):
         return bool(self.given) and self.primitive is None
 
     # -- fit ------------------------------------------------------------------------------
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "PriorPredictor":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> PriorPredictor:
         """Group the run's fitted codes into primitives, choose and fit their priors, draw and decode.
         ``motor`` (scaled, the run's fitted samples in its order) is kept for the choices of ``r`` and ``T``."""
         run = self.resolve_run()
@@ -237,7 +237,7 @@ class PriorPredictor(Predictor):
             for i, d in enumerate(draws)
         ]
 
-    def asked(self, primitive=None, given: bool = False) -> "PriorPredictor":
+    def asked(self, primitive=None, given: bool = False) -> PriorPredictor:
         """This fitted predictor asked differently (a primitive for every motion, each motion's
         label, or neither: the posterior), sharing its fitted priors, draws and choices."""
         other = copy.copy(self)
@@ -275,7 +275,7 @@ class PriorPredictor(Predictor):
         out, codes = self.mix(means, weights, seen.shape)
         if self.continuity:
             out = continuity_correction(out, seen, mask, valid_mask(check_lengths(lengths, n, steps), steps))
-        details = {"prior": self.summary(choice), "posterior": weights.tolist()}
+        details = {"prior": self.summary(choice), "posterior": weights.tolist(), "model_share": 1.0 - weight}
         return Forecast(out, codes, details)
 
     @staticmethod
@@ -339,11 +339,8 @@ class PriorPredictor(Predictor):
         fitted, drawn and decoded, and the fitted pairs, without it:
         ``[(held-out indices, draws, pairs)]`` (kept)."""
         if self.folds_ is None:
-            rng = np.random.default_rng([self.seed_, 39, 2])
-            fold_of = np.full(len(self.fitted_), -1)
-            for k in range(self.primitives_.count):
-                own = rng.permutation(self.primitives_.members(k))
-                fold_of[own] = np.arange(len(own)) % CV_FOLDS
+            members = [self.primitives_.members(k) for k in range(self.primitives_.count)]
+            fold_of = fold_split(members, len(self.fitted_), [self.seed_, 39, 2], CV_FOLDS)
             codes = np.asarray(self.run_.latents, dtype=np.float64)
             n = min(int(self.n_samples), CV_SAMPLES)
             self.folds_ = []
@@ -422,7 +419,7 @@ class PriorPredictor(Predictor):
         return float(errors.mean()) if errors.size else 0.0
 
     # -- online -----------------------------------------------------------------------------
-    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> "PriorStream":
+    def stream(self, truth, lengths, labels, frames, steps, keep, data=None) -> PriorStream:
         """The priors filtered a step at a time (module docstring), with the ``r`` and ``T`` chosen for
         a prefix of ``keep`` steps before the first step arrives; equal after step ``t`` to ``forecast``
         of that prefix with the same ``r`` and ``T``. The result's ``codes`` are the top primitive's
@@ -432,17 +429,27 @@ class PriorPredictor(Predictor):
         r, weight = self._setting(choice, ids is not None)
         return PriorStream(self, truth, lengths, ids, r, weight, choice["temperature"], int(steps[0]))
 
+    def online_share(self) -> float | None:
+        """The share of the decoded draws in the Gaussians of the one observation rule chosen so far
+        (``1 - blend``; None when no rule or several were chosen)."""
+        if len(self.choices_) != 1:
+            return None
+        choice = next(iter(self.choices_.values()))
+        return 1.0 - self._setting(choice, self.told_primitive)[1]
+
     def describe(self, details: dict, labels=None) -> dict:
-        """What ``result.json`` records of a forecast's ``details``: the prior's summary and the
+        """What ``result.json`` records of a forecast's ``details``: the prior's summary, the
+        ``model_share`` (the weight of the decoded draws against the fitted demonstrations' own
+        Gaussian, ``1 - blend``: 0 when the prediction does not use the run's decoder) and the
         ``primitive`` asked (None: none); with none asked (nor each motion's label), the ``posterior``
         (n, P) over ``primitives`` (their names), each sample's ``top_primitive`` and
         ``posterior_accuracy`` (:func:`~primspace.predict.primitives.top1_accuracy` against ``labels``).
         Online (no forecast's ``prior`` in ``details``): ``details`` with the summary and the primitive."""
         if "prior" not in details:
             summary = self.summary()
-            return {**details, "prior": summary, "primitive": summary["primitive"]}
+            return {**details, "prior": summary, "primitive": summary["primitive"], "model_share": self.online_share()}
         summary = details["prior"]
-        out = {"prior": summary, "primitive": summary["primitive"]}
+        out = {"prior": summary, "primitive": summary["primitive"], "model_share": details.get("model_share")}
         if summary["primitive"] is not None or self.given:
             return out
         names = list(summary["primitives"]["names"])

@@ -36,15 +36,15 @@ import numpy as np
 import torch
 from sklearn.base import clone
 
-from primspace.utils.errors import UserError
 from primspace.model.latent import LatentTable
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import continuity_correction
 from primspace.predict.metrics import check_lengths, valid_mask
 from primspace.predict.prior import PriorPredictor
 from primspace.train.api import reconstruct
-from primspace.train.run import require_run
 from primspace.train.config import resolve_device, thread_limit
+from primspace.train.run import require_run
+from primspace.utils.errors import UserError
 
 __all__ = ["PriorMapPredictor", "PRIOR_MAP", "MAP_STARTS", "map_refine", "map_objective", "prior_terms", "best_members"]
 
@@ -256,7 +256,7 @@ class PriorMapPredictor(Predictor):
             return bool(self.given) and self.primitive is None
         return self.prior is not None and self.prior.needs_labels
 
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> "PriorMapPredictor":
+    def fit(self, motor, labels=None, lengths=None, frames=None) -> PriorMapPredictor:
         """Fit the inner prior predictor (unless it is fitted already)."""
         self.resolve_run()
         if self.start not in MAP_STARTS:
@@ -296,7 +296,7 @@ class PriorMapPredictor(Predictor):
         out = out.astype(np.float64)
         if self.continuity:
             out = continuity_correction(out, seen, mask, valid_mask(check_lengths(lengths, n, steps), steps))
-        details = dict(inner.details)
+        details = dict(inner.details, model_share=1.0)  # the prediction is the MAP code decoded
         details["map"] = {
             "iterations": int(self.iterations),
             "lr": float(self.lr),

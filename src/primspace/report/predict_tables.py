@@ -15,10 +15,30 @@ from dataclasses import dataclass
 
 from primspace.results.tables import cell_text
 
-__all__ = ["PEER_PREFIXES", "TASKS_TEXT", "VERDICT_RULE", "TaskTable", "splits_tasks", "task_tables", "verdict"]
+__all__ = [
+    "PEER_PREFIXES",
+    "NO_MODEL",
+    "MODEL_SHARE_TEXT",
+    "TASKS_TEXT",
+    "VERDICT_RULE",
+    "TaskTable",
+    "splits_tasks",
+    "task_tables",
+    "verdict",
+    "share_text",
+]
 
 #: A row is a peer's when its name starts with one of these; every other row is primspace's.
-PEER_PREFIXES = ("promp", "nearest neighbour", "mean motion")
+PEER_PREFIXES = ("promp", "nearest neighbour", "mean motion", "raw gaussian")
+#: The mark of a row whose prediction does not come through the run's decoder (model share 0).
+NO_MODEL = "does not use the model"
+#: What the model-share column is, as the text says it.
+MODEL_SHARE_TEXT = (
+    "Model share: the share of a row's prediction that comes through the run's decoder (1 for the rows "
+    "that decode codes; for the prior, the weight its K-fold choice gave the decoded draws against the "
+    "fitted demonstrations' own Gaussian; 0 for the peers), per fraction where it differs; a row at 0 "
+    f'is marked "{NO_MODEL}".'
+)
 #: What the two tables are, as the text says it.
 TASKS_TEXT = (
     "Two tasks: with the primitive given (the rows told the test motion's primitive) and without it (the "
@@ -87,7 +107,25 @@ def _task(results: dict, title: str, methods: list[str], accuracy: bool) -> Task
         [m] + [cell_text(table[m].get(k, {}).get(name), digits=digits[name]) for name, ks in keys.items() for k in ks]
         for m in methods
     ]
+    shares = [share_text(table[m], keys["mse"]) for m in methods]
+    if any(shares):  # recorded from grid version 5 on
+        columns.append("model share")
+        rows = [row + [share] for row, share in zip(rows, shares)]
     return TaskTable(title, columns, rows, _verdict_line(table, methods, keys))
+
+
+def _shares(cells: dict, keys: list[str]) -> list[float]:
+    return [cells[k]["model_share"][0] for k in keys if cells.get(k, {}).get("model_share")]
+
+
+def share_text(cells: dict, keys: list[str]) -> str:
+    """A row's model share at the fractions ``keys`` (one number when the same at all, else one per
+    fraction), with :data:`NO_MODEL` where it is 0 at all; "" when none was recorded."""
+    shares = _shares(cells, keys)
+    if not shares:
+        return ""
+    text = f"{shares[0]:.2g}" if len(set(shares)) == 1 else " / ".join(f"{v:.2g}" for v in shares)
+    return f"{text} ({NO_MODEL})" if max(shares) == 0 else text
 
 
 def verdict(ours: list, peer: list, lower_better: bool) -> str:
@@ -116,8 +154,9 @@ def _verdict_line(table: dict, methods: list[str], keys: dict[str, list[str]]) -
             if a is None or b is None:
                 continue
             digits = 4 if name == "mse" else 2
+            mark = f", {NO_MODEL}" if _shares(table[a[0]], [k]) == [0.0] else ""
             parts.append(
-                f"{label} at {float(k):.0%}: {verdict(a[1], b[1], lower_better)} ({a[0]} "
+                f"{label} at {float(k):.0%}: {verdict(a[1], b[1], lower_better)} ({a[0]}{mark} "
                 f"{cell_text(a[1], digits)} against {b[0]} {cell_text(b[1], digits)})"
             )
     if not parts:

@@ -1,0 +1,95 @@
+"""The Gaussian peers: the raw trajectories' Gaussian and the tuned ProMP, their settings chosen by K-fold
+prediction of the fitted demonstrations (never the answer), and the share of a prediction through the decoder."""
+
+import numpy as np
+import pytest
+
+from primspace.predict.code_prior import fold_split
+from primspace.predict.gaussian_peers import RawGaussianPeer, TunedProMPPeer
+from primspace.predict.metrics import unobserved_mse
+from primspace.predict.peers import ProMPPeer
+from primspace.predict.registry import model_share
+from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
+from test_train import primitives
+
+
+@pytest.fixture(scope="module")
+def data():
+    train, test = primitives(6, seed=0, T=20), primitives(3, seed=100, T=20)
+    scale = np.abs(train.motor).max()
+    return train.motor / scale, train.labels, test.motor / scale, test.labels
+
+
+def test_the_raw_gaussian_is_the_conditioned_gaussian_of_the_demonstrations(data):
+    x, labels, y, test_labels = data
+    peer = RawGaussianPeer(per_label=True, noise=1e-4).fit(x, labels)
+    observed = Observation.build(0.25).masks(np.full(len(y), 20), 20)[0]
+    got = peer.predict(y, observed, test_labels)
+    # written out: mean and covariance of the label's flattened demonstrations, Gaussian conditioning
+    i, own = 0, x[labels == test_labels[0]].reshape(-1, 80)
+    mean, cov = own.mean(axis=0), np.cov(own, rowvar=False)
+    o = np.flatnonzero(np.repeat(observed[0], 4))
+    gain = cov[:, o] @ np.linalg.inv(cov[np.ix_(o, o)] + 1e-4 * np.eye(len(o)))
+    expected = mean + gain @ (y[i].reshape(-1)[o] - mean[o])
+    np.testing.assert_allclose(got[i].reshape(-1), expected, atol=1e-8)
+
+
+def test_the_tuned_promp_with_fixed_settings_is_the_packages_conditioning(data):
+    x, labels, y, test_labels = data
+    observed = Observation.build(0.25).masks(np.full(len(y), 20), 20)[0]
+    sequential = ProMPPeer(n_basis=6, noise=1e-3, n_iter=30).fit(x, labels).predict(y, observed, test_labels)
+    batch = TunedProMPPeer(n_basis=6, ridge=0.0, noise=1e-3, n_iter=30).fit(x, labels).predict(y, observed, test_labels)
+    np.testing.assert_allclose(batch, sequential, atol=1e-8)
+
+
+def test_the_settings_are_chosen_on_the_fitted_data_only(data):
+    x, labels, y, test_labels = data
+    rule = Observation.build(0.25)
+    peer = TunedProMPPeer(n_basis="auto", n_iter=30).fit(x, labels)
+    first = peer.forecast(y, rule, test_labels)
+    # the test motions' unobserved steps replaced by anything: the same choice, the same prediction
+    observed = rule.masks(np.full(len(y), 20), 20)[0]
+    other = np.where(observed[..., None], y, 5.0)
+    again = TunedProMPPeer(n_basis="auto", n_iter=30).fit(x, labels).forecast(other, rule, test_labels)
+    assert again.details["setting"] == first.details["setting"]
+    np.testing.assert_array_equal(again.motor, first.motor)
+    assert first.details["model_share"] == 0.0
+    scores = peer.choices_[rule.key]["scores"]
+    assert len(scores) == 5 * 4 * 4 and min(scores.values()) == scores[repr(first.details["setting"])]
+
+
+def test_the_tuned_raw_gaussian_beats_its_worst_setting_on_the_test_motions(data):
+    x, labels, y, test_labels = data
+    rule = Observation.build(0.25)
+    observed = rule.masks(np.full(len(y), 20), 20)[0]
+    tuned = RawGaussianPeer().fit(x, labels).predict(y, rule, test_labels)
+    errors = [
+        np.nanmean(unobserved_mse(RawGaussianPeer(noise=r).fit(x, labels).predict(y, rule, test_labels), y, observed))
+        for r in (1e-5, 1e-2)
+    ]
+    assert np.nanmean(unobserved_mse(tuned, y, observed)) <= max(errors)
+
+
+def test_the_folds_are_the_priors_split():
+    groups = [np.arange(0, 7), np.arange(7, 12)]
+    folds = fold_split(groups, 13, [0, 39, 2])
+    assert folds[12] == -1 and set(folds[:12]) == set(range(5))
+    rng = np.random.default_rng([0, 39, 2])
+    own = rng.permutation(groups[0])
+    assert folds[own[0]] == 0 and folds[own[1]] == 1
+
+
+def test_bad_settings_are_one_user_error():
+    with pytest.raises(UserError, match="n_basis"):
+        TunedProMPPeer(n_basis=1).fit(np.zeros((4, 5, 2)), np.array([0, 0, 1, 1]))
+    with pytest.raises(UserError, match="noise"):
+        RawGaussianPeer(noise="big").fit(np.zeros((4, 5, 2)), np.array([0, 0, 1, 1]))
+
+
+def test_the_model_share_of_each_kind_of_predictor():
+    assert model_share("promp", {}) == 0.0
+    assert model_share("raw_gaussian", {"model_share": 0.0}) == 0.0
+    assert model_share("mixture", {}) == 1.0
+    assert model_share("projection", {}) == 1.0  # a gradient start decodes its code
+    assert model_share("prior", {"model_share": 0.5}) == 0.5
