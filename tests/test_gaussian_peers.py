@@ -35,6 +35,7 @@ def test_the_raw_gaussian_is_the_conditioned_gaussian_of_the_demonstrations(data
     np.testing.assert_allclose(got[i].reshape(-1), expected, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_the_tuned_promp_with_fixed_settings_is_the_packages_conditioning(data):
     x, labels, y, test_labels = data
     observed = Observation.build(0.25).masks(np.full(len(y), 20), 20)[0]
@@ -43,6 +44,7 @@ def test_the_tuned_promp_with_fixed_settings_is_the_packages_conditioning(data):
     np.testing.assert_allclose(batch, sequential, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_the_settings_are_chosen_on_the_fitted_data_only(data):
     x, labels, y, test_labels = data
     rule = Observation.build(0.25)
@@ -93,3 +95,30 @@ def test_the_model_share_of_each_kind_of_predictor():
     assert model_share("mixture", {}) == 1.0
     assert model_share("projection", {}) == 1.0  # a gradient start decodes its code
     assert model_share("prior", {"model_share": 0.5}) == 0.5
+
+
+class _Fragile(TunedProMPPeer):
+    """A tuned ProMP over basis counts 5 and 6 whose fit with 6 fails (as the package's EM may)."""
+
+    def settings(self):
+        return [{"n_basis": b, "ridge": 0.0, "noise": 1e-3} for b in self.bases]
+
+    def fit_group(self, motor, lengths, key):
+        if key == 6:
+            raise np.linalg.LinAlgError("SVD did not converge")
+        return super().fit_group(motor, lengths, key)
+
+
+@pytest.mark.slow
+def test_a_setting_that_cannot_be_fitted_is_not_chosen(data):
+    x, labels, y, test_labels = data
+    rule = Observation.build(0.25)
+    peer = _Fragile(n_iter=20)
+    peer.bases = (6, 5)
+    forecast = peer.fit(x, labels).forecast(y, rule, test_labels)
+    assert forecast.details["setting"]["n_basis"] == 5
+    assert np.isnan(peer.choices_[rule.key]["scores"][repr({"n_basis": 6, "ridge": 0.0, "noise": 1e-3})])
+    peer = _Fragile(n_iter=20)
+    peer.bases = (6, 6)
+    with pytest.raises(UserError, match="cannot be fitted"):
+        peer.fit(x, labels).forecast(y, rule, test_labels)

@@ -166,3 +166,27 @@ def test_a_summary_keeps_the_grids_version_and_its_given_rows(tmp_path):
     del predict["version"], predict["given_rows"]
     (tmp_path / "results" / "predict.json").write_text(json.dumps(predict))
     assert not {"version", "given_rows"} & set(summarize(tmp_path, "old", "c")["results"]["predict"])
+
+
+def test_a_row_that_does_not_use_the_model_is_marked():
+    from primspace.report.predict_tables import NO_MODEL, share_text
+
+    shares = {"prior (labels)": (0.0, 0.0), "promp (labels)": (0.0, 0.0), "mixture": (1.0, 1.0)}
+    by_seed = {
+        str(seed): {
+            "methods": {
+                row: {k: {"mse": 0.01 * (1 + i) + 0.001 * seed, "model_share": shares[row][0]} for k in ("0.1", "0.25")}
+                for i, row in enumerate(shares)
+            }
+        }
+        for seed in (0, 1)
+    }
+    results = {"version": 5, "fractions": [0.1, 0.25], "table": predict_table(by_seed), "given_rows": GIVEN}
+    given = task_tables(results)[0]
+    assert given.columns[-1] == "model share"
+    assert given.rows[0][-1] == f"0 ({NO_MODEL})"  # the prior whose K-fold chose the raw data alone
+    assert f"prior (labels), {NO_MODEL}" in given.verdict
+    assert share_text({"0.1": {"model_share": [1.0, 0, 2]}, "0.25": {"model_share": [0.5, 0, 2]}}, ["0.1", "0.25"]) == (
+        "1 / 0.5"
+    )
+    assert share_text({"0.1": {"mse": [0.1, 0, 2]}}, ["0.1"]) == ""

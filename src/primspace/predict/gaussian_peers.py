@@ -21,7 +21,8 @@ answer, by the same K-fold prediction of the fitted demonstrations that chooses 
 (:func:`~primspace.predict.code_prior.fold_split`, :data:`~primspace.predict.code_prior.CV_FOLDS`
 folds within each label): each fold is predicted by the Gaussians fitted without it, and the
 setting with the lowest mean unobserved MSE of the held-out demonstrations is kept (the first
-on a tie, and the first when nothing is left unobserved). A forecast's ``details`` record the
+on a tie, and the first when nothing is left unobserved; a setting whose fit fails on a fold,
+e.g. the ProMP's EM with more basis functions than the data carry, is not chosen). A forecast's ``details`` record the
 setting and ``model_share`` 0: the run's decoder takes no part.
 """
 
@@ -103,11 +104,16 @@ class GaussianPeer(LabelledPeer):
         """Group -> fitted model, on every demonstration (``fold`` None) or on those out of ``fold``."""
         if (fold, key) not in self.models_:
             out = {}
-            for group, idx in self.groups_.items():
-                kept = idx if fold is None else idx[self.fold_of_[idx] != fold]
-                kept = idx if len(kept) == 0 else kept
-                out[group] = self.fit_group(self.motor_[kept], self.lengths_[kept], key)
+            try:
+                for group, idx in self.groups_.items():
+                    kept = idx if fold is None else idx[self.fold_of_[idx] != fold]
+                    kept = idx if len(kept) == 0 else kept
+                    out[group] = self.fit_group(self.motor_[kept], self.lengths_[kept], key)
+            except np.linalg.LinAlgError as exc:  # kept: the same fit fails again
+                out = exc
             self.models_[fold, key] = out
+        if isinstance(self.models_[fold, key], Exception):
+            raise self.models_[fold, key]
         return self.models_[fold, key]
 
     def _gaussian(self, fold, setting: dict, group, length: int) -> DecodedGaussian:
@@ -144,11 +150,15 @@ class GaussianPeer(LabelledPeer):
             scores = {}
             for setting in candidates:
                 predicted = np.full_like(self.motor_, np.nan)
-                for fold in np.unique(self.fold_of_[self.fold_of_ >= 0]):
-                    held = self.fold_of_ == fold
-                    labels = None if self.labels_ is None else self.labels_[held]
-                    args = (seen[held], observed[held], labels, self.lengths_[held])
-                    predicted[held] = self._conditioned(int(fold), setting, *args)
+                try:
+                    for fold in np.unique(self.fold_of_[self.fold_of_ >= 0]):
+                        held = self.fold_of_ == fold
+                        labels = None if self.labels_ is None else self.labels_[held]
+                        args = (seen[held], observed[held], labels, self.lengths_[held])
+                        predicted[held] = self._conditioned(int(fold), setting, *args)
+                except np.linalg.LinAlgError:  # a setting that cannot be fitted on a fold is not chosen
+                    scores[repr(setting)] = np.nan
+                    continue
                 errors = unobserved_mse(predicted, self.motor_, observed, self.lengths_)
                 errors = errors[np.isfinite(errors)]
                 scores[repr(setting)] = float(errors.mean()) if errors.size else np.nan
@@ -166,7 +176,10 @@ class GaussianPeer(LabelledPeer):
         setting = (
             candidates[0] if len(candidates) == 1 else self.choice(observation_rule(observed, lengths, mask.shape))
         )
-        out = self._conditioned(None, setting, seen, mask, labels, lengths)
+        try:
+            out = self._conditioned(None, setting, seen, mask, labels, lengths)
+        except np.linalg.LinAlgError as exc:
+            raise UserError(f"{type(self).__name__}: the setting {setting} cannot be fitted ({exc})") from exc
         return Forecast(out, None, {"setting": dict(setting), "model_share": 0.0})
 
     def predict(self, motor, observed, labels=None, lengths=None, frames=None, **options) -> np.ndarray:
@@ -256,7 +269,10 @@ class TunedProMPPeer(GaussianPeer):
         if lengths.min() < 2:
             raise UserError("the ProMP peer needs at least 2 valid steps per demonstration")
         promp = promp_class()(motor.shape[2], int(key))
-        promp.imitate([phase(n) for n in lengths], [m[:n] for m, n in zip(motor, lengths)], n_iter=self.n_iter)
+        with np.errstate(all="ignore"):
+            promp.imitate([phase(n) for n in lengths], [m[:n] for m, n in zip(motor, lengths)], n_iter=self.n_iter)
+        if not (np.isfinite(promp.weight_mean).all() and np.isfinite(promp.weight_cov).all()):
+            raise np.linalg.LinAlgError(f"the ProMP's EM did not converge with {key} basis functions")
         return promp
 
     def gaussian(self, model, length: int, setting: dict) -> DecodedGaussian:
