@@ -1,6 +1,8 @@
 """The Gaussian peers: the raw trajectories' Gaussian and the tuned ProMP, their settings chosen by K-fold
 prediction of the fitted demonstrations (never the answer), and the share of a prediction through the decoder."""
 
+import inspect
+
 import numpy as np
 import pytest
 
@@ -8,7 +10,7 @@ from primspace.predict.code_prior import fold_split
 from primspace.predict.gaussian_peers import RawGaussianPeer, TunedProMPPeer
 from primspace.predict.metrics import unobserved_mse
 from primspace.predict.peers import ProMPPeer
-from primspace.predict.registry import model_share
+from primspace.predict.registry import built_on_run, model_share
 from primspace.train.observe import Observation
 from primspace.utils.errors import UserError
 from test_train import primitives
@@ -90,11 +92,16 @@ def test_bad_settings_are_one_user_error():
 
 
 def test_the_model_share_of_each_kind_of_predictor():
-    assert model_share("promp", {}) == 0.0
-    assert model_share("raw_gaussian", {"model_share": 0.0}) == 0.0
-    assert model_share("mixture", {}) == 1.0
-    assert model_share("projection", {}) == 1.0  # a gradient start decodes its code
-    assert model_share("prior", {"model_share": 0.5}) == 0.5
+    from primspace.predict import REGISTRY
+    from primspace.predict.peers import NearestPeer
+
+    assert model_share({}, built_on_run(NearestPeer())) == 0.0  # "nearest" is a gradient start's name too
+    assert model_share({"model_share": 0.0}, False) == 0.0
+    assert model_share({}, True) == 1.0  # the mixture, a gradient start: they decode codes
+    assert model_share({"model_share": 0.5}, True) == 0.5  # the prior's share of decoded draws
+    assert {name for name, spec in REGISTRY.items() if spec.needs_run} == {
+        name for name, spec in REGISTRY.items() if "run" in inspect.signature(spec.cls).parameters
+    }
 
 
 class _Fragile(TunedProMPPeer):

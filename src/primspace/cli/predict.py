@@ -87,7 +87,7 @@ def _write_outputs(tmp: Path, prediction, predicted, dataset, judged: dict | Non
 
     result = {
         **prediction.summary(),
-        "model_share": model_share(prediction.init, prediction.details),
+        "model_share": model_share(prediction.details, True),  # the command's predictors are built on the run
         "command": command,
         "indices": [int(i) for i in prediction.indices],
         "source_ids": None if data.source_ids is None else [str(v) for v in data.source_ids],

@@ -104,7 +104,7 @@ def run_predict_point(
     success) over the run's evaluation samples (at most ``max_samples``: :func:`predicted_subset`)."""
     from primspace.predict.grid import grid_forecasts, grid_predictors, posterior_accuracy
     from primspace.predict.metrics import finite_mean, unobserved_mse
-    from primspace.predict.registry import model_share
+    from primspace.predict.registry import built_on_run, model_share
     from primspace.train import TrainConfig, configure_process, load_run
     from primspace.train.observe import Observation
 
@@ -126,7 +126,7 @@ def run_predict_point(
             accuracy = posterior_accuracy(forecast, test.labels)
             if accuracy is not None and name not in GIVEN_ROWS:
                 entry["accuracy"] = accuracy
-            entry["model_share"] = model_share(rows[name].name, forecast.details)
+            entry["model_share"] = model_share(forecast.details, built_on_run(rows[name]))
             if "mixture" in forecast.details:
                 entry["noise"] = forecast.details["mixture"]["noise"]
                 entry["condition"] = forecast.details["mixture"]["condition"]

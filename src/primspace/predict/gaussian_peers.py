@@ -22,7 +22,8 @@ answer, by the same K-fold prediction of the fitted demonstrations that chooses 
 folds within each label): each fold is predicted by the Gaussians fitted without it, and the
 setting with the lowest mean unobserved MSE of the held-out demonstrations is kept (the first
 on a tie, and the first when nothing is left unobserved; a setting whose fit fails on a fold,
-e.g. the ProMP's EM with more basis functions than the data carry, is not chosen). A forecast's ``details`` record the
+e.g. the ProMP's EM with more basis functions than the data carry, is not chosen, and when the
+chosen one's fit on all the demonstrations fails the next best is used). A forecast's ``details`` record the
 setting and ``model_share`` 0: the run's decoder takes no part.
 """
 
@@ -66,7 +67,8 @@ class GaussianPeer(LabelledPeer):
     Attributes
     ----------
     choices_ : dict
-        Observation rule -> ``{"setting": ..., "scores": {setting text: K-fold MSE}}``.
+        Observation rule -> ``{"setting": ..., "ranked": [settings, best first], "scores": {setting text:
+        K-fold MSE}}``.
     """
 
     #: A Gaussian over each test sample's valid steps (phase), else over all ``T`` steps.
@@ -163,8 +165,8 @@ class GaussianPeer(LabelledPeer):
                 errors = errors[np.isfinite(errors)]
                 scores[repr(setting)] = float(errors.mean()) if errors.size else np.nan
             finite = [s for s in candidates if np.isfinite(scores[repr(s)])]
-            best = min(finite, key=lambda s: scores[repr(s)]) if finite else candidates[0]
-            self.choices_[rule.key] = {"setting": best, "scores": scores}
+            ranked = sorted(finite, key=lambda s: scores[repr(s)]) + [s for s in candidates if s not in finite]
+            self.choices_[rule.key] = {"setting": ranked[0], "ranked": ranked, "scores": scores}
         return self.choices_[rule.key]["setting"]
 
     def forecast(self, motor, observed, labels=None, lengths=None, frames=None, **options) -> Forecast:
@@ -172,15 +174,19 @@ class GaussianPeer(LabelledPeer):
         seen, mask, labels, lengths = self._query(
             motor, observed, labels, lengths, same_steps=not self.over_valid_steps
         )
-        candidates = self.settings()
-        setting = (
-            candidates[0] if len(candidates) == 1 else self.choice(observation_rule(observed, lengths, mask.shape))
-        )
-        try:
-            out = self._conditioned(None, setting, seen, mask, labels, lengths)
-        except np.linalg.LinAlgError as exc:
-            raise UserError(f"{type(self).__name__}: the setting {setting} cannot be fitted ({exc})") from exc
-        return Forecast(out, None, {"setting": dict(setting), "model_share": 0.0})
+        ranked = self.settings()
+        if len(ranked) > 1:
+            rule = observation_rule(observed, lengths, mask.shape)
+            self.choice(rule)
+            ranked = self.choices_[rule.key]["ranked"]
+        for setting in ranked:  # the best the K-fold found whose fit on all the data succeeds
+            try:
+                out = self._conditioned(None, setting, seen, mask, labels, lengths)
+            except np.linalg.LinAlgError as exc:
+                failure = exc
+                continue
+            return Forecast(out, None, {"setting": dict(setting), "model_share": 0.0})
+        raise UserError(f"{type(self).__name__}: no setting can be fitted ({failure})")
 
     def predict(self, motor, observed, labels=None, lengths=None, frames=None, **options) -> np.ndarray:
         """:meth:`forecast`'s motion."""

@@ -44,6 +44,7 @@ __all__ = [
     "run_predictor",
     "predictor_for",
     "model_share",
+    "built_on_run",
 ]
 
 #: The registry's name of gradient inference from a start (the starts name it in a request).
@@ -222,12 +223,17 @@ def run_predictor(predictor: Predictor, run: TrainedRun, data: MotionDataset, ob
     return predictor.forecast(scaled, observation, data.labels, data.valid_lengths, frames, **extra)
 
 
-def model_share(name: str, details: dict) -> float:
+def model_share(details: dict, built_on_run: bool) -> float:
     """The share of a prediction that comes through the run's decoder, for ``result.json`` and the tables:
-    ``details["model_share"]`` where the predictor named ``name`` reports one (the prior: the weight of its
-    decoded draws, ``1 - blend``); else 1.0 for a predictor built on a run (it decodes codes) and 0.0 for a
-    peer (it never reads the run)."""
+    ``details["model_share"]`` where the predictor reports one (the prior: the weight of its decoded draws,
+    ``1 - blend``); else 1.0 for a predictor ``built_on_run`` (it decodes codes: :func:`built_on_run`) and 0.0
+    for a peer (it never reads the run)."""
     share = details.get("model_share")
     if share is not None:
         return float(share)
-    return 1.0 if spec_for(name).needs_run else 0.0
+    return 1.0 if built_on_run else 0.0
+
+
+def built_on_run(predictor: Predictor) -> bool:
+    """Whether ``predictor`` is built on a trained run (primspace's own; the peers are not)."""
+    return "run" in predictor.get_params()
