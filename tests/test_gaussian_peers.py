@@ -127,5 +127,5 @@ def test_a_setting_that_cannot_be_fitted_is_not_chosen(data):
     assert np.isnan(peer.choices_[rule.key]["scores"][repr({"n_basis": 6, "ridge": 0.0, "noise": 1e-3})])
     peer = _Fragile(n_iter=20)
     peer.bases = (6, 6)
-    with pytest.raises(UserError, match="cannot be fitted"):
+    with pytest.raises(UserError, match="no setting can be fitted"):
         peer.fit(x, labels).forecast(y, rule, test_labels)
