@@ -207,6 +207,7 @@ def test_predict_command_writes_data_result_and_figure(run_cli, train_set, eval_
     assert "motions predicted" in res.out
     result = json.loads((out / "result.json").read_text())
     assert result["n"] == len(eval_set) and result["mean"]["motor_mse"] > 0 and result["success"] is None
+    assert result["model_share"] == 1.0  # the mixture decodes codes: all of it comes through the decoder
     assert len(result["per_sample"]["motor_mse"]) == len(eval_set)
     assert MotionDataset.load(out / "predicted.h5").motor.shape == eval_set.motor.shape
     assert (out / "prediction.png").stat().st_size > 1000

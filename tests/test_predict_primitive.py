@@ -182,6 +182,7 @@ def test_the_command_without_a_primitive_writes_the_posterior_and_its_figure(run
     posterior = np.asarray(result["posterior"])
     assert posterior.shape == (9, 3) and np.allclose(posterior.sum(axis=1), 1.0)
     assert 0.0 <= result["posterior_accuracy"] <= 1.0 and len(result["top_primitive"]) == 9
+    assert result["model_share"] == pytest.approx(1.0 - result["prior"]["blend"])  # the decoded draws' weight
     assert_figure(out / "posterior.png", height=(200, 2500), min_coloured=200)
     assert sorted(p.name for p in out.iterdir()) == ["posterior.png", "predicted.h5", "prediction.png", "result.json"]
 
