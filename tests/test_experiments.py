@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from conftest import assert_figure, assert_user_error
-from primspace.utils.errors import UserError
 from primspace.experiments import presets as experiment_presets
 from primspace.experiments.clustering import run_clustering
 from primspace.experiments.inter import run_inter
 from primspace.experiments.intra import run_intra, split_indices
 from primspace.experiments.presets import ExperimentPreset, default_train
-from primspace.results.tables import qualitative_check
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
+from primspace.results.tables import qualitative_check
+from primspace.utils.errors import UserError
 
 TINY = ExperimentPreset(
     name="tiny",
@@ -97,10 +97,8 @@ def _hungarian_accuracy(true, pred) -> float:
 @pytest.mark.slow
 def test_clustering_and_success_results(finished):
     from primspace.cluster import LowRankSubspaceClustering
-    from primspace.results.layout import INITIAL_CODES, LEARNED_CODES
-    from primspace.results.layout import intra_key
     from primspace.experiments.runs import load_codes
-    from primspace.results.layout import run_dir_of
+    from primspace.results.layout import INITIAL_CODES, LEARNED_CODES, intra_key, run_dir_of
     from primspace.sim.success import evaluate_dataset
     from primspace.train import load_run, reconstruct
 
@@ -180,7 +178,6 @@ def test_figures_are_drawn_from_the_results_alone(finished, tmp_path):
     import shutil
 
     from conftest import read_png
-
     from primspace.experiments import figures
 
     exp = finished[0]
@@ -241,10 +238,16 @@ def test_experiment_dir_refuses_another_preset_or_data(finished, tmp_path):
         ExperimentDir(exp.path, TINY, data=other)
 
 
+@pytest.fixture(scope="module")
+def inter_done(tiny_data, tmp_path_factory):
+    """The tiny preset's inter-primitive folds, run once for the tests that read them."""
+    exp = ExperimentDir(tmp_path_factory.mktemp("inter") / "inter", TINY, data=tiny_data, workers=1, progress=False)
+    return exp, run_inter(exp)
+
+
 @pytest.mark.slow
-def test_inter_primitive_folds(tiny_data, tmp_path):
-    exp = ExperimentDir(tmp_path / "inter", TINY, data=tiny_data, workers=1, progress=False)
-    results = run_inter(exp)
+def test_inter_primitive_folds(inter_done):
+    exp, results = inter_done
     assert results["failures"] == {}
     assert sorted(r["fold"] for r in results["runs"]) == list(range(7))
     for r in results["runs"]:
@@ -262,14 +265,13 @@ def _scaled_targets(run_dir, data):
 
 
 @pytest.mark.slow
-def test_every_fold_scales_its_targets_into_the_unit_range(tiny_data, tmp_path):
+def test_every_fold_scales_its_targets_into_the_unit_range(inter_done, tiny_data):
     """The paper scales each joint "over all motions": a phase-2 primitive whose joints did
     not move in phase 1 (grasp's fingers) must not keep its targets in physical units."""
     from primspace.data import MotionDataset
 
     data = MotionDataset.load(tiny_data)
-    exp = ExperimentDir(tmp_path / "inter", TINY, data=tiny_data, workers=1, progress=False)
-    results = run_inter(exp)
+    exp, results = inter_done
     grasp = data.label_names.index("grasp")
     fingers = [j for j, name in enumerate(data.joint_names) if "finger" in name]
     assert fingers, data.joint_names
@@ -473,8 +475,8 @@ def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp
     part carved from the fitted part (never the evaluation part), and the intra protocol
     reruns with each init's choice beside the shared setting."""
     from primspace.experiments.intra import split_indices
-    from primspace.results.tables import tuning_table
     from primspace.experiments.tuning import TUNING_GRID, run_tune, settings_of, validation_split
+    from primspace.results.tables import tuning_table
     from primspace.sim.generate import GenerationConfig, generate_dataset
 
     with pytest.raises(UserError, match="one sample per primitive, so none is left to validate on"):
@@ -590,6 +592,27 @@ def test_tiny_experiment_numbers_are_pinned(finished):
 
 
 @pytest.mark.slow
+def test_clustering_and_success_over_seeds(finished, tiny_data, tmp_path):
+    """Two seeds: the first seed's results are those of the one-seed tiny grid, bit for bit;
+    the second's are under ``by_seed``; the outcome table averages both."""
+    from primspace.results.tables import outcome_spread_table
+
+    _, _, c1, s1 = finished
+    two = ExperimentDir(tmp_path / "two", replace(TINY, seeds=(0, 1)), data=tiny_data, workers=1, progress=False)
+    c2, s2 = run_clustering(two), run_success(two)
+    assert c2["latent"] == c1["latent"] and s2["generated"] == s1["generated"]
+    assert c1["by_seed"] == {} and s1["by_seed"] == {}
+    assert {r["init"] for r in c2["by_seed"]["1"]} == {"zero", "projection"} and len(c2["by_seed"]["1"]) == 3
+    assert set(s2["by_seed"]["1"]) == {"zero", "projection"}
+    assert outcome_spread_table(c1, s1) is None
+    columns, rows = outcome_spread_table(c2, s2)
+    row = next(r for r in rows if r[0] == "projection")
+    rates = [s2["generated"]["projection"]["overall"], s2["by_seed"]["1"]["projection"]["overall"]]
+    assert row[1] == 2 and row[2] == f"{np.mean(rates):.3g} ± {np.std(rates, ddof=1):.2g}"  # sample std
+    assert any(r[0] == "untrained P m" for r in rows)
+
+
+@pytest.mark.slow
 def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path):
     """The intra-primitive protocol on LASA (issue 14): the preset imports the data itself
     (offline), fits 2 of each shape's 7 demonstrations and infers the other 5."""
@@ -613,8 +636,8 @@ def test_lasa_preset_imports_real_demonstrations_and_runs_the_protocol(tmp_path)
 def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tmp_path, run_cli):
     from primspace.cli.experiments import _judgeable_steps
     from primspace.data import import_lasa
-    from primspace.utils.errors import DataError
     from primspace.experiments.presets import PRESETS
+    from primspace.utils.errors import DataError
 
     lasa = tmp_path / "lasa.h5"
     import_lasa(length=20, shapes=["Angle", "Sine"]).save(lasa)
@@ -681,13 +704,15 @@ def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
 
 
 @pytest.mark.slow
-def test_an_experiment_directory_takes_more_inits_but_not_fewer(tiny_data, tmp_path):
+def test_an_experiment_directory_takes_more_inits_but_not_fewer(finished, tmp_path):
     """A directory of an older version (four inits) gains calibrated runs beside its own;
     dropping an init or changing any other setting is still refused."""
+    import shutil
+
     from primspace.utils.errors import UserError
 
-    exp = ExperimentDir(tmp_path / "grow", TINY, data=tiny_data, workers=1, progress=False)
-    run_intra(exp)
+    shutil.copytree(finished[0].path, tmp_path / "grow", symlinks=True)  # the tiny grid, run
+    exp = ExperimentDir(tmp_path / "grow", TINY, workers=1, progress=False)
     exp.save_meta()
     more = replace(TINY, inits=("zero", "projection", "calibrated"))
     grown = ExperimentDir(exp.path, more, workers=1, progress=False)

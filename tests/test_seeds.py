@@ -4,8 +4,6 @@ intra results whose numbers we choose."""
 
 import json
 
-import pytest
-
 from primspace.results.claims import check_claims
 
 
@@ -118,36 +116,6 @@ def test_spread_table_is_mean_and_std_over_seeds():
     ]
     assert rows[0][3] == "0.0002 ± 0.0001" and rows[0][5] == "0.0005 ± 0.00036"
     assert spread_table({"runs": runs[:1]}) is None  # one seed: no spread
-
-
-@pytest.mark.slow
-def test_clustering_and_success_over_seeds(tmp_path, tiny_data):
-    """Two seeds: the first seed's results are those of a one-seed experiment, bit for
-    bit; the second's are under ``by_seed``; the outcome table averages both."""
-    from dataclasses import replace
-
-    import numpy as np
-    from test_experiments import TINY
-
-    from primspace.experiments.clustering import run_clustering
-    from primspace.results.tables import outcome_spread_table
-    from primspace.experiments.success import run_success
-    from primspace.experiments.workspace import ExperimentDir
-
-    data = tiny_data
-    one = ExperimentDir(tmp_path / "one", TINY, data=data, workers=1, progress=False)
-    two = ExperimentDir(tmp_path / "two", replace(TINY, seeds=(0, 1)), data=data, workers=1, progress=False)
-    (c1, s1), (c2, s2) = [(run_clustering(e), run_success(e)) for e in (one, two)]
-    assert c2["latent"] == c1["latent"] and s2["generated"] == s1["generated"]
-    assert c1["by_seed"] == {} and s1["by_seed"] == {}
-    assert {r["init"] for r in c2["by_seed"]["1"]} == {"zero", "projection"} and len(c2["by_seed"]["1"]) == 3
-    assert set(s2["by_seed"]["1"]) == {"zero", "projection"}
-    assert outcome_spread_table(c1, s1) is None
-    columns, rows = outcome_spread_table(c2, s2)
-    row = next(r for r in rows if r[0] == "projection")
-    rates = [s2["generated"]["projection"]["overall"], s2["by_seed"]["1"]["projection"]["overall"]]
-    assert row[1] == 2 and row[2] == f"{np.mean(rates):.3g} ± {np.std(rates, ddof=1):.2g}"  # sample std
-    assert any(r[0] == "untrained P m" for r in rows)
 
 
 def _rates(zero, projection, n=100, by_tolerance=None):
