@@ -109,6 +109,7 @@ def _close(got, want, where: str) -> None:
         assert got == want, where
 
 
+@pytest.mark.slow
 def test_acting_keeps_its_numbers(case):
     pinned = pinned_for_this_cpu(json.loads(PINNED.read_text()), "acting numbers", vendor=True)
     _close(numbers(case), pinned, "acting")

@@ -102,6 +102,7 @@ def test_weighted_loss_is_the_loss_of_the_real_rows():
         assert torch.allclose(real, weighted, rtol=1e-6) and torch.allclose(values, wvalues, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_compiled_step_is_the_eager_step(monkeypatch):
     # dynamo traces the recurrent loop; "eager" runs the traced graph (inductor's first compile
     # takes minutes on two cores: tests/gpu, benchmarks/bench_train.py --paths compiled measure it)

@@ -80,6 +80,7 @@ def test_motion_dataset_scales_joints_and_ignores_unknown_labels(run_cli, motion
     assert result == json.loads((out / "result.json").read_text())
 
 
+@pytest.mark.slow
 def test_sweep_prints_the_table(run_cli, latents, tmp_path):
     z, y = latents
     out = tmp_path / "out"

@@ -91,6 +91,7 @@ def test_all_observed_reconstructs_about_as_well_as_infer(trained, eval_set):
 # ------------------------------------------------------------------------ the forecast
 
 
+@pytest.mark.slow
 def test_the_forecast_improves_as_more_is_observed(trained, eval_set):
     result = infer_online(trained, eval_set, iterations=20)
     early, late = result.error_at(3), result.error_at(18)  # 10 % and 60 % of T = 30 observed

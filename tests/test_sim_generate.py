@@ -75,6 +75,7 @@ def test_ik_tracks_the_scripted_path_within_2mm(tiny, scene):
         assert np.all(rot[:, 2, 2] < -0.999)
 
 
+@pytest.mark.slow
 def test_same_seed_same_arrays_for_any_worker_count(tmp_path):
     one = generate_dataset(TINY, seed=5, workers=1, out=tmp_path / "one.h5", progress=False)
     two = generate_dataset(TINY, seed=5, workers=2, out=tmp_path / "two.h5", progress=False)

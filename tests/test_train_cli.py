@@ -28,6 +28,7 @@ def data_file(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_train_infer_reconstruct(run_cli, data_file, tmp_path):
     (tmp_path / "train.txt").write_text("0 2 4 6\n")
     np.save(tmp_path / "eval.npy", np.array([1, 3, 5, 7]))
