@@ -99,6 +99,7 @@ def test_sweep_prints_the_table(run_cli, latents, tmp_path):
     assert len(json.loads((out / "sweep.json").read_text())) == 3
 
 
+@pytest.mark.slow
 def test_existing_output_is_refused_unless_overwrite(run_cli, latents, tmp_path):
     z, _ = latents
     out = tmp_path / "out"
@@ -190,6 +191,7 @@ def test_bad_data_is_one_line_naming_the_file(run_cli, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_figures_handle_unknown_labels_extra_clusters_and_empty_sweeps(tmp_path):
     from primspace.plots import plot_clustering, plot_tau_sweep, save_figure
 

@@ -36,6 +36,7 @@ def test_a_second_writer_is_refused_while_the_first_holds_the_run(tmp_path):
     assert (run / LOCK_NAME).is_file() and load_run(run).epoch == 2  # the lock file is not a run file
 
 
+@pytest.mark.slow
 def test_the_lock_goes_with_a_killed_process(tmp_path):
     """A writer killed while training leaves no lock behind: the next run takes the folder."""
     data = primitives(2, seed=0, T=12, J=2)

@@ -80,6 +80,7 @@ def _tc(**kw):
 # ---------------------------------------------------------------------- learning
 
 
+@pytest.mark.slow
 def test_fit_reaches_a_low_loss(train_set, tmp_path):
     run = fit(
         train_set, tmp_path / "run", model_config=SMALL, train_config=_tc(epochs=60), init="projection", progress=False
@@ -427,6 +428,7 @@ def test_train_config_json_roundtrip_and_unknown_field():
         TrainConfig.from_dict({**cfg.to_dict(), "momentum": 0.9})
 
 
+@pytest.mark.slow
 def test_inference_updates_do_not_depend_on_the_batch_size(train_set, eval_set, tmp_path):
     """With θ frozen every code steps on its own sample's gradient: batch 5 (24 samples,
     a short last batch every epoch), 7 and 24 give the same codes. Stepping on the

@@ -107,6 +107,7 @@ def test_train_infer_reconstruct(run_cli, data_file, tmp_path):
     assert_user_error(res, "cannot resume", "latent_dim")
 
 
+@pytest.mark.slow
 def test_train_without_images(run_cli, data_file, tmp_path):
     res = run_cli(
         "train",
