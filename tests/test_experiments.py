@@ -730,10 +730,16 @@ def test_predict_grid_compares_starts_and_peers_over_fractions(finished):
     """`experiment predict`: every start and peer at every fraction, judged on simulator data, resumable."""
     from primspace.experiments.prediction import PEERS, PREDICT_VERSION, run_predict
     from primspace.predict.grid import PRIOR_ROWS
-    from test_predict_pinned import CHEAP_PRIORS  # the priors' rows small and fast: they are only there
+    from test_predict_pinned import CHEAP_PEERS, CHEAP_PRIORS  # the priors' and tuned peers' rows small and fast
 
     exp = finished[0]
-    args = dict(fractions=(0.25, 0.5), starts=("zero", "mixture"), epochs=2, prior_settings=CHEAP_PRIORS)
+    args = dict(
+        fractions=(0.25, 0.5),
+        starts=("zero", "mixture"),
+        epochs=2,
+        prior_settings=CHEAP_PRIORS,
+        peer_settings=CHEAP_PEERS,
+    )
     results = run_predict(exp, **args)
     table = results["table"]
     assert set(table) == {

@@ -98,9 +98,11 @@ def run_predict_point(
     judge: bool,
     max_samples: int | None = None,
     prior_settings: dict | None = None,
+    peer_settings: dict | None = None,
 ) -> dict:
     """One seed: every row (:func:`~primspace.predict.grid.grid_predictors`, ``prior_settings`` its
-    keywords of the priors' rows; None: their defaults) at every fraction; mean unobserved MSE (and
+    keywords of the priors' rows, ``peer_settings`` those of the tuned peers; None: their defaults)
+    at every fraction; mean unobserved MSE (and
     success) over the run's evaluation samples (at most ``max_samples``: :func:`predicted_subset`)."""
     from primspace.predict.grid import grid_forecasts, grid_predictors, posterior_accuracy
     from primspace.predict.metrics import finite_mean, unobserved_mse
@@ -116,7 +118,7 @@ def run_predict_point(
     )
     test = data.subset(test_idx)
     truth = fit.scaler.transform(test.motor)
-    rows = grid_predictors(fit, data, tuple(starts), epochs, prior_settings=prior_settings)
+    rows = grid_predictors(fit, data, tuple(starts), epochs, prior_settings=prior_settings, peer_settings=peer_settings)
     table: dict = {}
     for f in tuple(fractions) + ((1.0,) if judge else ()):
         key = f"{f:g}"
@@ -162,11 +164,12 @@ def run_predict(
     epochs: int = PREDICT_EPOCHS,
     seeds=None,
     prior_settings: dict | None = None,
+    peer_settings: dict | None = None,
 ) -> dict:
     """The prediction grid over the intra runs' seeds (runs intra first if needed); ``seeds``:
-    only those of them (the results then hold those seeds only); ``prior_settings``: keywords of
-    the priors' rows (:func:`~primspace.predict.grid.grid_predictors`; None, as the command runs
-    it: their defaults). The points' keys do not say them: points computed with other settings
+    only those of them (the results then hold those seeds only); ``prior_settings``,
+    ``peer_settings``: keywords of the priors' and the tuned peers' rows
+    (:func:`~primspace.predict.grid.grid_predictors`; None, as the command runs it: their defaults). The points' keys do not say them: points computed with other settings
     are reused as they are."""
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
@@ -187,7 +190,7 @@ def run_predict(
                 int(epochs),
                 judge,
                 PREDICT_MAX_SAMPLES,
-                *(() if prior_settings is None else (prior_settings,)),
+                *(() if prior_settings is None and peer_settings is None else (prior_settings, peer_settings)),
             ),
         )
         for s in seeds
