@@ -27,3 +27,10 @@ def test_readme_python_example_runs_as_written(tmp_path, monkeypatch):
     assert namespace["frames"] is None  # these demonstrations have no camera frames
     np.testing.assert_array_equal(namespace["model"].codes_, Z)  # loaded back from runs/fit
     assert (tmp_path / "runs" / "fit" / "checkpoint.pt").is_file()
+
+
+def test_readme_stays_a_front_door():
+    """README is what, quick start, one picture, results at a glance and links: at most 1,500 words;
+    detail lives in docs/."""
+    words = len(README.read_text(encoding="utf-8").split())
+    assert words <= 1500, f"README.md has {words} words"
