@@ -97,22 +97,7 @@ FORBIDDEN = {
     "act": ("results", "experiments", "report", "demo", "cli"),
     # reading an experiment folder's results (its layout, readers, tables, the claims): JSON and arrays
     # only, below the experiments that write them and the report that prints them
-    "results": (
-        "sim",
-        "cluster",
-        "probe",
-        "segmentation",
-        "model",
-        "train",
-        "predict",
-        "estimator",
-        "plots",
-        "act",
-        "experiments",
-        "report",
-        "demo",
-        "cli",
-    ),
+    "results": tuple(f for f in ABOVE_UTILS if f not in ("data", "results")),
     "experiments": ("report", "demo", "cli"),
     # the report reads results only: no experiment
     "report": ("experiments", "demo", "cli"),
