@@ -179,6 +179,7 @@ def test_a_scene_given_as_x_y_size(run_cli, files, tmp_path):
         ("missing file", ("nowhere.h5",)),
     ],
 )
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_writes_nothing(run_cli, files, tmp_path, case, fragments):
     out = tmp_path / "out"
     run, primitive, scene, extra = files["run"], "push", _scene(files), []

@@ -219,6 +219,7 @@ def test_animate_writes_a_gif_with_every_panel(run_cli, sim_run, tmp_path):
         assert gif.size[0] < width and gif.n_frames == MAX_FRAMES  # 31 steps, 30 frames by default
 
 
+@pytest.mark.slow
 def test_animate_refuses_bad_options_in_one_line(run_cli, sim_run, tmp_path):
     out = tmp_path / "a.gif"
     assert_user_error(

@@ -52,6 +52,7 @@ def motion_file(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_latents_with_labels(run_cli, latents, tmp_path):
     z, y = latents
     out = tmp_path / "out"

@@ -6,6 +6,7 @@ the output folder."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -14,6 +15,7 @@ from primspace.utils.errors import DataError, UserError
 FUZZ = settings(max_examples=60, derandomize=True, deadline=None, suppress_health_check=list(HealthCheck))
 
 
+@pytest.mark.slow
 @FUZZ
 @given(st.text(max_size=12))
 def test_an_observed_amount_is_a_number_a_word_or_one_line(text):

@@ -192,6 +192,7 @@ def _fail_at(monkeypatch, bad: set[int]) -> list[int]:
     return made
 
 
+@pytest.mark.slow
 def test_merged_file_equals_in_memory_generation(tmp_path, reference):
     out = tmp_path / "d.h5"
     shards = []

@@ -148,6 +148,7 @@ def test_a_full_disk_is_one_line_naming_the_output_and_the_disk(run_cli, data_fi
     assert not [p for p in (small_disk / "run").iterdir() if p.name.endswith(".tmp")]  # no half-written file
 
 
+@pytest.mark.slow
 def test_predict_options_are_never_ignored_without_a_word(run_cli, data_file, tmp_path):
     """Issue 38, item 7: --observe '' meant 0.25, --iterations without --online and --fitted-data
     with a start that does not read it were ignored, a fully observed motion trailed off."""

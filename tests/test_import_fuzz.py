@@ -148,6 +148,7 @@ def _outcome(run_cli, src, args, out) -> str:
     return f"failed import left {left}" if left else ""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", list(FORMATS))
 def test_damaged_inputs_import_or_fail_in_one_line(run_cli, tmp_path, fmt):
     (tmp_path / "in").mkdir()

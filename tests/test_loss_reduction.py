@@ -177,6 +177,7 @@ def test_validate_refuses_another_reduction():
 # ---------------------------------------------------------------------- training
 
 
+@pytest.mark.slow
 def test_training_under_the_sum_is_stable_with_the_default_learning_rates(motor_set, image_set):
     """Default lr / latent_lr: finite, decreasing. Motor only, the sum is T·J times the
     mean, and Adam (eps aside) ignores a constant factor: the same path as under "mean"."""
@@ -291,6 +292,7 @@ TINY = experiment_presets.ExperimentPreset(
 )
 
 
+@pytest.mark.slow
 def test_experiment_flag_and_a_changed_reduction_refused(run_cli, motor_set, tmp_path, monkeypatch):
     monkeypatch.setitem(experiment_presets.PRESETS, "tiny-sum", TINY)
     data, out = tmp_path / "d.h5", tmp_path / "exp"

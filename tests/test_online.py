@@ -48,6 +48,7 @@ def _scaled_mse(run, predicted, data) -> float:
 # ------------------------------------------------------------------ the same loss as infer
 
 
+@pytest.mark.slow
 def test_one_step_is_infer_from_that_many_steps(trained, eval_set):
     """The first arriving step's k iterations are infer(observe=t, epochs=k): same start, loss and Adam."""
     online = OnlineInference(trained, eval_set, iterations=15, start_step=10)
@@ -115,6 +116,7 @@ def test_offline_errors_read_the_same_measure(trained, eval_set):
 # -------------------------------------------------------------- determinism, warm start
 
 
+@pytest.mark.slow
 def test_same_seed_same_codes_and_no_iterations_keep_the_start(trained, eval_set):
     a = infer_online(trained, eval_set, iterations=3, init="random", seed=7)
     b = infer_online(trained, eval_set, iterations=3, init="random", seed=7)
@@ -142,6 +144,7 @@ def test_steps_not_yet_arrived_never_count(trained, eval_set):
 # --------------------------------------------------------------------------- padding
 
 
+@pytest.mark.slow
 def test_padding_never_counts(trained, eval_set):
     lengths = np.array([30, 20, 12, 30, 25, 16, 30, 8, 22])
     data = _padded(eval_set, lengths)

@@ -104,6 +104,7 @@ class _no_exit:
         return False
 
 
+@pytest.mark.slow
 def test_two_import_processes_into_one_output_one_wins(npz_pair, tmp_path):
     """Two `primspace import` processes started together: whatever the interleaving, one
     exits 0, the other exits 2 with one line, and the file is the winner's."""
@@ -295,6 +296,7 @@ def test_overwrite_refuses_a_data_set_another_runs_checkpoint_and_a_python_file(
     assert load_run(fit_run).epoch == 2  # the run still loads
 
 
+@pytest.mark.slow
 def test_overwrite_replaces_an_earlier_output_of_the_same_command_only(run_cli, fit_run, data_file, npz_pair, tmp_path):
     from primspace.utils.outputs import file_writer
 
@@ -397,6 +399,7 @@ def _without_dac_override() -> list[str]:
     return [setpriv, f"--inh-caps={drop}", f"--bounding-set={drop}", "--"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["cluster", "train", "experiment"])
 def test_a_read_only_empty_output_folder_is_refused_not_swapped(points, data_file, tmp_path, command):
     out = tmp_path / "ro_run"

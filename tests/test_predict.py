@@ -254,6 +254,7 @@ def test_online_prediction_reports_latency_and_the_error_against_time(run_cli, t
         predict(trained, eval_set, observe=0.5, init="zero", online=-1)
 
 
+@pytest.mark.slow
 def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
     """The README's path for one's own demonstrations: a CSV folder imported, fitted, predicted."""
     data = primitives(4, seed=7, T=20, J=3)

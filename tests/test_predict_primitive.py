@@ -61,6 +61,7 @@ def _predict(files, **kw):
 # ------------------------------------------------------------------------ Python
 
 
+@pytest.mark.slow
 def test_the_primitive_asked_changes_the_prediction(files):
     push = _predict(files, primitive="push")
     lift = _predict(files, primitive="lift")
@@ -72,6 +73,7 @@ def test_the_primitive_asked_changes_the_prediction(files):
     assert np.abs(np.where(observed, push.motor - lift.motor, 0)).max() < np.abs(push.motor - lift.motor).max()
 
 
+@pytest.mark.slow
 def test_without_a_primitive_the_posterior_is_in_the_details(files):
     p = _predict(files, init=PRIOR)
     posterior = np.asarray(p.details["posterior"])

@@ -55,6 +55,7 @@ def _predict(run_cli, files, out, *flags, run="run", data="data.h5"):
     return run_cli("predict", files / run, files / data, "--scene", *flags, "--threads", "1", "--out", out)
 
 
+@pytest.mark.slow
 def test_the_default_of_predict_scene_is_the_scene_policy(run_cli, files, tmp_path):
     """The test that says the default is the best: `--scene` with no other choice runs the scene policy,
     and the command's motions are those of `predict_from_scene` in Python."""
@@ -90,6 +91,7 @@ def test_python_predicts_from_the_scene_with_the_scene_policy(files):
     assert np.abs(other.motor - p.motor).max() > 1e-3  # another primitive, another motion
 
 
+@pytest.mark.slow
 def test_the_scene_policy_needs_no_image_head(run_cli, files, tmp_path):
     """It reads the fitted demonstrations' frames, not the run's image head."""
     res = _predict(run_cli, files, tmp_path / "o", "--primitive", "0", run="motor_run")
@@ -97,6 +99,7 @@ def test_the_scene_policy_needs_no_image_head(run_cli, files, tmp_path):
     assert json.loads((tmp_path / "o" / "result.json").read_text())["name"] == "reach"
 
 
+@pytest.mark.slow
 def test_a_primitive_is_a_cluster_of_the_fitted_codes_when_asked(run_cli, files, tmp_path):
     out = tmp_path / "clusters"
     res = _predict(run_cli, files, out, "--primitive", "0", "--primitives", "clusters")

@@ -69,6 +69,7 @@ def test_the_objective_falls_from_the_conditioned_code(given_prior, trained, tra
     assert forecast.details["prior"] == inner.details["prior"]
 
 
+@pytest.mark.slow
 def test_a_stiff_prior_holds_the_code_at_its_mean(given_prior, trained, train_set, eval_set):
     """A tiny covariance (a huge prior weight): from the mean the code stays there; from the
     conditioned code it goes there."""

@@ -71,6 +71,7 @@ def _primitive(policy, label) -> int:
 # ------------------------------------------------------------------------ forecast
 
 
+@pytest.mark.slow
 def test_forecast_has_the_shape_starts_at_the_given_joints_and_is_deterministic(sim):
     policy, held, motor, frames = sim["policy"], sim["held"], sim["motor"], sim["frames"]
     labels = sim["data"].labels[held]

@@ -146,6 +146,7 @@ def single_primitive_run(run_cli, tmp_path):
     return primitives(4, seed=1, T=30, J=3)
 
 
+@pytest.mark.slow
 def test_segment_by_synthesis_on_the_command_line(run_cli, tmp_path):
     pieces = single_primitive_run(run_cli, tmp_path)
     rng = np.random.default_rng(0)
@@ -201,6 +202,7 @@ def test_a_demonstration_that_no_tiling_fits_is_one_segment_of_its_nearest_templ
     assert np.allclose(result.segment_codes[0], codes[7]) and result.penalties[0] < 1e-3
 
 
+@pytest.mark.slow
 def test_the_offset_model_is_chosen_by_how_well_it_explains_the_data():
     from primspace.segmentation.synthesis import OFFSETS, by_offset
 

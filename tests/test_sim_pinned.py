@@ -156,6 +156,7 @@ def test_judge_version_is_pinned():
     assert JUDGE_VERSION == 2
 
 
+@pytest.mark.slow
 def test_generated_arrays_are_pinned(datasets):
     pinned, _ = pinned_for_this_cpu(BY_CPU, "generated arrays")
     assert {name: array_digests(ds) for name, ds in datasets.items()} == pinned

@@ -56,6 +56,7 @@ def numbers(history):
     return [{k: v for k, v in h.items() if k not in ("seconds", "samples_per_s")} for h in history]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers, frames", [(0, None), (2, 3)])
 def test_streaming_trains_the_same_numbers_as_frames_in_memory(data_file, workers, frames, monkeypatch):
     """θ, codes, both optimisers' states and the history, bit for bit; with K drawn frames
