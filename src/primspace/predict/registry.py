@@ -82,11 +82,6 @@ class PredictorSpec:
     command: bool
     build: Callable[[TrainedRun | None, PredictRequest], Predictor]
 
-    @property
-    def peer(self) -> bool:
-        """A peer (not built on a run)."""
-        return not self.needs_run
-
 
 def _mixture(run, request: PredictRequest) -> Predictor:
     return MixturePredictor(run, condition=request.condition, continuity=request.continuity, progress=request.progress)
