@@ -49,7 +49,7 @@ import torch
 from primspace.data import MotionDataset
 from primspace.model.latent import INFER_STARTS, LatentTable
 from primspace.predict.metrics import unobserved_mse
-from primspace.predict.stream import OnlineResult, Stream, follow, mean_over_samples, online_steps
+from primspace.predict.stream import OnlineResult, Stream, follow, mean_over_samples, online_steps, prefix_mask
 from primspace.train.api import as_run, infer, uses_images
 from primspace.train.checks import check_calibrated, check_data_fits, check_init
 from primspace.train.config import resolve_device
@@ -284,8 +284,8 @@ def infer_online(
         carry_moments=carry_moments,
         start_codes=start_codes,
     )
-    steps = np.arange(online.start_step, online.length + 1)
-    return follow(online, online.truth, online.lengths, steps, online.length, label="online", progress=progress)
+    steps, keep = online_steps(online.start_step, None, online.length)
+    return follow(online, online.truth, online.lengths, steps, keep, label="online", progress=progress)
 
 
 # ---------------------------------------------------------------- the offline figure
@@ -344,7 +344,7 @@ def offline_errors(
         )
         with torch.no_grad():
             predicted = parent.model(torch.from_numpy(inferred.latents), images=False).motor.numpy()
-        errors.append(unobserved_mse(predicted, truth, _prefix_mask(len(data), data.length, t), data.lengths))
+        errors.append(unobserved_mse(predicted, truth, prefix_mask(len(data), data.length, t), data.lengths))
         codes.append(inferred.latents)
     errors = np.stack(errors, axis=1)
     return {
@@ -372,11 +372,6 @@ def _start(
     (:func:`~primspace.train.starts.inference_start`), or ``start_codes`` when given."""
     observation = Observation.build(int(start_step))
     return inference_start(parent, init, data, scaled, observation, fitted_data, seed, start_codes)[1]
-
-
-def _prefix_mask(n: int, length: int, t: int) -> np.ndarray:
-    """(n, T) bool: steps ``1..t`` observed (a sample's padding is left out by its length)."""
-    return np.broadcast_to(np.arange(length) < t, (n, length))
 
 
 def _check_whole(name: str, value, least: int) -> int:

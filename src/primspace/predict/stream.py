@@ -21,7 +21,12 @@ from primspace.predict.metrics import unobserved_mse
 from primspace.utils.errors import UserError
 from primspace.utils.progress import progress_bar
 
-__all__ = ["OnlineResult", "Stream", "follow", "online_steps", "mean_over_samples"]
+__all__ = ["OnlineResult", "Stream", "follow", "online_steps", "mean_over_samples", "prefix_mask"]
+
+
+def prefix_mask(n: int, length: int, t: int) -> np.ndarray:
+    """(n, T) bool: steps ``1..t`` observed (a sample's padding is left out by its length)."""
+    return np.broadcast_to(np.arange(length) < t, (n, length))
 
 
 def mean_over_samples(errors: np.ndarray) -> np.ndarray:
@@ -157,9 +162,7 @@ def follow(
             if codes is None:
                 codes = np.empty((n, len(steps), code.shape[1]), dtype=np.float32)
             codes[:, s] = code
-            errors[:, s] = unobserved_mse(
-                predicted, truth, np.broadcast_to(np.arange(length) < t, (n, length)), lengths
-            )
+            errors[:, s] = unobserved_mse(predicted, truth, prefix_mask(n, length, t), lengths)
             if t == keep:
                 kept = predicted
             advance()
