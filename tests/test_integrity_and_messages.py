@@ -105,7 +105,7 @@ def test_a_saved_file_with_images_still_round_trips(tmp_path):
 
 
 def test_the_writer_mark(tmp_path):
-    from primspace.data.reading import file_writer
+    from primspace.utils.outputs import file_writer
 
     marked = _dataset().save(tmp_path / "m.h5", writer="primspace simulate")
     assert file_writer(marked) == "primspace simulate"

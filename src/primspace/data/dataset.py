@@ -199,7 +199,7 @@ class MotionDataset:
         Images are written in blocks of samples, one gzip-compressed chunk per sample,
         so saving a lazily-read image set never holds it all in memory. ``writer``, when
         given, is stored as the file attribute ``primspace_writer`` (read back by
-        :func:`primspace.data.reading.file_writer`).
+        :func:`primspace.utils.outputs.file_writer`).
 
         Raises
         ------

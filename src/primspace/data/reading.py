@@ -1,5 +1,6 @@
 """Reading a data set's HDF5 file: :func:`read_fields` (the :class:`MotionDataset`
-arguments it holds, checked) and :func:`file_writer` (the mark of the program that wrote it).
+arguments it holds, checked). The mark of the program that wrote it is read by
+:func:`primspace.utils.outputs.file_writer`.
 
 Which nodes and attributes a file has, their types and how attributes are encoded come
 from the schema table (:data:`primspace.data.schema.FIELDS`); writing and merging are
@@ -16,10 +17,10 @@ import h5py
 import numpy as np
 
 from primspace.data.images import LazyImages
-from primspace.data.schema import ARRAYS, ATTRIBUTES, SCHEMA_VERSION, WRITER_ATTRIBUTE, Field
+from primspace.data.schema import ARRAYS, ATTRIBUTES, SCHEMA_VERSION, Field
 from primspace.utils.errors import DataError, first_line
 
-__all__ = ["read_fields", "file_writer"]
+__all__ = ["read_fields"]
 
 #: Arrays held in memory (contiguous), then those read on demand (chunked per sample).
 _EAGER = tuple(f for f in ARRAYS if not f.lazy)
@@ -68,19 +69,6 @@ def read_fields(path: str | os.PathLike) -> dict:
         except OSError as exc:
             raise DataError(f"cannot read ({first_line(exc)})", path=path, field=a.name) from None
     return values
-
-
-def file_writer(path: str | os.PathLike) -> str | None:
-    """The writer mark of a file (its ``primspace_writer`` attribute), else None.
-
-    None also for a file that is missing, not HDF5 or unreadable: this never raises.
-    """
-    try:
-        with h5py.File(path, "r") as f:
-            value = f.attrs.get(WRITER_ATTRIBUTE)
-            return None if value is None else _as_str(value)
-    except Exception:  # noqa: BLE001 - not a file, not HDF5, unreadable: no mark
-        return None
 
 
 def _check_version(f: h5py.File, attr: Field, path) -> None:

@@ -98,7 +98,7 @@ CHECKSUM_CHUNK_BYTES = 1 << 18
 
 #: The optional file attribute marking which program wrote the file (``writer=`` of
 #: :meth:`MotionDataset.save` and :class:`DatasetWriter`; read by
-#: :func:`primspace.data.reading.file_writer`). Not a :class:`MotionDataset` field:
+#: :func:`primspace.utils.outputs.file_writer`). Not a :class:`MotionDataset` field:
 #: loading ignores it, and a file without it (every file written without ``writer=``,
 #: every file of other tools) has no mark.
 WRITER_ATTRIBUTE = DATA_SET_MARK  # primspace.utils.outputs reads it back

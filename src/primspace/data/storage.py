@@ -122,7 +122,7 @@ class DatasetWriter:
         gzip level of the per-sample image chunks.
     writer : str, optional
         A mark of the program writing the file (e.g. ``"primspace simulate"``), stored
-        as the file attribute ``primspace_writer`` and read back by :func:`~primspace.data.reading.file_writer`;
+        as the file attribute ``primspace_writer`` and read back by :func:`~primspace.utils.outputs.file_writer`;
         None (default) writes no mark.
 
     Examples

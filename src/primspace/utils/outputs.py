@@ -7,7 +7,7 @@ A command's mark is ``"primspace <command>"`` (``"primspace show"``). Where it i
   to matplotlib's ``savefig(metadata=...)``);
 - GIF animations: the comment extension, ``primspace <command>`` (:func:`gif_comment`);
 - HDF5 data sets: the root attribute ``primspace_writer``
-  (``MotionDataset.save(writer=...)``, read by :func:`primspace.data.reading.file_writer`).
+  (``MotionDataset.save(writer=...)``, read by :func:`primspace.utils.outputs.file_writer`).
   A data set without that attribute whose ``source`` is the simulator's is taken as
   ``primspace generate``'s (the generator records its settings there);
 - summaries (JSON): their own ``summary_version`` field (``primspace summarize``).
