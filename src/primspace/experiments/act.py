@@ -43,7 +43,7 @@ from primspace.experiments.sweep import GridPoint
 from primspace.experiments.workspace import ExperimentDir
 from primspace.predict.metrics import finite_mean
 from primspace.results.act import ALL, act_table, act_tables
-from primspace.results.layout import phase_dir
+from primspace.results.layout import figures_dir, phase_dir
 from primspace.utils.errors import UserError
 
 __all__ = [
@@ -254,7 +254,7 @@ def _animate(exp: ExperimentDir, q: int, seed: int, every: int) -> None:
     from primspace.act.command import act, write_animation
     from primspace.train import load_run
 
-    path = exp.path / "figures" / "act_push.gif"
+    path = figures_dir(exp.path) / "act_push.gif"
     data = exp.dataset()
     names = list(data.label_names or [])
     if path.exists() or "push" not in names:
