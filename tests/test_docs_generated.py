@@ -316,3 +316,18 @@ def test_a_stored_command_is_printed_with_placeholders_for_its_paths():
     )
     kept = "primspace experiment act --out exp --note 'two  spaces'"
     assert portable_command(kept) == kept
+
+
+def test_a_stored_command_the_cli_no_longer_has_is_marked_retired():
+    from primspace.cli.app import main as cli_main
+    from primspace.report.commands import RETIRED, portable_command
+
+    stored = "primspace experiment scene --preset demo --out /tmp/w/exp/b"
+    assert (
+        portable_command(stored)
+        == "primspace experiment scene --preset demo --out OUT  # retired in 0.9.0: no longer runs"
+    )
+    for command in RETIRED:  # each one really is gone from the CLI
+        with pytest.raises(SystemExit) as exited:
+            cli_main(command.split()[1:] + ["--help"])
+        assert exited.value.code == 2

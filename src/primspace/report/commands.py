@@ -6,7 +6,8 @@ placeholders: the experiment folder (``--out``/``-o``) by ``OUT``, a path inside
 ``OUT/<the rest>``, the data file (``--data``) by ``DATA`` and its suffix (``DATA.h5``),
 any other absolute path by its option's name in capitals (``--json /tmp/a.json`` ->
 ``JSON.json``) or ``PATH`` and its suffix. Relative paths and everything else are kept
-as written.
+as written. A command the CLI no longer has (:data:`RETIRED`) is kept, as history, with
+a comment that says so.
 """
 
 from __future__ import annotations
@@ -14,12 +15,15 @@ from __future__ import annotations
 import re
 from pathlib import PurePosixPath
 
-__all__ = ["OUT", "DATA", "portable_command"]
+__all__ = ["OUT", "DATA", "RETIRED", "portable_command"]
 
 #: The placeholder of the experiment folder.
 OUT = "OUT"
 #: The placeholder of the data file, before its suffix.
 DATA = "DATA"
+
+#: Commands the CLI no longer has, and the release that retired them.
+RETIRED = {"primspace experiment scene": "0.9.0"}
 
 _OUT_OPTIONS = ("--out", "-o")
 #: A path of one machine: from the root, the home (``~``) or a drive (``C:\``).
@@ -51,10 +55,12 @@ def _portable_line(line: str) -> str:
             parts[2 * i] = f"{flag}={_placeholder(value, flag, out)}"
         elif _ABSOLUTE.match(word):
             parts[2 * i] = _placeholder(word, option, out)
-    return "".join(parts)
+    retired = next((v for c, v in RETIRED.items() if line.split()[:3] == c.split()), None)
+    return "".join(parts) + (f"  # retired in {retired}: no longer runs" if retired else "")
 
 
 def portable_command(command: str) -> str:
     """``command`` (one or more lines) with every absolute path replaced by its named
-    placeholder (module docstring); a command without one is returned as it is."""
+    placeholder and every retired one marked (module docstring); any other command is
+    returned as it is."""
     return "\n".join(_portable_line(line) for line in command.split("\n"))

@@ -375,7 +375,7 @@ def render_composite(summary: dict) -> str:
 
 
 def render_scene(summary: dict) -> str:
-    """The scene-only table of one summary (``primspace experiment scene``)."""
+    """The scene-only table of one summary (of the retired ``primspace experiment scene``)."""
     sc = summary["results"]["scene"]
     seeds = sc.get("seeds") or summary.get("preset", {}).get("seeds", [])
     columns, rows = scene_table(sc)
