@@ -18,16 +18,14 @@ from __future__ import annotations
 import csv
 import io
 import os
-from pathlib import Path
 
 import numpy as np
 
 from primspace.utils.files import atomic_write_text
-from primspace.utils.folders import OutputKind, is_output_of
+from primspace.utils.folders import OutputKind
 
 __all__ = [
     "CLUSTER_OUTPUT",
-    "is_cluster_output",
     "OUTPUT_FILES",
     "figure_indices",
     "write_labels_csv",
@@ -44,11 +42,6 @@ OUTPUT_FILES = ("labels.csv", "result.json", "clustering.png", "sweep.csv", "swe
 CLUSTER_OUTPUT = OutputKind("primspace cluster", OUTPUT_FILES, frozenset({"n_clusters", "tau_option", "rank"}))
 
 SWEEP_COLUMNS = ("grid", "value", "tau", "tau_relative", "r2", "rank", "accuracy", "nmi", "ari", "note")
-
-
-def is_cluster_output(path: Path) -> bool:
-    """Whether ``path`` holds a ``result.json`` written by ``primspace cluster``."""
-    return is_output_of(path, CLUSTER_OUTPUT)
 
 
 def figure_indices(n: int, max_points: int = FIGURE_MAX_POINTS, seed: int = 0) -> np.ndarray:
