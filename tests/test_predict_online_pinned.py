@@ -13,24 +13,20 @@ import numpy as np
 import pytest
 
 from conftest import cpu_class, pinned_for_this_cpu
-from test_train import SMALL, primitives
+from test_train import primitives, small_run
 
 PINNED = Path(__file__).with_suffix(".json")
 
 
+def make_case():
+    """The small run, its fitted demonstrations and the test motions."""
+    train, test = primitives(6, seed=0, T=20), primitives(2, seed=100, T=20)
+    return small_run(train, epochs=10, final_lr_fraction=1.0), train, test
+
+
 @pytest.fixture(scope="module")
 def case():
-    from primspace.train import TrainConfig, fit
-
-    train, test = primitives(6, seed=0, T=20), primitives(2, seed=100, T=20)
-    run = fit(
-        train,
-        model_config=SMALL,
-        init="projection",
-        progress=False,
-        train_config=TrainConfig(epochs=10, batch_size=12, threads=1, final_lr_fraction=1.0),
-    )
-    return run, train, test
+    return make_case()
 
 
 def numbers(run, train, test) -> dict:
@@ -78,16 +74,6 @@ if __name__ == "__main__":  # records the pins of this CPU class
     import sys
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from primspace.train import TrainConfig, fit
-
-    train, test = primitives(6, seed=0, T=20), primitives(2, seed=100, T=20)
-    run = fit(
-        train,
-        model_config=SMALL,
-        init="projection",
-        progress=False,
-        train_config=TrainConfig(epochs=10, batch_size=12, threads=1, final_lr_fraction=1.0),
-    )
     table = json.loads(PINNED.read_text()) if PINNED.exists() else {}
-    table[cpu_class(vendor=True)] = numbers(run, train, test)
+    table[cpu_class(vendor=True)] = numbers(*make_case())
     PINNED.write_text(json.dumps(table, indent=1) + "\n")

@@ -15,7 +15,7 @@ import pytest
 
 from conftest import pinned_for_this_cpu
 from primspace.predict.grid import PRIOR_ROWS, TUNED_PEERS
-from test_train import SMALL, primitives
+from test_train import primitives, small_run
 
 PINNED = Path(__file__).with_suffix(".json")
 FRACTIONS = (0.1, 0.25, 0.5)
@@ -32,16 +32,8 @@ CHEAP_PEERS = {"promp_tuned": dict(n_basis=8, n_iter=50)}
 
 @pytest.fixture(scope="module")
 def case():
-    from primspace.train import TrainConfig, fit
-
     train, test = primitives(8, seed=0), primitives(4, seed=100)
-    run = fit(
-        train,
-        model_config=SMALL,
-        init="projection",
-        progress=False,
-        train_config=TrainConfig(epochs=30, batch_size=12, threads=1, final_lr_fraction=1.0),
-    )
+    run = small_run(train, epochs=30, final_lr_fraction=1.0)
     return run, train, test
 
 

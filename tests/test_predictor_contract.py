@@ -22,7 +22,7 @@ from sklearn.base import clone
 from primspace.predict import REGISTRY, MotionPredictor, Predictor, PriorPredictor
 from primspace.train.observe import Observation
 from primspace.utils.errors import UserError
-from test_train import SMALL, primitives
+from test_train import primitives, small_run
 
 #: Fixed noise, temperature and blend of the priors: no K-fold choice.
 FIXED = dict(noise=1e-3, temperature=10.0, blend=0.5)
@@ -53,16 +53,8 @@ ONLINE_IS_OFFLINE = ("mixture", "prior", "encoder")
 
 @pytest.fixture(scope="module")
 def case():
-    from primspace.train import TrainConfig, fit
-
     train, test = primitives(4, seed=0, T=16), primitives(2, seed=100, T=16)
-    run = fit(
-        train,
-        model_config=SMALL,
-        init="projection",
-        progress=False,
-        train_config=TrainConfig(epochs=5, batch_size=12, threads=1),
-    )
+    run = small_run(train, epochs=5)
     return run, run.scaler.transform(train.motor), train, run.scaler.transform(test.motor), test
 
 

@@ -26,6 +26,18 @@ SMALL = ModelConfig(latent_dim=6, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden
 FAST = dict(batch_size=12, threads=1)
 
 
+def small_run(train: MotionDataset, **train_config):
+    """A run of :data:`SMALL` fitted on ``train`` from the projection start (batch 12, one thread,
+    no progress bar; ``train_config``: the other TrainConfig fields, e.g. ``epochs``)."""
+    return fit(
+        train,
+        model_config=SMALL,
+        init="projection",
+        progress=False,
+        train_config=TrainConfig(batch_size=12, threads=1, **train_config),
+    )
+
+
 def primitives(n_per: int, *, seed: int, T: int = 30, J: int = 4, K: int = 3, images: bool = False) -> MotionDataset:
     """K primitives, each a 2-parameter family of smooth joint trajectories: a minimum-jerk
     reach to an end posture linear in (x, y), plus a primitive-specific oscillation whose
