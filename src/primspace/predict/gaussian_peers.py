@@ -293,4 +293,4 @@ class TunedProMPPeer(GaussianPeer):
         values, vectors = np.linalg.eigh(cov[np.ix_(order, order)])
         kept = values > 1e-12 * max(values.max(), 1e-300)  # its rank: at most the number of weights
         deviations = (vectors[:, kept] * np.sqrt(values[kept])).T
-        return DecodedGaussian.from_moments(promp.mean_trajectory(phase(length)).ravel(), deviations, length * joints)
+        return DecodedGaussian.from_moments(promp.mean_trajectory(times).ravel(), deviations, length * joints)
