@@ -68,6 +68,7 @@ def test_the_default_of_predict_scene_is_the_scene_policy(run_cli, files, tmp_pa
     assert result["primitive"] == 1 and result["name"] == "push" and result["policy"]["source"] == "labels"
     assert result["policy"]["primitives"]["names"] == NAMES and result["policy"]["primitives"]["sizes"] == [3, 3, 3]
     assert result["command"]["scene"] is True and result["command"]["mode"] == SCENE_POLICY
+    assert result["model_share"] == 0.0  # the motion map does not go through the run's decoder
     assert result["observe"] == {"motor": 1, "frames": "first"} and result["mean"]["motor_mse"] > 0
     predicted = MotionDataset.load(out / "predicted.h5")
     assert predicted.motor.shape == (9, 12, 3) and (out / "prediction.png").stat().st_size > 1000
@@ -85,6 +86,7 @@ def test_python_predicts_from_the_scene_with_the_scene_policy(files):
     p = predict_from_scene(files / "run", data, 2, indices=[0, 4, 8])
     assert p.init == p.details["mode"] == SCENE_POLICY and p.details["name"] == "wave" and p.details["primitive"] == 2
     assert p.codes.shape == (3, 0) and p.frames is None and p.motor.shape == (3, 12, 3)  # no code: the motion itself
+    assert p.details["model_share"] == 0.0
     assert p.motor_observed.sum(axis=1).tolist() == [1, 1, 1] and p.indices.tolist() == [0, 4, 8]
     assert np.isfinite(p.errors["motor_mse"]).all() and set(p.errors) == {"motor_mse"}
     other = predict_from_scene(files / "run", data, "reach", indices=[0, 4, 8])

@@ -86,6 +86,8 @@ def test_forecast_has_the_shape_starts_at_the_given_joints_and_is_deterministic(
     np.testing.assert_array_equal(a.motor, first_only.motor)
     assert a.details["policy"]["steps"] == list(STEPS) and a.details["policy"]["space"] == "motion"
     assert a.details["policy"]["primitives"]["names"] == list(PRIMS)
+    assert a.details["model_share"] == 0.0 and policy.model_share() == 0.0  # the motion map: no decoder
+    assert ScenePolicy(space="code").model_share() == 1.0  # the codes map: all of it decoded
     # fitted again (the same seed; the motion map does not depend on the later steps): the same plans
     again = ScenePolicy(steps=(0,), label_names=sim["data"].label_names)
     again.fit(motor[sim["fitted"]], sim["data"].labels[sim["fitted"]], None, frames[sim["fitted"]])

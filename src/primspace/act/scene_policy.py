@@ -355,7 +355,7 @@ class ScenePolicy(Predictor):
         out = np.stack([continue_from(p, m[:1], int(self.horizon)) for p, m in zip(plans, motor)])
         valid = valid_mask(check_lengths(lengths, n, length), length)
         out = np.where(valid[..., None], out, out[np.arange(n), check_lengths(lengths, n, length) - 1][:, None])
-        return Forecast(out, codes, {"policy": self.summary()})
+        return Forecast(out, codes, {"policy": self.summary(), "model_share": self.model_share()})
 
     def _ids(self, labels, n: int) -> np.ndarray:
         if self.primitive_ is not None:
@@ -364,6 +364,10 @@ class ScenePolicy(Predictor):
         if labels is None:
             raise UserError("the scene policy is given each motion's primitive: pass labels (or primitive=)")
         return self.primitives_.for_labels(labels)
+
+    def model_share(self) -> float:
+        """The share of a plan through the run's decoder: 1.0 with ``space="code"``, 0.0 with ``"motion"``."""
+        return 1.0 if self.space == "code" else 0.0
 
     def summary(self) -> dict:
         """What was fitted, for ``result.json``."""
@@ -420,7 +424,8 @@ def predict_from_scene(
     Prediction
         ``init`` ``"scene policy"``; ``codes`` an empty (n, 0) array (the policy predicts the motion
         itself, no code); ``frames`` None; the first step observed; ``details``: ``mode``, ``policy``
-        (:meth:`ScenePolicy.summary`), ``primitive`` (its id) and ``name``.
+        (:meth:`ScenePolicy.summary`), ``primitive`` (its id), ``name`` and ``model_share`` (0.0: the
+        motion does not come through the run's decoder).
     """
     parent = as_run(run)
     sub, idx = select(data, indices)
@@ -468,7 +473,8 @@ def predict_from_scene(
         errors={"motor_mse": unobserved_mse(forecast.motor, truth, motor_observed, sub.valid_lengths)},
         observation=observation.to_dict(),
         init=SCENE_POLICY,
-        details={"mode": SCENE_POLICY, "policy": policy.summary(), "primitive": k, "name": policy.primitives_.names[k]},
+        details={"mode": SCENE_POLICY, "policy": policy.summary(), "primitive": k, "name": policy.primitives_.names[k]}
+        | {"model_share": policy.model_share()},
     )
 
 
