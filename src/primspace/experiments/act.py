@@ -12,6 +12,9 @@ is scored by the MSE of the steps after the first (scaled units) and by the simu
 * ``scene policy`` (ours, :class:`~primspace.act.scene_policy.ScenePolicy`, the block's
   colour moments to the motion, per primitive) and ``scene policy (code)`` (the same map to
   the run's codes, decoded);
+* ``kernel ridge (blob, K-fold)``: the scene policy's kind of map (a Gaussian process's mean)
+  from the same features to the motion, its length scale and penalty chosen by K-fold on the
+  fitted demonstrations (:class:`~primspace.act.scene_peers.KernelRidgePeer`);
 * ``contextual ProMP (pixels)`` (the issue's peer: ridge from the PCA of the first frame's
   pixels to the ProMP weights of the primitive) and ``contextual ProMP (blob)`` (the same
   with our features: what the features alone buy);
@@ -27,6 +30,11 @@ every :data:`ACT_EVERY` steps with the current frame), ``open loop`` (its first 
 ``ProMP re-conditioned`` (a ProMP of the primitive conditioned on every executed step, every
 :data:`ACT_EVERY` steps; it does not see), and ``closed loop (no move)``: the closed loop
 without the perturbation.
+
+**What the model contributes.** Every row's entries carry ``model_share``, the share of its motion
+that comes through the run's decoder (:func:`primspace.predict.registry.model_share`): 1 for the
+rows that decode codes (``scene policy (code)``, ``reproduction``), 0 for the others, the scene
+policy's own rows included (its map predicts the motion, not a code).
 """
 
 from __future__ import annotations
@@ -50,6 +58,7 @@ __all__ = [
     "ACT_EVERY",
     "ACT_VERSION",
     "SCENE_ROWS",
+    "KERNEL_RIDGE",
     "LOOP_ROWS",
     "run_act",
     "run_act_point",
@@ -61,12 +70,13 @@ __all__ = [
 #: Steps between two looks in closed loop (:data:`primspace.act.planners.DEFAULT_EVERY`).
 ACT_EVERY = DEFAULT_EVERY
 #: Bumped when a grid point's content changes: points of another version are not reused.
-ACT_VERSION = 3
+ACT_VERSION = 4
 POLICY, POLICY_CODE = "scene policy", "scene policy (code)"
+KERNEL_RIDGE = "kernel ridge (blob, K-fold)"
 PROMP_PIXELS, PROMP_BLOB = "contextual ProMP (pixels)", "contextual ProMP (blob)"
 NEAREST, MEAN_MOTION, REPRODUCTION = "nearest first frame", "mean motion (labels)", "reproduction (whole motion)"
 #: The scene-only rows, in order.
-SCENE_ROWS = (POLICY, POLICY_CODE, PROMP_PIXELS, PROMP_BLOB, NEAREST, MEAN_MOTION, REPRODUCTION)
+SCENE_ROWS = (POLICY, POLICY_CODE, KERNEL_RIDGE, PROMP_PIXELS, PROMP_BLOB, NEAREST, MEAN_MOTION, REPRODUCTION)
 CLOSED, OPEN, PROMP_LOOP = PLANNERS
 CLOSED_STILL = f"{CLOSED} (no move)"
 #: The closed-loop rows (the first three with the block moved), in order.
@@ -79,37 +89,49 @@ def _first_step(n: int, length: int) -> np.ndarray:
     return np.repeat((np.arange(length) < 1)[None], n, axis=0)
 
 
-def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.ndarray, infer_dir: str, policy) -> dict:
-    """{row: motor (n, T, J) physical} of the scene-only rows; ``policy``: the closed loop's, fitted
-    (its first frame's map is the scene-only plan)."""
-    from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
+def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.ndarray, infer_dir: str, policy):
+    """The scene-only rows: {row: motor (n, T, J) physical}, {row: model share} and the kernel ridge's
+    chosen settings by primitive; ``policy``: the closed loop's, fitted (its first frame's map is the
+    scene-only plan)."""
+    from primspace.act.scene_peers import ContextualProMPPeer, KernelRidgePeer, NearestFramePeer
     from primspace.act.scene_policy import ScenePolicy
     from primspace.predict.peers import MeanMotionPeer
+    from primspace.predict.registry import built_on_run, model_share
     from primspace.train import load_run, reconstruct
 
     scaler = fit.scaler
     motor, truth = scaler.transform(fitted.motor), scaler.transform(test.motor)
     args = (motor, fitted.labels, fitted.lengths, fitted.images)
     query = (truth, _first_step(len(test), truth.shape[1]), test.labels, test.lengths, test.images)
-    out = {POLICY: scaler.inverse_transform(policy.predict(*query).astype(np.float32))}
+    seed = int(fit.train_config.seed)
     predictors = {
-        POLICY_CODE: ScenePolicy(fit, space="code", label_names=fitted.label_names),
-        PROMP_PIXELS: ContextualProMPPeer(features="pca"),
-        PROMP_BLOB: ContextualProMPPeer(features="blob"),
-        NEAREST: NearestFramePeer(),
-        MEAN_MOTION: MeanMotionPeer(),
+        POLICY: policy,
+        POLICY_CODE: ScenePolicy(fit, space="code", label_names=fitted.label_names).fit(*args),
+        KERNEL_RIDGE: KernelRidgePeer(features="blob", random_state=seed).fit(*args),
+        PROMP_PIXELS: ContextualProMPPeer(features="pca").fit(*args),
+        PROMP_BLOB: ContextualProMPPeer(features="blob").fit(*args),
+        NEAREST: NearestFramePeer().fit(*args),
+        MEAN_MOTION: MeanMotionPeer().fit(*args),
     }
+    out, shares = {}, {}
     for name, predictor in predictors.items():
-        scaled = predictor.fit(*args).predict(*query)
-        out[name] = scaler.inverse_transform(scaled.astype(np.float32))
+        forecast = predictor.forecast(*query)
+        out[name] = scaler.inverse_transform(forecast.motor.astype(np.float32))
+        shares[name] = model_share(forecast.details, built_on_run(predictor))
     inferred = load_run(infer_dir)
     where = {int(i): k for k, i in enumerate(inferred.indices)}
     out[REPRODUCTION] = reconstruct(inferred, inferred.latents[[where[int(i)] for i in test_idx]], images=False)[0]
-    return out
+    shares[REPRODUCTION] = 1.0  # the run's codes, decoded
+    names = fitted.label_names or []
+    chosen = {
+        (names[k] if k is not None and k < len(names) else str(k)): choice
+        for k, choice in predictors[KERNEL_RIDGE].choices_.items()
+    }
+    return out, shares, chosen
 
 
-def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | None) -> dict:
-    """{label name or "all": {"n", "success", "mse"}}."""
+def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | None, share: float) -> dict:
+    """{label name or "all": {"n", "success", "mse", "model_share"}} (``share``: the row's model share)."""
     names = np.array([test.label_names[int(label)] for label in test.labels])
     out = {}
     for name in [n for n in test.label_names if n in set(names)] + [ALL]:
@@ -117,7 +139,7 @@ def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | N
         entry = {"n": int(own.sum()), "success": float(success[own].mean())}
         if mse is not None:
             entry["mse"] = finite_mean(mse[own])
-        out[name] = entry
+        out[name] = entry | {"model_share": float(share)}
     return out
 
 
@@ -171,24 +193,26 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
     from primspace.act.command import fit_planners
 
     policy, promp = fit_planners(fit, fitted, int(every))  # once: the scene-only row and the loops
-    rows = _scene_rows(fit, fitted, test, test_idx, infer_dir, policy)
+    rows, shares, chosen = _scene_rows(fit, fitted, test, test_idx, infer_dir, policy)
     truth, first = fit.scaler.transform(test.motor), _first_step(len(test), test.motor.shape[1])
     plain = test.without_images()
     scene = {}
     for name, motor in rows.items():
         success = np.array([r.success for r in evaluate_dataset(plain, motor)], dtype=float)
         mse = unobserved_mse(fit.scaler.transform(motor), truth, first, test.lengths)
-        scene[name] = _per_primitive(test, success, mse)
+        scene[name] = _per_primitive(test, success, mse, shares[name])
     loop, latency = _loop_rows(fit, test, int(every), seed, policy, promp)
+    loop_share = {row: 0.0 if row == PROMP_LOOP else policy.model_share() for row in loop}  # ProMP reads no run
     rescued = ~loop[OPEN]  # the episodes the open loop's replay fails under the move
     return {
         "scene": scene,
-        "loop": {row: _per_primitive(test, ok.astype(float), None) for row, ok in loop.items()},
+        "loop": {row: _per_primitive(test, ok.astype(float), None, loop_share[row]) for row, ok in loop.items()},
         "where_open_fails": {
-            row: _per_primitive(test.subset(np.flatnonzero(rescued)), ok[rescued].astype(float), None)
+            row: _per_primitive(test.subset(np.flatnonzero(rescued)), ok[rescued].astype(float), None, loop_share[row])
             for row, ok in loop.items()
             if row != OPEN and rescued.any()
         },
+        "kernel_ridge_settings": chosen,
         "per_sample": {row: ok.astype(int).tolist() for row, ok in loop.items()},
         "test_indices": [int(i) for i in test_idx],
         "latency_ms": latency,

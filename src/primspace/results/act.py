@@ -4,7 +4,10 @@ Read by the command line, the HTML report (:mod:`primspace.report.act_section`) 
 generated block of docs/act.md (:mod:`primspace.report.markdown`) from an ``act`` result: an
 experiment directory's ``results/act.json`` or a stored summary's (which keeps ``table``,
 ``scene_rows``, ``loop_rows`` and ``by_seed``'s small entries). One place turns its numbers
-into rows, so the three show the same tables. Numbers are mean ± std over seeds (ddof 1).
+into rows, so the three show the same tables. Numbers are mean ± std over seeds (ddof 1). Where
+the results record each row's ``model_share`` (the share of its motion through the run's decoder),
+every table ends with a "model share" column, and a row at 0 is marked :data:`NO_MODEL`, as the
+prediction tables do (:mod:`primspace.report.predict_tables`).
 
 This module imports no experiment (the report may import it).
 """
@@ -13,19 +16,34 @@ from __future__ import annotations
 
 from primspace.results.tables import cell_text
 
-__all__ = ["ALL", "act_tables", "act_table", "act_latency_text"]
+__all__ = ["ALL", "NO_MODEL", "act_tables", "act_table", "act_latency_text", "share_text"]
 
 #: The column (and ``by_seed`` entry) of every primitive together.
 ALL = "all"
+#: The mark of a row whose motion does not come through the run's decoder (model share 0); the
+#: prediction tables' mark (:data:`primspace.report.predict_tables.NO_MODEL`).
+NO_MODEL = "does not use the model"
+
+
+def share_text(cells: dict) -> str:
+    """A row's model share (its ``"all"`` cell's mean over seeds), with :data:`NO_MODEL` at 0; "" when
+    not recorded (results before act version 4)."""
+    cell = cells.get(ALL, {}).get("model_share")
+    if not cell:
+        return ""
+    return f"{cell[0]:.2g} ({NO_MODEL})" if cell[0] == 0 else f"{cell[0]:.2g}"
 
 
 def _wide(part: dict, rows: list, metric: str) -> tuple[list[str], list[list]]:
-    """Rows ``rows`` of ``part`` by primitive (columns, then "all"): ``metric`` mean ± std over seeds."""
+    """Rows ``rows`` of ``part`` by primitive (columns, then "all"): ``metric`` mean ± std over seeds;
+    then the model share where recorded (:func:`share_text`)."""
     names = [p for p in dict.fromkeys(p for r in rows if r in part for p in part[r]) if p != ALL] + [ALL]
-    out = []
-    for row in [r for r in rows if r in part]:
-        out.append([row] + [cell_text(part[row].get(p, {}).get(metric), digits=2) for p in names])
-    return ["method"] + names, out
+    kept = [r for r in rows if r in part]
+    out = [[row] + [cell_text(part[row].get(p, {}).get(metric), digits=2) for p in names] for row in kept]
+    shares = [share_text(part[row]) for row in kept]
+    if not any(shares):
+        return ["method"] + names, out
+    return ["method"] + names + ["model share"], [row + [share] for row, share in zip(out, shares)]
 
 
 def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
@@ -56,11 +74,17 @@ def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
 
 
 def act_table(results: dict) -> tuple[list[str], list[list]]:
-    """The scene-only and closed-loop success over all primitives, one row per method."""
+    """The scene-only and closed-loop success over all primitives, one row per method, and each row's
+    model share where recorded."""
     table = results["table"]
-    rows = [[f"scene only: {r}", cell_text(table["scene"][r][ALL].get("success"), digits=2)] for r in table["scene"]]
-    rows += [[f"moved at 30 %: {r}", cell_text(table["loop"][r][ALL].get("success"), digits=2)] for r in table["loop"]]
-    return ["method", "success (all primitives)"], rows
+    rows = [
+        [f"{label}: {r}", cell_text(table[part][r][ALL].get("success"), digits=2), share_text(table[part][r])]
+        for part, label in (("scene", "scene only"), ("loop", "moved at 30 %"))
+        for r in table[part]
+    ]
+    if not any(row[2] for row in rows):
+        return ["method", "success (all primitives)"], [row[:2] for row in rows]
+    return ["method", "success (all primitives)", "model share"], rows
 
 
 def act_latency_text(results: dict) -> str:
