@@ -220,7 +220,7 @@ def test_atomic_directory_publishes_without_replacing_and_never_mixes_two_writer
 
     monkeypatch.setattr(files, "rename_noreplace", another_writer_lands_second)
     with pytest.raises(OutputExistsError):
-        with files.atomic_directory(empty, lambda path: None, last="result.json") as tmp:
+        with atomic_directory(empty, False, CLUSTER_OUTPUT) as tmp:
             for name in ("clustering.png", "labels.csv", "result.json"):
                 (tmp / name).write_text("mine")
     assert _snapshot(empty) == {"labels.csv": b"theirs"} and empty.stat().st_ino == inode

@@ -38,14 +38,12 @@ def act_command(
     from primspace.act.command import ACT_FILES, ACT_MARK, act, write_outputs
     from primspace.train import TrainConfig, configure_process
     from primspace.utils.files import check_outside_inputs
-    from primspace.utils.folders import OutputKind, atomic_directory, check_output_directory
+    from primspace.utils.folders import OutputKind, atomic_directory
 
     inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])
     check_outside_inputs(out, inputs)
     configure_process(TrainConfig(threads=threads).validate())
     kind = OutputKind(ACT_MARK, ACT_FILES, frozenset({"writer", "episodes", "scene"}))
-    check_output_directory(out, overwrite, kind)  # before minutes of fitting and executing
-    outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
     command = {
         "run": str(run),
         "primitive": primitive,
@@ -54,7 +52,8 @@ def act_command(
         "every": every,
         "seed": seed,
     }
-    with atomic_directory(out, overwrite, kind) as tmp:
+    with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before minutes of work
+        outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
         result = write_outputs(tmp, outcome, command)
     line = ", ".join(f"{name} {'succeeds' if e['success'] else 'fails'}" for name, e in result["episodes"].items())
     lat = result["episodes"]["closed loop"]["latency_ms"]["median"]

@@ -80,7 +80,7 @@ def cluster_command(
     """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
     from primspace.cluster.outputs import CLUSTER_OUTPUT
     from primspace.utils.files import check_outside_inputs
-    from primspace.utils.folders import check_output_directory
+    from primspace.utils.folders import atomic_directory, check_output_directory
 
     k, k_flag = _primitives_option(k, k_deprecated)
     check_outside_inputs(out, (src, labels))
@@ -88,24 +88,25 @@ def cluster_command(
     r2_target = _parse_r2(r2)
     _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init, k_flag)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
-    points = _points(src, labels)
-    if k > points.X.shape[0]:
-        raise UserError(f"{k_flag} {k} exceeds the {points.X.shape[0]} samples in {src}")
-    options = {
-        "affine": not linear,
-        "tau": tau,
-        "tau_relative": tau_relative,
-        "r2_target": r2_target,
-        "auto_criterion": auto_criterion.value,
-        "affinity": affinity.value,
-        "ones_weight": ones_weight,
-        "spectral": spectral.value,
-        "n_init": n_init,
-        "random_state": seed,
-    }
-    result = _cluster(src, points, k, options, do_sweep, grid)
-    record = {"input": str(src), "points": points.description, **result.to_dict()}
-    _write_outputs(out, overwrite, src, result, record, points.samples)
+    with atomic_directory(out, overwrite, CLUSTER_OUTPUT) as tmp:  # checked and locked before any work
+        points = _points(src, labels)
+        if k > points.X.shape[0]:
+            raise UserError(f"{k_flag} {k} exceeds the {points.X.shape[0]} samples in {src}")
+        options = {
+            "affine": not linear,
+            "tau": tau,
+            "tau_relative": tau_relative,
+            "r2_target": r2_target,
+            "auto_criterion": auto_criterion.value,
+            "affinity": affinity.value,
+            "ones_weight": ones_weight,
+            "spectral": spectral.value,
+            "n_init": n_init,
+            "random_state": seed,
+        }
+        result = _cluster(src, points, k, options, do_sweep, grid)
+        record = {"input": str(src), "points": points.description, **result.to_dict()}
+        _write_outputs(tmp, src, result, record, points.samples)
     if as_json:
         echo_json(record)
         return
@@ -168,13 +169,13 @@ def _cluster(src: Path, points, k: int, options: dict, do_sweep: bool, grid):
         raise UserError(f"{src}: {first_line(exc)}") from None
 
 
-def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, samples=None) -> None:
+def _write_outputs(tmp: Path, src: Path, result, record: dict, samples=None) -> None:
     """``labels.csv`` (``samples``: each point's index in the data file; default the row),
-    ``result.json``, ``clustering.png`` (and the sweep's files), atomically."""
+    ``result.json``, ``clustering.png`` (and the sweep's files) into ``tmp`` (published whole)."""
     from primspace.cluster import clustering_figure, sweep_figure
     from primspace.cluster.outputs import CLUSTER_OUTPUT, write_labels_csv, write_sweep_csv
     from primspace.plots import save_figure
-    from primspace.utils.folders import atomic_directory, write_json
+    from primspace.utils.folders import write_json
 
     n, scores = result.n_samples, result.scores
     shown = "" if result.figure_indices.size == n else f" ({result.figure_indices.size} of {n} samples)"
@@ -183,16 +184,15 @@ def _write_outputs(out: Path, overwrite: bool, src: Path, result, record: dict, 
         result, title=f"{src.name}: tau = {result.tau:.3g}, R^2 = {result.r2:.4f}, rank {result.rank}{acc}{shown}"
     )
     record["writer"] = CLUSTER_OUTPUT.command  # result.json says who wrote it (primspace.utils.outputs reads it)
-    with atomic_directory(out, overwrite, CLUSTER_OUTPUT) as tmp:
-        write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true, samples)
-        write_json(tmp / "result.json", record)
-        save_figure(figure, tmp / "clustering.png", writer=CLUSTER_OUTPUT.command)
-        if result.sweep is not None:
-            write_sweep_csv(tmp / "sweep.csv", result.sweep)
-            write_json(tmp / "sweep.json", record["sweep"])
-            save_figure(
-                sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png", writer=CLUSTER_OUTPUT.command
-            )
+    write_labels_csv(tmp / "labels.csv", result.labels, result.labels_true, samples)
+    write_json(tmp / "result.json", record)
+    save_figure(figure, tmp / "clustering.png", writer=CLUSTER_OUTPUT.command)
+    if result.sweep is not None:
+        write_sweep_csv(tmp / "sweep.csv", result.sweep)
+        write_json(tmp / "sweep.json", record["sweep"])
+        save_figure(
+            sweep_figure(result, title=f"{src.name}: tau sweep"), tmp / "sweep.png", writer=CLUSTER_OUTPUT.command
+        )
 
 
 def _print_summary(out: Path, result) -> None:

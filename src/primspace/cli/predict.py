@@ -208,11 +208,11 @@ def predict_command(
     check_outside_inputs(out, (file, indices, run, fitted))
     _check_ignored(iterations, online, fitted, init, scene)
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
-    dataset, idx, fitted_data = _inputs(file, indices, fitted)
     overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
     configure_process(TrainConfig(threads=threads).validate())
-    common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
-    with atomic_directory(out, overwrite, kind) as tmp:
+    with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before any work
+        dataset, idx, fitted_data = _inputs(file, indices, fitted)
+        common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
         prediction, command = _predict(
             run,
             dataset,

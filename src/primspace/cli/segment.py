@@ -97,27 +97,28 @@ def segment_command(
     check_outside_inputs(out, (run, data))
     check_output_directory(out, overwrite, kind)
     configure_threads(threads)
-    trained = load_run(run)
-    method = segment_method(method, trained)
-    _check_segment_options(method, min_steps, max_steps, offset, infer_epochs, tolerance)
-    ds = MotionDataset.load(data)
-    segment = _segment_windows if method is SegmentMethod.windows else _segment_by_primitives
-    samples, held, result, scores, window, k = segment(
-        trained, ds, run, data, primitives, tolerance, (min_steps, max_steps, offset.value, infer_epochs), method.value
-    )
-    record = {
-        "run": str(run),
-        "data": str(data),
-        "method": method.value,
-        "window": window,
-        "n_primitives": k,
-        "samples": samples.tolist(),
-        "boundaries": [b.tolist() for b in result.boundaries],
-        "scores": scores,
-        "note": result.note,
-    }
-    record |= {k: result.chosen[k] for k in ("offset", "threshold", "codes") if k in result.chosen}
-    with atomic_directory(out, overwrite, kind) as tmp:
+    with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before any work
+        trained = load_run(run)
+        method = segment_method(method, trained)
+        _check_segment_options(method, min_steps, max_steps, offset, infer_epochs, tolerance)
+        ds = MotionDataset.load(data)
+        segment = _segment_windows if method is SegmentMethod.windows else _segment_by_primitives
+        amounts = (min_steps, max_steps, offset.value, infer_epochs)
+        samples, held, result, scores, window, k = segment(
+            trained, ds, run, data, primitives, tolerance, amounts, method.value
+        )
+        record = {
+            "run": str(run),
+            "data": str(data),
+            "method": method.value,
+            "window": window,
+            "n_primitives": k,
+            "samples": samples.tolist(),
+            "boundaries": [b.tolist() for b in result.boundaries],
+            "scores": scores,
+            "note": result.note,
+        }
+        record |= {k: result.chosen[k] for k in ("offset", "threshold", "codes") if k in result.chosen}
         _write_segments(tmp / "segments.csv", samples, result)
         np.save(tmp / "step_labels.npy", result.padded_step_labels(held.length))
         _timeline(tmp / "timeline.png", trained, held, result, window, method.value)

@@ -13,8 +13,7 @@ the finished temporary is renamed onto the target with ``renameat2(RENAME_NOREPL
 or renamed over a placeholder created exclusively), so a target that appeared meanwhile
 (another writer finishing first) is never replaced: the write fails with
 :class:`~primspace.utils.errors.OutputExistsError` instead. Output folders are published alike
-(:func:`atomic_directory`); an existing empty folder is written into in place, never
-swapped for a new one, and refused with one line when it is not writable.
+(:func:`primspace.utils.folders.atomic_directory`).
 
 Every output is created with the permissions the user's umask allows (as ``open``
 would), not ``mkstemp``'s private 0600.
@@ -38,7 +37,7 @@ import os
 import shutil
 import socket
 import tempfile
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +47,6 @@ __all__ = [
     "check_output",
     "check_outside_inputs",
     "atomic_path",
-    "atomic_directory",
     "rename_noreplace",
     "check_writable_directory",
     "atomic_write_text",
@@ -213,7 +211,7 @@ def rename_noreplace(src: str | os.PathLike, dst: str | os.PathLike) -> None:
             raise OSError(code, os.strerror(code), os.fspath(dst))
     if os.path.isdir(src) and not os.path.islink(src):
         os.mkdir(dst)
-        _move_entries(Path(src), Path(dst))
+        _move_entries(Path(src), Path(dst), last="result.json")  # an output folder's completion mark last
         os.rmdir(src)
         return
     try:
@@ -326,81 +324,6 @@ def disk_full(directory: str | os.PathLike) -> str | None:
     except OSError:
         return None
     return f"no space left on the disk of {os.fspath(directory)} ({free} bytes free)" if free < FULL_MARGIN else None
-
-
-@contextlib.contextmanager
-def atomic_directory(
-    path: str | os.PathLike,
-    check: Callable[[Path], Any],
-    owned: Sequence[str] = (),
-    last: str | None = None,
-) -> Iterator[Path]:
-    """Yield a temporary folder beside ``path``; on success its files land in ``path``.
-
-    ``check(path)`` refuses what may not be written (a file; a non-empty folder without
-    overwrite, or one that is not an earlier output of the command): it runs first and
-    again when publishing. Then: a new ``path`` is the temporary folder renamed without
-    replacing (:func:`rename_noreplace`: a folder that appeared meanwhile is re-checked,
-    never replaced); an existing empty folder is written into in place (its inode,
-    owner and mode kept), each file moved in without replacing, so two writers never mix
-    their files; an earlier output that ``check`` accepted (``--overwrite``) gets each
-    new file renamed over the old one and the names in ``owned`` it did not write this
-    time removed, any other file left alone. ``last`` (the file that says the output is
-    complete) is moved last. On failure the temporary folder is removed.
-
-    Raises
-    ------
-    UserError
-        What ``check`` raises; an existing folder that is not writable.
-    """
-    path = Path(path)
-    check(path)
-    try:
-        if path.is_dir():
-            check_writable_directory(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        remove_stale_temporaries(path)
-        tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(path.name), suffix=".tmp", dir=path.parent))
-        os.chmod(tmp, umask_mode(0o777))
-    except OSError as exc:
-        raise os_error(exc, path) from None
-    try:
-        yield tmp
-        _publish_directory(tmp, path, check, owned, last)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def _publish_directory(tmp: Path, path: Path, check: Callable[[Path], Any], owned: Sequence[str], last) -> None:
-    """The publishing step of :func:`atomic_directory` (``check`` run again first)."""
-    check(path)
-    if not path.exists():
-        try:
-            rename_noreplace(tmp, path)
-            return
-        except FileExistsError:  # it appeared meanwhile: the same rules as for one found at the start
-            check(path)
-    if not any(path.iterdir()):
-        moved = []
-        try:
-            for name in sorted((p.name for p in tmp.iterdir()), key=lambda n: (n == last, n)):
-                rename_noreplace(tmp / name, path / name)
-                moved.append(path / name)
-        except FileExistsError:  # another writer is filling the same folder: take back ours, keep theirs
-            for mine in moved:
-                _discard(mine)
-            raise OutputExistsError(path) from None
-        tmp.rmdir()
-        return
-    written = {p.name for p in tmp.iterdir()}
-    for name in owned:
-        if name not in written:
-            with contextlib.suppress(FileNotFoundError):
-                (path / name).unlink()
-    for name in sorted(written, key=lambda n: (n == last, n)):
-        os.replace(tmp / name, path / name)
-    tmp.rmdir()
 
 
 def atomic_write_text(path: str | os.PathLike, text: str, overwrite: bool = True) -> None:
