@@ -63,6 +63,8 @@ _PARAMETER_FLAGS = (
     (re.compile(r"\bfitted_data=(?= )"), "--fitted-data FILE"),
     (re.compile(r"\bprimitives='clusters'"), "--primitives clusters"),  # the prior (predict.primitives)
     (re.compile(r"\bneed n_clusters\b"), "need --primitives K"),
+    (re.compile(r"\bfitted_per_primitive\b"), "--fitted-per-primitive"),  # experiments.regime
+    (re.compile(r"\beval_per_primitive\b"), "--eval-per-primitive"),
 )
 
 

@@ -302,6 +302,57 @@ _experiment_command(
 )
 
 
+_REGIME_N_HELP = (
+    "Fitted demonstrations kept per primitive, each from 1 to the fewest the preset's fitted split has "
+    "(default 2,3,5,10,20,49)."
+)
+
+
+@experiment_app.command("regime")
+def regime_command(
+    preset: str | None = typer.Option(None, "--preset", help="Experiment preset: demo, paper or lasa."),
+    data: Path | None = typer.Option(None, "--data", help="A data set file; default: the preset's simulated data."),
+    out: Path = typer.Option(..., "--out", "-o", help="The experiment directory."),
+    workers: int | None = typer.Option(None, "--workers", "-j", help="Parallel runs (default: all cores)."),
+    seed: int | None = typer.Option(None, "--seed", help="Seed of the generated data (default 0)."),
+    latent_dims: str | None = typer.Option(None, "--latent-dims", help="Override the preset's latent sizes."),
+    seeds: str | None = typer.Option(None, "--seeds", help="Override the run seeds, e.g. 0,1,2."),
+    epochs: str | None = typer.Option(None, "--epochs", help="Override the fit epochs (FIT[,INFER])."),
+    images: bool | None = typer.Option(None, "--images/--no-images", help="Override the vision loss."),
+    train_fraction: float | None = typer.Option(
+        None, "--train-fraction", help="Override the share of each primitive in the fitted split (LASA: 0.72)."
+    ),
+    fitted_per_primitive: str | None = typer.Option(None, "--fitted-per-primitive", help=_REGIME_N_HELP),
+    eval_per_primitive: int | None = typer.Option(
+        None, "--eval-per-primitive", help="At most this many evaluation motions per primitive (default: all)."
+    ),
+    mixed: bool = typer.Option(True, "--mixed/--no-mixed", help="Also one primitive with 2 among the largest n."),
+    report: bool = typer.Option(False, "--report/--no-report", help="Write OUT/report.html at the end."),
+    device: str | None = device_option(None, _RUN_DEVICE_HELP),
+    threads: int | None = threads_option(None, _RUN_THREADS_HELP),
+) -> None:
+    """The regime where codes help: n fitted demonstrations per primitive, the run trained on them, the
+    same evaluation motions predicted at 10/25/50 % by the prior (blend chosen and forced to the decoded
+    draws), the raw Gaussian, the tuned ProMP, the mixture and the nearest neighbour (docs/predict.md)."""
+    from primspace.experiments.regime import REGIME_N, check_counts, run_regime
+
+    counts = REGIME_N if fitted_per_primitive is None else int_list(fitted_per_primitive, "--fitted-per-primitive")
+    check_counts(counts, 10**9, "--fitted-per-primitive")  # the bounds of the data are checked once it is read
+    if eval_per_primitive is not None:
+        check_counts((eval_per_primitive,), 10**9, "--eval-per-primitive")
+    if train_fraction is not None and not 0.0 < train_fraction < 1.0:
+        raise UserError(f"--train-fraction must be between 0 and 1, got {train_fraction:g}")
+    overrides = _overrides("regime", latent_dims, None, seeds, epochs, images, None, None, device, threads)
+    overrides["train_fraction"] = train_fraction
+    exp = _experiment(preset, data, out, Backend.local, None, workers, seed, overrides)
+    results = run_regime(exp, counts, eval_per_primitive, mixed=mixed)
+    from primspace.results.claim_rules_regime import check_regime
+
+    row = check_regime(results)
+    typer.echo(f"{row['hypothesis']}\n{row['verdict']}: {row['ours']}")
+    _finish(exp, report)
+
+
 @app.command("summarize")
 def summarize_command(
     directory: Path = typer.Argument(..., help="An experiment directory."),

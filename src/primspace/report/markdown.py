@@ -37,6 +37,7 @@ from pathlib import Path
 from primspace.report.commands import portable_command
 from primspace.report.comparisons import COMPARISONS, merged, render_comparison, side_names
 from primspace.report.prose_numbers import render_composite_glance, render_differ
+from primspace.report.regime_tables import figure_path, regime_figure, render_regime
 from primspace.report.reproduce_blocks import (
     ABLATION,
     ablation,
@@ -96,6 +97,7 @@ TARGETS = {
     "differ": Path("docs") / "results.md",
     "predict": Path("docs") / "predict.md",
     "scene": Path("docs") / "predict.md",
+    "regime": Path("docs") / "predict.md",
     "composite": Path("docs") / "sequences.md",
     "composite-glance": Path("docs") / "sequences.md",
     "act": Path("docs") / "act.md",
@@ -235,6 +237,7 @@ def blocks(summaries: dict[str, dict], balances: dict[str, dict] | None = None) 
     scene = "\n\n".join(render_scene(s) for s in summaries.values() if "scene" in s["results"])
     composite = "\n\n".join(render_composite(s) for s in summaries.values() if "composite" in s["results"])
     act = "\n\n".join(render_act(s) for s in summaries.values() if "act" in s["results"])
+    regime = "\n\n".join(render_regime(s) for s in summaries.values() if "regime" in s["results"])
     if scene and not predicted:
         scene = note + scene  # docs/predict.md's first block with numbers
     return {
@@ -242,6 +245,7 @@ def blocks(summaries: dict[str, dict], balances: dict[str, dict] | None = None) 
         "results": note + "\n\n".join(parts) if parts else "No stored summaries yet (docs/results/).",
         "predict": note + predicted if predicted else "No stored prediction summaries yet (docs/results/).",
         "scene": scene or "No stored scene-only summaries yet (docs/results/).",
+        "regime": regime or "No stored regime summaries yet (docs/results/).",
         "composite": note + composite if composite else "No stored composite summaries yet (docs/results/).",
         "composite-glance": render_composite_glance(summaries),
         "differ": render_differ(summaries),
@@ -272,8 +276,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path, default=Path("."), help="the repository (default: here)")
     parser.add_argument("--check", action="store_true", help="write nothing; exit 1 if a block differs")
     args = parser.parse_args(argv)
-    new = blocks(load_summaries(args.root), load_balances(args.root / SUMMARY_DIR))
-    stale = []
+    summaries = load_summaries(args.root)
+    new = blocks(summaries, load_balances(args.root / SUMMARY_DIR))
+    stale = _regime_figures(summaries, args.root, args.check)
     for target in dict.fromkeys(TARGETS.values()):
         path = args.root / target
         text = path.read_text(encoding="utf-8")
@@ -289,6 +294,20 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     print(("rewrote " + ", ".join(stale)) if stale else "generated text is up to date")
     return 0
+
+
+def _regime_figures(summaries: dict[str, dict], root: Path, check: bool) -> list[str]:
+    """Draw each regime summary's figure (:func:`~primspace.report.regime_tables.figure_path`); with ``check``
+    draw nothing and return those missing."""
+    missing = []
+    for name, summary in summaries.items():
+        if "regime" in summary["results"]:
+            path = root / figure_path(name)
+            if check and not path.is_file():
+                missing.append(str(figure_path(name)))
+            elif not check:
+                regime_figure(summary, path)
+    return missing
 
 
 if __name__ == "__main__":

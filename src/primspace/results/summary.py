@@ -230,6 +230,41 @@ def _composite(c: dict) -> dict:
     }
 
 
+def _regime(r: dict) -> dict:
+    """The regime results kept: the settings, the tables over seeds, and per seed each row's MSE and success
+    (not per primitive)."""
+    keep = (
+        "version",
+        "latent_dim",
+        "fractions",
+        "fitted_per_primitive",
+        "eval_per_primitive",
+        "train_fraction",
+        "mixed_few",
+        "rows",
+        "given_rows",
+        "judged",
+        "label_names",
+        "table",
+        "mixed",
+        "failures",
+    )
+
+    def small(point: dict) -> dict:
+        return {
+            row: {f: {k: e[k] for k in ("mse", "success", "error") if k in e} for f, e in cells.items()}
+            for row, cells in point["methods"].items()
+        }
+
+    return {k: r.get(k) for k in keep} | {
+        "by_seed": {
+            seed: {"n_eval": s.get("n_eval"), "n": {n: {"methods": small(p)} for n, p in s.get("n", {}).items()}}
+            | ({"mixed": {"few": s["mixed"]["few"], "methods": small(s["mixed"])}} if "mixed" in s else {})
+            for seed, s in r.get("by_seed", {}).items()
+        }
+    }
+
+
 _REDUCERS = {
     "intra": lambda r: {
         "runs": [_intra(x) for x in r.get("runs", [])],
@@ -246,6 +281,7 @@ _REDUCERS = {
     "scene": _scene,
     "composite": _composite,
     "act": _act,
+    "regime": _regime,
 }
 
 
@@ -293,7 +329,7 @@ def summarize(out_dir: str | Path, name: str, command: str | None = None, note: 
         that ran into the directory, :func:`recorded_versions`), ``cpu`` (:func:`cpu_class` of this machine: run it where the
         runs ran), ``preset`` (the settings), ``timings``, ``data`` (the data summary) and
         ``results`` by experiment name (intra, success, clustering, inter, probe, tune, predict, scene,
-        composite, act: those run).
+        composite, act, regime: those run).
     """
     if not isinstance(name, str) or not name.strip() or any(c in name for c in "\n\r\x00"):
         raise UserError(f"the summary's name is a heading on one line, not empty: got {name!r}")
