@@ -57,11 +57,12 @@ def test_the_act_point_has_the_kernel_ridge_row_and_every_rows_model_share(point
     assert list(result["loop"]) == list(LOOP_ROWS)
     assert all(entry["all"]["model_share"] == 0.0 for entry in result["loop"].values())
     # the settings chosen by K-fold on the fitted demonstrations, per primitive
-    from primspace.act.scene_peers import LENGTH_GRID, PENALTY_GRID
+    from primspace.act.scene_kernel import LENGTH_GRID, PENALTY_GRID
 
     settings = result["kernel_ridge_settings"]
     assert set(settings) == {"touch", "push"} <= set(names)
-    assert all(s["length_scale"] in LENGTH_GRID and s["penalty"] in PENALTY_GRID for s in settings.values())
+    assert all(set(s["length_scale"]) <= set(LENGTH_GRID) and s["penalty"] in PENALTY_GRID for s in settings.values())
+    assert all(len(s["length_scale"]) == 3 for s in settings.values())  # one per feature: mass, column, row
 
 
 @pytest.mark.slow

@@ -8,8 +8,9 @@
   from the first frame and joints and the primitive, corrected by what a later frame shows;
   :func:`predict_from_scene` runs it on a data set (``primspace predict --scene``);
 * :mod:`primspace.act.scene_peers`: the scene-only peers (:class:`ContextualProMPPeer`,
-  :class:`NearestFramePeer`, :class:`KernelRidgePeer`); :mod:`primspace.act.frame_features`: what
-  is read of a frame;
+  :class:`NearestFramePeer`); :mod:`primspace.act.scene_kernel`: the scene policy's kind of map as
+  a peer (:class:`KernelRidgePeer`, tuned by K-fold); :mod:`primspace.act.frame_features`: what is
+  read of a frame;
 * :mod:`primspace.act.episode`: one episode in MuJoCo (:class:`~primspace.sim.execute.Executor`),
   optionally with the block moved during the motion;
 * :mod:`primspace.act.command`: ``primspace act``'s work (a scene, the planners, the outputs).
@@ -32,7 +33,7 @@ _HOME = {
     "predict_from_scene": "scene_policy",
     "ContextualProMPPeer": "scene_peers",
     "NearestFramePeer": "scene_peers",
-    "KernelRidgePeer": "scene_peers",
+    "KernelRidgePeer": "scene_kernel",
     "ColourBlob": "frame_features",
 }
 
@@ -53,5 +54,6 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # for type checkers and IDEs
     from primspace.act.frame_features import ColourBlob  # noqa: F401
-    from primspace.act.scene_peers import ContextualProMPPeer, KernelRidgePeer, NearestFramePeer  # noqa: F401
+    from primspace.act.scene_kernel import KernelRidgePeer  # noqa: F401
+    from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer  # noqa: F401
     from primspace.act.scene_policy import SCENE_POLICY, ScenePolicy, predict_from_scene  # noqa: F401

@@ -15,10 +15,10 @@ the steps after the first.
   weights; the prediction is the trajectory of the predicted weights.
 * :class:`NearestFramePeer`: the fitted demonstration of the same primitive whose first frame
   is nearest, replayed whole.
-* :class:`KernelRidgePeer`: the scene policy's kind of map (a Gaussian process's posterior mean
-  under an RBF kernel, i.e. kernel ridge regression) from the same features to the whole
-  motion, per primitive, with its length scale and penalty chosen by K-fold prediction of the
-  fitted demonstrations (not by the marginal likelihood, and never on the evaluation set).
+
+:class:`ScenePeer` is what they share (the first frames, no motor step read); the scene
+policy's own kind of map as a peer, tuned by K-fold, is
+:class:`~primspace.act.scene_kernel.KernelRidgePeer`.
 """
 
 from __future__ import annotations
@@ -29,12 +29,10 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from primspace.act.frame_features import frame_features
-from primspace.predict.code_prior import CV_FOLDS, fold_split
-from primspace.predict.metrics import valid_mask
 from primspace.predict.peers import LabelledPeer, phase
 from primspace.utils.errors import UserError
 
-__all__ = ["ContextualProMPPeer", "NearestFramePeer", "KernelRidgePeer", "RIDGE_ALPHAS", "LENGTH_GRID", "PENALTY_GRID"]
+__all__ = ["ScenePeer", "ContextualProMPPeer", "NearestFramePeer", "RIDGE_ALPHAS"]
 
 #: The ridge penalties :class:`ContextualProMPPeer` chooses from (``alpha="auto"``, leave-one-out).
 RIDGE_ALPHAS = np.logspace(-6, 3, 19)
@@ -57,7 +55,7 @@ def _first_frames(frames, n: int | None = None) -> np.ndarray:
     return arr
 
 
-class _ScenePeer(LabelledPeer):
+class ScenePeer(LabelledPeer):
     """What the scene peers add to the peers' checks: the first frames, and no motor step read."""
 
     def _fit_data(self, motor, labels, lengths, frames):
@@ -88,7 +86,7 @@ def _standardiser(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, np.where(scale > 1e-12, scale, 1.0)
 
 
-class ContextualProMPPeer(_ScenePeer):
+class ContextualProMPPeer(ScenePeer):
     """A ProMP per primitive whose weights are regressed on the first frame's features.
 
     Fitting, per label (or once for all): the package's ``ProMP(J, n_basis).imitate`` on the
@@ -233,7 +231,7 @@ class ContextualProMPPeer(_ScenePeer):
         return out
 
 
-class NearestFramePeer(_ScenePeer):
+class NearestFramePeer(ScenePeer):
     """The fitted demonstration of the same primitive whose first frame is nearest, whole.
 
     Distance: Euclidean between first frames, on the pixels scaled to [0, 1]
@@ -319,163 +317,3 @@ class NearestFramePeer(_ScenePeer):
         """
         _, labels, _, first = self._query(motor, observed, labels, lengths, frames, same_steps=True)
         return self.motor_[self.neighbours(first, labels)].copy()
-
-
-#: Length scales of :class:`KernelRidgePeer`'s RBF kernel (on standardised features) its K-fold choice tries.
-LENGTH_GRID = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
-#: Penalties of :class:`KernelRidgePeer` (the noise variance against the kernel's 1, standardised targets) tried.
-PENALTY_GRID = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0)
-
-
-def _rbf(a: np.ndarray, b: np.ndarray, length: float) -> np.ndarray:
-    """The RBF kernel ``exp(-|a_i - b_j|² / (2 length²))`` between the rows of ``a`` (n, d) and ``b`` (m, d)."""
-    return np.exp(-0.5 * ((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=-1) / float(length) ** 2)
-
-
-def _setting_grid(value, grid: tuple, name: str) -> tuple:
-    """``grid`` for ``"auto"``, else ``(value,)`` checked > 0 (one UserError)."""
-    if isinstance(value, str) and value == "auto":
-        return grid
-    if isinstance(value, (bool, str)) or not isinstance(value, (int, float, np.number)) or not value > 0:
-        raise UserError(f"{name} must be 'auto' or a number > 0, got {value!r}")
-    return (float(value),)
-
-
-class KernelRidgePeer(_ScenePeer):
-    """A Gaussian process's mean from the first frame's features to the whole motion, its settings
-    chosen by K-fold prediction of the fitted demonstrations.
-
-    Per label (or once for all): the features of the demonstrations' first frames (the
-    transformer fitted once on all of them, as :class:`ContextualProMPPeer`), standardised by the
-    group's mean and spread; the targets, each demonstration's whole motion (scaled, all ``T``
-    steps flattened, as the scene policy's), standardised per entry. The prediction is the
-    posterior mean of a Gaussian process with kernel ``exp(-|x - x'|² / (2 ℓ²))`` and noise
-    variance ``λ``, i.e. kernel ridge regression with penalty ``λ``: ``k(x)ᵀ (K + λ I)⁻¹ y``, mapped
-    back to scaled units; a test sample's padding beyond its valid steps holds its last valid
-    step. The motion is returned as predicted (its first step is not replaced by the observed one).
-
-    The settings (``"auto"``: every pair of :data:`LENGTH_GRID` x :data:`PENALTY_GRID`) are chosen
-    per group on its fitted demonstrations alone: ``folds`` folds
-    (:func:`~primspace.predict.code_prior.fold_split`, seeded by ``random_state`` and the label),
-    each predicted from the others; the pair with the lowest mean squared error over the held-out
-    demonstrations' valid entries (scaled units) is kept, the first in grid order on a tie. The
-    scene policy's kernel (a length per feature, a scale, a noise) maximises the marginal
-    likelihood instead; nothing here reads the evaluation set.
-
-    Parameters
-    ----------
-    features : str or object
-        The first frame's features (default ``"blob"``, the scene policy's;
-        :func:`~primspace.act.frame_features.frame_features`).
-    length_scale, penalty : "auto" or float
-        ``ℓ`` and ``λ`` (> 0), or ``"auto"``: chosen by K-fold.
-    per_label : bool
-        One map per label (labels needed in fit and predict) or one for all.
-    folds : int
-        Folds of the choice (>= 2); a group with at most this many demonstrations leaves one out at a time.
-    random_state : int
-        Seed of the folds.
-
-    Attributes
-    ----------
-    features_ : object
-        The fitted transformer of frames.
-    choices_ : dict
-        Label (None for all) -> ``{"length_scale", "penalty", "score"}``: the setting used and its
-        K-fold MSE (``score`` None when both settings were given).
-    """
-
-    def __init__(
-        self,
-        features="blob",
-        length_scale="auto",
-        penalty="auto",
-        per_label: bool = True,
-        folds=CV_FOLDS,
-        random_state=0,
-    ) -> None:
-        frame_features(features)  # a bad name fails here, not in fit
-        _setting_grid(length_scale, LENGTH_GRID, "length_scale")
-        _setting_grid(penalty, PENALTY_GRID, "penalty")
-        if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 2:
-            raise UserError(f"folds must be a whole number >= 2, got {folds!r}")
-        self.features, self.length_scale, self.penalty = features, length_scale, penalty
-        self.per_label, self.folds, self.random_state = bool(per_label), int(folds), random_state
-
-    def settings(self) -> list[tuple[float, float]]:
-        """The candidate ``(length_scale, penalty)`` pairs, in the order of a tie's choice."""
-        lengths = _setting_grid(self.length_scale, LENGTH_GRID, "length_scale")
-        return [
-            (float(ell), float(lam)) for ell in lengths for lam in _setting_grid(self.penalty, PENALTY_GRID, "penalty")
-        ]
-
-    def fit(self, motor, labels=None, lengths=None, frames=None) -> KernelRidgePeer:
-        """Fit the features, choose each group's setting by K-fold and fit its map (class docstring); returns self."""
-        motor, labels, lengths, first = self._fit_data(motor, labels, lengths, frames)
-        self.features_ = frame_features(self.features)
-        rows = np.asarray(self.features_.fit_transform(first), dtype=np.float64)
-        valid = np.repeat(valid_mask(lengths, motor.shape[1]), motor.shape[2], axis=1)  # (m, T·J), step-major
-        self.maps_, self.choices_ = {}, {}
-        for key, idx in self._groups(labels, len(motor)).items():
-            if len(idx) < 2:
-                raise UserError(f"{type(self).__name__}: label {key} has {len(idx)} demonstration: at least 2")
-            x_mean, x_scale = _standardiser(rows[idx])
-            y_mean, y_scale = _standardiser(motor[idx].reshape(len(idx), -1))
-            x, z = (rows[idx] - x_mean) / x_scale, (motor[idx].reshape(len(idx), -1) - y_mean) / y_scale
-            seed = [int(self.random_state), 50, 0 if key is None else int(key) + 1]
-            length, penalty, score = self._choose(x, z, y_scale, valid[idx], seed)
-            coef = np.linalg.solve(_rbf(x, x, length) + penalty * np.eye(len(x)), z)
-            self.maps_[key] = (x_mean, x_scale, x, coef, y_mean, y_scale, length)
-            self.choices_[key] = {"length_scale": length, "penalty": penalty, "score": score}
-        self._fitted(motor, labels)
-        return self
-
-    def _choose(self, x, z, y_scale, valid, seed) -> tuple[float, float, float | None]:
-        """The setting with the lowest K-fold MSE (scaled units, valid entries) of one group, and that MSE."""
-        candidates = self.settings()
-        if len(candidates) == 1:
-            return candidates[0] + (None,)
-        fold_of = fold_split([np.arange(len(x))], len(x), seed, self.folds)
-        errors, count = np.zeros(len(candidates)), 0
-        for fold in np.unique(fold_of):
-            test, train = fold_of == fold, fold_of != fold
-            count += int(valid[test].sum())
-            cache = {}
-            for i, (length, penalty) in enumerate(candidates):
-                if length not in cache:  # one eigendecomposition per fold and length serves every penalty
-                    values, vectors = np.linalg.eigh(_rbf(x[train], x[train], length))
-                    cache[length] = (values, vectors, vectors.T @ z[train], _rbf(x[test], x[train], length))
-                values, vectors, projected, cross = cache[length]
-                predicted = cross @ (vectors @ (projected / (values + penalty)[:, None]))
-                errors[i] += float(((((predicted - z[test]) * y_scale) ** 2)[valid[test]]).sum())
-        scores = errors / max(count, 1)
-        best = int(np.argmin(scores))  # the first on a tie
-        return candidates[best] + (float(scores[best]),)
-
-    def predict(self, motor, observed, labels=None, lengths=None, frames=None) -> np.ndarray:
-        """The predicted motion of each sample's first frame, ``(n, T, J)`` (class docstring).
-
-        Parameters
-        ----------
-        motor : array-like, shape (n, T, J)
-            The test samples: only their shape is read (T as fitted).
-        observed : array-like of bool, shape (n, T), or an Observation rule
-            Checked, not read: the scene alone predicts.
-        labels : array-like of int, optional
-            The test samples' primitives (needed when ``per_label``).
-        lengths : array-like of int, optional
-            Valid steps per test sample (the last valid step is held over the padding).
-        frames : array-like, shape (n, T, H, W, 3) uint8
-            Their frames; only the first of each is read.
-        """
-        (n, steps), labels, lengths, first = self._query(motor, observed, labels, lengths, frames, same_steps=True)
-        rows = np.asarray(self.features_.transform(first), dtype=np.float64)
-        keys = [self._key(labels, i) for i in range(n)]
-        out = np.empty((n, steps * self.n_joints_))
-        for key in dict.fromkeys(keys):
-            which = np.flatnonzero([k == key for k in keys])
-            x_mean, x_scale, x, coef, y_mean, y_scale, length = self.maps_[key]
-            out[which] = _rbf((rows[which] - x_mean) / x_scale, x, length) @ coef * y_scale + y_mean
-        out = out.reshape(n, steps, self.n_joints_)
-        last = out[np.arange(n), lengths - 1]
-        return np.where(valid_mask(lengths, steps)[..., None], out, last[:, None])

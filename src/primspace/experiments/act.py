@@ -14,7 +14,7 @@ is scored by the MSE of the steps after the first (scaled units) and by the simu
   the run's codes, decoded);
 * ``kernel ridge (blob, K-fold)``: the scene policy's kind of map (a Gaussian process's mean)
   from the same features to the motion, its length scale and penalty chosen by K-fold on the
-  fitted demonstrations (:class:`~primspace.act.scene_peers.KernelRidgePeer`);
+  fitted demonstrations (:class:`~primspace.act.scene_kernel.KernelRidgePeer`);
 * ``contextual ProMP (pixels)`` (the issue's peer: ridge from the PCA of the first frame's
   pixels to the ProMP weights of the primitive) and ``contextual ProMP (blob)`` (the same
   with our features: what the features alone buy);
@@ -93,7 +93,8 @@ def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.nd
     """The scene-only rows: {row: motor (n, T, J) physical}, {row: model share} and the kernel ridge's
     chosen settings by primitive; ``policy``: the closed loop's, fitted (its first frame's map is the
     scene-only plan)."""
-    from primspace.act.scene_peers import ContextualProMPPeer, KernelRidgePeer, NearestFramePeer
+    from primspace.act.scene_kernel import KernelRidgePeer
+    from primspace.act.scene_peers import ContextualProMPPeer, NearestFramePeer
     from primspace.act.scene_policy import ScenePolicy
     from primspace.predict.peers import MeanMotionPeer
     from primspace.predict.registry import built_on_run, model_share
