@@ -70,6 +70,7 @@ from primspace.train.checks import select
 from primspace.train.observe import FIRST, Observation, observation_masks
 from primspace.train.starts import fitted_samples
 from primspace.utils.errors import UserError
+from primspace.utils.seeds import library_seed
 
 __all__ = [
     "ScenePolicy",
@@ -206,7 +207,7 @@ class ScenePolicy(Predictor):
         self.extractor_ = frame_features(self.features).fit(frames[:, 0])
         first = self.extractor_.transform(frames[:, 0])
         targets = self._targets(motor)
-        make = _gaussian_process(int(self.random_state))
+        make = _gaussian_process(library_seed(self.random_state, "random_state"))
         self.maps_, self.expected_, self.scales_ = {}, {}, {}
         for k in range(self.primitives_.count):
             rows = self.primitives_.members(k)

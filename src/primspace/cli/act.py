@@ -39,7 +39,9 @@ def act_command(
     from primspace.train import TrainConfig, configure_process
     from primspace.utils.files import check_outside_inputs
     from primspace.utils.folders import OutputKind, atomic_directory
+    from primspace.utils.seeds import check_seed
 
+    check_seed(seed, "--seed")
     inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])
     check_outside_inputs(out, inputs)
     configure_process(TrainConfig(threads=threads).validate())

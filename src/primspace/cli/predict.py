@@ -199,7 +199,10 @@ def predict_command(
     from primspace.train import TrainConfig, configure_process
     from primspace.utils.files import check_outside_inputs
     from primspace.utils.folders import OutputKind, atomic_directory
+    from primspace.utils.seeds import check_seed
 
+    if seed is not None:
+        check_seed(seed, "--seed")
     source, clusters = parse_primitives(primitives, clusters, scene)
     motor, frames = _amounts(scene, primitive, observe, observe_frames, init, online)
     if scene and latent_lr is not None:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from primspace.utils.errors import UserError
+from primspace.utils.seeds import library_seed
 
 __all__ = [
     "Primitives",
@@ -147,7 +148,8 @@ def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, random_
         raise UserError(
             f"the number of clusters must be a whole number in 1..{len(codes)} (the fitted codes), got {n_clusters!r}"
         )
-    model = LowRankSubspaceClustering(int(n_clusters), affine=True, random_state=random_state)
+    seed = None if random_state is None else library_seed(random_state, "random_state")  # sklearn takes 0..2**32-1
+    model = LowRankSubspaceClustering(int(n_clusters), affine=True, random_state=seed)
     raw = model.fit(codes).labels_
     order = list(dict.fromkeys(raw.tolist()))  # by first member
     order += [c for c in range(int(n_clusters)) if c not in order]
