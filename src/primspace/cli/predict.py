@@ -209,7 +209,7 @@ def predict_command(
         raise UserError("--latent-lr goes with gradient inference, not with --scene (the scene policy has no codes)")
     prior = _prior_options(scene, init, primitive, source, clusters, prior_samples)
     check_outside_inputs(out, (file, indices, run, fitted))
-    _check_ignored(iterations, online, fitted, init, scene)
+    _check_ignored(iterations, online, fitted, init, scene, bool(prior) and not scene)
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
     overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
     configure_process(TrainConfig(threads=threads).validate())
@@ -332,6 +332,7 @@ def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_sa
     the prior when ``--init prior`` or when a primitive is asked for and ``--init`` is not given;
     one line when ``--init`` names another predictor (only the prior takes a primitive)."""
     from primspace.predict import PRIOR
+    from primspace.predict.prior import MAX_PRIOR_SAMPLES
 
     if scene:
         if prior_samples is not None:
@@ -352,19 +353,29 @@ def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_sa
                 f"only the prior predictor takes {', '.join(asked)}: give --init prior (or no --init), not --init {init}"
             )
         return {}
-    if prior_samples is not None and prior_samples < 2:
-        raise UserError(f"--prior-samples {prior_samples}: must be at least 2")
+    if prior_samples is not None and not 2 <= prior_samples <= MAX_PRIOR_SAMPLES:
+        raise UserError(
+            f"--prior-samples {prior_samples}: must be in 2..{MAX_PRIOR_SAMPLES} (codes drawn per primitive)"
+        )
     return {"primitive": primitive, "primitives": source, "n_clusters": clusters, "prior_samples": prior_samples}
 
 
-def _check_ignored(iterations, online: bool, fitted, init, scene: bool) -> None:
-    """One line for an option that would be ignored (rather than ignoring it without a word)."""
+def _check_ignored(iterations, online: bool, fitted, init, scene: bool, prior: bool = False) -> None:
+    """One line for an option that would be ignored (rather than ignoring it without a word);
+    ``prior``: the prior predicts (``--init prior``, or a prior option without ``--init``)."""
+    from primspace.model.latent import INFER_STARTS
     from primspace.predict import DEFAULT_PREDICTOR, PRIOR
+    from primspace.predict.registry import GRADIENT, spec_for
     from primspace.train.starts import STARTS_FROM_FITTED
 
     if iterations is not None and not online:
         raise UserError("--iterations goes with --online (the iterations per arriving step)")
-    start = init or DEFAULT_PREDICTOR
+    start = PRIOR if prior else init or DEFAULT_PREDICTOR
+    if iterations is not None and spec_for(start).name != GRADIENT:
+        raise UserError(
+            f"--iterations is read by gradient inference (--init {', '.join(INFER_STARTS)}); --init {start} "
+            "predicts each arriving step without iterations: drop --iterations"
+        )
     readers = STARTS_FROM_FITTED + (DEFAULT_PREDICTOR, PRIOR)
     if fitted is not None and not scene and init is not None and start not in readers:
         raise UserError(

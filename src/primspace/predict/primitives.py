@@ -66,8 +66,14 @@ class Primitives:
     def resolve(self, primitive) -> int:
         """``primitive`` (a name, or an id as int or digits) as an id, or one UserError listing them."""
         if isinstance(primitive, str):
-            if primitive in self.names:
-                return self.names.index(primitive)
+            named = [k for k, name in enumerate(self.names) if name == primitive]
+            if len(named) > 1:
+                ids = ", ".join(str(k) for k in named[:-1]) + f" and {named[-1]}"
+                raise UserError(
+                    f"{primitive!r} names primitives {ids}: give the id of the one meant ({self.available()})"
+                )
+            if named:
+                return named[0]
             if primitive.strip().isdigit():
                 primitive = int(primitive)
             else:

@@ -62,7 +62,7 @@ from primspace.train.observe import NOTHING, Observation
 from primspace.utils.errors import UserError
 from primspace.utils.progress import stage
 
-__all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "BLEND_GRID", "CV_SAMPLES"]
+__all__ = ["PriorPredictor", "PRIOR", "NOISE_GRID", "TEMPERATURE_GRID", "BLEND_GRID", "CV_SAMPLES", "MAX_PRIOR_SAMPLES"]
 
 #: The name of the prior predictor among the predictors of :func:`primspace.predict.predict`.
 PRIOR = "prior"
@@ -74,6 +74,9 @@ TEMPERATURE_GRID = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0)
 BLEND_GRID = (0.0, 0.5, 0.9, 1.0)
 #: Draws per primitive of each fold's priors in the K-fold choice (at most ``n_samples``).
 CV_SAMPLES = 500
+#: The most draws per primitive (``n_samples``, ``--prior-samples``): each is decoded and kept, so
+#: memory grows with it (25 times the default; the K-fold choice reads at most :data:`CV_SAMPLES`).
+MAX_PRIOR_SAMPLES = 50_000
 
 
 class PriorPredictor(Predictor):
@@ -202,8 +205,9 @@ class PriorPredictor(Predictor):
     def _check_params(self) -> None:
         if self.primitives not in PRIMITIVE_SOURCES:
             raise UserError(f"primitives must be one of {', '.join(PRIMITIVE_SOURCES)}, got {self.primitives!r}")
-        if isinstance(self.n_samples, bool) or not isinstance(self.n_samples, (int, np.integer)) or self.n_samples < 2:
-            raise UserError(f"n_samples must be a whole number >= 2, got {self.n_samples!r}")
+        n = self.n_samples
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 2 <= n <= MAX_PRIOR_SAMPLES:
+            raise UserError(f"n_samples must be a whole number in 2..{MAX_PRIOR_SAMPLES}, got {n!r}")
         for name in ("noise", "temperature"):
             value = getattr(self, name)
             if value != "auto" and not (isinstance(value, (int, float)) and float(value) > 0):
