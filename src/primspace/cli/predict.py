@@ -159,7 +159,10 @@ def predict_command(
         "and the error of the rest after each step.",
     ),
     iterations: int | None = typer.Option(
-        None, "--iterations", help="With --online: inference iterations per arriving step (default 5)."
+        None,
+        "--iterations",
+        help="With --online and gradient inference (--init zero, random, ...): inference iterations per arriving "
+        "step (default 5); the mixture and the prior read none.",
     ),
     scene: bool = typer.Option(
         False,
@@ -189,7 +192,7 @@ def predict_command(
         None, "--clusters", hidden=True, help="The number of clusters K of --primitives clusters (as --primitives K)."
     ),
     prior_samples: int | None = typer.Option(
-        None, "--prior-samples", help="The prior: codes drawn and decoded per primitive (default 2000)."
+        None, "--prior-samples", help="The prior: codes drawn and decoded per primitive (default 2000, at most 50000)."
     ),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
