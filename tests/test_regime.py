@@ -72,6 +72,14 @@ def test_the_fitted_subset_is_seeded_nested_and_per_primitive():
     assert set(mixed) <= set(five) and few_primitive(labels, 4) == 1
 
 
+def test_the_tuned_promp_takes_a_grid_of_basis_counts():
+    from primspace.predict.gaussian_peers import TunedProMPPeer
+
+    assert {s["n_basis"] for s in TunedProMPPeer(n_basis=(10, 15)).settings()} == {10, 15}
+    with pytest.raises(UserError, match="n_basis"):
+        TunedProMPPeer(n_basis=(10, 1)).settings()
+
+
 def test_a_bad_n_is_refused_naming_the_option():
     assert check_counts((5, 2, 2), 7) == (2, 5)
     for bad, words in (((0,), "not a whole number >= 1"), ((8,), "more than the 7"), ((), "is empty")):

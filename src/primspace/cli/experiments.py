@@ -327,6 +327,9 @@ def regime_command(
         None, "--eval-per-primitive", help="At most this many evaluation motions per primitive (default: all)."
     ),
     mixed: bool = typer.Option(True, "--mixed/--no-mixed", help="Also one primitive with 2 among the largest n."),
+    promp_basis: str | None = typer.Option(
+        None, "--promp-basis", help="The tuned ProMP's basis counts tried, e.g. 10,15,20 (default 10,15,20,30,40)."
+    ),
     report: bool = typer.Option(False, "--report/--no-report", help="Write OUT/report.html at the end."),
     device: str | None = device_option(None, _RUN_DEVICE_HELP),
     threads: int | None = threads_option(None, _RUN_THREADS_HELP),
@@ -345,7 +348,11 @@ def regime_command(
     overrides = _overrides("regime", latent_dims, None, seeds, epochs, images, None, None, device, threads)
     overrides["train_fraction"] = train_fraction
     exp = _experiment(preset, data, out, Backend.local, None, workers, seed, overrides)
-    results = run_regime(exp, counts, eval_per_primitive, mixed=mixed)
+    basis = (
+        None if promp_basis is None else check_counts(int_list(promp_basis, "--promp-basis"), 10**9, "--promp-basis")
+    )
+    settings = None if basis is None else {"promp_tuned": {"n_basis": basis}}
+    results = run_regime(exp, counts, eval_per_primitive, mixed=mixed, settings=settings)
     from primspace.results.claim_rules_regime import check_regime
 
     row = check_regime(results)

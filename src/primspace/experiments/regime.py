@@ -312,6 +312,7 @@ def run_regime(
         "rows": [name for name, _ in REGIME_ROWS],
         "given_rows": list(REGIME_GIVEN),
         "judged": judge,
+        "settings": settings or {},
         "label_names": list(data.label_names or []),
         "by_seed": by_seed,
         "failures": grid.failures,

@@ -51,9 +51,12 @@ RIDGE_GRID = (0.0, 1e-6, 1e-4, 1e-2)
 
 
 def _grid(value, grid, name: str, low: float) -> list:
-    """``[value]`` when fixed (checked ``>= low``), the grid when ``"auto"``."""
+    """``[value]`` when fixed (checked ``>= low``), the grid when ``"auto"``, the values of a tuple or list
+    (each checked) when one is given as the grid to try."""
     if isinstance(value, str) and value == "auto":
         return list(grid)
+    if isinstance(value, (tuple, list)) and value:
+        return [v for item in value for v in _grid(item, grid, name, low)]
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not value >= low:
         raise UserError(f"{name} must be 'auto' or a number >= {low:g}, got {value!r}")
     return [value]
@@ -233,8 +236,8 @@ class TunedProMPPeer(GaussianPeer):
     ----------
     per_label : bool
         One ProMP per label (labels needed in fit and predict, default) or one for all.
-    n_basis : "auto" or int
-        Basis functions per joint (auto: :data:`BASIS_GRID`).
+    n_basis : "auto", int or tuple of int
+        Basis functions per joint (auto: :data:`BASIS_GRID`; a tuple: the grid tried).
     ridge : "auto" or float
         Added to the diagonal of each fitted weight covariance (auto: :data:`RIDGE_GRID`).
     noise : "auto" or float

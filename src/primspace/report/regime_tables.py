@@ -116,6 +116,10 @@ def _mixed(regime: dict, fraction: float) -> list[str]:
     return ["", title, "", _table(columns, rows)]
 
 
+def _settings_text(settings: dict) -> str:
+    return "; ".join(f"{kind} {', '.join(f'{k} = {v}' for k, v in kw.items())}" for kind, kw in settings.items())
+
+
 def render_regime(summary: dict) -> str:
     """One summary's regime block (module docstring)."""
     regime = summary["results"]["regime"]
@@ -132,6 +136,7 @@ def render_regime(summary: dict) -> str:
         + f"; measured on {summary.get('cpu', {}).get('model', 'an unrecorded CPU')}"
         + (f", {summary['timings']['regime']:.0f} s in all" if "regime" in summary.get("timings", {}) else "")
         + ". Mean ± sample std (ddof 1) over seeds."
+        + (f" The rows' settings: {_settings_text(regime['settings'])}." if regime.get("settings") else "")
     )
     metrics = [m for m, _ in METRICS if m != "success" or regime.get("judged")]
     for task in TASKS:

@@ -244,6 +244,7 @@ def _regime(r: dict) -> dict:
         "rows",
         "given_rows",
         "judged",
+        "settings",
         "label_names",
         "table",
         "mixed",
