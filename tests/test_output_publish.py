@@ -189,3 +189,17 @@ def test_every_folder_writer_is_refused_while_another_process_writes_its_folder(
     finally:
         lock.release()
     assert _snapshot(out) == {}
+
+
+def test_a_refused_writer_leaves_another_writers_lock_file_alone(run_cli, points, tmp_path):
+    """A run directory (its writer's lock file left behind by design) is refused as foreign with
+    --overwrite, every file of it kept, its lock file too."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / ".writer.lock").write_text("12345")
+    (out / "config.json").write_text("{}")
+    before = _snapshot(out)
+    assert_user_error(
+        run_cli("cluster", points, "--k", 2, "--out", out, "--overwrite"), "not a primspace cluster output"
+    )
+    assert _snapshot(out) == before
