@@ -15,7 +15,11 @@ from primspace.cli.options import threads_option
 @app.command("act")
 def act_command(
     run: Path = typer.Argument(..., help="A trained run (fit) on simulated demonstrations with camera frames."),
-    primitive: str = typer.Option(..., "--primitive", help="The primitive to do: a label name (push) or id."),
+    primitive: str = typer.Option(
+        ...,
+        "--primitive",
+        help="The primitive to do: a label name (push) or its number in the run's list of primitives (not a label id).",
+    ),
     scene: str = typer.Option(
         ..., "--scene", help="FILE:INDEX (a data file's sample: its block and first joints) or x,y,size in metres."
     ),

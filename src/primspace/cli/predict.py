@@ -175,7 +175,8 @@ def predict_command(
     primitive: str | None = typer.Option(
         None,
         "--primitive",
-        help="The primitive of every motion, a name (push) or an id: the prior "
+        help="The primitive of every motion, a name (push) or its number in the run's list of primitives "
+        "(not a label id): the prior "
         "predictor (--init prior) predicts each motion as it; without it the prior weighs its "
         "primitives by their posterior. With --scene: the primitive to perform, a name (a label "
         "name, or 'cluster 2') or an id of --primitives (result.json lists them).",
