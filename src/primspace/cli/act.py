@@ -46,6 +46,7 @@ def act_command(
     from primspace.utils.seeds import check_seed
 
     check_seed(seed, "--seed")
+    _check_before_work(scene, every)
     inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])
     check_outside_inputs(out, inputs)
     configure_process(TrainConfig(threads=threads).validate())
@@ -64,3 +65,27 @@ def act_command(
     line = ", ".join(f"{name} {'succeeds' if e['success'] else 'fails'}" for name, e in result["episodes"].items())
     lat = result["episodes"]["closed loop"]["latency_ms"]["median"]
     typer.echo(f"wrote {out}: {result['primitive']}: {line}; a plan takes {lat:.2f} ms (median)")
+
+
+def _check_before_work(scene: str, every: int) -> None:
+    """``--every``, and ``--scene``'s form, its block's place or its file, refused in one line
+    before the run is read and the policy fitted (the library checks them again, with the run)."""
+    from primspace.act.planner import check_every
+    from primspace.sim.execute import check_block
+    from primspace.utils.errors import UserError
+
+    check_every(every)
+    text = scene.strip()
+    parts = text.split(",")
+    if len(parts) == 3:
+        try:
+            x, y, size = (float(p) for p in parts)
+        except ValueError:
+            raise UserError(f"--scene {text!r}: give x,y,size in metres (e.g. 0.5,0.0,0.05) or FILE:INDEX") from None
+        check_block(x, y, size)
+        return
+    path, _, index = text.rpartition(":")
+    if not path or not index.strip().lstrip("-").isdigit():
+        raise UserError(f"--scene {text!r}: give FILE:INDEX (a data file's sample) or x,y,size in metres")
+    if not Path(path).is_file():
+        raise UserError(f"--scene {path}: no such file")
