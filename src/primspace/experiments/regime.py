@@ -234,13 +234,14 @@ def _point_key(tag: str, seed: int, cap: int | None) -> str:
     return f"regime{REGIME_VERSION}/projection-{tag}-s{seed}" + ("" if cap is None else f"-e{cap}")
 
 
-def _plan(exp: ExperimentDir, counts, cap, mixed: bool) -> dict:
-    """Per seed: the fitted subsets by ``n`` (and the mixed variant's), the evaluation motions, the few primitive."""
-    data, preset = exp.dataset(), exp.preset
+def _plan(exp: ExperimentDir, counts, cap, mixed: bool, seeds) -> dict:
+    """Per seed of ``seeds``: the fitted subsets by ``n`` (and the mixed variant's), the evaluation motions,
+    the few primitive."""
+    data = exp.dataset()
     labels = np.asarray(data.labels)
     plans = {}
-    for seed in preset.seeds:
-        fitted, evaluation = split_indices(labels, preset.train_fraction, seed)
+    for seed in seeds:
+        fitted, evaluation = split_indices(labels, exp.preset.train_fraction, seed)
         ns = check_counts(counts, int(np.unique(labels[fitted], return_counts=True)[1].min()))
         if cap is not None:
             check_counts((cap,), int(np.unique(labels[evaluation], return_counts=True)[1].min()), "eval_per_primitive")
@@ -261,19 +262,22 @@ def run_regime(
     fractions=REGIME_FRACTIONS,
     mixed: bool = True,
     settings: dict | None = None,
+    seeds=None,
 ) -> dict:
     """The regime grid over the preset's seeds (module docstring): write ``results/regime.json`` and
     ``figures/regime_errors.png``. ``fitted_per_primitive``: the ``n`` (each from 1 to the fitted split's
     smallest primitive); ``eval_per_primitive``: at most this many evaluation motions per primitive
     (None: all); ``mixed``: also the variant with one primitive at :data:`MIXED_FEW`; ``settings``:
-    the rows' keywords (:func:`regime_predictors`; None: their defaults; not in the points' keys)."""
+    the rows' keywords (:func:`regime_predictors`; None: their defaults; not in the points' keys); ``seeds``:
+    only those of the preset's seeds (the results then hold those seeds only; None: all)."""
     from primspace.experiments.prediction import judgeable
     from primspace.experiments.runs import focus_runs
 
     data = exp.dataset()
     if data.labels is None:
         raise UserError("the regime experiment needs labelled data: its n counts demonstrations per primitive")
-    plans = _plan(exp, fitted_per_primitive, eval_per_primitive, mixed)
+    chosen = [s for s in exp.preset.seeds if seeds is None or s in set(seeds)]
+    plans = _plan(exp, fitted_per_primitive, eval_per_primitive, mixed, chosen)
     q = focus_runs(exp, {"runs": []})[0]
     judge, extra = judgeable(data), () if settings is None else (settings,)
     points, where = [], {}
