@@ -148,7 +148,7 @@ def render_regime(summary: dict) -> str:
         for metric in metrics:
             for fraction in regime["fractions"]:
                 lines.append(
-                    f"- {TASKS[task]}, {metric} at {fraction:.0%}: {crossing_text(regime, task, metric, fraction)}"
+                    f"- {TASKS[task]}, {'MSE' if metric == 'mse' else metric} at {fraction:.0%}: {crossing_text(regime, task, metric, fraction)}"
                 )
     row = check_regime(regime)
     lines += ["", f"**Hypothesis** (written before the runs): {row['hypothesis']}", "", f"Rule {row['rule']}.", ""]

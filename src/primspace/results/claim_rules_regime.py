@@ -53,7 +53,7 @@ def codes_help(results: dict) -> Outcome:
             for n, c in compared.items():
                 verdicts.append(c["verdict"])
                 parts.append(
-                    f"{title}, {metric} at n = {n}: {c['verdict']} ({c['ours'][0]:.3g} ± {c['ours'][1]:.2g} against "
+                    f"{title}, {'MSE' if metric == 'mse' else metric} at n = {n}: {c['verdict']} ({c['ours'][0]:.3g} ± {c['ours'][1]:.2g} against "
                     f"{c['peer']} {c['peer_cell'][0]:.3g} ± {c['peer_cell'][1]:.2g})"
                 )
     if not verdicts:
