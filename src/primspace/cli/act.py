@@ -3,6 +3,7 @@ loop and ProMP re-conditioned; docs/act.md)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import typer
@@ -10,6 +11,10 @@ import typer
 from primspace.act.planner import DEFAULT_EVERY
 from primspace.cli.app import app
 from primspace.cli.options import threads_option
+from primspace.utils.errors import UserError
+
+#: How the library names the fitted data (``fitted_data=...``): act's flag for it is ``--data``.
+_ACT_DATA = re.compile(r"\bfitted_data=(MotionDataset\.load\(PATH\))?")
 
 
 @app.command("act")
@@ -60,7 +65,10 @@ def act_command(
         "seed": seed,
     }
     with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before minutes of work
-        outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
+        try:
+            outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
+        except UserError as exc:  # the library names fitted_data=, act's flag is --data
+            raise UserError(_ACT_DATA.sub("--data PATH", str(exc))) from None
         result = write_outputs(tmp, outcome, command)
     line = ", ".join(f"{name} {'succeeds' if e['success'] else 'fails'}" for name, e in result["episodes"].items())
     lat = result["episodes"]["closed loop"]["latency_ms"]["median"]
@@ -72,7 +80,6 @@ def _check_before_work(scene: str, every: int) -> None:
     before the run is read and the policy fitted (the library checks them again, with the run)."""
     from primspace.act.planner import check_every
     from primspace.sim.execute import check_block
-    from primspace.utils.errors import UserError
 
     check_every(every)
     text = scene.strip()
