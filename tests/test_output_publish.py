@@ -203,3 +203,18 @@ def test_a_refused_writer_leaves_another_writers_lock_file_alone(run_cli, points
         run_cli("cluster", points, "--k", 2, "--out", out, "--overwrite"), "not a primspace cluster output"
     )
     assert _snapshot(out) == before
+
+
+def test_a_writer_killed_while_marking_the_folder_unfinished_leaves_it_writable(tmp_path):
+    """The mark's own temporary, left by a killed writer (this host, a process that is gone), is
+    bookkeeping: the folder is still empty to the next writer, which removes it."""
+    from primspace.utils.files import temp_prefix
+    from primspace.utils.folders import INCOMPLETE_NAME, LOCK_NAME
+
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / LOCK_NAME).write_text("999999999")
+    stale = temp_prefix(INCOMPLETE_NAME).replace(f"-{os.getpid()}.", "-999999999.") + "x.tmp"
+    (out / stale).write_text("primspace te")
+    _write(out, False, "new")
+    assert sorted(_snapshot(out)) == ["a.txt", "b.txt", "result.json"]

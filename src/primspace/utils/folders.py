@@ -90,8 +90,9 @@ def check_output_directory(path: str | os.PathLike, overwrite: bool, kind: Outpu
 
 
 def _entries(path: Path) -> list[Path]:
-    """What ``path`` holds, its writer's bookkeeping (lock, unfinished mark) aside."""
-    return [p for p in path.iterdir() if p.name not in _BOOKKEEPING]
+    """What ``path`` holds, its writer's bookkeeping (lock, unfinished mark and its temporary) aside."""
+    mark_temporary = f".{INCOMPLETE_NAME}."
+    return [p for p in path.iterdir() if p.name not in _BOOKKEEPING and not p.name.startswith(mark_temporary)]
 
 
 def _incomplete_mark(path: Path) -> str | None:
