@@ -45,7 +45,7 @@ def act_command(
     """Execute the primitive in the scene in MuJoCo: planned from the camera, re-planned in closed loop when a frame
     surprises the plan; the open loop and ProMP re-conditioned on the executed joints run the same scene."""
     from primspace.act.command import ACT_FILES, ACT_MARK, act, write_outputs
-    from primspace.train import TrainConfig, configure_process
+    from primspace.train import TrainConfig, configure_process, load_run
     from primspace.utils.files import check_outside_inputs
     from primspace.utils.folders import OutputKind, atomic_directory
     from primspace.utils.seeds import check_seed
@@ -66,7 +66,9 @@ def act_command(
     }
     with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before minutes of work
         try:
-            outcome = act(run, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
+            trained = load_run(run)
+            _check_primitive(trained, primitive, data)  # before the frames are read and the policy fitted
+            outcome = act(trained, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
         except UserError as exc:  # the library names fitted_data=, act's flag is --data
             raise UserError(_ACT_DATA.sub("--data PATH", str(exc))) from None
         result = write_outputs(tmp, outcome, command)
@@ -96,3 +98,15 @@ def _check_before_work(scene: str, every: int) -> None:
         raise UserError(f"--scene {text!r}: give FILE:INDEX (a data file's sample) or x,y,size in metres")
     if not Path(path).is_file():
         raise UserError(f"--scene {path}: no such file")
+
+
+def _check_primitive(trained, primitive: str, data) -> None:
+    """``--primitive`` resolved against the labels of the run's fitted demonstrations (as the scene
+    policy will), one UserError listing them otherwise."""
+    from primspace.data import MotionDataset
+    from primspace.predict.primitives import primitives_from_labels
+    from primspace.train.starts import fitted_samples
+
+    fitted = fitted_samples(trained, None if data is None else MotionDataset.load(data))
+    if fitted.labels is not None:
+        primitives_from_labels(fitted.labels, fitted.label_names).resolve(primitive)
