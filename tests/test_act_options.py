@@ -16,10 +16,17 @@ from conftest import assert_user_error
         (["--scene", "scenes.h5"], ["--scene", "FILE:INDEX"]),
         (["--scene", "missing.h5:3"], ["missing.h5", "no such file"]),
         (["--scene", "0.5,0,0.05", "--every", "0"], ["re-planning interval", "0"]),
+        (["--scene", "three.h5:7"], ["three.h5", "sample 7 is outside 0..2"]),
+        (["--scene", "three.h5:1"], ["three.h5", "no block params"]),
     ],
 )
 def test_act_refuses_its_options_before_reading_the_run(run_cli, tmp_path, monkeypatch, flags, fragments):
+    import numpy as np
+
+    from primspace.data import MotionDataset
+
     monkeypatch.chdir(tmp_path)
+    MotionDataset(np.zeros((3, 5, 2), np.float32), dt=0.1).save(tmp_path / "three.h5")
     res = run_cli("act", tmp_path / "run", "--primitive", "push", *flags, "--out", tmp_path / "o")
     assert_user_error(res, *fragments)
     assert not (tmp_path / "o").exists()

@@ -78,9 +78,10 @@ def act_command(
 
 
 def _check_before_work(scene: str, every: int) -> None:
-    """``--every``, and ``--scene``'s form, its block's place or its file, refused in one line
-    before the run is read and the policy fitted (the library checks them again, with the run)."""
+    """``--every``, and ``--scene``'s form, its block's place or its file's sample, refused in one
+    line before the run is read and the policy fitted (the library checks them again, with the run)."""
     from primspace.act.planner import check_every
+    from primspace.data import MotionDataset
     from primspace.sim.execute import check_block
 
     check_every(every)
@@ -98,6 +99,13 @@ def _check_before_work(scene: str, every: int) -> None:
         raise UserError(f"--scene {text!r}: give FILE:INDEX (a data file's sample) or x,y,size in metres")
     if not Path(path).is_file():
         raise UserError(f"--scene {path}: no such file")
+    scenes = MotionDataset.load(path)
+    if not 0 <= int(index) < len(scenes):
+        raise UserError(f"--scene {path}: sample {int(index)} is outside 0..{len(scenes) - 1}")
+    if scenes.params is None or scenes.params.shape[1] < 3:
+        raise UserError(
+            f"--scene {path}: the file has no block params (block_x, block_y, block_size) to place the block"
+        )
 
 
 def _check_primitive(trained, primitive: str, data) -> None:
