@@ -81,6 +81,17 @@ def tiny_data(tmp_path_factory):
     return path
 
 
+@pytest.fixture
+def grid_only(monkeypatch):
+    """``run_intra`` without its steps after the grid (probe, Appendix A check, figures, animations),
+    for the tests of the grid itself: tests/test_experiments.py checks those steps on its own grid."""
+    from primspace.experiments import intra
+
+    for name in ("run_probe", "run_appendix_a", "write_animations"):
+        monkeypatch.setattr(intra, name, lambda *args, **kwargs: None)
+    monkeypatch.setattr(intra.figures, "draw_intra", lambda *args, **kwargs: [])
+
+
 # ------------------------------------------------------------------ figures (PNG files)
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

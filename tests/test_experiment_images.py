@@ -78,7 +78,7 @@ def test_frame_strips_are_drawn_and_reported(finished):
 
 
 @pytest.mark.slow
-def test_old_runs_are_completed_once_without_retraining(finished):
+def test_old_runs_are_completed_once_without_retraining(finished, grid_only):
     exp, results = finished
     key = results["runs"][0]["key"]
     result_file = exp.path / "runs" / key / "result.json"

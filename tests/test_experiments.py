@@ -202,7 +202,7 @@ def test_figures_are_drawn_from_the_results_alone(finished, tmp_path):
 
 
 @pytest.mark.slow
-def test_rerun_skips_finished_runs(finished):
+def test_rerun_skips_finished_runs(finished, grid_only):
     exp = finished[0]
     metrics = sorted(exp.path.glob("runs/intra/*/*/metrics.jsonl"))
     before = [p.stat().st_mtime_ns for p in metrics]
@@ -212,7 +212,7 @@ def test_rerun_skips_finished_runs(finished):
 
 
 @pytest.mark.slow
-def test_a_failed_run_is_reported_and_the_others_finish(tiny_data, tmp_path, run_cli, monkeypatch):
+def test_a_failed_run_is_reported_and_the_others_finish(tiny_data, tmp_path, run_cli, monkeypatch, grid_only):
     broken = ExperimentPreset(**{**TINY.to_dict(), "name": "broken", "inits": ("zero", "bogus")})
     monkeypatch.setitem(experiment_presets.PRESETS, "broken", broken)
     out = tmp_path / "exp"
@@ -300,7 +300,7 @@ def test_intra_fit_and_infer_targets_lie_in_the_unit_range(finished, tiny_data):
 
 @pytest.mark.ray
 @pytest.mark.slow
-def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path):
+def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path, grid_only):
     from test_parallel import _ray_or_skip
 
     _ray_or_skip()
@@ -338,7 +338,7 @@ def test_demo_runs_end_to_end_and_says_whether_the_paper_holds(tiny_data, tmp_pa
 
 
 @pytest.mark.slow
-def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, monkeypatch):
+def test_cli_overrides_are_checked_and_recorded(tiny_data, tmp_path, run_cli, monkeypatch, grid_only):
     monkeypatch.setitem(experiment_presets.PRESETS, "tiny", TINY)
     out = tmp_path / "exp"
     bad = run_cli(
@@ -470,7 +470,7 @@ def test_a_summary_holds_what_the_claims_and_docs_read(finished):
 
 
 @pytest.mark.slow
-def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp_path):
+def test_tune_gives_every_init_the_same_grid_on_a_validation_split(finished, tmp_path, grid_only):
     """Fair baselines: each init is tuned over the same settings and epochs on a validation
     part carved from the fitted part (never the evaluation part), and the intra protocol
     reruns with each init's choice beside the shared setting."""
@@ -592,7 +592,7 @@ def test_tiny_experiment_numbers_are_pinned(finished):
 
 
 @pytest.mark.slow
-def test_clustering_and_success_over_seeds(finished, tiny_data, tmp_path):
+def test_clustering_and_success_over_seeds(finished, tiny_data, tmp_path, grid_only):
     """Two seeds: the first seed's results are those of the one-seed tiny grid, bit for bit;
     the second's are under ``by_seed``; the outcome table averages both."""
     from primspace.results.tables import outcome_spread_table
@@ -651,7 +651,7 @@ def test_experiment_all_leaves_out_success_on_data_the_simulator_cannot_judge(tm
 
 
 @pytest.mark.slow
-def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tmp_path):
+def test_calibrated_points_infer_with_projections_fit_trained_once(tiny_data, tmp_path, grid_only):
     """The intra grid's calibrated point has no fit of its own: it and the projection point
     share ``projection-q4-s0/fit`` under a lock (two workers: trained once, every epoch logged
     once), and its codes start at that fit's calibration map applied to P m."""
@@ -704,7 +704,7 @@ def test_inter_calibrated_shares_projections_phase_one(tiny_data, tmp_path):
 
 
 @pytest.mark.slow
-def test_an_experiment_directory_takes_more_inits_but_not_fewer(finished, tmp_path):
+def test_an_experiment_directory_takes_more_inits_but_not_fewer(finished, tmp_path, grid_only):
     """A directory of an older version (four inits) gains calibrated runs beside its own;
     dropping an init or changing any other setting is still refused."""
     import shutil

@@ -46,8 +46,13 @@ def test_the_tuned_promp_with_fixed_settings_is_the_packages_conditioning(data):
     np.testing.assert_allclose(batch, sequential, atol=1e-8)
 
 
-@pytest.mark.slow
-def test_the_settings_are_chosen_on_the_fitted_data_only(data):
+def test_the_settings_are_chosen_on_the_fitted_data_only(data, monkeypatch):
+    from primspace.predict import gaussian_peers
+
+    assert min(gaussian_peers.BASIS_GRID) == 10 and max(gaussian_peers.BASIS_GRID) == 40  # the range
+    # a smaller grid of basis counts and ridges (the choice's rule is the same for any grid)
+    monkeypatch.setattr(gaussian_peers, "BASIS_GRID", (4, 8))
+    monkeypatch.setattr(gaussian_peers, "RIDGE_GRID", (0.0, 1e-4))
     x, labels, y, test_labels = data
     rule = Observation.build(0.25)
     peer = TunedProMPPeer(n_basis="auto", n_iter=30).fit(x, labels)
@@ -60,7 +65,10 @@ def test_the_settings_are_chosen_on_the_fitted_data_only(data):
     np.testing.assert_array_equal(again.motor, first.motor)
     assert first.details["model_share"] == 0.0
     scores = peer.choices_[rule.key]["scores"]
-    assert len(scores) == 5 * 4 * 4 and min(scores.values()) == scores[repr(first.details["setting"])]
+    assert (
+        len(scores) == 2 * 2 * len(gaussian_peers.NOISE_GRID)
+        and min(scores.values()) == scores[repr(first.details["setting"])]
+    )
 
 
 def test_the_tuned_raw_gaussian_beats_its_worst_setting_on_the_test_motions(data):

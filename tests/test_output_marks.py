@@ -262,6 +262,8 @@ def test_experiment_refuses_a_folder_that_is_not_an_experiment_before_writing(ru
         "zero",
         "--seeds",
         "0",
+        "--workers",
+        "1",
     )
     assert_user_error(res, str(out), "not an experiment directory", "experiment.json")
     assert _snapshot(out) == before

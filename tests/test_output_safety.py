@@ -300,7 +300,7 @@ def test_check_outside_inputs_compares_resolved_paths(tmp_path):
 
 
 @pytest.mark.slow
-def test_success_on_data_not_from_the_simulator_fails_before_training(run_cli, data_file, tmp_path):
+def test_success_on_data_not_from_the_simulator_fails_before_training(run_cli, data_file, tmp_path, grid_only):
     out = tmp_path / "exp"
     res = run_cli("experiment", "success", "--data", data_file, "--out", out)
     assert_user_error(res, str(data_file), "label")
@@ -319,6 +319,8 @@ def test_success_on_data_not_from_the_simulator_fails_before_training(run_cli, d
         "2",
         "--inits",
         "zero",
+        "--workers",
+        "1",
     )
     assert res.code == 0, res.err
     assert f"success: skipped, the simulator cannot judge these data ({data_file}" in res.out
