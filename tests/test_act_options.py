@@ -18,6 +18,7 @@ from conftest import assert_user_error
         (["--scene", "0.5,0,0.05", "--every", "0"], ["re-planning interval", "0"]),
         (["--scene", "three.h5:7"], ["three.h5", "sample 7 is outside 0..2"]),
         (["--scene", "three.h5:1"], ["three.h5", "no block params"]),
+        (["--scene", "swapped.h5:1"], ["swapped.h5", "block_y, block_x, block_size", "in that order"]),
     ],
 )
 def test_act_refuses_its_options_before_reading_the_run(run_cli, tmp_path, monkeypatch, flags, fragments):
@@ -27,6 +28,10 @@ def test_act_refuses_its_options_before_reading_the_run(run_cli, tmp_path, monke
 
     monkeypatch.chdir(tmp_path)
     MotionDataset(np.zeros((3, 5, 2), np.float32), dt=0.1).save(tmp_path / "three.h5")
+    blocks = np.tile([0.0, 0.5, 0.05], (3, 1))
+    swapped = MotionDataset(np.zeros((3, 5, 2), np.float32), params=blocks, dt=0.1)
+    swapped.param_names = ["block_y", "block_x", "block_size"]
+    swapped.save(tmp_path / "swapped.h5")
     res = run_cli("act", tmp_path / "run", "--primitive", "push", *flags, "--out", tmp_path / "o")
     assert_user_error(res, *fragments)
     assert not (tmp_path / "o").exists()
@@ -76,3 +81,18 @@ def test_act_names_its_own_flag_for_the_fitted_data(run_cli, motor_run, tmp_path
         shutil.move(moved, motor_run / "d.h5")
     assert_user_error(res, "d.h5", "--data PATH")
     assert "--fitted-data" not in res.err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_act_refuses_a_scene_whose_joints_are_not_the_runs(run_cli, motor_run, tmp_path):
+    """The scene file's sample names itself and says how many joints it has and the run has."""
+    import numpy as np
+
+    from primspace.data import MotionDataset
+
+    blocks = np.tile([0.5, 0.0, 0.05], (2, 1))
+    MotionDataset(np.zeros((2, 6, 3), np.float32), params=blocks, dt=0.1).save(tmp_path / "s.h5")
+    res = run_cli(
+        "act", motor_run / "run", "--primitive", "push", "--scene", f"{tmp_path / 's.h5'}:1", "--out", tmp_path / "o"
+    )
+    assert_user_error(res, "s.h5", "sample 1", "3 joints", "the run's 2")

@@ -67,7 +67,7 @@ def act_command(
     with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before minutes of work
         try:
             trained = load_run(run)
-            _check_primitive(trained, primitive, data)  # before the frames are read and the policy fitted
+            _check_with_run(trained, primitive, scene, data)  # before the frames are read and the policy fitted
             outcome = act(trained, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
         except UserError as exc:  # the library names fitted_data=, act's flag is --data
             raise UserError(_ACT_DATA.sub("--data PATH", str(exc))) from None
@@ -82,6 +82,7 @@ def _check_before_work(scene: str, every: int) -> None:
     line before the run is read and the policy fitted (the library checks them again, with the run)."""
     from primspace.act.planner import check_every
     from primspace.data import MotionDataset
+    from primspace.sim.config import PARAM_NAMES
     from primspace.sim.execute import check_block
 
     check_every(every)
@@ -106,11 +107,17 @@ def _check_before_work(scene: str, every: int) -> None:
         raise UserError(
             f"--scene {path}: the file has no block params (block_x, block_y, block_size) to place the block"
         )
+    names = list(scenes.param_names or [])
+    if set(PARAM_NAMES) & set(names) and tuple(names[:3]) != PARAM_NAMES:  # named, in another order
+        raise UserError(
+            f"--scene {path}: its params are ({', '.join(names)}); act reads the block from its first three, "
+            f"{', '.join(PARAM_NAMES)}, in that order"
+        )
 
 
-def _check_primitive(trained, primitive: str, data) -> None:
+def _check_with_run(trained, primitive: str, scene: str, data) -> None:
     """``--primitive`` resolved against the labels of the run's fitted demonstrations (as the scene
-    policy will), one UserError listing them otherwise."""
+    policy will), one UserError listing them otherwise; a ``--scene`` file's joints against theirs."""
     from primspace.data import MotionDataset
     from primspace.predict.primitives import primitives_from_labels
     from primspace.train.starts import fitted_samples
@@ -118,3 +125,8 @@ def _check_primitive(trained, primitive: str, data) -> None:
     fitted = fitted_samples(trained, None if data is None else MotionDataset.load(data))
     if fitted.labels is not None:
         primitives_from_labels(fitted.labels, fitted.label_names).resolve(primitive)
+    if len(scene.split(",")) != 3:  # FILE:INDEX (its form checked already)
+        path, _, index = scene.strip().rpartition(":")
+        joints, theirs = MotionDataset.load(path).motor.shape[2], fitted.motor.shape[2]
+        if joints != theirs:
+            raise UserError(f"--scene {path}: sample {int(index)} has {joints} joints, the run's {theirs}")
