@@ -96,3 +96,13 @@ def test_act_refuses_a_scene_whose_joints_are_not_the_runs(run_cli, motor_run, t
         "act", motor_run / "run", "--primitive", "push", "--scene", f"{tmp_path / 's.h5'}:1", "--out", tmp_path / "o"
     )
     assert_user_error(res, "s.h5", "sample 1", "3 joints", "the run's 2")
+
+
+@pytest.mark.slow
+def test_act_without_frames_names_the_data_given(run_cli, motor_run, tmp_path):
+    """--data without frames: named, not told to give --data; without --data, told to."""
+    args = ("act", motor_run / "run", "--primitive", "push", "--scene", "0.5,0,0.05", "--out", tmp_path / "o")
+    res = run_cli(*args, "--data", motor_run / "d.h5")
+    assert_user_error(res, "d.h5 has none", "camera frames")
+    assert "give --data" not in res.err
+    assert_user_error(run_cli(*args), "the run's data has none", "give --data with frames")

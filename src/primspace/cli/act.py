@@ -117,12 +117,15 @@ def _check_before_work(scene: str, every: int) -> None:
 
 def _check_with_run(trained, primitive: str, scene: str, data) -> None:
     """``--primitive`` resolved against the labels of the run's fitted demonstrations (as the scene
-    policy will), one UserError listing them otherwise; a ``--scene`` file's joints against theirs."""
+    policy will), one UserError listing them otherwise; ``--data`` without frames; a ``--scene``
+    file's joints against theirs."""
     from primspace.data import MotionDataset
     from primspace.predict.primitives import primitives_from_labels
     from primspace.train.starts import fitted_samples
 
     fitted = fitted_samples(trained, None if data is None else MotionDataset.load(data))
+    if data is not None and not fitted.has_images:
+        raise UserError(f"act learns from the fitted demonstrations' camera frames, and {data} has none")
     if fitted.labels is not None:
         primitives_from_labels(fitted.labels, fitted.label_names).resolve(primitive)
     if len(scene.split(",")) != 3:  # FILE:INDEX (its form checked already)
