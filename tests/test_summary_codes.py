@@ -42,8 +42,13 @@ COMMAND = "primspace experiment intra --out tiny"
 @pytest.fixture(scope="module")
 def exp(tiny_data, tmp_path_factory):
     """The intra grid run on the tiny data set (conftest's ``tiny_data``)."""
+    from primspace.experiments import intra
+
     exp = ExperimentDir(tmp_path_factory.mktemp("exp") / "out", TINY, data=tiny_data, workers=1, progress=False)
-    run_intra(exp)
+    with pytest.MonkeyPatch.context() as mp:  # figures and animations: not what a summary holds (seconds)
+        mp.setattr(intra.figures, "draw_intra", lambda *a, **k: [])
+        mp.setattr(intra, "write_animations", lambda *a, **k: None)
+        run_intra(exp)
     return exp
 
 
