@@ -65,3 +65,13 @@ def test_clusters_of_codes_take_any_seed_of_ours():
     rng = np.random.default_rng(0)
     codes = np.vstack([rng.normal(size=4) + 0.01 * rng.normal(size=(6, 4)) for _ in range(2)])
     assert primitives_from_clusters(codes, 2, random_state=5_000_000_000).count == 2
+
+
+def test_cluster_takes_any_seed_of_ours_and_names_its_option_for_others(run_cli, tmp_path):
+    np.save(tmp_path / "z.npy", np.random.default_rng(0).normal(size=(30, 6)))
+    for seed in ("-1", str(MAX_SEED + 1)):
+        res = run_cli("cluster", tmp_path / "z.npy", "--k", 2, "--seed", seed, "--out", tmp_path / "c")
+        assert_user_error(res, "--seed", seed)
+        assert "z.npy" not in res.err and not (tmp_path / "c").exists()
+    res = run_cli("cluster", tmp_path / "z.npy", "--k", 2, "--seed", 5_000_000_000, "--out", tmp_path / "c")
+    assert res.code == 0, res.err

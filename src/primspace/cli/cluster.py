@@ -81,7 +81,9 @@ def cluster_command(
     from primspace.cluster.outputs import CLUSTER_OUTPUT
     from primspace.utils.files import check_outside_inputs
     from primspace.utils.folders import atomic_directory, check_output_directory
+    from primspace.utils.seeds import check_seed, library_seed
 
+    check_seed(seed, "--seed")
     k, k_flag = _primitives_option(k, k_deprecated)
     check_outside_inputs(out, (src, labels))
     check_output_directory(out, overwrite, CLUSTER_OUTPUT)
@@ -102,7 +104,7 @@ def cluster_command(
             "ones_weight": ones_weight,
             "spectral": spectral.value,
             "n_init": n_init,
-            "random_state": seed,
+            "random_state": library_seed(seed),
         }
         result = _cluster(src, points, k, options, do_sweep, grid)
         record = {"input": str(src), "points": points.description, **result.to_dict()}
