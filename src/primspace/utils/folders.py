@@ -143,9 +143,12 @@ class FolderLock:
     def acquire(self) -> FolderLock:
         """Take the lock (a no-op when held); one UserError when another process holds it
         or the folder is not writable."""
+        import errno
         import fcntl
 
-        while self.handle is None:
+        for _ in range(100):
+            if self.handle is not None:
+                break
             try:
                 handle = open(self.folder / LOCK_NAME, "a+", encoding="utf-8")
             except OSError as exc:
@@ -163,6 +166,10 @@ class FolderLock:
                     f"{self.folder}: another primspace process{who} is writing this folder; "
                     "wait for it to end or choose another --out"
                 ) from None
+            except OSError as exc:  # a file system without flock: written unlocked, as before locks
+                if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+                    handle.close()
+                    raise UserError(f"{self.folder}: cannot lock this folder ({exc.strerror})") from None
             if not _same_file(handle, self.folder / LOCK_NAME):  # its holder removed it as we opened it
                 handle.close()
                 continue
@@ -171,6 +178,8 @@ class FolderLock:
             handle.write(str(os.getpid()))
             handle.flush()
             self.handle = handle
+        if self.handle is None:
+            raise UserError(f"{self.folder}: its lock file keeps being replaced; is another program writing here?")
         return self
 
     def release(self) -> None:
