@@ -218,3 +218,38 @@ def test_a_writer_killed_while_marking_the_folder_unfinished_leaves_it_writable(
     (out / stale).write_text("primspace te")
     _write(out, False, "new")
     assert sorted(_snapshot(out)) == ["a.txt", "b.txt", "result.json"]
+
+
+CLI_KILLER = r"""
+import os, signal, sys
+from pathlib import Path
+from primspace.cli import main
+
+out = Path(sys.argv[1])
+real = os.replace
+
+def killing(src, dst, *args, **kwargs):
+    real(src, dst, *args, **kwargs)
+    if Path(dst).parent == out and not Path(dst).name.startswith("."):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+os.replace = killing
+main(sys.argv[2:])
+"""
+
+
+def test_a_killed_cluster_overwrite_never_looks_complete_and_is_rerun_whole(run_cli, points, tmp_path):
+    """`cluster --overwrite` killed after its first file replaced the old one: no result.json
+    beside files of two outputs; `cluster` again (no --overwrite) writes it whole."""
+    from primspace.cluster.outputs import CLUSTER_OUTPUT
+    from primspace.utils.folders import is_output_of
+
+    out = tmp_path / "c"
+    assert run_cli("cluster", points, "--k", 2, "--out", out).code == 0
+    args = ["cluster", str(points), "--k", "3", "--out", str(out), "--overwrite"]
+    proc = subprocess.run([sys.executable, "-c", CLI_KILLER, str(out), *args], capture_output=True, timeout=300)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    assert not is_output_of(out, CLUSTER_OUTPUT)
+    assert run_cli("cluster", points, "--k", 3, "--out", out).code == 0
+    assert json.loads((out / "result.json").read_text())["n_clusters"] == 3
+    assert sorted(p.name for p in out.iterdir()) == ["clustering.png", "labels.csv", "result.json"]
