@@ -238,6 +238,7 @@ main(sys.argv[2:])
 """
 
 
+@pytest.mark.slow
 def test_a_killed_cluster_overwrite_never_looks_complete_and_is_rerun_whole(run_cli, points, tmp_path):
     """`cluster --overwrite` killed after its first file replaced the old one: no result.json
     beside files of two outputs; `cluster` again (no --overwrite) writes it whole."""
