@@ -51,6 +51,8 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from primspace.data.importers.ts import read_ts
+
 DATASETS = ("lasa", "sim", "codes", "basicmotions", "watch")
 CODE_RUNS = (("projection", 10), ("projection", 20), ("projection", 40), ("random", 40))
 
@@ -94,29 +96,13 @@ def load_codes(experiment: str):
     return out
 
 
-def read_ts(path: Path):
-    """A multivariate, equal-length UEA ``.ts`` file: (n, T, channels) values and class names."""
-    series, labels, in_data = [], [], False
-    for line in path.read_text(encoding="utf-8").splitlines():
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        if in_data:
-            *channels, label = line.split(":")
-            series.append(np.array([[float(v) for v in c.split(",")] for c in channels]).T)
-            labels.append(label)
-        elif line.lower() == "@data":
-            in_data = True
-    return np.stack(series), labels
-
-
 def load_basicmotions():
     from primspace.cluster.inputs import trajectory_matrix
 
     folder = _package_dir("sktime") / "datasets" / "data" / "BasicMotions"
     parts = [read_ts(folder / f"BasicMotions_{part}.ts") for part in ("TRAIN", "TEST")]
-    motor = np.concatenate([p[0] for p in parts])
-    names = [name for p in parts for name in p[1]]
+    motor = np.concatenate([np.stack(p.series) for p in parts])
+    names = [name for p in parts for name in p.labels]
     classes = sorted(set(names))
     return trajectory_matrix(motor), np.array([classes.index(n) for n in names])
 

