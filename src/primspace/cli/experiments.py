@@ -187,7 +187,7 @@ def _experiment_command(
         preset: str | None = typer.Option(
             None,
             "--preset",
-            help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended) or lasa (real demonstrations, CPU); composite takes demo, paper or lasa too.",
+            help="Experiment preset: demo (CPU, minutes; the default), paper (GPU recommended), lasa (real demonstrations, CPU) or real (the intra protocol on an imported --data file, docs/real.md); composite takes demo, paper or lasa.",
         ),
         data: Path | None = typer.Option(
             None, "--data", help="A data set file; default: generate the preset's simulated data into OUT."

@@ -28,6 +28,7 @@ __all__ = [
     "DEFAULT_PRESET",
     "LASA_DATA",
     "LASA_CHAINS",
+    "REAL_PRESET",
     "COMPOSITE_PRESET_OF",
     "default_model",
     "default_train",
@@ -288,6 +289,27 @@ PRESETS: dict[str, ExperimentPreset] = {
     ),
 }
 
+#: The preset of the intra protocol on real recordings (docs/real.md).
+REAL_PRESET = "real"
+# The intra-primitive protocol on real recordings (issue 50): any labelled data file from
+# `primspace import` (--data; without it, LASA at 61 steps), 20 % of each class fitting θ
+# and Z, the other 80 % inferred with θ frozen, q = 8, the demo's schedule and optimiser.
+PRESETS[REAL_PRESET] = ExperimentPreset(
+    name=REAL_PRESET,
+    data_preset=LASA_DATA,
+    train_fraction=0.2,
+    inits=("zero", "random", "projection", "pca", "calibrated"),
+    latent_dims=(8,),
+    seeds=(0, 1, 2),
+    images=False,
+    fit_epochs=400,
+    infer_epochs=250,
+    train=replace(default_train(), batch_size=16, lr=3e-3, latent_lr=3e-2),
+    cluster_latent_dim=8,
+    lasa_length=61,
+    inter_latent_dim=8,
+    inter_epochs=(200, 200),
+)
 
 _DEMO_TRAIN = dict(batch_size=16, lr=3e-3, latent_lr=3e-2)
 # Long demonstrations made of several primitives (issue 15; docs/sequences.md): one code of
