@@ -76,6 +76,9 @@ def test_diagnostics_scale_drift_and_conditioning():
 def test_the_real_preset_is_the_protocol():
     from primspace.experiments.presets import PRESETS, REAL_PRESET
 
+    from primspace.report.real_tables import REAL
+
+    assert REAL == REAL_PRESET  # the preset whose summaries docs/real.md shows
     p = PRESETS[REAL_PRESET]
     assert (p.train_fraction, p.latent_dims, p.seeds, p.fit_epochs, p.infer_epochs) == (0.2, (8,), (0, 1, 2), 400, 250)
     assert {"zero", "random", "projection", "calibrated", "pca"} == set(p.inits)

@@ -5,6 +5,7 @@ docs/reproduce.md, written from the stored summaries.
 (experiment summaries, :mod:`primspace.results.summary`) and rewrites the generated
 blocks of README.md (the results at a glance), docs/results.md (the tables per summary,
 and the numbers its prose discusses), docs/predict.md (prediction, scene),
+docs/real.md (the intra protocol on real recordings, :mod:`primspace.report.real_tables`),
 docs/sequences.md (composite segmentation, and its synthesis at a glance; the blocks
 behind the prose: :mod:`primspace.report.prose_numbers`) and
 docs/act.md (acting from the scene and in closed loop, :func:`render_act`) and docs/reproduce.md
@@ -37,6 +38,7 @@ from pathlib import Path
 from primspace.report.commands import portable_command
 from primspace.report.comparisons import COMPARISONS, merged, render_comparison, side_names
 from primspace.report.prose_numbers import render_composite_glance, render_differ
+from primspace.report.real_tables import is_real, render_real
 from primspace.report.regime_tables import figure_path, regime_figure, render_regime
 from primspace.report.reproduce_blocks import (
     ABLATION,
@@ -101,6 +103,7 @@ TARGETS = {
     "composite": Path("docs") / "sequences.md",
     "composite-glance": Path("docs") / "sequences.md",
     "act": Path("docs") / "act.md",
+    "real": Path("docs") / "real.md",
     "ablation": Path("docs") / "reproduce.md",
     "paper-setting": Path("docs") / "reproduce.md",
 }
@@ -225,7 +228,11 @@ def blocks(summaries: dict[str, dict], balances: dict[str, dict] | None = None) 
     """The text of every generated block, by block name (:data:`TARGETS`); ``balances``: the
     stored loss-balance measurements (:func:`primspace.report.reproduce_blocks.load_balances`)."""
     tune_only = {tuned for source, tuned in TUNED_IN.items() if source in summaries}
-    parts = [render_summary(s, s["name"] in tune_only) for s in summaries.values() if set(s["results"]) & _REPRODUCED]
+    parts = [
+        render_summary(s, s["name"] in tune_only)
+        for s in summaries.values()
+        if set(s["results"]) & _REPRODUCED and not is_real(s)  # the real preset's: docs/real.md
+    ]
     parts += [
         render_comparison(merged(summaries, a), merged(summaries, b), what)
         + ("\n\n" + clustering_ablation(merged(summaries, a), merged(summaries, b)) if a == ABLATION[0] else "")
@@ -252,6 +259,7 @@ def blocks(summaries: dict[str, dict], balances: dict[str, dict] | None = None) 
         "act": note + act if act else NO_ACT,
         "ablation": ablation(summaries),
         "paper-setting": paper_setting(summaries, balances),
+        "real": render_real(summaries),
     }
 
 
