@@ -108,6 +108,9 @@ def test_import_ts_command_writes_the_data_set(run_cli, tmp_path):
     guessed = run_cli("import", train, "--length", "5", "--out", tmp_path / "guessed.h5")  # .ts: the format guessed
     assert guessed.code == 0, guessed.err
     assert len(MotionDataset.load(tmp_path / "guessed.h5")) == 2
+    folder = run_cli("import", tmp_path, "--length", "5", "--out", tmp_path.parent / f"{tmp_path.name}-folder.h5")
+    assert folder.code == 0, folder.err  # a folder of .ts files (and no .csv): the format guessed
+    assert len(MotionDataset.load(tmp_path.parent / f"{tmp_path.name}-folder.h5")) == 3
 
 
 @pytest.mark.parametrize(

@@ -254,7 +254,11 @@ def _guess_format(src: Path | None) -> str:
     if src.is_dir():
         from primspace.data.importers import is_lerobot_dir, looks_like_npy_folder
 
-        return "lerobot" if is_lerobot_dir(src) else "npy" if looks_like_npy_folder(src) else "csv"
+        if is_lerobot_dir(src):
+            return "lerobot"
+        if looks_like_npy_folder(src):
+            return "npy"
+        return "ts" if any(src.glob("*.ts")) and not any(src.rglob("*.csv")) else "csv"
     suffix = src.suffix.lower()
     if suffix == ".npz":
         return "npz"
