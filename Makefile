@@ -16,15 +16,21 @@ $(VENV)/bin/activate:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 
-$(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
-	$(PIP) install --quiet $(TORCH)
-	$(PIP) install --quiet -e .
+# torch's pin and the project resolved in one pip call; the test install is a superset of the
+# plain one (so it marks both, and `make demo` after `make test` installs nothing again)
+TEST_EXTRAS := [test,ray,video,predict]
+define install_project
+	$(PIP) install --quiet $(TORCH) -e '.$(1)'
 	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
+endef
+
+$(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
+	$(call install_project,)
 	touch $@
 
-$(VENV)/.installed-test: $(VENV)/.installed
-	$(PIP) install --quiet -e '.[test,ray,video,predict]'
-	touch $@
+$(VENV)/.installed-test: $(VENV)/bin/activate pyproject.toml
+	$(call install_project,$(TEST_EXTRAS))
+	touch $(VENV)/.installed $@
 
 install: $(VENV)/.installed
 install-test: $(VENV)/.installed-test

@@ -305,7 +305,7 @@ def test_ray_backend_gives_the_same_numbers_as_local(tiny_data, tmp_path, grid_o
 
     _ray_or_skip()
     small = ExperimentPreset(**{**TINY.to_dict(), "name": "small", "inits": ("projection",)})
-    local = run_intra(ExperimentDir(tmp_path / "local", small, data=tiny_data, workers=2, progress=False))
+    local = run_intra(ExperimentDir(tmp_path / "local", small, data=tiny_data, workers=1, progress=False))
     ray = run_intra(ExperimentDir(tmp_path / "ray", small, data=tiny_data, backend="ray", workers=2, progress=False))
     assert local["failures"] == ray["failures"] == {}
     assert [r["fit"] for r in local["runs"]] == [r["fit"] for r in ray["runs"]]
