@@ -1,6 +1,6 @@
 # primspace: the two commands a new user runs are `make demo` and `make test`.
-# Each does its own set-up in .venv (torch is pinned to the CPU wheel first: a bare
-# `torch` requirement would pull a multi-GB CUDA build).
+# Each does its own set-up in .venv (torch is pinned to 2.13.0, whose CPU wheel these machines
+# hold: a bare `torch` requirement would pull a multi-GB CUDA build).
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
