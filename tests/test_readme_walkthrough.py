@@ -22,8 +22,10 @@ import pytest
 from conftest import read_png
 
 README = Path(__file__).resolve().parents[1] / "README.md"
-# other importers, or other options of the same one (tests/test_readme_imports.py runs those lines)
-ALTERNATIVES = ("--format csv", "demos.npz", "--format lerobot", "--format npy", "--filter-key")
+# other importers, or other options of the same one (tests/test_readme_imports.py runs those lines);
+# a primitive by name needs labelled data, which robomimic files lack (tests/test_predict_primitive.py
+# runs `predict --primitive` on a CSV folder labelled by its folder names)
+ALTERNATIVES = ("--format csv", "demos.npz", "--format lerobot", "--format npy", "--filter-key", "--primitive push")
 
 
 def _lines() -> list[str]:
