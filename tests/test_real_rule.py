@@ -30,6 +30,9 @@ def test_projection_below_zero_by_more_than_the_spread(zero, projection, verdict
     assert out["verdict"] == verdict
     assert detail in out["by_q"][8]["detail"]
     assert out["by_q"][8]["zero"] == pytest.approx(np.mean(zero))
+    lower = sum(p < z for z, p in zip(zero, projection))
+    assert out["by_q"][8]["lower_in"] == [lower, len(zero)]
+    assert f"projection lower in {lower} of {len(zero)} seeds" in out["text"]
 
 
 def test_eval_losses_are_the_last_inference_loss_per_seed():
@@ -75,7 +78,6 @@ def test_diagnostics_scale_drift_and_conditioning():
 
 def test_the_real_preset_is_the_protocol():
     from primspace.experiments.presets import PRESETS, REAL_PRESET
-
     from primspace.report.real_tables import REAL
 
     assert REAL == REAL_PRESET  # the preset whose summaries docs/real.md shows

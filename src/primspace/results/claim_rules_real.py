@@ -70,10 +70,13 @@ def eval_losses(intra: dict) -> dict[int, dict[str, dict[int, float]]]:
     return {q: out[q] for q in sorted(out)}
 
 
-def _compare(zero: list[float], projection: list[float]) -> dict:
-    """The rule at one q (module docstring)."""
-    z, p = np.asarray(zero), np.asarray(projection)
+def _compare(zero: dict[int, float], projection: dict[int, float]) -> dict:
+    """The rule at one q (module docstring), on ``{seed: final eval loss}`` of each; also in how
+    many of the seeds both ran projection ended lower (``lower_in``, said beside the verdict)."""
+    z, p = np.asarray(list(zero.values())), np.asarray(list(projection.values()))
+    paired = sorted(set(zero) & set(projection))
     numbers = {"zero": float(z.mean()), "projection": float(p.mean()), "seeds": int(min(z.size, p.size))}
+    numbers["lower_in"] = [sum(projection[s] < zero[s] for s in paired), len(paired)]
     if min(z.size, p.size) < 2:
         return numbers | {"verdict": "cannot be checked", "detail": "one seed: no spread"}
     spread = float(max(z.std(ddof=1), p.std(ddof=1)))
@@ -89,7 +92,7 @@ def projection_below_zero(intra: dict) -> dict:
     """The rule's verdict on one data set's intra result: ``verdict``, ``direction``, ``text`` and
     the numbers at each q (``by_q``: zero's and projection's mean, the difference, the spread)."""
     by_q = {
-        q: _compare(list(d["zero"].values()), list(d["projection"].values()))
+        q: _compare(d["zero"], d["projection"])
         for q, d in eval_losses(intra).items()
         if "zero" in d and "projection" in d
     }
@@ -104,7 +107,8 @@ def projection_below_zero(intra: dict) -> dict:
         verdict, direction = "does not hold", AGAINST
     text = "; ".join(
         f"q = {q}: {c['detail']} (zero {c['zero']:.3g}, projection {c['projection']:.3g}"
-        + (f", difference {c['difference']:.2g} against spread {c['spread']:.2g})" if "spread" in c else ")")
+        + (f", difference {c['difference']:.2g} against spread {c['spread']:.2g}" if "spread" in c else "")
+        + f"; projection lower in {c['lower_in'][0]} of {c['lower_in'][1]} seeds)"
         for q, c in by_q.items()
     )
     return {"verdict": verdict, "direction": direction, "by_q": by_q, "text": text}
