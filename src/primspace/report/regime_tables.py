@@ -26,8 +26,8 @@ FIGURE_DIR = Path("docs") / "figures"
 
 
 def figure_path(name: str) -> Path:
-    """The figure of summary ``name``, relative to the repository: ``docs/figures/regime-<name>.png``."""
-    return FIGURE_DIR / f"regime-{file_stem(name)}.png"
+    """The figure of summary ``name``, relative to the repository: ``docs/figures/<name>_error_vs_n.png``."""
+    return FIGURE_DIR / f"{file_stem(name)}_error_vs_n.png"
 
 
 def regime_figure(summary: dict, path: str | Path) -> None:
@@ -80,6 +80,7 @@ def crossing_text(regime: dict, task: str, metric: str, fraction: float) -> str:
     if after is not None:
         c = compared[after]
         text += f"; at n = {after} it {c['verdict'].replace('holds', 'wins')} against {c['peer']}"
+    text += "; by n: " + ", ".join(f"{n} {c['verdict'].replace('holds', 'wins')}" for n, c in compared.items())
     seeds = seed_crossings(regime, task, metric, fraction)
     if len(seeds) > 1:
         text += "; seed by seed: " + ", ".join(f"{s}: {'none' if v is None else v}" for s, v in seeds.items())
@@ -134,8 +135,9 @@ def render_regime(summary: dict) -> str:
         f"{' or '.join(map(str, n_eval))} evaluation motions for every n"
         + (f" (at most {cap} per primitive)" if cap else " (the whole evaluation split)")
         + f"; measured on {summary.get('cpu', {}).get('model', 'an unrecorded CPU')}"
-        + (f", {summary['timings']['regime']:.0f} s in all" if "regime" in summary.get("timings", {}) else "")
-        + ". Mean ± sample std (ddof 1) over seeds."
+        + " (times: docs/reproduce.md). Mean ± sample std (ddof 1) over seeds; with one seed there is no spread, and "
+        "a comparison holds when the model's number is better at all."
+        + (f" Note: {summary['note']}." if summary.get("note") else "")
         + (f" The rows' settings: {_settings_text(regime['settings'])}." if regime.get("settings") else "")
     )
     metrics = [m for m, _ in METRICS if m != "success" or regime.get("judged")]
