@@ -97,3 +97,21 @@ def test_the_act_tables_mark_is_the_prediction_tables_and_old_results_have_no_sh
     old = fake_act_results()  # results before act version 4 record no share
     assert all(columns[-1] != "model share" for _, columns, _ in act_tables(old))
     assert act_table(old)[0] == ["method", "success (all primitives)"]
+
+
+def test_one_fitted_demonstration_per_primitive_is_refused_before_any_training(tmp_path, run_cli, monkeypatch):
+    """The scene policy maps each primitive's fitted demonstrations: with one per primitive in a
+    seed's fitted split, `experiment act` says so in one line before training anything (it used to
+    train, fail every point and say "re-run the same command to retry them")."""
+    from dataclasses import replace
+
+    from conftest import assert_user_error
+    from primspace.experiments import presets as experiment_presets
+    from test_experiments import TINY
+
+    simulate(tmp_path / "data.h5")  # 9 motions per primitive
+    monkeypatch.setitem(experiment_presets.PRESETS, "tiny", replace(TINY, train_fraction=0.1))
+    out = tmp_path / "exp"
+    res = run_cli("experiment", "act", "--preset", "tiny", "--data", tmp_path / "data.h5", "--out", out)
+    assert_user_error(res, "at least 2 fitted demonstrations per primitive", "has 1 in seed 0", "--train-fraction")
+    assert not (out / "runs").exists()

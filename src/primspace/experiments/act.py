@@ -223,6 +223,23 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
     }
 
 
+def _check_fitted_per_primitive(exp: ExperimentDir, data) -> None:
+    """One line before any training when a seed's fitted split leaves a primitive fewer than the
+    2 demonstrations the scene policy's map per primitive needs."""
+    from primspace.experiments.intra import split_indices
+
+    for seed in exp.preset.seeds:
+        train, _ = split_indices(data.labels, exp.preset.train_fraction, seed)
+        counts = np.bincount(data.labels[train], minlength=len(data.label_names))
+        for k in np.flatnonzero(counts[: len(data.label_names)] < 2):
+            if np.any(data.labels == k):
+                raise UserError(
+                    f"experiment act needs at least 2 fitted demonstrations per primitive: "
+                    f"{data.label_names[k]} has {counts[k]} in seed {seed}'s fitted split "
+                    f"(train fraction {exp.preset.train_fraction:g}); give --train-fraction or more demonstrations"
+                )
+
+
 def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
     """The act grid over the intra runs' seeds at the focus q (runs intra first if needed).
 
@@ -236,6 +253,7 @@ def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
         raise UserError(_NO_FRAMES)
     if not judgeable(data):
         raise UserError("experiment act executes motions in the simulator: its data must be simulated")
+    _check_fitted_per_primitive(exp, data)
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
     seeds = projection_seeds(intra, q)
