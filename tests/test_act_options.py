@@ -106,3 +106,26 @@ def test_act_without_frames_names_the_data_given(run_cli, motor_run, tmp_path):
     assert_user_error(res, "d.h5 has none", "camera frames")
     assert "give --data" not in res.err
     assert_user_error(run_cli(*args), "the run's data has none", "give --data with frames")
+
+
+def test_the_library_reads_a_scene_file_as_the_command_checks_it(tmp_path):
+    """`act.command.read_scene` is the one check of a --scene (the command calls it before any work,
+    the library again with the run): a file naming the block's columns in another order is refused."""
+    import numpy as np
+
+    from primspace.act.command import read_scene
+    from primspace.data import MotionDataset
+    from primspace.utils.errors import UserError
+
+    params = np.array([[0.0, 0.5, 0.05], [0.02, 0.45, 0.05]])
+    swapped = MotionDataset(motor=np.zeros((2, 5, 3)), params=params, param_names=["block_y", "block_x", "block_size"])
+    swapped.save(tmp_path / "swapped.h5")
+    with pytest.raises(UserError, match="in that order"):
+        read_scene(f"{tmp_path / 'swapped.h5'}:0")
+    ordered = MotionDataset(
+        motor=np.zeros((2, 5, 3)), params=params[:, [1, 0, 2]], param_names=["block_x", "block_y", "block_size"]
+    )
+    ordered.save(tmp_path / "ordered.h5")
+    (x, y, size), data, i = read_scene(f"{tmp_path / 'ordered.h5'}:1")
+    assert (x, y, size) == pytest.approx((0.45, 0.02, 0.05)) and i == 1 and len(data) == 2
+    assert read_scene("0.5,0.0,0.05")[1:] == (None, None)

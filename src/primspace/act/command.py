@@ -33,6 +33,7 @@ __all__ = [
     "ACT_FILES",
     "ACT_MARK",
     "ActScene",
+    "read_scene",
     "parse_scene",
     "fit_planners",
     "act",
@@ -60,9 +61,12 @@ class ActScene:
         return {"block_x": self.block_x, "block_y": self.block_y, "size": self.size, "source": self.source}
 
 
-def parse_scene(text: str, fitted, primitive_rows: np.ndarray) -> ActScene:
-    """``FILE:INDEX`` or ``x,y,size`` as a scene (module docstring); one UserError otherwise."""
+def read_scene(text: str):
+    """The block a ``--scene`` names, checked without the run: ``((x, y, size), None, None)`` for
+    ``x,y,size``, ``((x, y, size), data, index)`` for ``FILE:INDEX``; one UserError otherwise (a file
+    without block params, or whose params name the block's columns in another order, included)."""
     from primspace.data import MotionDataset
+    from primspace.sim.config import PARAM_NAMES
     from primspace.sim.execute import check_block
 
     text = text.strip()
@@ -72,12 +76,12 @@ def parse_scene(text: str, fitted, primitive_rows: np.ndarray) -> ActScene:
             x, y, size = (float(p) for p in parts)
         except ValueError:
             raise UserError(f"--scene {text!r}: give x,y,size in metres (e.g. 0.5,0.0,0.05) or FILE:INDEX") from None
-        x, y, size = check_block(x, y, size)
-        first = np.asarray(fitted.motor[primitive_rows, 0], dtype=np.float64).mean(axis=0)
-        return ActScene(x, y, size, first, "given")
+        return check_block(x, y, size), None, None
     path, _, index = text.rpartition(":")
     if not path or not index.strip().lstrip("-").isdigit():
         raise UserError(f"--scene {text!r}: give FILE:INDEX (a data file's sample) or x,y,size in metres")
+    if not Path(path).is_file():
+        raise UserError(f"--scene {path}: no such file")
     data = MotionDataset.load(path)
     i = int(index)
     if not 0 <= i < len(data):
@@ -86,8 +90,24 @@ def parse_scene(text: str, fitted, primitive_rows: np.ndarray) -> ActScene:
         raise UserError(
             f"--scene {path}: the file has no block params (block_x, block_y, block_size) to place the block"
         )
-    x, y, size = check_block(*(float(v) for v in data.params[i, :3]))
-    return ActScene(x, y, size, np.asarray(data.motor[i, 0], dtype=np.float64), f"{path}:{i}")
+    names = list(data.param_names or [])
+    if set(PARAM_NAMES) & set(names) and tuple(names[:3]) != PARAM_NAMES:  # named, in another order
+        raise UserError(
+            f"--scene {path}: its params are ({', '.join(names)}); act reads the block from its first three, "
+            f"{', '.join(PARAM_NAMES)}, in that order"
+        )
+    return check_block(*(float(v) for v in data.params[i, :3])), data, i
+
+
+def parse_scene(text: str, fitted, primitive_rows: np.ndarray) -> ActScene:
+    """``FILE:INDEX`` or ``x,y,size`` as a scene (module docstring; :func:`read_scene` checks it)."""
+    (x, y, size), data, i = read_scene(text)
+    if data is None:
+        first = np.asarray(fitted.motor[primitive_rows, 0], dtype=np.float64).mean(axis=0)
+        return ActScene(x, y, size, first, "given")
+    return ActScene(
+        x, y, size, np.asarray(data.motor[i, 0], dtype=np.float64), f"{text.strip().rpartition(':')[0]}:{i}"
+    )
 
 
 def fit_planners(run, fitted, every: int):

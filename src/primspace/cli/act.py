@@ -80,39 +80,11 @@ def act_command(
 def _check_before_work(scene: str, every: int) -> None:
     """``--every``, and ``--scene``'s form, its block's place or its file's sample, refused in one
     line before the run is read and the policy fitted (the library checks them again, with the run)."""
+    from primspace.act.command import read_scene
     from primspace.act.planner import check_every
-    from primspace.data import MotionDataset
-    from primspace.sim.config import PARAM_NAMES
-    from primspace.sim.execute import check_block
 
     check_every(every)
-    text = scene.strip()
-    parts = text.split(",")
-    if len(parts) == 3:
-        try:
-            x, y, size = (float(p) for p in parts)
-        except ValueError:
-            raise UserError(f"--scene {text!r}: give x,y,size in metres (e.g. 0.5,0.0,0.05) or FILE:INDEX") from None
-        check_block(x, y, size)
-        return
-    path, _, index = text.rpartition(":")
-    if not path or not index.strip().lstrip("-").isdigit():
-        raise UserError(f"--scene {text!r}: give FILE:INDEX (a data file's sample) or x,y,size in metres")
-    if not Path(path).is_file():
-        raise UserError(f"--scene {path}: no such file")
-    scenes = MotionDataset.load(path)
-    if not 0 <= int(index) < len(scenes):
-        raise UserError(f"--scene {path}: sample {int(index)} is outside 0..{len(scenes) - 1}")
-    if scenes.params is None or scenes.params.shape[1] < 3:
-        raise UserError(
-            f"--scene {path}: the file has no block params (block_x, block_y, block_size) to place the block"
-        )
-    names = list(scenes.param_names or [])
-    if set(PARAM_NAMES) & set(names) and tuple(names[:3]) != PARAM_NAMES:  # named, in another order
-        raise UserError(
-            f"--scene {path}: its params are ({', '.join(names)}); act reads the block from its first three, "
-            f"{', '.join(PARAM_NAMES)}, in that order"
-        )
+    read_scene(scene)
 
 
 def _check_with_run(trained, primitive: str, scene: str, data) -> None:
