@@ -49,6 +49,7 @@ from primspace.utils.files import (
     check_writable_directory,
     os_error,
 )
+from primspace.utils.folders import lock_exclusively
 
 __all__ = [
     "CONFIG_NAME",
@@ -185,7 +186,6 @@ class WriterLock:
     def acquire(self) -> WriterLock:
         """Take the lock (a no-op when held, or while the folder does not exist yet); one
         UserError when another process holds it."""
-        import fcntl
 
         if self.handle is not None or not self.run_dir.is_dir():
             return self
@@ -193,17 +193,7 @@ class WriterLock:
             handle = open(self.run_dir / LOCK_NAME, "a+", encoding="utf-8")
         except OSError as exc:
             raise os_error(exc, self.run_dir) from None
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            handle.seek(0)
-            holder = handle.read().strip()
-            handle.close()
-            who = f" (pid {holder})" if holder.isdigit() else ""
-            raise UserError(
-                f"{self.run_dir}: another primspace process{who} is writing this run; wait for it to end "
-                "or choose another out_dir"
-            ) from None
+        lock_exclusively(handle, self.run_dir, "run", "wait for it to end or choose another out_dir")
         handle.seek(0)
         handle.truncate()
         handle.write(str(os.getpid()))

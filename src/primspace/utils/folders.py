@@ -39,6 +39,7 @@ from primspace.utils.files import atomic_write_json
 from primspace.utils.outputs import describe
 
 __all__ = [
+    "lock_exclusively",
     "OutputKind",
     "FolderLock",
     "LOCK_NAME",
@@ -133,6 +134,22 @@ def _same_file(handle, path: Path) -> bool:
         return False
 
 
+def lock_exclusively(handle, path: Path, what: str, hint: str) -> None:
+    """``flock`` the open lock file ``handle`` exclusively without waiting; when another process
+    holds it, close ``handle`` and raise one UserError naming ``path``, the holder's process id as the
+    lock file records it, ``what`` it writes and the ``hint``. Other OSErrors pass."""
+    import fcntl
+
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip()
+        handle.close()
+        who = f" (pid {holder})" if holder.isdigit() else ""
+        raise UserError(f"{path}: another primspace process{who} is writing this {what}; {hint}") from None
+
+
 class FolderLock:
     """The exclusive lock of the one process writing ``folder``: ``flock`` on its
     :data:`LOCK_NAME` file, which holds the writer's process id and is removed on release."""
@@ -144,7 +161,6 @@ class FolderLock:
         """Take the lock (a no-op when held); one UserError when another process holds it
         or the folder is not writable."""
         import errno
-        import fcntl
 
         for _ in range(100):
             if self.handle is not None:
@@ -156,16 +172,7 @@ class FolderLock:
                     f"{self.folder}: cannot write into this folder ({exc.strerror or type(exc).__name__})"
                 ) from None
             try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                handle.seek(0)
-                holder = handle.read().strip()
-                handle.close()
-                who = f" (pid {holder})" if holder.isdigit() else ""
-                raise UserError(
-                    f"{self.folder}: another primspace process{who} is writing this folder; "
-                    "wait for it to end or choose another --out"
-                ) from None
+                lock_exclusively(handle, self.folder, "folder", "wait for it to end or choose another --out")
             except OSError as exc:  # a file system without flock: written unlocked, as before locks
                 if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
                     handle.close()
