@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from primspace.predict.metrics import observed_prefix, unobserved_mse
-from primspace.predict.peers import MeanMotionPeer, NearestPeer, ProMPPeer, best_noise
+from primspace.predict.peers import (
+    MeanMotionPeer,
+    NearestPeer,
+    ProMPPeer,
+    best_noise,
+    imitate_promp,
+    phase,
+    promp_class,
+)
 from primspace.utils.errors import UserError
 
 T = 40
@@ -169,6 +177,21 @@ def test_promp_missing_package_is_a_user_error(monkeypatch):
     motor, labels = _demos(n_labels=1, per_label=2)
     with pytest.raises(UserError, match=r"pip install 'primspace\[predict\]'"):
         ProMPPeer().fit(motor, labels)
+
+
+@pytest.mark.parametrize("n_basis", [4, 9])
+def test_imitate_promp_is_the_packages_em_over_demonstrations_of_several_lengths(n_basis):
+    pytest.importorskip("movement_primitives")
+    rng = np.random.default_rng(3)
+    demos = [np.cumsum(rng.normal(size=(n, 3)), axis=0) * 0.1 for n in (20, 31, 20, 25, 20, 25)]
+    package = promp_class()(3, n_basis)
+    package.imitate([phase(len(y)) for y in demos], demos, n_iter=40)
+    ours = imitate_promp(3, n_basis, demos, 40)
+    assert type(ours) is type(package)
+    np.testing.assert_allclose(ours.weight_mean, package.weight_mean, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(ours.weight_cov, package.weight_cov, rtol=1e-9, atol=1e-12)
+    assert ours.variance == pytest.approx(package.variance, rel=1e-9)
+    assert np.abs(ours.weight_mean).max() > 0.01  # it learned something, not two zero starts
 
 
 def test_promp_conditioned_on_a_full_prefix_reproduces_it():

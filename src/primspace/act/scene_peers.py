@@ -29,7 +29,7 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from primspace.act.frame_features import frame_features
-from primspace.predict.peers import LabelledPeer, phase
+from primspace.predict.peers import LabelledPeer, imitate_promp, phase, promp_class
 from primspace.utils.errors import UserError
 
 __all__ = ["ScenePeer", "ContextualProMPPeer", "NearestFramePeer", "RIDGE_ALPHAS"]
@@ -89,7 +89,8 @@ def _standardiser(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class ContextualProMPPeer(ScenePeer):
     """A ProMP per primitive whose weights are regressed on the first frame's features.
 
-    Fitting, per label (or once for all): the package's ``ProMP(J, n_basis).imitate`` on the
+    Fitting, per label (or once for all): the package's ``ProMP(J, n_basis)`` learned by its EM
+    (:func:`~primspace.predict.peers.imitate_promp`) on the
     group's demonstrations (time as phase in [0, 1] over each one's valid steps, as
     :class:`~primspace.predict.peers.ProMPPeer`); each demonstration's own weights by least
     squares on that ProMP's basis (the package's ``ProMP.weights``, ridge
@@ -148,12 +149,7 @@ class ContextualProMPPeer(ScenePeer):
 
     def fit(self, motor, labels=None, lengths=None, frames=None) -> ContextualProMPPeer:
         """Fit the ProMPs, the features and the regressions (class docstring); returns self."""
-        try:
-            from movement_primitives.promp import ProMP
-        except ImportError as exc:
-            raise UserError(
-                "the contextual ProMP peer needs the movement-primitives package: pip install 'primspace[predict]'"
-            ) from exc
+        promp_class()  # the package is there before any work
         motor, labels, lengths, first = self._fit_data(motor, labels, lengths, frames)
         if lengths.min() < 2:
             raise UserError("the contextual ProMP peer needs at least 2 valid steps per demonstration")
@@ -161,9 +157,8 @@ class ContextualProMPPeer(ScenePeer):
         rows = np.asarray(self.features_.fit_transform(first), dtype=np.float64)
         self.promps_, self.regressions_, self.alphas_ = {}, {}, {}
         for key, idx in self._groups(labels, len(motor)).items():
-            promp = ProMP(motor.shape[2], self.n_basis)
             demos = [motor[i, : lengths[i]] for i in idx]
-            promp.imitate([phase(lengths[i]) for i in idx], demos, n_iter=self.n_iter)
+            promp = imitate_promp(motor.shape[2], self.n_basis, demos, self.n_iter)
             weights = np.stack([promp.weights(phase(len(y)), y, lmbda=WEIGHT_RIDGE) for y in demos])
             self.promps_[key] = promp
             self.regressions_[key], self.alphas_[key] = self._regression(rows[idx], weights - promp.weight_mean)

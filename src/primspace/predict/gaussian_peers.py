@@ -37,7 +37,7 @@ import numpy as np
 from primspace.predict.base import Forecast, observation_rule
 from primspace.predict.code_prior import CV_FOLDS, DecodedGaussian, condition_primitives, fold_split
 from primspace.predict.metrics import unobserved_mse
-from primspace.predict.peers import LabelledPeer, phase, promp_class
+from primspace.predict.peers import LabelledPeer, imitate_promp, phase, promp_class
 from primspace.utils.errors import UserError
 
 __all__ = ["GaussianPeer", "RawGaussianPeer", "TunedProMPPeer", "NOISE_GRID", "BASIS_GRID", "RIDGE_GRID"]
@@ -277,9 +277,8 @@ class TunedProMPPeer(GaussianPeer):
     def fit_group(self, motor: np.ndarray, lengths: np.ndarray, key):
         if lengths.min() < 2:
             raise UserError("the ProMP peer needs at least 2 valid steps per demonstration")
-        promp = promp_class()(motor.shape[2], int(key))
         with np.errstate(all="ignore"):
-            promp.imitate([phase(n) for n in lengths], [m[:n] for m, n in zip(motor, lengths)], n_iter=self.n_iter)
+            promp = imitate_promp(motor.shape[2], int(key), [m[:n] for m, n in zip(motor, lengths)], self.n_iter)
         if not (np.isfinite(promp.weight_mean).all() and np.isfinite(promp.weight_cov).all()):
             raise np.linalg.LinAlgError(f"the ProMP's EM did not converge with {key} basis functions")
         return promp

@@ -43,6 +43,7 @@ __all__ = [
     "LabelledPeer",
     "phase",
     "promp_class",
+    "imitate_promp",
 ]
 
 _PROMP_MISSING = "the ProMP peer needs the movement-primitives package: pip install 'primspace[predict]'"
@@ -60,6 +61,68 @@ def promp_class():
 def phase(length: int) -> np.ndarray:
     """Phase in [0, 1] over ``length`` valid steps (a fresh array: the package divides in place)."""
     return np.linspace(0.0, 1.0, int(length))
+
+
+#: The temporal-difference factor of the ProMP's EM (``gamma`` of ``ProMP.imitate``).
+_EM_GAMMA = 0.7
+
+
+def imitate_promp(n_dims: int, n_basis: int, demos: Sequence[np.ndarray], n_iter: int = 1000, min_delta: float = 1e-5):
+    """The package's ``ProMP`` learned from ``demos`` (each ``(steps, n_dims)`` over phase [0, 1])
+    by the EM of ``ProMP.imitate`` (movement-primitives 0.9: Lazaric & Ghavamzadeh 2010, Sec. 3.2,
+    with its variance update and stopping rule), computed once per demonstration length.
+
+    ``imitate`` takes three pseudo-inverses of a ``(n_dims·n_basis)²`` matrix per demonstration
+    and iteration; but a demonstration's E-step covariance depends only on its time grid, so
+    demonstrations of one length share it. Here each iteration takes one pseudo-inverse per
+    distinct length (plus one of the weight covariance) and the per-demonstration means in one
+    product: the same updates (equal to ``imitate``'s up to rounding, pinned by a test), about
+    ``3 x demonstrations / lengths`` times fewer factorisations (a K-fold over 343 paper
+    demonstrations at 40 basis functions: hours to seconds). Returns the fitted ``ProMP``.
+    """
+    promp = promp_class()(int(n_dims), int(n_basis))
+    lengths = np.array([len(y) for y in demos])
+    order = np.argsort(lengths, kind="stable")
+    demos = [np.asarray(demos[i], dtype=np.float64) for i in order]
+    sizes = np.unique(lengths[order], return_counts=True)
+    grams, rhs, energies = [], [], []
+    start = 0
+    for steps, count in zip(*sizes):
+        diff = np.eye(steps) - _EM_GAMMA * np.eye(steps, k=1)  # H of imitate, per joint
+        basis_diff = promp._rbfs_1d_sequence(phase(steps)) @ diff.T  # (n_basis, steps)
+        grams.append(np.kron(np.eye(promp.n_dims), basis_diff @ basis_diff.T))
+        for y in demos[start : start + count]:
+            residual = diff @ y  # (steps, n_dims): R of imitate, step-major
+            rhs.append((basis_diff @ residual).T.ravel())  # joint-major, as the weights
+            energies.append(float(np.sum(residual**2)))
+        start += count
+    rhs, counts = np.asarray(rhs), sizes[1]
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    n_samples, total_energy = int(lengths.sum()), float(np.sum(energies))
+    promp.variance = 1.0
+    means = np.zeros((len(demos), promp.n_weights))
+    for _ in range(int(n_iter)):
+        previous = promp.weight_mean
+        precision = np.linalg.pinv(promp.weight_cov)
+        prior = precision @ promp.weight_mean
+        covs = []
+        for g, gram in enumerate(grams):
+            cov = np.linalg.pinv(gram / promp.variance + precision)
+            rows = slice(bounds[g], bounds[g + 1])
+            means[rows] = (rhs[rows] / promp.variance + prior) @ cov.T
+            covs.append(cov)
+        promp.weight_mean = means.mean(axis=0)
+        centered = means - promp.weight_mean
+        spread = sum(c * cov for c, cov in zip(counts, covs))
+        promp.weight_cov = (centered.T @ centered + spread) / len(demos)
+        variance = total_energy - 2.0 * float(np.sum(rhs * means))
+        for g, (gram, cov) in enumerate(zip(grams, covs)):
+            block = means[bounds[g] : bounds[g + 1]]
+            variance += counts[g] * np.trace(gram @ cov) + float(np.einsum("ij,jk,ik->", block, gram, block))
+        promp.variance = variance / (np.linalg.norm(means) * len(demos) * promp.n_dims * n_samples + 2.0)
+        if np.linalg.norm(promp.weight_mean - previous) < min_delta:
+            break
+    return promp
 
 
 class LabelledPeer(MotionPredictor):
@@ -148,7 +211,8 @@ class LabelledPeer(MotionPredictor):
 class ProMPPeer(LabelledPeer):
     """ProMP conditioning (``movement-primitives``): one ProMP per primitive, or one for all.
 
-    Fitting: the package's ``ProMP(J, n_basis).imitate`` (its EM) on each group's
+    Fitting: the package's ``ProMP(J, n_basis)`` learned by its EM (``imitate``, computed per
+    demonstration length by :func:`imitate_promp`) on each group's
     demonstrations, time as phase in [0, 1] over each demonstration's valid steps
     (``np.linspace(0, 1, T_i)``). With two demonstrations a group's spread is rank one,
     but the package's EM adds the per-demonstration posterior covariances, so the
@@ -192,14 +256,12 @@ class ProMPPeer(LabelledPeer):
 
     def fit(self, motor, labels=None, lengths=None, frames=None) -> ProMPPeer:
         """Fit one ProMP per label (or one for all) on the valid steps; returns self."""
-        promp_cls = promp_class()
         motor, labels, lengths = self._fit_data(motor, labels, lengths)
         if lengths.min() < 2:
             raise UserError("the ProMP peer needs at least 2 valid steps per demonstration")
         self.promps_ = {}
         for key, idx in self._groups(labels, len(motor)).items():
-            promp = promp_cls(motor.shape[2], self.n_basis)
-            promp.imitate([phase(lengths[i]) for i in idx], [motor[i, : lengths[i]] for i in idx], n_iter=self.n_iter)
+            promp = imitate_promp(motor.shape[2], self.n_basis, [motor[i, : lengths[i]] for i in idx], self.n_iter)
             if self.ridge:
                 promp.weight_cov = promp.weight_cov + self.ridge * np.eye(promp.n_weights)
             self.promps_[key] = promp
