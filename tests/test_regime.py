@@ -184,6 +184,8 @@ def test_the_regime_grid_is_resumable_and_seeded(regime_data, tmp_path):
     assert exp.figure("regime_errors").is_file()
     stamps = {p: p.stat().st_mtime_ns for p in (tmp_path / "a" / "runs").rglob("result.json")}
     assert len(stamps) == 3
+    # the mixed point's key names the others' count: with n = 5 added it is another point, not this one
+    assert {p.parent.name for p in stamps} == {"projection-n2-s0", "projection-n3-s0", "projection-mixed2of3-s0"}
     assert run_regime(exp, (2, 3), fractions=(0.25,), settings=CHEAP)["table"] == table  # finished points skipped
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     alone = run_regime(

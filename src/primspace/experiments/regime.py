@@ -292,7 +292,8 @@ def run_regime(
         if "mixed" in plan:
             few, subset = plan["mixed"]
             test = plan["eval"][np.asarray(data.labels)[plan["eval"]] == few]
-            key = _point_key(f"mixed{MIXED_FEW}", seed, eval_per_primitive)
+            many = max(plan["n"])  # in the key: the others' count changes the point
+            key = _point_key(f"mixed{MIXED_FEW}of{many}", seed, eval_per_primitive)
             points.append(GridPoint(key, (*common, subset.tolist(), test.tolist(), tuple(fractions), judge, *extra)))
             where[key] = (seed, "mixed")
     with exp.stage("regime"):
