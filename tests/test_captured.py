@@ -41,7 +41,7 @@ def _fit(ds, step, device="cpu", **train):
     return fit(ds, model_config=MC, train_config=tc, init="projection", indices=np.arange(10), progress=False)
 
 
-@pytest.mark.parametrize("reduction", ["mean", "sum"])
+@pytest.mark.parametrize("reduction", ["mean", "sum", "precision"])
 @pytest.mark.parametrize("lengths", [None, [12, 9, 7, 12, 10, 12, 8, 12, 11, 12, 12, 6, 12, 12]])
 def test_captured_step_is_the_eager_step(reduction, lengths):
     # 10 samples at batch 4: the last batch padded with 2 rows of weight 0; K = 3 frames

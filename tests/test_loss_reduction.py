@@ -169,7 +169,7 @@ def test_mean_is_unchanged(image_set):
 def test_validate_refuses_another_reduction():
     with pytest.raises(UserError) as err:
         TrainConfig(loss_reduction="median").validate()
-    assert str(err.value) == "loss_reduction must be 'mean' or 'sum', got 'median'"
+    assert str(err.value) == "loss_reduction must be 'mean', 'sum' or 'precision', got 'median'"
     assert TrainConfig(loss_reduction="sum").validate().loss_reduction == "sum"
     assert TrainConfig.from_dict({"epochs": 3}).loss_reduction == "mean"  # configs saved without it
 
@@ -274,7 +274,7 @@ def test_preset_override_goes_into_the_train_config():
     summed = demo.with_overrides(loss_reduction="sum", vision_frames=8)
     assert summed.train == replace(demo.train, loss_reduction="sum", vision_frames=8)
     assert demo.with_overrides(loss_reduction=None) == demo
-    with pytest.raises(UserError, match="loss_reduction must be 'mean' or 'sum'"):
+    with pytest.raises(UserError, match="loss_reduction must be 'mean', 'sum' or 'precision'"):
         demo.with_overrides(loss_reduction="median")
 
 

@@ -71,6 +71,8 @@ def _print_result(result: dict) -> None:
         f"{result['n_samples']} samples; loss reduction {result['loss_reduction']}, weights motor "
         f"{result['motor_weight']:g} vision {result['vision_weight']:g}; images {'on' if result['images'] else 'off'}"
     )
+    if result.get("precision"):
+        typer.echo("learned precisions (loss reduction precision): " + _precision_line(result["precision"]))
     groups = [("all", result), *result["per_primitive"].items()]
     typer.echo("the loss's terms (the run's reduction and weights), per primitive:")
     _echo_table(
@@ -94,6 +96,13 @@ def _print_result(result: dict) -> None:
     table.append(["all", *result["joint_rms"]["all"]])
     typer.echo("motor RMS error per primitive and joint, in the data's joint units:")
     _echo_table(["primitive", *joints], table)
+
+
+def _precision_line(precision: dict) -> str:
+    """``motor s_m … weight e^(-s_m) …; vision …`` of a loss-balance result's ``precision``."""
+    return "; ".join(
+        f"{m} log-variance s {v['log_variance']:.3g}, weight exp(-s) {v['weight']:.3g}" for m, v in precision.items()
+    )
 
 
 def _short_names(names: list[str]) -> list[str]:

@@ -213,7 +213,9 @@ def _experiment_command(
         ),
         vision_frames: int | None = typer.Option(None, "--vision-frames", help=_VISION_FRAMES_HELP),
         loss_reduction: LossReduction | None = typer.Option(
-            None, "--loss-reduction", help="Override the loss: mean or sum (the paper's)."
+            None,
+            "--loss-reduction",
+            help="Override the loss: mean, sum (the paper's) or precision (each modality weighed by its learned precision).",
         ),
         optimizer: Optimizer | None = _STEPPING["optimizer"],
         lr: float | None = _STEPPING["lr"],

@@ -26,10 +26,12 @@ class LatentInit(str, Enum):
 
 
 class LossReduction(str, Enum):
-    """``TrainConfig.loss_reduction``: per-element means (primspace) or the paper's sums."""
+    """``TrainConfig.loss_reduction``: per-element means (primspace), the paper's sums, or the means
+    weighed by learned precisions."""
 
     mean = "mean"
     sum = "sum"
+    precision = "precision"
 
 
 class Optimizer(str, Enum):
@@ -78,7 +80,9 @@ _RECONSTRUCT_MARK = "primspace reconstruct"
 
 _LOSS_REDUCTION_HELP = (
     "mean: per-element mean squared errors (motor and vision weigh alike); sum: the paper's "
-    "summed squared errors per sample (docs/model.md). Learning rates are not rescaled."
+    "summed squared errors per sample; precision: each modality's mean weighed by its learned "
+    "precision, one log-variance per modality trained with the weights (docs/model.md). "
+    "Learning rates are not rescaled."
 )
 
 

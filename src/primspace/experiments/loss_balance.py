@@ -15,7 +15,10 @@ For a trained run (``fit`` or ``infer``) and its own samples, in the run's own r
 and weights, :func:`loss_balance` measures
 
 - the motor term ``w_m · motor`` and the vision term ``w_v · vision`` of the loss (and the
-  code-smoothness term, when the run has one), which add up to :func:`batch_loss`'s total;
+  code-smoothness term, when the run has one), which add up to :func:`batch_loss`'s total
+  (under ``"precision"`` each term is ``½ (e^{-s_m} · w_m · MSE_m + s_m)`` and the learned
+  ``s_m`` and weights ``e^{-s_m}`` are reported; the gradients are of these terms, the
+  ``s_m`` held, not counted in θ);
 - the norm of each term's gradient with respect to θ (the decoder's weights: all of them,
   the dynamics that both heads share, each head) and to the codes (each code on its own
   sample's loss, as training steps it), and the cosine between the two terms' gradients;
@@ -80,7 +83,10 @@ def loss_balance(run, dataset: MotionDataset, *, indices=None, batch_size: int =
     -------
     dict (JSON-ready)
         ``run``, ``kind``, ``epoch``, ``loss_reduction``, ``motor_weight``, ``vision_weight``,
-        ``images``, ``n_samples``, ``primitives``, ``joints``;
+        ``images``, ``n_samples``, ``primitives``, ``joints``; ``precision``: the learned
+        log-variance ``s_m`` and weight ``e^{-s_m}`` of each modality
+        (:meth:`~primspace.model.precision.ModalityPrecision.summary`; None when the decoder
+        has none);
         ``terms``: ``motor``, ``vision`` (and ``smoothness``), ``total``, ``vision_share``
         (the vision term over the total); ``mse``: per-element ``motor`` (scaled units) and
         ``vision`` (pixels in [0, 1]) as metrics.jsonl logs them;
@@ -145,11 +151,13 @@ def _batches(labels: np.ndarray, rows: np.ndarray, batch_size: int, n_groups: in
 
 
 def _theta_parts(model) -> dict[str, list]:
-    """θ's parameters by part (:data:`THETA_PARTS`)."""
+    """θ's parameters by part (:data:`THETA_PARTS`); the learned precisions (``precision.*``), the
+    loss's own weights, are not among them."""
     parts = {name: [] for name in THETA_PARTS}
     for name, param in model.named_parameters():
         head = name.split(".")[0]
-        parts[head if head in parts else "dynamics"].append(param)
+        if head != "precision":
+            parts[head if head in parts else "dynamics"].append(param)
     return parts
 
 
@@ -310,6 +318,7 @@ def _summary(run, setup: dict, totals: _Totals, names: list[str], joints: list[s
         "motor_weight": tc.motor_weight,
         "vision_weight": tc.vision_weight,
         "vision_frames_trained": tc.vision_frames,
+        "precision": None if setup["model"].precision is None else setup["model"].precision.summary(),
         "observe": run.config.get("observe"),
         "images": bool(setup["use_images"]),
         "n_samples": overall.pop("n"),

@@ -45,6 +45,11 @@ class ModelConfig:
         None: one code per sequence (the paper). W: a sequence of codes ``z_1..z_K``,
         one per window of W steps (``K = ceil(T / W)``), for long demonstrations made of
         several primitives (the paper's *Summary and Discussion*; docs/sequences.md).
+    learned_precision : bool
+        The decoder holds one learned log-variance per modality
+        (:class:`~primspace.model.precision.ModalityPrecision`), the weights of the loss
+        ``TrainConfig.loss_reduction="precision"``; a fit sets it from its train config.
+        False (default): no such parameters, the state of a run fitted without them.
     """
 
     latent_dim: int = 20
@@ -58,6 +63,7 @@ class ModelConfig:
     n_joints: int = 0
     length: int = 0
     code_window: int | None = None
+    learned_precision: bool = False
 
     def __post_init__(self) -> None:
         self.layer_sizes = tuple(int(s) for s in self.layer_sizes)
@@ -106,6 +112,8 @@ class ModelConfig:
             raise UserError(f"length (T) must be at least 1, got {self.length}")
         if self.code_window is not None and (not isinstance(self.code_window, int) or self.code_window < 1):
             raise UserError(f"code window (code_window, --code-window) must be at least 1 step, got {self.code_window}")
+        if not isinstance(self.learned_precision, bool):
+            raise UserError(f"learned_precision must be true or false, got {self.learned_precision!r}")
         if self.image_size is not None:
             check_image_size(self.image_size, self.image_channels)
         return self

@@ -48,6 +48,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from primspace.model.config import ModelConfig, check_image_size
+from primspace.model.precision import ModalityPrecision
 
 __all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput", "code_interpolation"]
 
@@ -242,6 +243,7 @@ class DecoderOutput(NamedTuple):
     motor: torch.Tensor  # (B, T, J), scaled joint values
     images: torch.Tensor | None  # (B, T, H, W, 3) in [0, 1], or None
     fast_states: torch.Tensor  # (B, T, k_1), d_1..d_T of the fastest layer
+    log_variances: torch.Tensor | None = None  # (2,) s of motor and vision (ModelConfig.learned_precision)
 
 
 # ---------------------------------------------------------------------------- decoder
@@ -305,6 +307,8 @@ class MTRNNDecoder(nn.Module):
         self.image_head = (
             ImageDecoder(sizes[0], config.image_size, config.image_channels) if config.has_images else None
         )
+        # last: the other parameters keep their order and their seeded values
+        self.precision = ModalityPrecision() if config.learned_precision else None
         if config.code_window is not None:  # derived from the config: not saved with the weights
             self.register_buffer(
                 "interpolation", code_interpolation(config.length, config.code_window), persistent=False
@@ -366,7 +370,7 @@ class MTRNNDecoder(nn.Module):
             else:
                 rows = (frame_steps + torch.arange(b, device=flat.device).unsqueeze(1) * t).reshape(-1)
                 frames = self.image_head(flat.index_select(0, rows)).view(b, frame_steps.shape[1], h, w, 3)
-        return DecoderOutput(motor, frames, fast)
+        return DecoderOutput(motor, frames, fast, None if self.precision is None else self.precision())
 
     # ------------------------------------------------------------------ accounting
     def macs_per_sample(self, *, images: bool = True) -> int:

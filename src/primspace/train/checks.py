@@ -3,6 +3,8 @@ each refuses bad input with one :class:`~primspace.utils.errors.UserError` line.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from primspace.data import JointScaler, MotionDataset
@@ -17,6 +19,7 @@ __all__ = [
     "check_calibrated",
     "check_scaler",
     "fit_model_config",
+    "check_precision_learned",
     "check_initial_latents",
     "select",
     "check_data_fits",
@@ -66,15 +69,25 @@ def check_scaler(scaler, parent: TrainedRun | None, data: MotionDataset) -> None
 
 
 def fit_model_config(model_config, parent: TrainedRun | None, data: MotionDataset, images) -> ModelConfig:
-    """The model config of a fit: the parent's (a given one must agree), or the given one fitted to the data."""
+    """The model config of a fit: the parent's (a given one must agree), or the given one fitted to the data.
+    ``learned_precision`` is not compared: the fit sets it from its train config."""
     if parent is None:
         return (model_config or ModelConfig()).fitted_to(data, images=data.has_images if images is None else images)
     mc = parent.model_config
     if model_config is not None:
         given = model_config.fitted_to(data, images=mc.has_images if images is None else images)
-        if given.to_dict() != mc.to_dict():
+        if replace(given, learned_precision=mc.learned_precision).to_dict() != mc.to_dict():
             raise UserError(f"{run_name(parent)}: model config differs from the one given; omit model_config")
     return mc
+
+
+def check_precision_learned(tc, parent: TrainedRun) -> None:
+    """Refuse inferring under ``loss_reduction="precision"`` with a run whose decoder has no learned precisions."""
+    if tc.loss_reduction == "precision" and not parent.model_config.learned_precision:
+        raise UserError(
+            f"{run_name(parent)}: loss_reduction 'precision' weighs the senses by the learned precisions "
+            f"of a run fitted with it; this one was fitted with {parent.train_config.loss_reduction!r}"
+        )
 
 
 def check_initial_latents(initial_latents, n: int, q: int) -> np.ndarray | None:

@@ -29,8 +29,9 @@ __all__ = [
     "thread_limit",
 ]
 
-#: :attr:`TrainConfig.loss_reduction`'s values: primspace's per-element means, the paper's sums.
-LOSS_REDUCTIONS = ("mean", "sum")
+#: :attr:`TrainConfig.loss_reduction`'s values: primspace's per-element means, the paper's sums,
+#: the per-element means weighed by learned precisions.
+LOSS_REDUCTIONS = ("mean", "sum", "precision")
 #: How a batch's step runs (TrainConfig.step).
 STEPS = ("eager", "compiled", "captured")
 #: How θ and the codes step (TrainConfig.optimizer).
@@ -72,7 +73,7 @@ class TrainConfig:
     motor_weight, vision_weight : float
         ``w_m``, ``w_v`` of the loss (module docstring). ``vision_weight = 0`` skips the
         image head.
-    loss_reduction : {"mean", "sum"}
+    loss_reduction : {"mean", "sum", "precision"}
         How the squared errors of a sample are reduced (docs/model.md, "The paper's
         summed loss"). ``"mean"`` (default, primspace's loss): each sample's mean over
         its valid motor entries and over its pixels,
@@ -92,8 +93,17 @@ class TrainConfig:
         ``eps`` (1e-8), whose damping becomes ``D`` times weaker for a loss ``D`` times
         larger (``D`` = T·J for motor, more with frames), negligible at the gradient
         sizes of training; tested stable (finite, decreasing) with the default rates.
-        The logged ``loss`` is the objective; ``motor`` and ``vision`` stay the
-        per-element mean squared errors under both, comparable across reductions.
+        ``"precision"``: the per-element means, each modality's weighed by its learned
+        precision as a Gaussian likelihood, ``ℓ_i = Σ_m ½ (e^{-s_m} · w_m · MSE_im + s_m)``
+        with one log-variance ``s_m`` per modality trained with θ (Kendall, Gal & Cipolla
+        2018; :mod:`primspace.model.precision`): ``s_m`` settles at ``log`` of its
+        modality's error, so each sense weighs by how well it is predicted, not by its
+        size; the fit gives its decoder the ``s_m`` (``ModelConfig.learned_precision``);
+        inference with θ frozen keeps them frozen (a code's gradient still depends on its
+        own sample only). A modality at weight 0 has no term.
+        The logged ``loss`` is the objective (under ``"precision"`` it can be negative);
+        ``motor`` and ``vision`` stay the per-element mean squared errors under each,
+        comparable across reductions.
     vision_frames : int, optional
         Compute the vision loss of each training step on this many frames per sequence,
         drawn uniformly without replacement (a fresh draw per sequence and step, from
@@ -216,7 +226,7 @@ class TrainConfig:
                 f"vision_frames must be a whole number >= 1 (or None: every frame), got {self.vision_frames}"
             )
         if self.loss_reduction not in LOSS_REDUCTIONS:
-            raise UserError(f"loss_reduction must be 'mean' or 'sum', got {self.loss_reduction!r}")
+            raise UserError(f"loss_reduction must be 'mean', 'sum' or 'precision', got {self.loss_reduction!r}")
         if self.motor_weight == 0 and self.vision_weight == 0:
             raise UserError("motor_weight and vision_weight are both 0: nothing to train")
         if self.checkpoint_every is not None and (

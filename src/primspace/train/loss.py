@@ -3,8 +3,14 @@ loss and its logged parts (:func:`batch_loss`), a step of the codes alone
 (:func:`code_step`) and the precision the loss is computed in (:func:`autocast_for`).
 
 The loss (paper, *Main Results*: ``L(θ, z_1..z_n) = Σ_i ‖d(θ, z_i) − o_i‖²``) is taken here
-as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`), or with
-``TrainConfig.loss_reduction="sum"`` as the paper's sums over each sample's entries. For
+as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspace.train`), with
+``TrainConfig.loss_reduction="sum"`` as the paper's sums over each sample's entries, or with
+``"precision"`` as each modality's Gaussian negative log-likelihood per element,
+``Σ_m ½ (e^{-s_m} · w_m · MSE_m + s_m)``, the log-variances ``s_m`` learned with θ
+(:mod:`primspace.model.precision`; Kendall, Gal & Cipolla 2018). The paper finds that
+"only a small portion of each perceived image is relevant to motion, the rest is a
+background noise" (*Summary and Discussion*); weighed by its precision, a sense counts by
+how well it is predicted, not by how many values it holds. For
 data of different lengths (``MotionDataset.lengths``) each sample's loss is its mean (or
 sum) over its own valid steps and the batch loss the mean over samples, so padding never
 counts and a code's gradient does not depend on the other samples of its batch. The
@@ -26,8 +32,17 @@ from primspace.data.steps import valid_steps
 from primspace.model.latent import LatentTable
 from primspace.train.config import TrainConfig
 from primspace.train.observe import observation_masks
+from primspace.utils.errors import UserError
 
-__all__ = ["DataTensors", "batch_loss", "batch_frames", "code_step", "code_variation", "autocast_for"]
+__all__ = [
+    "DataTensors",
+    "batch_loss",
+    "batch_frames",
+    "precision_loss",
+    "code_step",
+    "code_variation",
+    "autocast_for",
+]
 
 
 @dataclass
@@ -164,8 +179,9 @@ def batch_loss(
 
     ``loss`` is the objective of ``tc.loss_reduction`` (``"mean"``: ``w_m · motor + w_v ·
     vision``; ``"sum"``: the same weights on each sample's summed squared errors, then the
-    mean over samples); ``motor`` and ``vision`` are per-element mean squared errors
-    under both. ``steps`` (B, K): the vision loss on those frames of each sequence only
+    mean over samples; ``"precision"``: :func:`precision_loss` of the per-element means,
+    weighed by the decoder's learned precisions); ``motor`` and ``vision`` are per-element
+    mean squared errors under each. ``steps`` (B, K): the vision loss on those frames of each sequence only
     (every frame when None); a sum over them is scaled by ``T / K``, an unbiased estimate
     of the sum over all frames (each step is drawn with probability ``K / T``). ``frames``:
     the batch's stored frames (:func:`batch_frames`), given when they are streamed;
@@ -174,6 +190,7 @@ def batch_loss(
     padded rows weight 0, :mod:`primspace.train.captured`); None: every sample weighs 1.
     """
     summed = tc.loss_reduction == "sum"
+    weighed = tc.loss_reduction == "precision"
     use_images = tensors.use_images
     mask, motor_mask = _rows(tensors.mask, idx), _rows(tensors.motor_steps(), idx)
     with autocast:
@@ -193,14 +210,36 @@ def batch_loss(
             vision_term, vision = _sse(out.images.float(), target, frame_mask, scale, weights)
         else:
             vision = vision_term = _mse(out.images.float(), target, frame_mask, weights)
-        loss = tc.motor_weight * motor_term + tc.vision_weight * vision_term
+        loss = None if weighed else tc.motor_weight * motor_term + tc.vision_weight * vision_term
     else:
+        vision = vision_term = None
+        loss = None if weighed else tc.motor_weight * motor_term
+    if weighed:
+        loss = precision_loss(out.log_variances, motor_term, vision_term, tc)
+    if vision_term is None:
         vision = torch.zeros((), device=motor.device)
-        loss = tc.motor_weight * motor_term
     config = getattr(model, "module", model).config  # DDP holds the decoder as .module
     if tc.code_smoothness > 0 and config.code_window is not None:
         loss = loss + tc.code_smoothness * code_variation(z, config, mask, weights)
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
+
+
+def precision_loss(
+    log_variances: torch.Tensor | None, motor: torch.Tensor, vision: torch.Tensor | None, tc: TrainConfig
+) -> torch.Tensor:
+    """``Σ_m ½ (e^{-s_m} · w_m · MSE_m + s_m)`` over the modalities trained (vision: when
+    ``vision`` is given) whose weight ``w_m`` is not 0 (a term at weight 0 would only drive
+    its ``s_m`` down without end); ``log_variances``: ``s`` (2,) of motor and vision, the
+    decoder's (:class:`~primspace.model.precision.ModalityPrecision`)."""
+    if log_variances is None:
+        raise UserError(
+            "loss_reduction 'precision' needs a decoder with learned log-variances "
+            "(a run fitted with loss_reduction 'precision')"
+        )
+    s = log_variances.float()
+    terms = [(0, tc.motor_weight, motor), (1, tc.vision_weight, vision)]
+    parts = [0.5 * (torch.exp(-s[m]) * (w * mse) + s[m]) for m, w, mse in terms if mse is not None and w != 0]
+    return torch.stack(parts).sum()
 
 
 def code_step(

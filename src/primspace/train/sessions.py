@@ -27,6 +27,7 @@ from primspace.train.checks import (
     check_data_fits,
     check_init,
     check_initial_latents,
+    check_precision_learned,
     check_scaler,
     check_something_to_train,
     fit_model_config,
@@ -51,6 +52,7 @@ __all__ = [
     "run_session",
     "theta_optimizer",
     "uses_images",
+    "learns_precision",
     "as_run",
 ]
 
@@ -129,7 +131,7 @@ def fit_session(*args, **kwargs) -> tuple[Session, dict | None]:
     parent = None if weights_from is None else as_run(weights_from)
     check_calibrated(init, parent)
     check_scaler(scaler, parent, data)
-    mc = fit_model_config(model_config, parent, data, images)
+    mc = replace(fit_model_config(model_config, parent, data, images), learned_precision=learns_precision(tc))
     use_images = uses_images(mc, data, tc, images, where=None if parent is None else run_name(parent))
     check_something_to_train(tc, use_images)
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
@@ -205,6 +207,7 @@ def infer_session(*args, **kwargs) -> tuple[Session, dict | None]:
     observation = Observation.build(request.observe, request.observe_frames)
     data, _ = select(dataset, indices)
     mc = parent.model_config
+    check_precision_learned(tc, parent)
     initial_latents = check_initial_latents(initial_latents, len(data), mc.code_size)
     use_images = uses_images(mc, data, tc)
     check_something_to_train(tc, use_images)
@@ -317,12 +320,22 @@ def _calibrator(initializer: LatentInitializer, scaled: np.ndarray, latent_dim: 
     return lambda codes: CodeCalibration(latent_dim).fit(initializer.transform(scaled), codes)
 
 
+def learns_precision(tc: TrainConfig) -> bool:
+    """Whether a fit under ``tc`` gives its decoder learned precisions (``ModelConfig.learned_precision``)."""
+    return tc.loss_reduction == "precision"
+
+
 def _new_model(mc: ModelConfig, seed: int, state: dict | None = None) -> MTRNNDecoder:
-    """A decoder with weights drawn from ``seed`` (without touching the global RNG), then ``state`` loaded."""
+    """A decoder with weights drawn from ``seed`` (without touching the global RNG), then ``state`` loaded
+    (a parent's learned precisions, ``precision.*``, only where this decoder has them; fresh ones where the
+    parent has none)."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model = MTRNNDecoder(mc)
     if state is not None:
+        own = model.state_dict()
+        state = {k: v for k, v in state.items() if not k.startswith("precision.") or k in own}
+        state |= {k: v for k, v in own.items() if k.startswith("precision.") and k not in state}
         model.load_state_dict(state)
     return model
 
