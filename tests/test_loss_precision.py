@@ -11,7 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from primspace.data import JointScaler
+from primspace.data import JointScaler, MotionDataset
 from primspace.experiments.presets import resolve_preset
 from primspace.model.decoder import MTRNNDecoder
 from primspace.model.precision import MODALITIES, ModalityPrecision
@@ -197,3 +197,36 @@ def test_packed_and_captured_steps_carry_the_precisions(image_set):
 def test_preset_override():
     demo = resolve_preset("demo").with_overrides(loss_reduction="precision", images=True)
     assert demo.train.loss_reduction == "precision" and not demo.model.learned_precision  # the fit sets it
+
+
+def test_loss_balance_shows_the_learned_weights(image_set):
+    from primspace.experiments.loss_balance import loss_balance
+
+    tc = replace(SHORT, epochs=3, loss_reduction="precision")
+    run = fit(image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
+    result = loss_balance(run, image_set)
+    learned = run.model.precision.summary()
+    assert result["precision"] == learned and result["loss_reduction"] == "precision"
+    by_hand = {m: 0.5 * (learned[m]["weight"] * result["mse"][m] + learned[m]["log_variance"]) for m in MODALITIES}
+    assert [result["terms"][m] for m in MODALITIES] == pytest.approx([by_hand[m] for m in MODALITIES], rel=1e-5)
+    weighed = {m: learned[m]["weight"] * result["mse"][m] for m in MODALITIES}
+    assert result["vision_share"] == pytest.approx(weighed["vision"] / sum(weighed.values()), rel=1e-9)
+    assert sorted(result["gradients"]["theta"]["motor"]) == ["all", "dynamics", "image_head", "motor_head"]
+    assert (
+        loss_balance(fit(image_set, model_config=IMAGE_MODEL, train_config=SHORT, progress=False), image_set)[
+            "precision"
+        ]
+        is None
+    )
+
+
+def test_the_command_prints_the_learned_weights(run_cli, image_set, tmp_path):
+    data = image_set.save(tmp_path / "data.h5")
+    tc = replace(SHORT, epochs=2, loss_reduction="precision")
+    run = fit(MotionDataset.load(data), tmp_path / "run", model_config=IMAGE_MODEL, train_config=tc, progress=False)
+    res = run_cli("diagnose", "loss-balance", tmp_path / "run", "--no-gradients")
+    assert res.code == 0, res.err
+    s = run.model.precision.summary()
+    line = next(x for x in res.out.splitlines() if x.startswith("learned precisions"))
+    assert f"motor log-variance s {s['motor']['log_variance']:.3g}, weight exp(-s) {s['motor']['weight']:.3g}" in line
+    assert f"vision log-variance s {s['vision']['log_variance']:.3g}" in line

@@ -88,7 +88,8 @@ def loss_balance(run, dataset: MotionDataset, *, indices=None, batch_size: int =
         (:meth:`~primspace.model.precision.ModalityPrecision.summary`; None when the decoder
         has none);
         ``terms``: ``motor``, ``vision`` (and ``smoothness``), ``total``, ``vision_share``
-        (the vision term over the total); ``mse``: per-element ``motor`` (scaled units) and
+        (the vision term over the total; under ``"precision"`` the vision share of the
+        weighed errors ``e^{-s_m} · w_m · MSE_m``); ``mse``: per-element ``motor`` (scaled units) and
         ``vision`` (pixels in [0, 1]) as metrics.jsonl logs them;
         ``gradients`` (with ``gradients``): ``theta`` (per term, the norm of the gradient of
         the mean loss over the samples, per part of :data:`THETA_PARTS` and ``all``;
@@ -329,4 +330,17 @@ def _summary(run, setup: dict, totals: _Totals, names: list[str], joints: list[s
         "joint_rms": {"values": rms.tolist(), "all": rms_all.tolist()},
         "joint_rms_scaled": {"values": (rms / half).tolist(), "all": (rms_all / half).tolist()},
     }
+    if out["precision"] is not None:
+        for part in (out, *out["per_primitive"].values()):
+            part["vision_share"] = _weighed_share(part["mse"], out["precision"], tc)
     return out
+
+
+def _weighed_share(mse: dict, precision: dict, tc) -> float | None:
+    """Under ``"precision"``: the vision share of the weighed errors ``e^{-s_m} · w_m · MSE_m`` (the terms
+    themselves hold ``½ s_m`` too, of either sign); None without vision."""
+    if "vision" not in mse:
+        return None
+    motor = precision["motor"]["weight"] * tc.motor_weight * mse["motor"]
+    vision = precision["vision"]["weight"] * tc.vision_weight * mse["vision"]
+    return _ratio(vision, motor + vision)
