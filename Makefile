@@ -1,11 +1,15 @@
 # primspace: the two commands a new user runs are `make demo` and `make test`.
-# Each does its own set-up in .venv (torch is pinned to 2.13.0, whose CPU wheel these machines
-# hold: a bare `torch` requirement would pull a multi-GB CUDA build).
+# Each does its own set-up in .venv. torch is pinned to 2.13.0 and taken from PyTorch's CPU index
+# (TORCH_INDEX): from the public index alone, `torch==2.13.0` is the CUDA build with about 20
+# nvidia-*/cuda-* packages (several GB). Where the CPU index does not answer (a machine that reaches
+# only a local index, which holds the CPU wheel), torch comes from pip's configured index, and
+# `make` says so in one line. docs/performance.md, "Install": the dry-run reports of both.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 TORCH  ?= torch==2.13.0
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 # gymnasium-robotics is installed without its dependencies: we only read the Franka
 # Panda model files it bundles (it would otherwise pull gymnasium and friends).
 ROBOT_ASSETS := gymnasium-robotics==1.4.2
@@ -16,16 +20,26 @@ $(VENV)/bin/activate:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 
-# torch's pin and the project resolved in one pip call; the test install is a superset of the
-# plain one (so it marks both, and `make demo` after `make test` installs nothing again)
+# torch first, from the CPU index when it answers (one quick probe, not pip's retries on every
+# package); then the project with torch's pin, which the installed CPU wheel satisfies. The plain
+# install has the `predict` extra (`primspace act` and ProMP need it); the test install is a
+# superset of it (so it marks both, and `make demo` after `make test` installs nothing again).
+DEMO_EXTRAS := [predict]
 TEST_EXTRAS := [test,ray,video,predict]
 define install_project
+	@if $(PY) -c "import urllib.request; urllib.request.urlopen('$(TORCH_INDEX)/torch/', timeout=20)" 2>/dev/null; then \
+		echo "torch: the CPU wheel from $(TORCH_INDEX)"; \
+		$(PIP) install --quiet --index-url $(TORCH_INDEX) $(TORCH); \
+	else \
+		echo "torch: $(TORCH_INDEX) does not answer; $(TORCH) from pip's configured index (from the public index alone that is the CUDA build)"; \
+		$(PIP) install --quiet $(TORCH); \
+	fi
 	$(PIP) install --quiet $(TORCH) -e '.$(1)'
 	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)
 endef
 
 $(VENV)/.installed: $(VENV)/bin/activate pyproject.toml
-	$(call install_project,)
+	$(call install_project,$(DEMO_EXTRAS))
 	touch $@
 
 $(VENV)/.installed-test: $(VENV)/bin/activate pyproject.toml

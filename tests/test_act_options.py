@@ -37,6 +37,17 @@ def test_act_refuses_its_options_before_reading_the_run(run_cli, tmp_path, monke
     assert not (tmp_path / "o").exists()
 
 
+def test_act_without_the_predict_extra_refuses_at_once(run_cli, tmp_path, monkeypatch):
+    """movement-primitives missing (the ``predict`` extra): one line naming the pip command, before
+    the options, the run or the output are looked at."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "movement_primitives", None)  # what find_spec reads as not installed
+    res = run_cli("act", tmp_path / "run", "--primitive", "push", "--scene", "0.5,0,0.05", "--out", tmp_path / "o")
+    assert_user_error(res, "act needs the movement-primitives package", "pip install 'primspace[predict]'")
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.fixture(scope="module")
 def motor_run(tmp_path_factory):
     """A tiny run on labelled motions without frames (act refuses it for want of frames, after

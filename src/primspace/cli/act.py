@@ -10,7 +10,7 @@ import typer
 
 from primspace.act.planner import DEFAULT_EVERY
 from primspace.cli.app import app
-from primspace.cli.options import threads_option
+from primspace.cli.options import require_extra, threads_option
 from primspace.utils.errors import UserError
 
 #: How the library names the fitted data (``fitted_data=...``): act's flag for it is ``--data``.
@@ -50,6 +50,7 @@ def act_command(
     from primspace.utils.folders import OutputKind, atomic_directory
     from primspace.utils.seeds import check_seed
 
+    require_extra("movement_primitives", "movement-primitives", "predict", "act", "ProMP runs the same scene")
     check_seed(seed, "--seed")
     _check_before_work(scene, every)
     inputs = [run] + ([data] if data is not None else []) + ([Path(scene.rpartition(":")[0])] if ":" in scene else [])

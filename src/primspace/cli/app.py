@@ -168,8 +168,9 @@ def main(argv: list[str] | None = None) -> None:
     except _click_errors.ClickException as exc:  # the option parser's usage errors
         typer.echo(f"primspace: error: {_usage_line(exc, args)}", err=True)
         sys.exit(2)
-    except (KeyboardInterrupt, EOFError, typer.Abort):
-        typer.echo("primspace: error: interrupted", err=True)
+    except (KeyboardInterrupt, EOFError, typer.Abort) as exc:  # Interrupted says what was saved
+        said = first_line(exc) if isinstance(exc, KeyboardInterrupt) and str(exc) else ""
+        typer.echo("primspace: error: interrupted" + (f": {as_flags(said)}" if said else ""), err=True)
         sys.exit(130)
     except UserError as exc:
         typer.echo(f"primspace: error: {as_flags(str(exc))}", err=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from primspace.cli.app import app
-from primspace.cli.options import echo_json
+from primspace.cli.options import allow_unfinished_option, check_finished, echo_json
 from primspace.utils.errors import UserError, first_line
 
 
@@ -76,6 +76,7 @@ def cluster_command(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the result JSON instead of text."),
     overwrite: bool = typer.Option(False, help="Replace a non-empty OUT directory."),
+    allow_unfinished: bool = allow_unfinished_option(),
 ) -> None:
     """Affine low-rank subspace clustering (paper, Background): labels, scores, figure."""
     from primspace.cluster.outputs import CLUSTER_OUTPUT
@@ -91,7 +92,7 @@ def cluster_command(
     _check_cluster_options(k, tau, tau_relative, r2_target, ones_weight, n_init, k_flag)
     grid = _parse_float_list(sweep_taus, "--sweep-taus") if sweep_taus else None
     with atomic_directory(out, overwrite, CLUSTER_OUTPUT) as tmp:  # checked and locked before any work
-        points = _points(src, labels)
+        points = _points(src, labels, allow_unfinished)
         if k > points.X.shape[0]:
             raise UserError(f"{k_flag} {k} exceeds the {points.X.shape[0]} samples in {src}")
         options = {
@@ -115,7 +116,7 @@ def cluster_command(
     _print_summary(out, result)
 
 
-def _points(src: Path, labels: Path | None):
+def _points(src: Path, labels: Path | None, allow_unfinished: bool = False):
     """The points: a data file's trajectories, an ``.npy`` of codes, or a run's codes (a run
     directory, or the ``latents.npy`` in one) numbered by its samples' indices in the data
     file and labelled from it (``--labels``: one label per code, in the run's order)."""
@@ -133,6 +134,7 @@ def _points(src: Path, labels: Path | None):
     from primspace.train.rundata import load_fitted_data
 
     trained = load_run(run_dir)
+    check_finished(trained, allow_unfinished)
     X = trained.latents.astype("float64")
     true, names, whence = None, None, ""
     if labels is not None:

@@ -34,6 +34,36 @@ def configure_threads(threads: int | None, device: str = "cpu") -> None:
     configure_process(TrainConfig(threads=threads, device=device).validate())
 
 
+#: ``--allow-unfinished``'s help: the commands that use a trained run refuse one that stopped early.
+ALLOW_UNFINISHED_HELP = "Use a run that stopped before its last epoch (Ctrl-C, a kill); default: refuse it."
+
+
+def allow_unfinished_option():
+    """``--allow-unfinished`` (:func:`check_finished`)."""
+    return typer.Option(False, "--allow-unfinished", help=ALLOW_UNFINISHED_HELP)
+
+
+def check_finished(run, allow: bool) -> None:
+    """One line when ``run`` (a :class:`~primspace.train.run.TrainedRun`) stopped before its last
+    epoch, unless ``allow``: it names the epochs done and the two ways on."""
+    if allow or run.finished:
+        return
+    verb = "train" if run.kind == "fit" else "infer"
+    raise UserError(
+        f"{run.run_dir}: stopped after epoch {run.epoch} of {run.train_config.epochs}; finish it "
+        f"(primspace {verb} ... --out {run.run_dir} --resume) or pass --allow-unfinished"
+    )
+
+
+def require_extra(module: str, package: str, extra: str, command: str, why: str) -> None:
+    """One line naming ``pip install 'primspace[EXTRA]'`` when ``module`` (of ``package``, in the
+    ``extra`` extra) is not installed: a command checks it before any work."""
+    from importlib.util import find_spec
+
+    if find_spec(module) is None:
+        raise UserError(f"{command} needs the {package} package ({why}): pip install 'primspace[{extra}]'")
+
+
 def echo_json(obj) -> None:
     typer.echo(json.dumps(obj, indent=2))
 

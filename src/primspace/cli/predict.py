@@ -13,7 +13,7 @@ from pathlib import Path
 import typer
 
 from primspace.cli.app import app
-from primspace.cli.options import threads_option
+from primspace.cli.options import allow_unfinished_option, check_finished, threads_option
 from primspace.utils.errors import UserError
 
 #: The mark ``predict`` writes into its data file and figure (primspace.utils.outputs).
@@ -197,10 +197,11 @@ def predict_command(
     ),
     no_judge: bool = typer.Option(False, "--no-judge", help="Do not replay simulator data to judge success."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier predict output."),
+    allow_unfinished: bool = allow_unfinished_option(),
 ) -> None:
     """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded
     (with --scene: the whole motion from the first frame and joints, as the named primitive, by the scene policy)."""
-    from primspace.train import TrainConfig, configure_process
+    from primspace.train import TrainConfig, configure_process, load_run
     from primspace.utils.files import check_outside_inputs
     from primspace.utils.folders import OutputKind, atomic_directory
     from primspace.utils.seeds import check_seed
@@ -218,10 +219,12 @@ def predict_command(
     overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
     configure_process(TrainConfig(threads=threads).validate())
     with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before any work
+        trained = load_run(run)
+        check_finished(trained, allow_unfinished)
         dataset, idx, fitted_data = _inputs(file, indices, fitted)
         common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
         prediction, command = _predict(
-            run,
+            trained,
             dataset,
             scene,
             prior,

@@ -9,7 +9,15 @@ from pathlib import Path
 import typer
 
 from primspace.cli.app import app
-from primspace.cli.options import configure_threads, device_option, float_list, int_list, threads_option
+from primspace.cli.options import (
+    allow_unfinished_option,
+    check_finished,
+    configure_threads,
+    device_option,
+    float_list,
+    int_list,
+    threads_option,
+)
 from primspace.model.config import ModelConfig
 from primspace.train.config import TrainConfig
 from primspace.utils.errors import UserError
@@ -395,6 +403,7 @@ def reconstruct_command(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier reconstruct output."),
     device: str = device_option("cpu"),
     threads: int | None = threads_option(),
+    allow_unfinished: bool = allow_unfinished_option(),
 ) -> None:
     """Draw generated against ground-truth joints (and frames) for one sample."""
     import numpy as np
@@ -404,6 +413,7 @@ def reconstruct_command(
 
     configure_threads(threads, device)
     out, trained, ds, row = run_sample(run, sample, out, data, frames, overwrite, writer=_RECONSTRUCT_MARK)
+    check_finished(trained, allow_unfinished)
     motor, generated = reconstruct(trained, trained.latents[row : row + 1], device=device)  # here, not in plots
     truth = ds.subset([int(sample)])
     images = None if truth.images is None else np.asarray(truth.images)[0]

@@ -28,7 +28,8 @@ from primspace.train.logger import open_logger
 from primspace.train.loss import DataTensors, autocast_for, batch_loss
 from primspace.train.rundir import RunDirectory
 from primspace.train.streaming import FrameStream, should_stream
-from primspace.utils.progress import progress_bar
+from primspace.utils.interrupt import Interrupted, deferred_interrupt
+from primspace.utils.progress import announce, progress_bar
 
 __all__ = [
     "Session",
@@ -231,16 +232,47 @@ class Session:
             self.store.close()  # the writer's lock: the run is over, however it ended
 
     def _run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
+        """The epochs up to ``tc.epochs``. Ctrl-C (one process training) stops after the epoch it
+        comes in: that epoch is checkpointed and :class:`~primspace.utils.interrupt.Interrupted`
+        says where the run stands; a second Ctrl-C stops at once (the last checkpoint kept)."""
         self.start(ckpt)
+        self._announce_start(ckpt, progress, label)
         fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
-        with progress_bar(self.tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
-            if self.epoch:
-                advance(self.epoch)
-            while self.epoch < self.tc.epochs:
-                t0 = time.perf_counter()
-                values = self.end_epoch(self._train_epoch(), time.perf_counter() - t0)
-                advance(loss=values["loss"], sps=values["samples_per_s"])
-        self.finish()
+        then = "stopping after this epoch" + (", its checkpoint written" if self.store is not None else "")
+        with deferred_interrupt(then, enabled=not self.world.distributed) as stop:
+            with progress_bar(self.tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
+                if self.epoch:
+                    advance(self.epoch)
+                while self.epoch < self.tc.epochs and not stop.requested:
+                    t0 = time.perf_counter()
+                    values = self.end_epoch(self._train_epoch(), time.perf_counter() - t0)
+                    advance(loss=values["loss"], sps=values["samples_per_s"])
+            if self.epoch < self.tc.epochs:  # stopped by Ctrl-C
+                self._stop(label)
+            self.finish()
+        if stop.requested:
+            raise Interrupted(f"{label} {self.name}: finished (epoch {self.epoch}) as Ctrl-C came")
+
+    def _announce_start(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
+        """One line when a run resumes (from which epoch; the metrics lines past that checkpoint
+        dropped), or when it was asked to resume and found no checkpoint (it starts over)."""
+        if ckpt is not None:
+            dropped = 0 if self.store is None else self.store.dropped
+            after = f"; {dropped} epoch(s) logged after that checkpoint dropped from metrics.jsonl" if dropped else ""
+            announce(
+                f"{label} {self.name}: resuming from epoch {self.epoch} of {self.tc.epochs}{after}", enabled=progress
+            )
+        elif self.store is not None and self.store.resume_asked:
+            announce(f"{label} {self.name}: no checkpoint to resume from: starting from epoch 0", enabled=progress)
+
+    def _stop(self, label: str) -> None:
+        """After Ctrl-C: the epoch just done checkpointed, and :class:`Interrupted` saying so."""
+        where = f"{label} {self.name}: stopped after epoch {self.epoch} of {self.tc.epochs}"
+        if self.store is None:
+            raise Interrupted(f"{where} (held in memory: nothing saved)")
+        if self._last_checkpoint != self.epoch:
+            self._checkpoint()
+        raise Interrupted(f"{where}, checkpoint written; continue it with resume=True, epochs={self.tc.epochs}")
 
     def start(self, ckpt: dict | None) -> None:
         """From ``ckpt`` (a checkpoint dict), or from the start: the run directory begun,

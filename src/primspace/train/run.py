@@ -86,6 +86,12 @@ class TrainedRun:
     calibration: CodeCalibration | None = field(repr=False, default=None)
 
     @property
+    def finished(self) -> bool:
+        """Whether the run trained every epoch its config asks for (a run stopped early, by
+        Ctrl-C or a kill, has not: ``epoch < train_config.epochs``)."""
+        return self.epoch >= self.train_config.epochs
+
+    @property
     def final_loss(self) -> float | None:
         """The last logged epoch's total loss."""
         return self.history[-1]["loss"] if self.history else None

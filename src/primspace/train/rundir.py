@@ -220,7 +220,9 @@ def open_run_dir(out_dir: Path, config: dict, resume: bool, overwrite: bool, inp
     except BaseException:
         lock.release()
         raise
-    return RunDirectory(out_dir, lock), ckpt
+    store = RunDirectory(out_dir, lock)
+    store.resume_asked = resume
+    return store, ckpt
 
 
 def start_run_dir(out_dir: Path, remove: bool = True) -> None:
@@ -418,6 +420,8 @@ class RunDirectory:
         self.path = Path(path)
         self.lock = WriterLock(self.path) if lock is None else lock
         self._found = _run_identity(self.path)
+        self.resume_asked = False  # the run was asked to resume (whether or not it found a checkpoint)
+        self.dropped = 0  # metrics lines past the checkpoint resumed from, dropped (:meth:`history_through`)
 
     def close(self) -> None:
         """The run is over: release the writer's lock."""
@@ -457,6 +461,8 @@ class RunDirectory:
 
     def history_through(self, epoch: int) -> list[dict]:
         """The metrics up to ``epoch``; lines past it (written before a kill) are dropped from the file."""
-        kept = [h for h in read_metrics(self.path / METRICS_NAME) if h["epoch"] <= epoch]
+        lines = read_metrics(self.path / METRICS_NAME)
+        kept = [h for h in lines if h["epoch"] <= epoch]
+        self.dropped = len(lines) - len(kept)
         atomic_write_text(self.path / METRICS_NAME, "".join(json.dumps(h) + "\n" for h in kept))
         return kept
