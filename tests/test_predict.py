@@ -218,7 +218,8 @@ def test_predict_command_writes_data_result_and_figure(run_cli, train_set, eval_
 @pytest.mark.parametrize(
     "flags, match",
     [
-        (["--observe", "0"], "at least 1 step"),
+        (["--observe-steps", "0"], "at least 1 step"),
+        (["--observe", "0.25", "--observe-steps", "5"], "not both"),
         (["--observe", "1.5"], "(0, 1]"),
         (["--observe", "half"], "--observe 'half'"),
         (["--observe", "0.5", "--observe-frames", "first"], "has no frames"),

@@ -294,7 +294,7 @@ def test_an_imported_csv_folder_by_its_folder_names(run_cli, tmp_path):
     assert run_cli("import", tmp_path / "csv", "--format", "csv", "--length", "20", "--out", d).code == 0
     assert run_cli("train", d, "--epochs", "3", "--latent-dim", "4", "--out", tmp_path / "run").code == 0
     names = MotionDataset.load(d).label_names
-    args = ["predict", tmp_path / "run", d, "--observe", "5", "--prior-samples", SAMPLES]
+    args = ["predict", tmp_path / "run", d, "--observe-steps", "5", "--prior-samples", SAMPLES]
     res = run_cli(*args, "--primitive", "wave", "--out", tmp_path / "wave")
     assert res.code == 0, res.err
     assert json.loads((tmp_path / "wave" / "result.json").read_text())["primitive"] == "wave"

@@ -8,6 +8,7 @@ block's colour in the first frame to the motion, per primitive; docs/act.md)."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
@@ -24,18 +25,43 @@ _SHOWN = 4
 
 
 def parse_amount(text: str, option: str, words: tuple[str, ...]):
-    """``--observe`` / ``--observe-frames``: ``0.25`` (a fraction: has a point or an
-    exponent), ``10`` (steps), or one of ``words``; one line naming ``option`` otherwise."""
+    """``--observe`` / ``--observe-frames``: a fraction of each motion's valid steps, written
+    ``0.25`` (with a decimal point or an exponent) or ``25%``, or one of ``words``. A whole number
+    (``25``) is refused: steps go in ``OPTION-steps``. One line naming ``option`` otherwise."""
     text = text.strip()
     if text in words:
         return text
+    percent = text.endswith("%")
+    number = text[:-1].strip() if percent else text
     try:
-        return float(text) if any(c in text for c in ".eE") else int(text)
+        value = float(number)
     except ValueError:
         allowed = " or ".join(repr(w) for w in words)
         raise UserError(
-            f"{option} {text!r}: give a fraction with a decimal point (0.25), a number of steps (10) or {allowed}"
+            f"{option} {text!r}: give a fraction with a decimal point (0.25), a percentage (25%) or {allowed} "
+            f"(a number of steps: {option}-steps 10)"
         ) from None
+    if not percent and not any(c in number for c in ".eE"):
+        raise UserError(
+            f"{option} {text}: write {text}% for a percentage of each motion or {option}-steps {text} for "
+            f"{text} steps (a fraction has a decimal point: 0.25)"
+        )
+    fraction = value / 100 if percent else value
+    if not (math.isfinite(fraction) and 0 < fraction <= 1):
+        raise UserError(f"{option} {text}: the observed fraction must be in (0, 1] (above 0 % and at most 100 %)")
+    return fraction
+
+
+def observed_amount(text: str | None, steps: int | None, option: str, words: tuple[str, ...]):
+    """``OPTION`` (:func:`parse_amount`) or ``OPTION-steps`` (a number of steps, at least 1), not both;
+    None when neither is given."""
+    if steps is None:
+        return None if text is None else parse_amount(text, option, words)
+    if text is not None:
+        raise UserError(f"give {option} {text} or {option}-steps {steps}, not both")
+    if steps < 1:
+        raise UserError(f"{option}-steps {steps}: observe at least 1 step (or {option} none)")
+    return int(steps)
 
 
 def _shown_titles(dataset, indices) -> list[str]:
@@ -113,13 +139,19 @@ def predict_command(
     observe: str | None = typer.Option(
         None,
         "--observe",
-        help="Observed joints: a fraction of each motion's valid "
-        "steps (0.25, the default), a number of steps (10), or none (frames only).",
+        help="Observed joints: a fraction of each motion's valid steps, 0.25 (the default) or 25%, or none "
+        "(frames only). A whole number is refused: steps go in --observe-steps.",
+    ),
+    observe_steps: int | None = typer.Option(
+        None, "--observe-steps", help="Observed joints: the first N steps of each motion (instead of --observe)."
     ),
     observe_frames: str | None = typer.Option(
         None,
         "--observe-frames",
-        help="Observed frames: a fraction, a number of steps, first (the first frame) or none. Default: as --observe.",
+        help="Observed frames: a fraction (0.25 or 25%), first (the first frame) or none. Default: as --observe.",
+    ),
+    observe_frames_steps: int | None = typer.Option(
+        None, "--observe-frames-steps", help="Observed frames: the first N steps (instead of --observe-frames)."
     ),
     init: str | None = typer.Option(
         None,
@@ -209,7 +241,11 @@ def predict_command(
     if seed is not None:
         check_seed(seed, "--seed")
     source, clusters = parse_primitives(primitives, clusters, scene)
-    motor, frames = _amounts(scene, primitive, observe, observe_frames, init, online)
+    observed = {
+        "--observe": (observe, observe_steps),
+        "--observe-frames": (observe_frames, observe_frames_steps),
+    }
+    motor, frames = _amounts(scene, primitive, observed, init, online)
     if scene and latent_lr is not None:
         raise UserError("--latent-lr goes with gradient inference, not with --scene (the scene policy has no codes)")
     prior = _prior_options(scene, init, primitive, source, clusters, prior_samples)
@@ -297,14 +333,16 @@ def _inputs(file: Path, indices: Path | None, fitted: Path | None) -> tuple:
     return dataset, idx, MotionDataset.load(fitted) if fitted is not None else None
 
 
-def _amounts(scene: bool, primitive, observe, observe_frames, init, online: bool) -> tuple:
-    """``--observe`` and ``--observe-frames`` parsed (motor None under ``--scene``), after the ``--scene`` checks."""
+def _amounts(scene: bool, primitive, observed: dict, init, online: bool) -> tuple:
+    """``--observe`` (or ``--observe-steps``) and ``--observe-frames`` (or ``--observe-frames-steps``)
+    parsed (motor None under ``--scene``), after the ``--scene`` checks; ``observed``: each option's
+    (text, steps) as given."""
     from primspace.train.observe import FIRST, NOTHING
 
-    _check_scene_flags(scene, primitive, observe, observe_frames, init, online)
-    motor = None if scene else parse_amount("0.25" if observe is None else observe, "--observe", (NOTHING,))
-    frames = None if observe_frames is None else parse_amount(observe_frames, "--observe-frames", (FIRST, NOTHING))
-    return motor, frames
+    _check_scene_flags(scene, primitive, observed, init, online)
+    motor = observed_amount(*observed["--observe"], "--observe", (NOTHING,))
+    frames = observed_amount(*observed["--observe-frames"], "--observe-frames", (FIRST, NOTHING))
+    return (None if scene else 0.25 if motor is None else motor), frames
 
 
 def parse_primitives(
@@ -390,20 +428,13 @@ def _check_ignored(iterations, online: bool, fitted, init, scene: bool, prior: b
         )
 
 
-def _check_scene_flags(scene: bool, primitive, observe, observe_frames, init, online: bool) -> None:
+def _check_scene_flags(scene: bool, primitive, observed: dict, init, online: bool) -> None:
     """One line for flags that do not go with ``--scene``, and ``--scene`` without ``--primitive``."""
     if not scene:
         return
-    given = [
-        name
-        for name, value in (
-            ("--observe", observe),
-            ("--observe-frames", observe_frames),
-            ("--init", init),
-            ("--online", online or None),
-        )
-        if value is not None
-    ]
+    amounts = [(option, text) for option, (text, _) in observed.items()]
+    amounts += [(f"{option}-steps", steps) for option, (_, steps) in observed.items()]
+    given = [name for name, value in (*amounts, ("--init", init), ("--online", online or None)) if value is not None]
     if given:
         raise UserError(f"--scene observes the first frame and the first joints only: do not give {', '.join(given)}")
     if primitive is None:
