@@ -79,3 +79,31 @@ def test_train_with_stderr_not_a_terminal_logs_its_epochs(run_cli, tmp_path, log
     assert any(re.match(_STAMP + r"fit run: running", line) for line in lines), lines
     assert re.match(_STAMP + r"fit run: done \(10/10, loss [\d.e-]+, \d+ samples/s\) in", lines[-1]), lines
     assert "wrote" in res.out
+
+
+def test_the_time_left_is_the_average_pace_since_the_start_and_unknown_before_a_step():
+    assert progress.remaining_seconds(180.0, 0, 10) is None  # 3 minutes in, nothing done: no estimate
+    assert progress.remaining_seconds(60.0, 2, 10) == pytest.approx(240.0)
+    assert progress.remaining_seconds(None, 2, 10) is None and progress.remaining_seconds(60.0, 2, None) is None
+    assert progress.remaining_seconds(60.0, 10, 10) == 0.0
+
+
+def test_the_bar_does_not_claim_seconds_left_when_parallel_jobs_end_together():
+    """Two jobs of ten end 0.1 s apart after six minutes (two workers): rich's own column, pacing
+    from the first ended job, claims seconds; the bar's column says about 24 minutes."""
+    from rich.progress import Progress, TimeRemainingColumn
+
+    now = [0.0]
+    bar = Progress(get_time=lambda: now[0], disable=True)
+    task_id = bar.add_task("intra", total=10)
+    task = bar.tasks[0]
+    column = progress.AverageRemainingColumn()
+    now[0] = 200.0
+    assert column.render(task).plain == "-:--:--"
+    now[0] = 360.0
+    bar.update(task_id, advance=1)
+    now[0] = 360.1
+    bar.update(task_id, advance=1)
+    assert column.render(task).plain == "0:24:00"  # 360.1 s for 2 of 10: 8 more at that pace
+    rich_left = TimeRemainingColumn().render(task).plain
+    assert rich_left in ("0:00:00", "0:00:01", "-:--:--")  # what the bar showed before: seconds

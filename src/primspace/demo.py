@@ -24,11 +24,11 @@ from primspace.experiments.presets import PRESETS
 from primspace.experiments.success import run_success
 from primspace.experiments.workspace import ExperimentDir
 from primspace.report import build_report
-from primspace.results.layout import LEARNED_CODES
+from primspace.results.layout import DATA_FILE, LEARNED_CODES, META_FILE, RESULT_FILE
 from primspace.results.tables import final, qualitative_check
 from primspace.utils.progress import announce
 
-__all__ = ["run_demo"]
+__all__ = ["earlier_results", "run_demo"]
 
 
 def run_demo(
@@ -43,7 +43,10 @@ def run_demo(
     ``device``, ``threads``: each run's (None: the demo preset's, auto and 1)."""
     start = time.perf_counter()
     preset = PRESETS["demo"].with_overrides(device=device, threads=threads)
+    reused = earlier_results(out_dir)
     exp = ExperimentDir(out_dir, preset, workers=workers, progress=progress)
+    if reused:
+        announce(f"demo: {reused}", enabled=progress)
     announce(f"demo 1/5: the simulated data set ({exp.path})", enabled=progress)
     exp.dataset()
     announce("demo 2/5: intra-primitive runs (fit on 20%, infer the rest, per init and q)", enabled=progress)
@@ -54,10 +57,23 @@ def run_demo(
     success = run_success(exp)
     announce("demo 5/5: the report", enabled=progress)
     report = build_report(exp.path)
-    return _summary(exp, intra, clustering, success, report, time.perf_counter() - start)
+    took = f"{time.perf_counter() - start:.0f} s" + (f" ({reused})" if reused else "")
+    return _summary(exp, intra, clustering, success, report, took)
 
 
-def _summary(exp, intra, clustering, success, report, seconds) -> str:
+def earlier_results(out_dir: str | Path) -> str | None:
+    """What an earlier demo left in ``out_dir`` that this one reuses instead of computing it again,
+    in one line (None: nothing, the demo starts from scratch)."""
+    path = Path(out_dir)
+    runs = len(list(path.glob(f"runs/*/{RESULT_FILE}"))) if (path / META_FILE).is_file() else 0
+    data = (path / DATA_FILE).is_file()
+    if not data and not runs:
+        return None
+    what = " and ".join(p for p in ("its data set" if data else "", f"{runs} finished run(s)" if runs else "") if p)
+    return f"reusing {what} from an earlier demo in {path} (remove that folder or give --out elsewhere to start over)"
+
+
+def _summary(exp, intra, clustering, success, report, took: str) -> str:
     """The text ``primspace demo`` prints: report path, a table per init, the verdict."""
     finals = {}
     for r in intra["runs"]:
@@ -82,7 +98,7 @@ def _summary(exp, intra, clustering, success, report, seconds) -> str:
     ok, text = qualitative_check(intra)
     verdict = {True: "HOLDS", False: "DOES NOT HOLD", None: "cannot be checked"}[ok]
     return "\n".join(
-        [f"primspace demo finished in {seconds:.0f} s", f"report: {report}", ""]
+        [f"primspace demo finished in {took}", f"report: {report}", ""]
         + lines
         + ["", f"paper's qualitative result (projection's eval loss below zero and random): {verdict}", f"  {text}"]
     )

@@ -28,13 +28,14 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    ProgressColumn,
     SpinnerColumn,
     TextColumn,
     TimeElapsedColumn,
-    TimeRemainingColumn,
 )
+from rich.text import Text
 
-__all__ = ["LOG_AFTER", "announce", "progress_bar", "stage"]
+__all__ = ["LOG_AFTER", "announce", "progress_bar", "remaining_seconds", "stage"]
 
 #: Seconds a step runs before it writes its lines to a log (stderr not a terminal).
 LOG_AFTER = 5.0
@@ -104,6 +105,29 @@ class _LogLines:
                 )
 
 
+def remaining_seconds(elapsed: float | None, done: float, total: float | None) -> float | None:
+    """The time left at the average pace since the start: ``elapsed * (total - done) / done``;
+    None before the first step is done (or with no total): nothing to estimate from yet."""
+    if not total or not done or elapsed is None:
+        return None
+    return max(0.0, elapsed * (total - done) / done)
+
+
+class AverageRemainingColumn(ProgressColumn):
+    """A bar's time left at its average pace since it started (:func:`remaining_seconds`), shown
+    as ``-:--:--`` until a step is done. Rich's own column extrapolates the pace of the last 30 s
+    from the first step on, which claims seconds left when jobs running in parallel end together
+    after minutes."""
+
+    def render(self, task) -> Text:
+        left = remaining_seconds(task.elapsed, task.completed, task.total)
+        if left is None:
+            return Text("-:--:--", style="progress.remaining")
+        minutes, seconds = divmod(int(round(left)), 60)
+        hours, minutes = divmod(minutes, 60)
+        return Text(f"{hours}:{minutes:02d}:{seconds:02d}", style="progress.remaining")
+
+
 @contextlib.contextmanager
 def progress_bar(
     total: int | None,
@@ -151,7 +175,7 @@ def progress_bar(
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
-        TimeRemainingColumn(),
+        AverageRemainingColumn(),
     ]
     if fields:
         columns.append(TextColumn(fields))
