@@ -21,6 +21,12 @@ COMPARISONS = (
         "the per-element loss (ours) against the paper's summed loss (`--loss-reduction sum`)",
     ),
     (
+        "demo-images-precision",
+        "demo-images-mean",
+        "each modality weighed by its learned precision (`--loss-reduction precision`) against the per-element "
+        "mean loss, the demo preset with frames, three seeds",
+    ),
+    (
         "paper-images-short-mean",
         "paper-images-short-sum",
         "the same at the paper preset with images, 35 % of the schedule, one seed, one H200",
