@@ -36,6 +36,10 @@ Choices the paper leaves open (documented in ``docs/model.md``):
   ``uint8 / 255``); every deconvolution is ``ConvTranspose2d(kernel 4, stride 2,
   padding 1)``, so each doubles the resolution and ``H`` and ``W`` must be multiples of
   ``2 ** len(image_channels)``.
+
+With ``ModelConfig.learned_precision`` the decoder also holds the loss's learned
+log-variance of each modality (:class:`~primspace.model.precision.ModalityPrecision`),
+trained and saved with θ and returned with every output (``DecoderOutput.log_variances``).
 """
 
 from __future__ import annotations
