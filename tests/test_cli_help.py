@@ -76,6 +76,14 @@ def test_a_choice_shows_its_name_and_its_help_lists_the_choices(run_cli, monkeyp
     assert "INIT" in text and "One of: zero, random, projection, pca, calibrated." in text
 
 
+@pytest.mark.parametrize("path", [(), ("train",), ("predict",), ("demo",)])
+def test_a_flag_shows_no_type(run_cli, monkeypatch, path):
+    """``--version``, ``--overwrite``: flags take no value, so their help shows none (typer showed ``<bool>``)."""
+    text = _help(run_cli, monkeypatch, path, 200)
+    assert "<bool>" not in text
+    assert ("--version" if not path else "--help") in text
+
+
 #: Names of the number of primitives (clusters) to find; only ``--primitives`` (and ``-k``) is shown.
 _NUMBER_OF_PRIMITIVES = {"--k", "--clusters", "--n-clusters", "--primitives", "--n-primitives"}
 

@@ -120,6 +120,13 @@ def test_resume_says_where_it_continues_and_what_it_dropped(data, tmp_path, caps
     assert "resuming from epoch 2 of 3; 1 epoch(s) logged after that checkpoint dropped from metrics.jsonl" in err
 
 
+def test_a_run_folder_named_after_its_kind_is_named_with_its_parent(data, tmp_path, capsys):
+    _fit(data, tmp_path / "runs" / "fit", train_config=_tc(epochs=1))
+    capsys.readouterr()
+    _fit(data, tmp_path / "runs" / "fit", train_config=_tc(epochs=2), resume=True, progress=None)
+    assert "fit runs/fit: resuming from epoch 1 of 2" in capsys.readouterr().err  # not "fit fit"
+
+
 def test_resume_without_a_checkpoint_says_it_starts_over(data, tmp_path, capsys):
     capsys.readouterr()
     run = _fit(data, tmp_path / "new", train_config=_tc(epochs=1), resume=True, progress=None)

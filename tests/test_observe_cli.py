@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from conftest import assert_user_error
-from primspace.cli.predict import observed_amount, parse_amount
+from primspace.cli.observing import observed_amount, parse_amount
 from primspace.utils.errors import UserError
 
 
@@ -55,3 +55,15 @@ def test_predict_refuses_before_reading_anything(run_cli, tmp_path, flags, fragm
     res = run_cli("predict", tmp_path / "run", tmp_path / "d.h5", "--out", tmp_path / "o", *flags)
     assert_user_error(res, *fragments)
     assert not (tmp_path / "o").exists()
+
+
+def test_the_summary_says_the_rule_in_words_and_frames_only_for_data_with_frames():
+    from primspace.cli.observing import observed_text
+
+    rule = {"motor": 0.25, "frames": 0.25}
+    assert observed_text(rule, frames=False) == "the first 25 % of the joints"  # not {'motor': 0.25, ...}
+    assert observed_text(rule, frames=True) == "the first 25 % of the joints and the first 25 % of the frames"
+    assert observed_text({"motor": 10, "frames": "first"}, frames=True) == (
+        "the first 10 step(s) of the joints and the first step of the frames"
+    )
+    assert observed_text({"motor": "none", "frames": 0.5}, frames=True).startswith("none of the joints")

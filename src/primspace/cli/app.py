@@ -20,8 +20,10 @@ import typer.main
 from primspace.utils.errors import UserError, first_line
 
 try:  # typer >= 0.2x carries its own copy of Click
+    from typer._click import core as _click_core
     from typer._click import exceptions as _click_errors
 except ImportError:  # pragma: no cover - older typer runs on Click itself
+    from click import core as _click_core
     from click import exceptions as _click_errors
 
 app = typer.Typer(
@@ -107,13 +109,24 @@ def click_command():
     type column folds mid-word on a narrow terminal, and its help names the choices."""
     root = typer.main.get_command(app)
     todo = [root]
+    _no_flag_types(root)
     while todo:
         group = todo.pop()
         for sub in getattr(group, "commands", {}).values():
             todo.append(sub)
+            _no_flag_types(sub)
             for param in sub.params:
                 _short_choices(param)
     return root
+
+
+def _no_flag_types(command) -> None:
+    """A flag (``--overwrite``, ``--version``, ``--help``) takes no value: its help shows no type
+    (typer shows ``<bool>``). The help option is made here, as Click caches it, to be marked too."""
+    context = _click_core.Context(command, help_option_names=app.info.context_settings["help_option_names"])
+    for param in [*command.params, command.get_help_option(context)]:
+        if param is not None and getattr(param, "is_flag", False) and param.metavar is None:
+            param.metavar = ""
 
 
 def _short_choices(param) -> None:

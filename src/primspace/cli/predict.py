@@ -8,12 +8,12 @@ block's colour in the first frame to the motion, per primitive; docs/act.md)."""
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import typer
 
 from primspace.cli.app import app
+from primspace.cli.observing import observed_amount, observed_text
 from primspace.cli.options import allow_unfinished_option, check_finished, threads_option
 from primspace.utils.errors import UserError
 
@@ -22,46 +22,6 @@ PREDICT_MARK = "primspace predict"
 #: The files of a ``primspace predict`` output directory (result.json last: it says the output is complete).
 PREDICT_FILES = ("predicted.h5", "prediction.png", "posterior.png", "result.json")
 _SHOWN = 4
-
-
-def parse_amount(text: str, option: str, words: tuple[str, ...]):
-    """``--observe`` / ``--observe-frames``: a fraction of each motion's valid steps, written
-    ``0.25`` (with a decimal point or an exponent) or ``25%``, or one of ``words``. A whole number
-    (``25``) is refused: steps go in ``OPTION-steps``. One line naming ``option`` otherwise."""
-    text = text.strip()
-    if text in words:
-        return text
-    percent = text.endswith("%")
-    number = text[:-1].strip() if percent else text
-    try:
-        value = float(number)
-    except ValueError:
-        allowed = " or ".join(repr(w) for w in words)
-        raise UserError(
-            f"{option} {text!r}: give a fraction with a decimal point (0.25), a percentage (25%) or {allowed} "
-            f"(a number of steps: {option}-steps 10)"
-        ) from None
-    if not percent and not any(c in number for c in ".eE"):
-        raise UserError(
-            f"{option} {text}: write {text}% for a percentage of each motion or {option}-steps {text} for "
-            f"{text} steps (a fraction has a decimal point: 0.25)"
-        )
-    fraction = value / 100 if percent else value
-    if not (math.isfinite(fraction) and 0 < fraction <= 1):
-        raise UserError(f"{option} {text}: the observed fraction must be in (0, 1] (above 0 % and at most 100 %)")
-    return fraction
-
-
-def observed_amount(text: str | None, steps: int | None, option: str, words: tuple[str, ...]):
-    """``OPTION`` (:func:`parse_amount`) or ``OPTION-steps`` (a number of steps, at least 1), not both;
-    None when neither is given."""
-    if steps is None:
-        return None if text is None else parse_amount(text, option, words)
-    if text is not None:
-        raise UserError(f"give {option} {text} or {option}-steps {steps}, not both")
-    if steps < 1:
-        raise UserError(f"{option}-steps {steps}: observe at least 1 step (or {option} none)")
-    return int(steps)
 
 
 def _shown_titles(dataset, indices) -> list[str]:
@@ -277,7 +237,7 @@ def predict_command(
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
         if prediction.details.get("posterior") is not None:
             _write_posterior(tmp, prediction, dataset)
-    typer.echo(_summary_line(out, result, prediction, online, judged))
+    typer.echo(_summary_line(out, result, prediction, online, judged, dataset.has_images))
 
 
 def _predict(run, dataset, scene: bool, prior: dict, motor, frames, init, continuity: bool, online, common):
@@ -464,15 +424,14 @@ def _write_posterior(tmp: Path, prediction, dataset) -> None:
     save_figure(fig, tmp / "posterior.png", writer=PREDICT_MARK)
 
 
-def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None) -> str:
-    """What ``primspace predict`` prints when it is done."""
+def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None, frames: bool) -> str:
+    """What ``primspace predict`` prints when it is done (``frames``: the data has frames)."""
     from primspace.act.scene_policy import SCENE_POLICY
 
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     means = means or "every valid step was observed, no step left to score"
-    line = (
-        f"wrote {out}: {result['n']} motions predicted from {prediction.observation}, init {prediction.init}: {means}"
-    )
+    seen = observed_text(prediction.observation, frames)
+    line = f"wrote {out}: {result['n']} motions predicted from {seen}, init {prediction.init}: {means}"
     if prediction.details.get("mode") == SCENE_POLICY:
         d = prediction.details
         line += f"; every motion as primitive {d['primitive']} ({d['name']}) of the {d['policy']['source']}"

@@ -195,7 +195,12 @@ class Session:
 
     @property
     def name(self) -> str:
-        return self.run_dir.path.name if self.run_dir is not None else "(in memory)"
+        """The run as messages and bars name it: its folder's name, with the parent folder's when the
+        folder is named after a kind of run (``runs/fit``, not ``fit fit`` after the label)."""
+        if self.run_dir is None:
+            return "(in memory)"
+        path = self.run_dir.path
+        return f"{path.parent.name}/{path.name}" if path.name in ("fit", "infer") and path.parent.name else path.name
 
     def state(self) -> dict:
         """The checkpoint of the session as it stands (:func:`~primspace.train.checkpoint.checkpoint_state`)."""
