@@ -21,7 +21,7 @@ $(VENV)/bin/activate:
 	$(PIP) install --quiet --upgrade pip
 
 # torch first, from the CPU index when it answers (one quick probe, not pip's retries on every
-# package); then the project with torch's pin, which the installed CPU wheel satisfies. The plain
+# package; otherwise no separate call: the next one resolves it with the project); then the project with torch's pin, which the installed CPU wheel satisfies. The plain
 # install has the `predict` extra (`primspace act` and ProMP need it); the test install is a
 # superset of it (so it marks both, and `make demo` after `make test` installs nothing again).
 DEMO_EXTRAS := [predict]
@@ -32,7 +32,6 @@ define install_project
 		$(PIP) install --quiet --index-url $(TORCH_INDEX) $(TORCH); \
 	else \
 		echo "torch: $(TORCH_INDEX) does not answer; $(TORCH) from pip's configured index (from the public index alone that is the CUDA build)"; \
-		$(PIP) install --quiet $(TORCH); \
 	fi
 	$(PIP) install --quiet $(TORCH) -e '.$(1)'
 	$(PIP) install --quiet --no-deps $(ROBOT_ASSETS)

@@ -33,7 +33,8 @@ def test_torch_comes_from_the_cpu_index_with_a_fallback(tmp_path, target):
     assert f"urlopen('{CPU_INDEX}/torch/'" in probe  # one quick look at the index before pip
     from_index, _, fallback = rest.partition(" else ")
     assert f"pip install --quiet --index-url {CPU_INDEX} torch==2.13.0" in from_index
-    assert "does not answer" in fallback and "pip install --quiet torch==2.13.0;" in fallback
+    fallback = fallback.split(" fi", 1)[0]
+    assert "does not answer" in fallback and "pip install" not in fallback  # the project's call resolves torch
     lines = script.splitlines()
     torch_step = next(i for i, line in enumerate(lines) if CPU_INDEX in line)
     project_step = next(i for i, line in enumerate(lines) if "-e '." in line)
