@@ -194,6 +194,7 @@ def predict_command(
     """Predict the rest of each motion: codes inferred from the observed beginning, the whole sequence decoded
     (with --scene: the whole motion from the first frame and joints, as the named primitive, by the scene policy)."""
     from primspace.train import TrainConfig, configure_process, load_run
+    from primspace.train.checks import check_data_fits
     from primspace.utils.files import check_outside_inputs
     from primspace.utils.folders import OutputKind, atomic_directory
     from primspace.utils.seeds import check_seed
@@ -218,6 +219,8 @@ def predict_command(
         trained = load_run(run)
         check_finished(trained, allow_unfinished)
         dataset, idx, fitted_data = _inputs(file, indices, fitted)
+        if not scene:  # the file named in one line, before a predictor is fitted
+            check_data_fits(dataset, trained.model_config, use_images=False)
         common = dict(epochs=epochs, indices=idx, fitted_data=fitted_data, threads=threads, **overrides)
         prediction, command = _predict(
             trained,
