@@ -21,9 +21,10 @@ $(VENV)/bin/activate:
 	$(PIP) install --quiet --upgrade pip
 
 # torch first, from the CPU index when it answers (one quick probe, not pip's retries on every
-# package; otherwise no separate call: the next one resolves it with the project); then the project with torch's pin, which the installed CPU wheel satisfies. The plain
-# install has the `predict` extra (`primspace act` and ProMP need it); the test install is a
-# superset of it (so it marks both, and `make demo` after `make test` installs nothing again).
+# package; otherwise no separate call: the next one resolves it with the project); then the
+# project with torch's pin, which the installed CPU wheel satisfies. The plain install has the
+# `predict` extra (`primspace act` and ProMP need it); the test install is a superset of it (so
+# it marks both, and `make demo` after `make test` installs nothing again).
 DEMO_EXTRAS := [predict]
 TEST_EXTRAS := [test,ray,video,predict]
 define install_project
