@@ -237,14 +237,15 @@ class Session:
             self.store.close()  # the writer's lock: the run is over, however it ended
 
     def _run(self, ckpt: dict | None, progress: bool | None, label: str) -> None:
-        """The epochs up to ``tc.epochs``. Ctrl-C (one process training) stops after the epoch it
-        comes in: that epoch is checkpointed and :class:`~primspace.utils.interrupt.Interrupted`
-        says where the run stands; a second Ctrl-C stops at once (the last checkpoint kept)."""
+        """The epochs up to ``tc.epochs``. Ctrl-C (one process training into a run directory) stops
+        after the epoch it comes in: that epoch is checkpointed and
+        :class:`~primspace.utils.interrupt.Interrupted` says where the run stands; a second Ctrl-C
+        stops at once (the last checkpoint kept). A run held in memory stops at once."""
         self.start(ckpt)
         self._announce_start(ckpt, progress, label)
         fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
-        then = "stopping after this epoch" + (", its checkpoint written" if self.store is not None else "")
-        with deferred_interrupt(then, enabled=not self.world.distributed) as stop:
+        deferred = self.store is not None and not self.world.distributed
+        with deferred_interrupt("stopping after this epoch, its checkpoint written", enabled=deferred) as stop:
             with progress_bar(self.tc.epochs, f"{label} {self.name}", enabled=progress, fields=fields_fmt) as advance:
                 if self.epoch:
                     advance(self.epoch)
@@ -273,8 +274,6 @@ class Session:
     def _stop(self, label: str) -> None:
         """After Ctrl-C: the epoch just done checkpointed, and :class:`Interrupted` saying so."""
         where = f"{label} {self.name}: stopped after epoch {self.epoch} of {self.tc.epochs}"
-        if self.store is None:
-            raise Interrupted(f"{where} (held in memory: nothing saved)")
         if self._last_checkpoint != self.epoch:
             self._checkpoint()
         raise Interrupted(f"{where}, checkpoint written; continue it with resume=True, epochs={self.tc.epochs}")
