@@ -30,6 +30,8 @@ def test_a_counted_step_writes_a_line_when_it_runs_each_tenth_and_when_it_ends(c
     assert "epochs: running" in lines[0]
     assert 5 <= len(lines) <= 12, lines  # a line per tenth at most, not one per step
     assert re.search(r"epochs: done \(20/20, loss 0\.05\) in [\d.]+ s$", lines[-1]), lines[-1]
+    tenths = [line for line in lines[1:-1] if "/20" in line]
+    assert tenths and all(re.search(r", \d+ s, about \d+ s left$", line) for line in tenths), lines
 
 
 def test_a_quick_step_writes_nothing_and_false_is_silent(capsys, monkeypatch):

@@ -10,7 +10,8 @@ writes lines otherwise; ``True`` draws; ``False`` is silent.
 
 In a log, a step that ends within :data:`LOG_AFTER` seconds writes nothing (quick commands
 and tests stay clean); a longer one writes a line when it has run that long, a line each
-tenth of its steps, and a line when it ends, with its time.
+tenth of its steps (with the time left at the average pace so far), and a line when it
+ends, with its time.
 """
 
 from __future__ import annotations
@@ -90,7 +91,9 @@ class _LogLines:
             while self.done * 10 >= self.next_tenth * self.total:
                 self.next_tenth += 1
             if self.done < self.total:
-                _write(f"{self.description}: {self._state()}, {time.monotonic() - self.started:.0f} s")
+                elapsed = time.monotonic() - self.started
+                left = remaining_seconds(elapsed, self.done, self.total)
+                _write(f"{self.description}: {self._state()}, {elapsed:.0f} s, about {left:.0f} s left")
 
     def finish(self, ok: bool) -> None:
         self.timer.cancel()
