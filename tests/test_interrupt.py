@@ -1,6 +1,7 @@
 """Ctrl-C during training: the epoch it comes in is finished and checkpointed, the run says where it
 stands; ``resume`` says where it continues from (or that it starts over); a run that did not finish
-is refused by ``predict``, ``reconstruct`` and ``cluster`` unless ``--allow-unfinished``."""
+is refused by ``predict``, ``reconstruct``, ``cluster``, ``infer`` and ``act`` unless
+``--allow-unfinished``."""
 
 from __future__ import annotations
 
@@ -163,6 +164,8 @@ def unfinished(data, tmp_path_factory) -> Path:
         ["predict", "{run}", "{data}", "--out", "{out}"],
         ["reconstruct", "{run}", "--sample", "0", "--out", "{out}.png"],
         ["cluster", "{run}", "--primitives", "2", "--out", "{out}"],
+        ["infer", "{run}", "{data}", "--out", "{out}"],
+        ["act", "{run}", "--primitive", "push", "--scene", "0.5,0,0.05", "--out", "{out}"],
     ],
 )
 def test_an_unfinished_run_is_refused_in_one_line(run_cli, unfinished, data, tmp_path, command):

@@ -10,7 +10,7 @@ import typer
 
 from primspace.act.planner import DEFAULT_EVERY
 from primspace.cli.app import app
-from primspace.cli.options import require_extra, threads_option
+from primspace.cli.options import allow_unfinished_option, check_finished, require_extra, threads_option
 from primspace.utils.errors import UserError
 
 #: How the library names the fitted data (``fitted_data=...``): act's flag for it is ``--data``.
@@ -41,6 +41,7 @@ def act_command(
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier act output."),
     threads: int | None = threads_option(),
+    allow_unfinished: bool = allow_unfinished_option(),
 ) -> None:
     """Execute the primitive in the scene in MuJoCo: planned from the camera, re-planned in closed loop when a frame
     surprises the plan; the open loop and ProMP re-conditioned on the executed joints run the same scene."""
@@ -68,6 +69,7 @@ def act_command(
     with atomic_directory(out, overwrite, kind) as tmp:  # checked and locked before minutes of work
         try:
             trained = load_run(run)
+            check_finished(trained, allow_unfinished)
             _check_with_run(trained, primitive, scene, data)  # before the frames are read and the policy fitted
             outcome = act(trained, primitive, scene, perturb=perturb, every=every, seed=seed, data=data)
         except UserError as exc:  # the library names fitted_data=, act's flag is --data

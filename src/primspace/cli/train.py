@@ -348,6 +348,7 @@ def infer_command(
     threads: int | None = threads_option(),
     resume: bool = typer.Option(False, "--resume", help="Continue the inference in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it is an earlier infer run."),
+    allow_unfinished: bool = allow_unfinished_option(),
     log_to: tuple[LogTarget, Path] | None = _log_to_option(),
     stream_frames: bool | None = _INFER_SCALE["stream_frames"],
     frames_memory_gb: float | None = _INFER_SCALE["frames_memory_gb"],
@@ -357,7 +358,7 @@ def infer_command(
 ) -> None:
     """Find latent codes for new samples with the trained weights frozen (under torchrun:
     each batch's samples split across the processes)."""
-    from primspace.train import infer
+    from primspace.train import infer, load_run
 
     log_to = _log_to(log_to, (file, indices, run))
     overrides = {"device": device, "amp": amp, "threads": threads}
@@ -376,10 +377,12 @@ def infer_command(
         if value is not None:
             overrides[name] = value
     ds, idx = _inputs(out, file, indices, run)
+    trained = load_run(run)
+    check_finished(trained, allow_unfinished)
     _launch(
         replace(_TC, device=device, amp=amp, threads=threads).validate(),
         lambda: infer(
-            run,
+            trained,
             ds,
             out,
             epochs=epochs,
