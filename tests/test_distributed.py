@@ -37,6 +37,7 @@ pytestmark = pytest.mark.usefixtures("one_thread_each")  # one thread per test, 
 BASE = dict(epochs=2, batch_size=4, threads=1, seed=0, checkpoint_every=1, final_lr_fraction=1.0)  # resumed to 3 below
 IMAGES = dict(BASE, vision_frames=3, loss_reduction="sum")
 MOTOR_ONLY = dict(BASE, vision_weight=0.0)  # the model has an image head, its loss is not trained
+PRECISION = dict(BASE, vision_frames=3, loss_reduction="precision")  # learned log-variances in the decoder
 INFER_ROWS = [0, 4, 5, 9, 12]
 DEADLINE = 300  # seconds for both processes, start to end
 
@@ -76,6 +77,7 @@ def _process(rank: int, port: int, folder: str) -> None:
         out["motor"], out["motor_history"] = motor.state, numbers(motor.history)
         inferred = infer(run, ds, epochs=2, indices=INFER_ROWS, progress=False)
         out["infer"] = inferred.state
+        out["precision"] = fit(ds, model_config=SMALL, train_config=TrainConfig(**PRECISION), progress=False).state
         try:
             fit(ds, model_config=SMALL, train_config=TrainConfig(**{**BASE, "lr": 1e30}), progress=False)
         except TrainingDivergedError as exc:
@@ -133,6 +135,15 @@ def test_motor_only_training_with_an_unused_image_head(two_processes):
         ddp["motor_history"][-1]["vision"] is None
         and ddp["motor_history"][-1]["loss"] < ddp["motor_history"][0]["loss"]
     )
+
+
+@pytest.mark.slow
+def test_learned_precisions_train_in_two_processes_as_in_two_parts(two_processes):
+    (ddp, other), folder = two_processes
+    ds = MotionDataset.load(folder / "data.h5")
+    one = fit(ds, model_config=SMALL, train_config=TrainConfig(**PRECISION, micro_batches=2), progress=False)
+    assert same_state(one.state, ddp["precision"]) and same_state(other["precision"], ddp["precision"])
+    assert float(one.model.precision.raw.detach().abs().min()) > 0  # they trained
 
 
 @pytest.mark.slow
