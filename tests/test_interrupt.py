@@ -53,12 +53,14 @@ def _fit(data: Path, out, **kw):
 
 
 def _sigint_after_epoch(monkeypatch, epoch: int) -> None:
-    """Ctrl-C right after ``epoch`` is done (before the loop looks at the next one)."""
+    """Ctrl-C once, right after the first run to end ``epoch`` ends it (before the loop looks at the next)."""
     original = Session.end_epoch
+    pressed = []
 
     def end_then_sigint(self, sums, seconds):
         line = original(self, sums, seconds)
-        if self.epoch == epoch:
+        if self.epoch == epoch and not pressed:
+            pressed.append(True)
             signal.raise_signal(signal.SIGINT)
         return line
 
@@ -216,3 +218,22 @@ def test_ctrl_c_on_the_command_line_checkpoints_and_resume_says_so(run_cli, data
     res = run_cli("train", data, "--out", out, "--epochs", str(done + 1), "--resume", *flags)
     assert res.code == 0, res.err
     assert f"fit {out.name}: resuming from epoch {done} of {done + 1}" in res.err
+
+
+@needs_sigint
+def test_ctrl_c_stops_packed_runs_after_their_epoch_with_their_checkpoints(data, tmp_path, monkeypatch):
+    from primspace.train.packed import fit_packed
+
+    ds = MotionDataset.load(data)
+    jobs = [
+        dict(dataset=ds, out_dir=tmp_path / name, model_config=TINY, train_config=_tc(seed=seed), init=init)
+        for name, seed, init in (("a", 0, "projection"), ("b", 1, "zero"))
+    ]
+    _sigint_after_epoch(monkeypatch, 2)  # in the first run's end of epoch 2: the second still ends it
+    with pytest.raises(
+        Interrupted, match=r"fit 2 runs packed: stopped after epoch 2 of 6, checkpoints written; continue"
+    ):
+        fit_packed(jobs, progress=False)
+    monkeypatch.undo()
+    assert [load_run(tmp_path / name).epoch for name in ("a", "b")] == [2, 2]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -271,11 +271,15 @@ class Session:
         elif self.store is not None and self.store.resume_asked:
             announce(f"{label} {self.name}: no checkpoint to resume from: starting from epoch 0", enabled=progress)
 
+    def checkpoint_now(self) -> None:
+        """Checkpoint the epoch just done, unless it is checkpointed already (a stop on Ctrl-C)."""
+        if self._last_checkpoint != self.epoch:
+            self._checkpoint()
+
     def _stop(self, label: str) -> None:
         """After Ctrl-C: the epoch just done checkpointed, and :class:`Interrupted` saying so."""
         where = f"{label} {self.name}: stopped after epoch {self.epoch} of {self.tc.epochs}"
-        if self._last_checkpoint != self.epoch:
-            self._checkpoint()
+        self.checkpoint_now()
         raise Interrupted(f"{where}, checkpoint written; continue it with resume=True, epochs={self.tc.epochs}")
 
     def start(self, ckpt: dict | None) -> None:

@@ -40,6 +40,7 @@ from primspace.train.run import TrainedRun
 from primspace.train.rundir import run_from_state
 from primspace.train.sessions import fit_session, infer_session
 from primspace.utils.errors import UserError
+from primspace.utils.interrupt import Interrupted, deferred_interrupt
 from primspace.utils.progress import progress_bar
 
 __all__ = ["PackedStep", "pack_key", "train_packed", "fit_packed", "infer_packed"]
@@ -244,10 +245,15 @@ def _train_group(group: list[Session], progress: bool | None, label: str) -> lis
     errors = []
     epochs = group[0].tc.epochs
     fields_fmt = "loss {task.fields[loss]:.4g}  {task.fields[sps]:.0f} samples/s"
-    with progress_bar(epochs, label, enabled=progress, fields=fields_fmt) as advance:
+    then = "stopping after this epoch, the runs' checkpoints written"
+    deferred = all(s.store is not None for s in group)  # a pack trains in one process (_check_packable)
+    with (
+        deferred_interrupt(then, enabled=deferred) as stop,
+        progress_bar(epochs, label, enabled=progress, fields=fields_fmt) as advance,
+    ):
         advance(group[0].epoch)
         step = PackedStep(group)
-        while group and group[0].epoch < epochs:
+        while group and group[0].epoch < epochs and not stop.requested:
             t0 = time.perf_counter()
             plans = [s.begin_epoch() for s in group]
             step.begin_epoch(plans[0].autocast)
@@ -272,6 +278,13 @@ def _train_group(group: list[Session], progress: bool | None, label: str) -> lis
                     loss=sum(line["loss"] for line in lines) / len(lines),
                     sps=sum(line["samples_per_s"] for line in lines),
                 )
+    if group and group[0].epoch < epochs:  # stopped by Ctrl-C
+        for s in group:
+            s.checkpoint_now()
+        raise Interrupted(
+            f"{label}: stopped after epoch {group[0].epoch} of {epochs}, checkpoints written; continue them with "
+            f"resume=True, epochs={epochs}"
+        )
     return errors
 
 
