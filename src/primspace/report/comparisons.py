@@ -26,6 +26,7 @@ COMPARISONS = (
         "each modality weighed by its learned precision (`--loss-reduction precision`) against the per-element "
         "mean loss, the demo preset with frames, three seeds",
     ),
+    ("demo-images-precision-zero", "demo-images-mean", "the same from the zero start"),
     (
         "paper-images-short-mean",
         "paper-images-short-sum",
