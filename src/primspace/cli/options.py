@@ -55,6 +55,23 @@ def check_finished(run, allow: bool) -> None:
     )
 
 
+#: ``train --scale-over-file``'s help.
+SCALE_OVER_FILE_HELP = (
+    "Fit the joints' scaling to [-1, 1] on every sample of DATA, as the experiments do (errors then in their "
+    "units), not only on the samples trained on (--indices)."
+)
+
+
+def file_scaler(dataset, weights_from=None):
+    """``train --scale-over-file``: the joint scaler fitted on every sample of ``dataset`` (what the
+    experiments give every run); refused with ``--weights-from`` (the parent run's scaler is used)."""
+    if weights_from is not None:
+        raise UserError("--scale-over-file goes without --weights-from (the parent run's scaler is used)")
+    from primspace.data import JointScaler
+
+    return JointScaler().fit(dataset.motor)
+
+
 def require_extra(module: str, package: str, extra: str, command: str, why: str) -> None:
     """One line naming ``pip install 'primspace[EXTRA]'`` when ``module`` (of ``package``, in the
     ``extra`` extra) is not installed: a command checks it before any work."""

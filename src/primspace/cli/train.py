@@ -10,10 +10,12 @@ import typer
 
 from primspace.cli.app import app
 from primspace.cli.options import (
+    SCALE_OVER_FILE_HELP,
     allow_unfinished_option,
     check_finished,
     configure_threads,
     device_option,
+    file_scaler,
     float_list,
     int_list,
     threads_option,
@@ -281,6 +283,7 @@ def train_command(
     ),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in OUT from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUT if it exists."),
+    scale_over_file: bool = typer.Option(False, "--scale-over-file", help=SCALE_OVER_FILE_HELP),
     log_to: tuple[LogTarget, Path] | None = _log_to_option(),
     stream_frames: bool | None = _TRAIN_SCALE["stream_frames"],
     loader_workers: int = _TRAIN_SCALE["loader_workers"],
@@ -306,6 +309,7 @@ def train_command(
     )
     tc = replace(_TC, **{k: given[k] for k in _TRAIN_FLAGS}).validate()
     ds, idx = _train_inputs(out, file, indices, weights_from, tc, no_images)
+    scaler = file_scaler(ds, weights_from) if scale_over_file else None
     _launch(
         tc,
         lambda: fit(
@@ -320,6 +324,7 @@ def train_command(
             weights_from=weights_from,
             images=False if no_images else None,
             log_to=log_to,
+            scaler=scaler,
         ),
     )
 
