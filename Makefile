@@ -17,6 +17,9 @@ ROBOT_ASSETS := gymnasium-robotics==1.4.2
 .PHONY: demo test test-fast lint docs install install-test bench clean
 
 $(VENV)/bin/activate:
+	@$(PYTHON) -c "import sys; sys.exit(sys.version_info < (3, 11))" || { \
+		echo "primspace needs Python >= 3.11 (pyproject's requires-python); $(PYTHON) is older: make PYTHON=python3.11 ..." >&2; \
+		exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 

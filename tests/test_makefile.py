@@ -53,3 +53,18 @@ def test_the_plain_install_has_the_predict_extra(tmp_path):
     full = _dry_run(tmp_path, "install-test")
     extras = full.split("-e '.[", 1)[1].split("]", 1)[0].split(",")
     assert "predict" in extras and "test" in extras
+
+
+def test_an_older_python_is_refused_in_one_line_before_the_venv(tmp_path):
+    """``make`` with a Python below 3.11 stops before making .venv, naming the version and the fix."""
+    shutil.copy(ROOT / "Makefile", tmp_path / "Makefile")
+    (tmp_path / "pyproject.toml").write_text("")
+    old = tmp_path / "python3.10"
+    old.write_text("#!/bin/sh\nexit 1\n")  # what `python3.10 -c 'sys.exit(version < (3, 11))'` answers
+    old.chmod(0o755)
+    done = subprocess.run(
+        ["make", "install", f"PYTHON={old}"], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode != 0
+    assert f"primspace needs Python >= 3.11 (pyproject's requires-python); {old} is older" in done.stderr
+    assert not (tmp_path / ".venv").exists()
