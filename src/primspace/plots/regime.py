@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullLocator
 
 __all__ = ["plot_error_against_n"]
 
@@ -38,6 +39,9 @@ def plot_error_against_n(
             )
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ticks = sorted({float(n) for ns, _, _ in rows.values() for n in ns})
+        ax.set_xticks(ticks, [f"{n:g}" for n in ticks])  # the n run, plainly, not 2x10^0
+        ax.xaxis.set_minor_locator(NullLocator())
         ax.set_xlabel("fitted demonstrations per primitive (n)")
         ax.set_ylabel(ylabel)
         ax.set_title(name, fontsize=9)
