@@ -20,7 +20,7 @@ FUZZ = settings(max_examples=60, derandomize=True, deadline=None, suppress_healt
 @given(st.text(max_size=12))
 def test_an_observed_amount_is_a_number_a_word_or_one_line(text):
     """``--observe`` / ``--observe-frames``: whatever is typed parses or is one UserError."""
-    from primspace.cli.predict import parse_amount
+    from primspace.cli.observing import parse_amount
     from primspace.train.observe import Observation
 
     try:

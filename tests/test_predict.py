@@ -274,7 +274,7 @@ def test_predict_on_an_imported_csv_folder(run_cli, tmp_path):
         "predict",
         tmp_path / "run",
         tmp_path / "d.h5",
-        "--observe",
+        "--observe-steps",
         "5",
         "--init",
         "nearest",
