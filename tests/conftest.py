@@ -81,6 +81,22 @@ def tiny_data(tmp_path_factory):
     return path
 
 
+@pytest.fixture(scope="module")
+def loss_motor_set():
+    """9 synthetic motor sequences of 10 steps, 4 joints (the loss tests' data)."""
+    from test_train import primitives
+
+    return primitives(3, seed=0, T=10, J=4)
+
+
+@pytest.fixture(scope="module")
+def loss_image_set():
+    """6 synthetic sequences of 6 steps, 3 joints, 8x8 frames (the loss tests' data)."""
+    from test_train import primitives
+
+    return primitives(2, seed=1, T=6, J=3, images=True)
+
+
 @pytest.fixture
 def grid_only(monkeypatch):
     """``run_intra`` without its steps after the grid (probe, Appendix A check, figures, animations),

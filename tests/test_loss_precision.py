@@ -20,7 +20,7 @@ from primspace.train.loss import DataTensors, batch_loss
 from primspace.train.packed import fit_packed
 from primspace.utils.errors import UserError
 from test_loss_reduction import IMAGE_MODEL, SMALL_ARGS
-from test_train import SMALL, primitives
+from test_train import SMALL
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # one thread (tests/conftest.py)
 
@@ -28,29 +28,19 @@ SHORT = TrainConfig(epochs=6, batch_size=4, threads=1)
 NOGRAD = torch.no_grad()
 
 
-@pytest.fixture(scope="module")
-def motor_set():
-    return primitives(3, seed=0, T=10, J=4)  # 9 sequences of 10 steps, 4 joints
-
-
-@pytest.fixture(scope="module")
-def image_set():
-    return primitives(2, seed=1, T=6, J=3, images=True)  # 6 sequences of 6 steps, 8x8 frames
-
-
 # ------------------------------------------------------------ the other reductions, pinned
 
 
-def test_motor_only_mean_is_pinned(motor_set):
+def test_motor_only_mean_is_pinned(loss_motor_set):
     """Same seed, same numbers: the default loss on motor data, as before the precision loss."""
-    run = fit(motor_set, model_config=SMALL, train_config=SHORT, progress=False)
+    run = fit(loss_motor_set, model_config=SMALL, train_config=SHORT, progress=False)
     last = run.history[-1]
     assert (last["loss"], last["motor"]) == pytest.approx((0.10001925296253628, 0.10001925296253628), rel=1e-6)
     assert float(abs(run.latents).sum()) == pytest.approx(73.30300903320312, rel=1e-6)
 
 
-def test_mean_with_frames_is_pinned(image_set):
-    run = fit(image_set, model_config=IMAGE_MODEL, train_config=replace(SHORT, vision_frames=2), progress=False)
+def test_mean_with_frames_is_pinned(loss_image_set):
+    run = fit(loss_image_set, model_config=IMAGE_MODEL, train_config=replace(SHORT, vision_frames=2), progress=False)
     last = run.history[-1]
     assert (last["loss"], last["motor"], last["vision"]) == pytest.approx(
         (0.3601820071538289, 0.1170315792163213, 0.24315041800340018), rel=1e-6
@@ -73,9 +63,9 @@ def _model(data, images: bool, raw=(0.0, 0.0)):
     return model, tensors, torch.randn(len(data), mc.code_size)
 
 
-def test_precision_loss_by_hand(image_set):
+def test_precision_loss_by_hand(loss_image_set):
     """Σ_m ½ (e^{-s_m} · w_m · MSE_m + s_m) with the decoder's s, and the logged MSEs as under "mean"."""
-    model, tensors, z = _model(image_set, images=True, raw=(-0.3, 0.1))
+    model, tensors, z = _model(loss_image_set, images=True, raw=(-0.3, 0.1))
     idx = torch.tensor([0, 2, 5])
     s_m, s_v = -0.3 * ModalityPrecision.RATE, 0.1 * ModalityPrecision.RATE
     with torch.no_grad():
@@ -97,22 +87,22 @@ def test_precision_loss_by_hand(image_set):
         assert parts[2].item() == 0.0
 
 
-def test_precision_needs_a_decoder_with_learned_precisions(image_set):
+def test_precision_needs_a_decoder_with_learned_precisions(loss_image_set):
     torch.manual_seed(0)
-    model = MTRNNDecoder(IMAGE_MODEL.fitted_to(image_set, images=True))
+    model = MTRNNDecoder(IMAGE_MODEL.fitted_to(loss_image_set, images=True))
     assert model.precision is None and model(torch.zeros(1, 5)).log_variances is None
-    tensors = DataTensors.build(image_set, JointScaler().fit(image_set.motor), True, torch.device("cpu"))
+    tensors = DataTensors.build(loss_image_set, JointScaler().fit(loss_image_set.motor), True, torch.device("cpu"))
     with pytest.raises(UserError, match="needs a decoder with learned log-variances"):
         batch_loss(model, torch.zeros(2, 5), torch.arange(2), tensors, TrainConfig(loss_reduction="precision"), NOGRAD)
 
 
-def test_bad_reduction_refused_in_one_line(run_cli, motor_set, tmp_path):
+def test_bad_reduction_refused_in_one_line(run_cli, loss_motor_set, tmp_path):
     with pytest.raises(UserError) as err:
         TrainConfig(loss_reduction="gradnorm").validate()
     assert str(err.value) == "loss_reduction must be 'mean', 'sum' or 'precision', got 'gradnorm'"
     assert TrainConfig(loss_reduction="precision").validate().loss_reduction == "precision"
     data = tmp_path / "d.h5"
-    motor_set.save(data)
+    loss_motor_set.save(data)
     res = run_cli("train", data, "--out", tmp_path / "bad", "--loss-reduction", "gradnorm", *SMALL_ARGS)
     assert res.code == 2 and "gradnorm" in res.err and not (tmp_path / "bad").exists()
     assert "Traceback" not in res.err
@@ -121,13 +111,13 @@ def test_bad_reduction_refused_in_one_line(run_cli, motor_set, tmp_path):
 # ---------------------------------------------------------------------- training
 
 
-def test_log_variances_move_toward_log_mse(image_set):
+def test_log_variances_move_toward_log_mse(loss_image_set):
     """On a tiny fit each s_m goes from 0 toward log MSE_m, its minimiser, and ends near it."""
     tc = TrainConfig(epochs=60, batch_size=6, threads=1, lr=2e-2, loss_reduction="precision")
-    run = fit(image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
+    run = fit(loss_image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
     assert run.model_config.learned_precision
     learned = run.model.precision.summary()
-    final = evaluate(run, image_set)
+    final = evaluate(run, loss_image_set)
     for m in MODALITIES:
         target = math.log(final[m])
         s = learned[m]["log_variance"]
@@ -138,12 +128,14 @@ def test_log_variances_move_toward_log_mse(image_set):
     )
 
 
-def test_checkpoint_round_trip_and_resume(image_set, tmp_path):
+def test_checkpoint_round_trip_and_resume(loss_image_set, tmp_path):
     """The s_m are saved, loaded and resumed with θ: two epochs and two more are four at once."""
     tc = replace(SHORT, epochs=4, loss_reduction="precision", vision_frames=2, final_lr_fraction=1.0)
-    whole = fit(image_set, tmp_path / "whole", model_config=IMAGE_MODEL, train_config=tc, progress=False)
-    fit(image_set, tmp_path / "part", model_config=IMAGE_MODEL, train_config=replace(tc, epochs=2), progress=False)
-    resumed = fit(image_set, tmp_path / "part", model_config=IMAGE_MODEL, train_config=tc, resume=True, progress=False)
+    whole = fit(loss_image_set, tmp_path / "whole", model_config=IMAGE_MODEL, train_config=tc, progress=False)
+    fit(loss_image_set, tmp_path / "part", model_config=IMAGE_MODEL, train_config=replace(tc, epochs=2), progress=False)
+    resumed = fit(
+        loss_image_set, tmp_path / "part", model_config=IMAGE_MODEL, train_config=tc, resume=True, progress=False
+    )
     loaded = load_run(tmp_path / "whole")
     assert json.loads((tmp_path / "whole" / "config.json").read_text())["model"]["learned_precision"] is True
     assert torch.equal(loaded.model.precision.raw, whole.model.precision.raw)
@@ -152,14 +144,14 @@ def test_checkpoint_round_trip_and_resume(image_set, tmp_path):
     assert np.allclose(resumed.latents, whole.latents, atol=1e-5)
 
 
-def test_a_run_without_it_loads_and_parents_a_precision_fit(motor_set, tmp_path):
-    fit(motor_set, tmp_path / "mean", model_config=SMALL, train_config=replace(SHORT, epochs=1), progress=False)
+def test_a_run_without_it_loads_and_parents_a_precision_fit(loss_motor_set, tmp_path):
+    fit(loss_motor_set, tmp_path / "mean", model_config=SMALL, train_config=replace(SHORT, epochs=1), progress=False)
     parent = load_run(tmp_path / "mean")
     assert parent.model.precision is None and not parent.model_config.learned_precision
     with pytest.raises(UserError, match="fitted with 'mean'"):
-        infer(parent, motor_set, epochs=1, loss_reduction="precision", progress=False)
+        infer(parent, loss_motor_set, epochs=1, loss_reduction="precision", progress=False)
     child = fit(
-        motor_set,
+        loss_motor_set,
         model_config=SMALL,
         train_config=replace(SHORT, epochs=1, loss_reduction="precision"),
         weights_from=parent,
@@ -170,20 +162,20 @@ def test_a_run_without_it_loads_and_parents_a_precision_fit(motor_set, tmp_path)
     assert own.keys() == parent.model.state_dict().keys()
 
 
-def test_inference_keeps_the_precisions_and_each_code_its_own(image_set):
+def test_inference_keeps_the_precisions_and_each_code_its_own(loss_image_set):
     """θ frozen, s_m frozen: a code's steps do not depend on the other samples of its batch."""
     tc = replace(SHORT, epochs=3, loss_reduction="precision")
-    run = fit(image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
-    one, all_ = (infer(run, image_set, epochs=3, batch_size=b, progress=False) for b in (1, 6))
+    run = fit(loss_image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
+    one, all_ = (infer(run, loss_image_set, epochs=3, batch_size=b, progress=False) for b in (1, 6))
     assert torch.equal(one.model.precision.raw, run.model.precision.raw)
     assert torch.equal(all_.model.precision.raw, run.model.precision.raw)
     assert np.allclose(one.latents, all_.latents, atol=1e-5)
 
 
-def test_packed_and_captured_steps_carry_the_precisions(image_set):
+def test_packed_and_captured_steps_carry_the_precisions(loss_image_set):
     tc = replace(SHORT, epochs=3, loss_reduction="precision", vision_frames=2)
     jobs = [
-        dict(dataset=image_set, model_config=IMAGE_MODEL, train_config=replace(tc, seed=seed), init=init)
+        dict(dataset=loss_image_set, model_config=IMAGE_MODEL, train_config=replace(tc, seed=seed), init=init)
         for seed, init in ((0, "projection"), (1, "zero"))
     ]
     alone = [fit(**job, progress=False) for job in jobs]
@@ -199,12 +191,12 @@ def test_preset_override():
     assert demo.train.loss_reduction == "precision" and not demo.model.learned_precision  # the fit sets it
 
 
-def test_loss_balance_shows_the_learned_weights(image_set):
+def test_loss_balance_shows_the_learned_weights(loss_image_set):
     from primspace.experiments.loss_balance import loss_balance
 
     tc = replace(SHORT, epochs=3, loss_reduction="precision")
-    run = fit(image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
-    result = loss_balance(run, image_set)
+    run = fit(loss_image_set, model_config=IMAGE_MODEL, train_config=tc, progress=False)
+    result = loss_balance(run, loss_image_set)
     learned = run.model.precision.summary()
     assert result["precision"] == learned and result["loss_reduction"] == "precision"
     by_hand = {m: 0.5 * (learned[m]["weight"] * result["mse"][m] + learned[m]["log_variance"]) for m in MODALITIES}
@@ -213,15 +205,15 @@ def test_loss_balance_shows_the_learned_weights(image_set):
     assert result["vision_share"] == pytest.approx(weighed["vision"] / sum(weighed.values()), rel=1e-9)
     assert sorted(result["gradients"]["theta"]["motor"]) == ["all", "dynamics", "image_head", "motor_head"]
     assert (
-        loss_balance(fit(image_set, model_config=IMAGE_MODEL, train_config=SHORT, progress=False), image_set)[
+        loss_balance(fit(loss_image_set, model_config=IMAGE_MODEL, train_config=SHORT, progress=False), loss_image_set)[
             "precision"
         ]
         is None
     )
 
 
-def test_the_command_prints_the_learned_weights(run_cli, image_set, tmp_path):
-    data = image_set.save(tmp_path / "data.h5")
+def test_the_command_prints_the_learned_weights(run_cli, loss_image_set, tmp_path):
+    data = loss_image_set.save(tmp_path / "data.h5")
     tc = replace(SHORT, epochs=2, loss_reduction="precision")
     run = fit(MotionDataset.load(data), tmp_path / "run", model_config=IMAGE_MODEL, train_config=tc, progress=False)
     res = run_cli("diagnose", "loss-balance", tmp_path / "run", "--no-gradients")

@@ -22,7 +22,7 @@ from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, evaluate, fit
 from primspace.train.loss import DataTensors, batch_loss
 from primspace.utils.errors import UserError
-from test_train import SMALL, primitives
+from test_train import SMALL
 
 IMAGE_MODEL = ModelConfig(
     latent_dim=5, layer_sizes=(16, 8), taus=(2.0, 8.0), p_hidden=16, motor_hidden=16, image_channels=(8, 4)
@@ -32,16 +32,6 @@ NO_AUTOCAST = torch.no_grad()
 
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # one thread (tests/conftest.py)
-
-
-@pytest.fixture(scope="module")
-def motor_set():
-    return primitives(3, seed=0, T=10, J=4)  # 9 sequences of 10 steps, 4 joints
-
-
-@pytest.fixture(scope="module")
-def image_set():
-    return primitives(2, seed=1, T=6, J=3, images=True)  # 6 sequences of 6 steps, 8x8 frames
 
 
 def _setup(data, images: bool, lengths=None):
@@ -77,8 +67,8 @@ def _loss(model, z, idx, tensors, tc, steps=None):
 # ------------------------------------------------------------------ the objective
 
 
-def test_sum_of_motor_errors_by_hand(motor_set):
-    model, tensors, z = _setup(motor_set, images=False)
+def test_sum_of_motor_errors_by_hand(loss_motor_set):
+    model, tensors, z = _setup(loss_motor_set, images=False)
     idx = torch.tensor([0, 4, 7, 8])
     tc = TrainConfig(loss_reduction="sum", motor_weight=0.5)
     loss, (logged, motor, vision) = _loss(model, z[idx], idx, tensors, tc)
@@ -91,8 +81,8 @@ def test_sum_of_motor_errors_by_hand(motor_set):
     assert motor == pytest.approx(errors.mean().item() / 4, rel=1e-6)  # 4 joints
 
 
-def test_sum_of_motor_and_pixel_errors_by_hand(image_set):
-    model, tensors, z = _setup(image_set, images=True)
+def test_sum_of_motor_and_pixel_errors_by_hand(loss_image_set):
+    model, tensors, z = _setup(loss_image_set, images=True)
     idx = torch.tensor([5, 1, 2])
     tc = TrainConfig(loss_reduction="sum", motor_weight=2.0, vision_weight=0.25)
     loss, (_, motor, vision) = _loss(model, z[idx], idx, tensors, tc)
@@ -103,9 +93,9 @@ def test_sum_of_motor_and_pixel_errors_by_hand(image_set):
     assert vision == pytest.approx(s.mean().item() / (8 * 8 * 3), rel=1e-6)
 
 
-def test_padded_steps_never_count(image_set):
+def test_padded_steps_never_count(loss_image_set):
     lengths = [6, 3, 4, 6, 1, 5]
-    model, tensors, z = _setup(image_set, images=True, lengths=lengths)
+    model, tensors, z = _setup(loss_image_set, images=True, lengths=lengths)
     idx = torch.arange(6)
     tc = TrainConfig(loss_reduction="sum")
     loss, (_, motor, vision) = _loss(model, z, idx, tensors, tc)
@@ -125,10 +115,10 @@ def test_padded_steps_never_count(image_set):
 
 
 @pytest.mark.parametrize("lengths", [None, [6, 3, 4, 6, 1, 5]])
-def test_drawn_frames_scaled_by_t_over_k(image_set, lengths):
+def test_drawn_frames_scaled_by_t_over_k(loss_image_set, lengths):
     """K drawn frames, their sum times T / K: with K = T exactly the all-frame sum, and for
     K < T its mean over all C(T, K) equally likely draws is exactly the all-frame sum."""
-    model, tensors, z = _setup(image_set, images=True, lengths=lengths)
+    model, tensors, z = _setup(loss_image_set, images=True, lengths=lengths)
     idx = torch.arange(6)
     tc = TrainConfig(loss_reduction="sum", motor_weight=0.0)  # the vision term alone
     exact, _ = _loss(model, z, idx, tensors, tc)
@@ -151,10 +141,10 @@ def test_drawn_frames_scaled_by_t_over_k(image_set, lengths):
         assert _loss(model, z, idx, tensors, tc, torch.tensor(c).expand(6, k))[0] == pytest.approx(by_hand, rel=1e-6)
 
 
-def test_mean_is_unchanged(image_set):
+def test_mean_is_unchanged(loss_image_set):
     """The default reduction is the per-element mean, computed exactly as before."""
     assert TrainConfig().loss_reduction == "mean"
-    model, tensors, z = _setup(image_set, images=True)
+    model, tensors, z = _setup(loss_image_set, images=True)
     idx = torch.tensor([0, 3])
     tc = TrainConfig(motor_weight=0.7, vision_weight=1.3)
     with torch.no_grad():
@@ -178,12 +168,12 @@ def test_validate_refuses_another_reduction():
 
 
 @pytest.mark.slow
-def test_training_under_the_sum_is_stable_with_the_default_learning_rates(motor_set, image_set):
+def test_training_under_the_sum_is_stable_with_the_default_learning_rates(loss_motor_set, loss_image_set):
     """Default lr / latent_lr: finite, decreasing. Motor only, the sum is T·J times the
     mean, and Adam (eps aside) ignores a constant factor: the same path as under "mean"."""
     tc = TrainConfig(epochs=40, batch_size=4, threads=1)
     runs = {
-        r: fit(motor_set, model_config=SMALL, train_config=replace(tc, loss_reduction=r), progress=False)
+        r: fit(loss_motor_set, model_config=SMALL, train_config=replace(tc, loss_reduction=r), progress=False)
         for r in ("mean", "sum")
     }
     history = runs["sum"].history
@@ -194,30 +184,30 @@ def test_training_under_the_sum_is_stable_with_the_default_learning_rates(motor_
         assert h["loss"] == pytest.approx(40 * h["motor"], rel=1e-5)
     mean_motor = [h["motor"] for h in runs["mean"].history]
     assert [h["motor"] for h in history] == pytest.approx(mean_motor, rel=0.02)
-    ev = evaluate(runs["sum"], motor_set)  # follows the run's reduction
+    ev = evaluate(runs["sum"], loss_motor_set)  # follows the run's reduction
     assert ev["loss"] == pytest.approx(40 * ev["motor"], rel=1e-5)
-    assert ev["motor"] == pytest.approx(evaluate(runs["mean"], motor_set)["motor"], rel=0.05)
+    assert ev["motor"] == pytest.approx(evaluate(runs["mean"], loss_motor_set)["motor"], rel=0.05)
 
     # with frames, on 2 of 6 drawn frames: finite and decreasing too (to half at a constant rate)
     run = fit(
-        image_set,
+        loss_image_set,
         model_config=IMAGE_MODEL,
         progress=False,
         train_config=replace(tc, loss_reduction="sum", vision_frames=2, final_lr_fraction=1.0),
     )
     losses = [h["loss"] for h in run.history]
     assert all(math.isfinite(v) for v in losses) and losses[-1] < losses[0] / 2
-    ev = evaluate(run, image_set)
+    ev = evaluate(run, loss_image_set)
     assert ev["loss"] == pytest.approx(6 * (3 * ev["motor"] + 192 * ev["vision"]), rel=1e-5)
 
 
-def test_a_run_does_not_resume_under_another_reduction(motor_set, tmp_path):
+def test_a_run_does_not_resume_under_another_reduction(loss_motor_set, tmp_path):
     tc = TrainConfig(epochs=2, batch_size=9, threads=1, loss_reduction="sum")
-    fit(motor_set, tmp_path / "run", model_config=SMALL, train_config=tc, progress=False)
+    fit(loss_motor_set, tmp_path / "run", model_config=SMALL, train_config=tc, progress=False)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["train"]["loss_reduction"] == "sum"
     with pytest.raises(UserError, match="cannot resume: train loss_reduction differs"):
         fit(
-            motor_set,
+            loss_motor_set,
             tmp_path / "run",
             model_config=SMALL,
             train_config=replace(tc, epochs=3, loss_reduction="mean"),
@@ -226,16 +216,21 @@ def test_a_run_does_not_resume_under_another_reduction(motor_set, tmp_path):
         )
 
 
-def test_a_run_saved_before_the_field_resumes(motor_set, tmp_path):
+def test_a_run_saved_before_the_field_resumes(loss_motor_set, tmp_path):
     from primspace.train.rundir import CHECKPOINT_NAME
 
     tc = TrainConfig(epochs=1, batch_size=9, threads=1)
-    fit(motor_set, tmp_path / "run", model_config=SMALL, train_config=tc, progress=False)
+    fit(loss_motor_set, tmp_path / "run", model_config=SMALL, train_config=tc, progress=False)
     ckpt = torch.load(tmp_path / "run" / CHECKPOINT_NAME, weights_only=False)
     del ckpt["config"]["train"]["loss_reduction"]  # as written before loss_reduction existed
     torch.save(ckpt, tmp_path / "run" / CHECKPOINT_NAME)
     run = fit(
-        motor_set, tmp_path / "run", model_config=SMALL, train_config=replace(tc, epochs=2), resume=True, progress=False
+        loss_motor_set,
+        tmp_path / "run",
+        model_config=SMALL,
+        train_config=replace(tc, epochs=2),
+        resume=True,
+        progress=False,
     )
     assert run.epoch == 2
 
@@ -246,9 +241,9 @@ def test_a_run_saved_before_the_field_resumes(motor_set, tmp_path):
 SMALL_ARGS = ("--layers", "12,6", "--latent-dim", "3", "--threads", "1", "--batch-size", "4", "--epochs", "2")
 
 
-def test_cli_flag_reaches_the_config(run_cli, motor_set, tmp_path):
+def test_cli_flag_reaches_the_config(run_cli, loss_motor_set, tmp_path):
     data = tmp_path / "d.h5"
-    motor_set.save(data)
+    loss_motor_set.save(data)
     run = tmp_path / "run"
     res = run_cli("train", data, "--out", run, "--loss-reduction", "sum", *SMALL_ARGS)
     assert res.code == 0, res.err
@@ -293,10 +288,10 @@ TINY = experiment_presets.ExperimentPreset(
 
 
 @pytest.mark.slow
-def test_experiment_flag_and_a_changed_reduction_refused(run_cli, motor_set, tmp_path, monkeypatch):
+def test_experiment_flag_and_a_changed_reduction_refused(run_cli, loss_motor_set, tmp_path, monkeypatch):
     monkeypatch.setitem(experiment_presets.PRESETS, "tiny-sum", TINY)
     data, out = tmp_path / "d.h5", tmp_path / "exp"
-    motor_set.save(data)
+    loss_motor_set.save(data)
     args = (
         "experiment",
         "intra",
@@ -319,11 +314,11 @@ def test_experiment_flag_and_a_changed_reduction_refused(run_cli, motor_set, tmp
     assert_user_error(run_cli(*args), "made with other settings", "train.loss_reduction=sum")
 
 
-def test_experiment_directory_without_the_field_opens(motor_set, tmp_path):
+def test_experiment_directory_without_the_field_opens(loss_motor_set, tmp_path):
     """experiment.json written before loss_reduction existed: the default, "mean", is
     what it was made with; "sum" is another setting."""
     data = tmp_path / "d.h5"
-    motor_set.save(data)
+    loss_motor_set.save(data)
     exp = ExperimentDir(tmp_path / "old", TINY, data=data)
     exp.save_meta()
     meta = json.loads((exp.path / "experiment.json").read_text())
