@@ -210,14 +210,15 @@ def batch_loss(
             vision_term, vision = _sse(out.images.float(), target, frame_mask, scale, weights)
         else:
             vision = vision_term = _mse(out.images.float(), target, frame_mask, weights)
-        loss = None if weighed else tc.motor_weight * motor_term + tc.vision_weight * vision_term
     else:
-        vision = vision_term = None
-        loss = None if weighed else tc.motor_weight * motor_term
+        vision_term = None
+        vision = torch.zeros((), device=motor.device)
     if weighed:
         loss = precision_loss(out.log_variances, motor_term, vision_term, tc)
-    if vision_term is None:
-        vision = torch.zeros((), device=motor.device)
+    else:
+        loss = tc.motor_weight * motor_term
+        if vision_term is not None:
+            loss = loss + tc.vision_weight * vision_term
     config = getattr(model, "module", model).config  # DDP holds the decoder as .module
     if tc.code_smoothness > 0 and config.code_window is not None:
         loss = loss + tc.code_smoothness * code_variation(z, config, mask, weights)
