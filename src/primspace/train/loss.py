@@ -7,9 +7,10 @@ as ``w_m · mean((m̂ − m)²) + w_v · mean((ŝ − s)²)`` (see :mod:`primspa
 ``TrainConfig.loss_reduction="sum"`` as the paper's sums over each sample's entries, or with
 ``"precision"`` as each modality's Gaussian negative log-likelihood per element,
 ``Σ_m ½ (e^{-s_m} · w_m · MSE_m + s_m)``, the log-variances ``s_m`` learned with θ
-(:mod:`primspace.model.precision`; Kendall, Gal & Cipolla 2018). The paper finds that
-"only a small portion of each perceived image is relevant to motion, the rest is a
-background noise" (*Summary and Discussion*); weighed by its precision, a sense counts by
+(:mod:`primspace.model.precision`; Kendall, Gal & Cipolla 2018). The paper, on vision
+(*Summary and Discussion*): "The problem here is only a small portion of each perceived
+image is relevant to motion, the rest is a background noise which will clutter random
+projection." Weighed by its precision, a sense counts by
 how well it is predicted, not by how many values it holds. For
 data of different lengths (``MotionDataset.lengths``) each sample's loss is its mean (or
 sum) over its own valid steps and the batch loss the mean over samples, so padding never
