@@ -36,7 +36,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -46,6 +45,8 @@ from pathlib import Path
 import numpy as np
 import torch
 from threadpoolctl import threadpool_limits
+
+from primspace.utils.files import atomic_write_json
 
 PREFIX = 30  # the executed steps ProMP is conditioned on
 
@@ -213,7 +214,7 @@ def main() -> None:
             "parts": rows,
             "look_ms": {"keep": keep, "replan": keep + by["(c)"]},
         }
-        args.json.write_text(json.dumps(figures, indent=2))
+        atomic_write_json(args.json, figures)
 
 
 if __name__ == "__main__":

@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import time
 
 import torch
 
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
+from primspace.utils.files import atomic_write_json
 
 
 def _step(model, z, target):
@@ -81,8 +81,7 @@ def main() -> None:
         f"|loss diff| {out['loss_diff']:.2e}, max |grad diff| {out['grad_max_diff']:.2e}"
     )
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
+        atomic_write_json(args.json, out)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import time
@@ -50,6 +49,7 @@ from primspace.data import MotionDataset
 from primspace.model.config import ModelConfig
 from primspace.predict.online import OnlineInference, infer_online, offline_errors
 from primspace.train import TrainConfig, fit
+from primspace.utils.files import atomic_write_json
 
 T, J, Q, H, W = 61, 9, 40, 48, 64
 WITHIN = 1.10  # "reaches the offline error within 10 %"
@@ -279,7 +279,7 @@ def main() -> None:
     if args.images:
         image_bench(args, figures)
     if args.json:
-        args.json.write_text(json.dumps(figures, indent=2))
+        atomic_write_json(args.json, figures)
 
 
 if __name__ == "__main__":

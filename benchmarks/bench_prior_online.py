@@ -30,7 +30,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import time
@@ -44,6 +43,7 @@ from threadpoolctl import threadpool_limits
 from primspace.predict import fit_predictor, predict, unobserved_mse
 from primspace.predict.prior import PriorPredictor
 from primspace.train.observe import Observation
+from primspace.utils.files import atomic_write_json
 
 K = 7  # the paper's primitives
 
@@ -166,7 +166,7 @@ def main() -> None:
     worst = max(r["step_median_ms"] for r in rows if r["motions"] == 1)
     print(f"one motion, worst case: {worst:.2f} ms per arriving step (target <= 20 ms on one core)")
     if args.json:
-        args.json.write_text(json.dumps(figures, indent=2))
+        atomic_write_json(args.json, figures)
 
 
 if __name__ == "__main__":

@@ -24,13 +24,13 @@ for _name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from primspace.predict.peers import imitate_promp, phase, promp_class  # noqa: E402
+from primspace.utils.files import atomic_write_json
 
 
 def _demos(count: int, lengths: int, seed: int = 0) -> list[np.ndarray]:
@@ -82,7 +82,7 @@ def main() -> None:
             flush=True,
         )
     if args.json:
-        args.json.write_text(json.dumps({"demos": args.demos, "lengths": args.lengths, "rows": rows}, indent=1))
+        atomic_write_json(args.json, {"demos": args.demos, "lengths": args.lengths, "rows": rows})
 
 
 if __name__ == "__main__":

@@ -40,7 +40,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import tempfile
@@ -55,6 +54,7 @@ from torch.utils.flop_counter import FlopCounterMode
 from primspace.data import MotionDataset
 from primspace.model.decoder import ModelConfig, MTRNNDecoder
 from primspace.train import TrainConfig, configure_process, fit, infer
+from primspace.utils.files import atomic_write_json
 
 T, J, H, W, Q = 61, 9, 48, 64, 40
 PAPER_FIT_SAMPLES, PAPER_INFER_SAMPLES, PAPER_FIT_EPOCHS, PAPER_INFER_EPOCHS = 343, 1372, 800, 600
@@ -584,7 +584,7 @@ def main() -> None:
         print(f"\nload average at the end: {os.getloadavg()[0]:.2f}")
         if args.json and figures:
             args.json.parent.mkdir(parents=True, exist_ok=True)
-            args.json.write_text(json.dumps(figures, indent=2))
+            atomic_write_json(args.json, figures)
         return
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -611,12 +611,12 @@ def main() -> None:
                     args.schedule_step,
                 )
                 if args.json:  # written at once: a later, time-boxed step may not finish
-                    args.json.write_text(json.dumps(figures, indent=2))
+                    atomic_write_json(args.json, figures)
         if args.demo or args.demo_only:
             bench_demo(work)
     print(f"\nload average at the end: {os.getloadavg()[0]:.2f}")
     if args.json:
-        args.json.write_text(json.dumps(figures, indent=2))
+        atomic_write_json(args.json, figures)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,6 @@ writes the numbers as JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
@@ -27,6 +26,7 @@ from primspace.experiments.composite.experiment import split_sequences
 from primspace.segmentation import segmentation_scores
 from primspace.segmentation.synthesis import segment_by_synthesis
 from primspace.train import load_run
+from primspace.utils.files import atomic_write_json
 from primspace.utils.stats import sample_std
 
 
@@ -75,8 +75,7 @@ def main() -> None:
             f"{np.mean(acc):.2f} ± {sample_std(acc):.2f} | {per} |"
         )
     if args.out:
-        with open(args.out, "w") as fh:
-            json.dump({"args": vars(args), "rows": rows}, fh, indent=2)
+        atomic_write_json(args.out, {"args": vars(args), "rows": rows})
 
 
 if __name__ == "__main__":

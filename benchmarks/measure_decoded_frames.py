@@ -37,12 +37,13 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import torch
+
+from primspace.utils.files import atomic_write_json
 
 WINDOW = 7  # pixels each side of the block's window: 7 x 7
 
@@ -356,7 +357,7 @@ def main() -> None:
             f"the same pairs {decoded_pairs['whole']:.3f} whole, {decoded_pairs['window']:.2f} in the windows"
         )
     if args.json:
-        args.json.write_text(json.dumps(figures, indent=2))
+        atomic_write_json(args.json, figures)
 
 
 if __name__ == "__main__":
