@@ -42,8 +42,9 @@ def test_a_saved_file_has_what_the_table_says(tmp_path):
         step_labels=[[0, 0, 1, 1], [1, 1, 1, -1], [0, 0, -1, -1]],
         step_segments=[[0, 0, 1, 1], [0, 0, 0, -1], [0, 0, -1, -1]],
         source_ids=["a.hdf5:data/demo_0", "a.hdf5:data/demo_1", "b.npz:0"],
+        scene=np.zeros((n, 4)),
     )
-    dims = {"N": n, "T": t, "J": j, "H": h, "W": w, "P": 2}
+    dims = {"N": n, "T": t, "J": j, "H": h, "W": w, "P": 2, "S": 4}
     with h5py.File(ds.save(tmp_path / "d.h5", compression_level=6)) as f:
         assert set(f.keys()) == {a.name for a in ARRAYS}
         assert set(f.attrs) == {a.name for a in ATTRIBUTES}
@@ -84,6 +85,7 @@ def test_field_lookup_shapes_and_buffers():
         "step_labels",
         "step_segments",
         "source_ids",
+        "scene",
     ]
     assert arrays_of(shard)["images"] is None
 

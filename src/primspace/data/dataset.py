@@ -63,8 +63,12 @@ class MotionDataset:
         Where each sample was recorded, e.g. ``robomimic:lift.hdf5:data/demo_3`` or
         ``lerobot:pusht:episode 12``: set by the importers, kept by :meth:`subset` and
         carried into predictions and experiment results (one line of text each).
-    joint_names, label_names, param_names : list of str, optional
-        Names; defaults are ``j0..``, ``0..`` (one per label value), ``p0..``.
+    scene : array-like, shape (N, S), optional
+        Each sample's scene, where a simulator varies it (:mod:`primspace.sim.variation`:
+        block and table colours, light, camera pose, a distractor), named by ``scene_names``;
+        kept aligned by :meth:`subset`.
+    joint_names, label_names, param_names, scene_names : list of str, optional
+        Names; defaults are ``j0..``, ``0..`` (one per label value), ``p0..``, ``s0..``.
     dt : float, default 1.0
         Seconds between time steps.
     source : str
@@ -97,9 +101,11 @@ class MotionDataset:
     step_labels: np.ndarray | None = None
     step_segments: np.ndarray | None = None
     source_ids: np.ndarray | None = None
+    scene: np.ndarray | None = None
     joint_names: list[str] | None = None
     label_names: list[str] | None = None
     param_names: list[str] | None = None
+    scene_names: list[str] | None = None
     dt: float = 1.0
     source: str = ""
     path: Path | None = field(default=None, repr=False)

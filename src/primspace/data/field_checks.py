@@ -32,6 +32,9 @@ __all__ = [
     "validate_labels",
     "validate_params",
     "validate_param_names",
+    "coerce_scene",
+    "validate_scene",
+    "validate_scene_names",
     "validate_dt",
     "stored_floating",
     "stored_uint8",
@@ -47,6 +50,10 @@ def coerce_motor(motor, path) -> np.ndarray:
 
 def coerce_params(params, path) -> np.ndarray:
     return as_float32(params, "params", path)
+
+
+def coerce_scene(scene, path) -> np.ndarray:
+    return as_float32(scene, "scene", path)
 
 
 def coerce_images(images, path):
@@ -156,6 +163,19 @@ def validate_param_names(ds) -> None:
     n_params = ds.params.shape[1]
     if len(ds.param_names) != n_params:
         raise DataError(f"{len(ds.param_names)} names for P={n_params} params", path=ds.path, field="param_names")
+
+
+def validate_scene(ds) -> None:
+    p, n, sc = ds.path, ds.motor.shape[0], ds.scene
+    if sc.ndim != 2 or sc.shape[0] != n:
+        raise DataError(f"must have shape ({n}, S), got {sc.shape}", path=p, field="scene")
+    check_finite(sc, "scene", p)
+
+
+def validate_scene_names(ds) -> None:
+    n = ds.scene.shape[1]
+    if len(ds.scene_names) != n:
+        raise DataError(f"{len(ds.scene_names)} names for S={n} scene values", path=ds.path, field="scene_names")
 
 
 def validate_dt(ds) -> None:

@@ -16,8 +16,8 @@ it is required), how it is stored (chunks, compression, fill value), how the in-
   (``writer_option``, ``block_dims``) and compares a merged file's names (``owner``).
 
 Shapes are symbolic: ``N`` samples, ``T`` time steps, ``J`` joints, ``H`` x ``W``
-frames, ``P`` generative factors; ``J`` and ``P`` are also the lengths of
-``joint_names`` and ``param_names``. :func:`markdown_table` renders the arrays as the
+frames, ``P`` generative factors, ``S`` scene values; ``J``, ``P`` and ``S`` are also the
+lengths of ``joint_names``, ``param_names`` and ``scene_names``. :func:`markdown_table` renders the arrays as the
 table of ``docs/data.md`` (a test keeps the two equal).
 
 Sample numbers
@@ -33,7 +33,7 @@ Examples
 --------
 >>> from primspace.data.schema import ARRAYS, field
 >>> [f.name for f in ARRAYS]
-['motor', 'images', 'labels', 'params', 'lengths', 'step_labels', 'step_segments', 'source_ids']
+['motor', 'images', 'labels', 'params', 'lengths', 'step_labels', 'step_segments', 'source_ids', 'scene']
 >>> field("images").file_shape({"N": 2, "T": 5, "H": 48, "W": 64})
 (2, 5, 48, 64, 3)
 """
@@ -54,6 +54,7 @@ from primspace.data.field_checks import (
     coerce_labels,
     coerce_motor,
     coerce_params,
+    coerce_scene,
     default_label_names,
     default_names,
     stored_floating,
@@ -66,6 +67,8 @@ from primspace.data.field_checks import (
     validate_motor,
     validate_param_names,
     validate_params,
+    validate_scene,
+    validate_scene_names,
 )
 from primspace.data.steps import coerce_steps, validate_lengths, validate_step_labels, validate_step_segments
 from primspace.data.values import coerce_source_ids, validate_source_ids
@@ -337,6 +340,18 @@ FIELDS: tuple[Field, ...] = (
         validate=validate_source_ids,
         check_stored=stored_strings,
     ),
+    Field(
+        "scene",
+        "dataset",
+        "float32, each sample's scene in a simulator that varies it (block colour, light ...)",
+        checksum=True,
+        dtype=np.dtype(np.float32),
+        shape=("N", "S"),
+        writer_option="with_scene",
+        coerce=coerce_scene,
+        validate=validate_scene,
+        check_stored=stored_floating,
+    ),
     Field("schema_version", "attribute", "layout version of the file", codec="version", default=None),
     Field(
         "joint_names",
@@ -369,6 +384,17 @@ FIELDS: tuple[Field, ...] = (
         default=None,
         normalize=partial(default_names, prefix="p", array="params", ndim=2),
         validate=validate_param_names,
+    ),
+    Field(
+        "scene_names",
+        "attribute",
+        "S names of the scene values",
+        owner="scene",
+        matched=True,
+        codec="strings",
+        default=None,
+        normalize=partial(default_names, prefix="s", array="scene", ndim=2),
+        validate=validate_scene_names,
     ),
     Field(
         "dt",

@@ -113,6 +113,10 @@ class DatasetWriter:
         Whether the file holds labels / params (default: names were given).
     with_steps, with_source_ids : bool
         Whether the file holds ``lengths``, ``step_labels`` and ``step_segments``; ``source_ids``.
+    scene_names : list of str
+        S names of the ``scene`` array (a simulator's scene that varies per sample).
+    with_scene : bool, optional
+        Whether the file holds ``scene`` (default: scene names were given).
     dt : float
     source : str
     overwrite : bool
@@ -150,6 +154,8 @@ class DatasetWriter:
         with_params: bool | None = None,
         with_steps: bool = False,
         with_source_ids: bool = False,
+        scene_names: Sequence[str] = (),
+        with_scene: bool | None = None,
         dt: float = 1.0,
         source: str = "",
         overwrite: bool = False,
@@ -166,6 +172,8 @@ class DatasetWriter:
         self.with_labels = bool(self.label_names) if with_labels is None else with_labels
         self.with_params = bool(self.param_names) if with_params is None else with_params
         self.with_steps, self.with_source_ids = bool(with_steps), bool(with_source_ids)
+        self.scene_names = [str(s) for s in scene_names]
+        self.with_scene = bool(self.scene_names) if with_scene is None else with_scene
         self.dt, self.source = float(dt), str(source)
         self.overwrite = overwrite
         self.compression_level = compression_level
@@ -188,6 +196,7 @@ class DatasetWriter:
     def _dims(self) -> dict[str, int]:
         """The file's dimensions, by schema symbol."""
         dims = {"N": self.n_samples, "T": self.length, "J": len(self.joint_names), "P": len(self.param_names)}
+        dims["S"] = len(self.scene_names)
         if self.image_size is not None:
             dims["H"], dims["W"] = self.image_size
         return dims
@@ -231,6 +240,7 @@ class DatasetWriter:
         step_labels=None,
         step_segments=None,
         source_ids=None,
+        scene=None,
     ) -> None:
         """Validate and store samples ``start .. start + len(motor) - 1``."""
         block, sl = self._check_block(
@@ -244,6 +254,7 @@ class DatasetWriter:
                 step_labels=step_labels,
                 step_segments=step_segments,
                 source_ids=source_ids,
+                scene=scene,
             ),
         )
         for array in _LAZY:
