@@ -84,7 +84,8 @@ def generate_command(
         "demo",
         "--preset",
         "-p",
-        help="demo (126 motions) or paper (1715 motions, as in the paper); composite-demo "
+        help="demo (126 motions) or paper (1715 motions, as in the paper); paper-varied: paper's in scenes that "
+        "vary (--scene-variation varied); composite-demo "
         "or composite: long demonstrations of 2-4 primitives in a row, with per-step labels (joints only by default).",
     ),
     workers: int | None = typer.Option(None, "--workers", "-w", help="Processes (default: every usable core)."),
@@ -99,6 +100,13 @@ def generate_command(
         "--block-jitter",
         help="each: every sample's block jittered on its own (every preset's default); shared: one jitter "
         "per primitive and grid cell, shared by the cell's block sizes (the paper's layout). Grid presets only.",
+    ),
+    scene_variation: str | None = typer.Option(
+        None,
+        "--scene-variation",
+        help="none: the standard scene (the default but for paper-varied); varied: each sample's block and "
+        "table colours, light, camera pose and a distractor drawn from its seed and recorded in the file "
+        "(docs/data.md). Grid presets only.",
     ),
     config_file: Path | None = typer.Option(
         None,
@@ -131,13 +139,15 @@ def generate_command(
             raise UserError(
                 f"--block-jitter: --preset {preset} draws its blocks anywhere (no grid); it applies to paper and demo"
             )
+        if scene_variation is not None:
+            raise UserError(f"--scene-variation: --preset {preset} has the standard scene; it applies to grid presets")
         _generate_composite(
             out, preset, config_file, (height, width, no_images), workers, backend, address, seed, overwrite
         )
         return
     if preset not in generate.PRESETS:
         raise UserError(f"unknown preset {preset!r}; choose from {', '.join([*generate.PRESETS, *COMPOSITE_PRESETS])}")
-    config = _generation_config(preset, config_file, height, width, no_images, block_jitter)
+    config = _generation_config(preset, config_file, height, width, no_images, block_jitter, scene_variation)
     check_workers(workers)
     start = time.perf_counter()
     shards = []
@@ -161,16 +171,19 @@ def generate_command(
     )
 
 
-def _generation_config(preset: str, config_file, height, width, no_images: bool, block_jitter=None):
-    """The validated ``GenerationConfig`` of a single-primitive preset with --config, the frame flags and
-    --block-jitter over it."""
+def _generation_config(preset: str, config_file, height, width, no_images: bool, block_jitter=None, scene=None):
+    """The validated ``GenerationConfig`` of a single-primitive preset with --config, the frame flags,
+    --block-jitter and --scene-variation (``scene``) over it."""
     import dataclasses
 
     from primspace.sim.config import BLOCK_JITTERS
     from primspace.sim.generate import GenerationConfig, resolve_config
+    from primspace.sim.variation import VARIATIONS
 
     if block_jitter is not None and block_jitter not in BLOCK_JITTERS:
         raise UserError(f"--block-jitter {block_jitter!r}: choose from {', '.join(BLOCK_JITTERS)}")
+    if scene is not None and scene not in VARIATIONS:
+        raise UserError(f"--scene-variation {scene!r}: choose from {', '.join(VARIATIONS)}")
 
     config = resolve_config(preset)
     if config_file is not None:
@@ -186,6 +199,8 @@ def _generation_config(preset: str, config_file, height, width, no_images: bool,
         changes["width"] = width
     if block_jitter is not None:
         changes["block_jitter"] = block_jitter
+    if scene is not None:
+        changes["scene_variation"] = scene
     config = dataclasses.replace(config, **changes)
     try:
         return resolve_config(config)

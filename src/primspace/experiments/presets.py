@@ -258,6 +258,8 @@ class ExperimentPreset:
 
 PRESETS: dict[str, ExperimentPreset] = {
     "paper": ExperimentPreset(name="paper", data_preset="paper"),
+    # The paper's settings on its layout in scenes that vary (issue 52; docs/data.md, "Scenes that vary").
+    "paper-varied": ExperimentPreset(name="paper-varied", data_preset="paper-varied"),
     # Sized by measurement to fit `make demo` in 5 minutes on 2 cores (docs/performance.md).
     "demo": ExperimentPreset(
         name="demo",

@@ -10,6 +10,7 @@ trajectories by inverse kinematics and rendered headless on the CPU:
 - :mod:`primspace.sim.ik`         damped-least-squares inverse kinematics along a path
 - :mod:`primspace.sim.rollout`    replay through the kinematics: block motion, contacts
 - :mod:`primspace.sim.render`     the offscreen camera
+- :mod:`primspace.sim.variation`  scenes that vary per sample (colours, light, camera, a distractor)
 - :mod:`primspace.sim.config`     what to generate: settings, presets, each sample's block
 - :mod:`primspace.sim.shards`     the shard layout of a generation into a file
 - :mod:`primspace.sim.generate`   sharded parallel generation into HDF5 (or memory)

@@ -95,6 +95,11 @@ class GenerationConfig:
     verify : bool
         Replay every generated motion through the success judge and refuse one that
         fails (a guard against silently writing a bad sample; costs ~6 ms a sample).
+    scene_variation : str
+        A level of :data:`primspace.sim.variation.VARIATIONS`: ``"none"`` (default) the
+        standard scene; ``"varied"`` draws each sample's block and table colours, light,
+        camera pose and a distractor from its own seed stream and records them in the
+        file's ``scene`` array (the blocks and motions stay the same).
     """
 
     block_x: tuple[float, ...] = _grid(0.42, 0.60, 7)
@@ -110,6 +115,7 @@ class GenerationConfig:
     ik_tolerance: float = 0.002
     verify: bool = True
     block_jitter: str = "each"
+    scene_variation: str = "none"
 
     def __post_init__(self) -> None:
         for name in ("block_x", "block_y", "block_size", "primitives"):
@@ -169,6 +175,9 @@ class GenerationConfig:
                 raise UserError(f"{name} = {bad[0]:.4g} m{extra} is outside the table's {what} range [{lo}, {hi}] m")
         if not (0.0 <= self.jitter <= 0.5):
             raise UserError(f"jitter = {self.jitter}: must be in [0, 0.5] (a fraction of the grid spacing)")
+        from primspace.sim.variation import resolve_variation
+
+        resolve_variation(self.scene_variation)
         if self.block_jitter not in BLOCK_JITTERS:
             raise UserError(f"block_jitter = {self.block_jitter!r}: must be one of {', '.join(BLOCK_JITTERS)}")
         if not (MIN_LENGTH <= self.length <= 100_000):
@@ -185,7 +194,11 @@ class GenerationConfig:
 
     # ---------------------------------------------------------------------- json
     def to_dict(self) -> dict[str, Any]:
+        """The settings as JSON values (``scene_variation`` only when it is not ``"none"``, so
+        the standard scene's settings, manifests and files are those of earlier versions)."""
         d = asdict(self)
+        if d["scene_variation"] == "none":
+            del d["scene_variation"]
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
@@ -247,9 +260,11 @@ def _bad():
 #: Named configurations. ``paper``: 7 x 7 positions x 5 sizes x 7 primitives = 1715
 #: motions of T = 61 steps with 48 x 64 frames, as in the paper. ``demo``: 3 x 3
 #: positions x 2 sizes x 7 primitives = 126 motions, the same T and frames, for the CPU demo.
+#: ``paper-varied``: the paper's layout in scenes that vary (:mod:`primspace.sim.variation`).
 PRESETS: dict[str, GenerationConfig] = {
     "paper": GenerationConfig(),
     "demo": GenerationConfig(block_x=_grid(0.44, 0.58, 3), block_y=_grid(-0.12, 0.12, 3), block_size=(0.04, 0.06)),
+    "paper-varied": GenerationConfig(scene_variation="varied"),
 }
 
 

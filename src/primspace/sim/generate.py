@@ -129,17 +129,17 @@ def simulate_sample(scene, camera, config: GenerationConfig, label: int, x: floa
     return motor.astype(np.float32), images, err
 
 
-_SCENE = None
+_SCENES: dict = {}
 
 
-def worker_scene():
-    """One scene per process (the model is compiled once; the block size changes per sample)."""
-    global _SCENE
-    if _SCENE is None:
+def worker_scene(distractor: bool = False):
+    """One scene per process (the model is compiled once; the block size changes per sample),
+    and one with the distractor body for the scenes that vary (:mod:`primspace.sim.variation`)."""
+    if distractor not in _SCENES:
         from primspace.sim.scene import Scene
 
-        _SCENE = Scene()
-    return _SCENE
+        _SCENES[distractor] = Scene(distractor=distractor)
+    return _SCENES[distractor]
 
 
 def generate_shard(config: GenerationConfig, seed: int, sample_indices) -> dict[str, np.ndarray]:
@@ -149,18 +149,25 @@ def generate_shard(config: GenerationConfig, seed: int, sample_indices) -> dict[
     -------
     dict
         ``start`` (first index), ``motor`` (k, T, 9) float32, ``images`` (k, T, H, W, 3)
-        uint8 or None, ``labels`` (k,) int32, ``params`` (k, 3) float32, ``ik_error`` (k,).
+        uint8 or None, ``labels`` (k,) int32, ``params`` (k, 3) float32, ``ik_error`` (k,);
+        in scenes that vary, ``scene`` (k, S) float32 (:func:`~primspace.sim.variation.draw_scene`,
+        set in the scene before the sample is made).
     """
     from primspace.sim.render import Camera
+    from primspace.sim.variation import apply_scene, draw_scene, resolve_variation
 
     indices = [int(i) for i in sample_indices]
-    scene = worker_scene()
+    variation = resolve_variation(config.scene_variation)
+    scene = worker_scene(variation.enabled)
     k = len(indices)
     out = {"start": indices[0] if indices else 0, **_buffers(config, k), "ik_error": np.empty(k)}
     camera = Camera(scene, config.height, config.width) if config.images else None
     try:
         for j, index in enumerate(indices):
             label, x, y, size = sample_params(config, seed, index)
+            if variation.enabled:  # float32 as recorded: a recorded row re-renders its scene
+                out["scene"][j] = draw_scene(variation, seed, index).astype(np.float32)
+                apply_scene(scene, out["scene"][j])
             motor, images, err = simulate_sample(scene, camera, config, label, x, y, size, index)
             out["motor"][j], out["labels"][j], out["params"][j], out["ik_error"][j] = motor, label, (x, y, size), err
             if images is not None:
@@ -359,6 +366,7 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
         joint_names=meta["joint_names"],
         label_names=meta["label_names"],
         param_names=meta["param_names"],
+        scene_names=meta.get("scene_names"),
         dt=config.dt,
         source=meta["source"],
     )
@@ -366,9 +374,12 @@ def _generate_in_memory(config: GenerationConfig, seed: int, on_shard, run_optio
 
 def _buffers(config: GenerationConfig, n: int) -> dict:
     """Empty arrays of the data set's fields (:mod:`primspace.data.schema`) for ``n`` motions
-    of 9 joints and 3 generative factors (``images`` None without frames)."""
-    dims = {"N": n, "T": config.length, "J": 9, "P": 3}
-    names = ["motor", "labels", "params"]
+    of 9 joints and 3 generative factors (``images`` None without frames; ``scene`` in scenes
+    that vary)."""
+    from primspace.sim.variation import SCENE_NAMES
+
+    dims = {"N": n, "T": config.length, "J": 9, "P": 3, "S": len(SCENE_NAMES)}
+    names = ["motor", "labels", "params"] + (["scene"] if config.scene_variation != "none" else [])
     if config.images:
         dims |= {"H": config.height, "W": config.width}
         names.append("images")

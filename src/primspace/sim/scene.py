@@ -42,6 +42,7 @@ __all__ = [
     "JOINT_NAMES",
     "FINGER_MAX",
     "CAMERA",
+    "HIDDEN_Z",
 ]
 
 _ASSET_SUBDIR = ("envs", "assets", "kitchen_franka", "franka_assets")
@@ -112,6 +113,9 @@ _HAND_RGBA = "0.25 0.25 0.28 1"
 _TABLE_RGBA = "0.72 0.60 0.45 1"
 _FLOOR_RGBA = "0.30 0.33 0.38 1"
 _BLOCK_RGBA = "0.85 0.05 0.05 1"
+
+#: Height (m) at which the distractor waits out of sight, below the floor.
+HIDDEN_Z = -2.0
 
 
 def franka_assets_dir() -> Path:
@@ -197,8 +201,10 @@ def _robot_body(chain_root: ET.Element) -> ET.Element:
     return robot
 
 
-def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]:
-    """The scene's MJCF text and its mesh files (a MuJoCo virtual file system)."""
+def _scene_xml(assets: Path, camera: CameraSpec, distractor: bool = False) -> tuple[str, dict[str, bytes]]:
+    """The scene's MJCF text and its mesh files (a MuJoCo virtual file system); with
+    ``distractor``, a mocap body ``distractor`` after the robot (its geom a cylinder, out of
+    sight below the floor until it is placed: :mod:`primspace.sim.variation`)."""
     asset_root = ET.parse(assets / "assets.xml").getroot()
     chain_root = ET.parse(assets / "chain.xml").getroot()
     defaults = asset_root.find("default")
@@ -251,13 +257,19 @@ def _scene_xml(assets: Path, camera: CameraSpec) -> tuple[str, dict[str, bytes]]
     block = ET.SubElement(world, "body", name="block", mocap="true", pos="0.5 0 0.025")
     ET.SubElement(block, "geom", name="block", type="box", size="0.025 0.025 0.025", rgba=_BLOCK_RGBA)
     world.append(robot)
+    if distractor:  # after the robot: every other body and geom keeps its id
+        other = ET.SubElement(world, "body", name="distractor", mocap="true", pos=f"0.8 0.4 {HIDDEN_Z}")
+        ET.SubElement(other, "geom", name="distractor", type="cylinder", size="0.025 0.03", rgba="0.2 0.4 0.9 1")
     return ET.tostring(root, encoding="unicode"), files
 
 
 @lru_cache(maxsize=4)
-def build_model(camera: CameraSpec = CAMERA) -> mujoco.MjModel:
-    """Compile the scene (cached per process; callers copy it before changing sizes)."""
-    xml, files = _scene_xml(franka_assets_dir(), camera)
+def build_model(camera: CameraSpec = CAMERA, distractor: bool = False) -> mujoco.MjModel:
+    """Compile the scene (cached per process; callers copy it before changing sizes).
+
+    ``distractor`` adds the distractor body of the scenes that vary (:mod:`primspace.sim.variation`);
+    without it the model is the standard scene's."""
+    xml, files = _scene_xml(franka_assets_dir(), camera, distractor)
     model = mujoco.MjModel.from_xml_string(xml, files)
     # no geom collides: the simulator is kinematic, contacts are measured on demand
     model.geom_contype[:] = 0
@@ -272,6 +284,9 @@ class Scene:
     ----------
     camera : CameraSpec
         Where the camera is (the default frames arm, gripper and block at 64 x 48).
+    distractor : bool
+        Add the distractor body of the scenes that vary (:mod:`primspace.sim.variation`);
+        its geom (``distractor_geom``, else None) is never among the judge's geoms.
 
     Attributes
     ----------
@@ -281,10 +296,17 @@ class Scene:
         qpos addresses of the 7 arm joints and the 2 finger joints.
     tcp : int
         Site id of the tool centre point (:data:`TCP_POS`).
+    light : int
+        Light id of the key light (a scene that varies turns and dims it).
+    camera_pose : (ndarray, ndarray)
+        The compiled camera's position (3,) and quaternion (4,), from which a scene that
+        varies moves the camera (:func:`primspace.sim.variation.apply_scene`).
+    distractor_geom, distractor_mocap : int or None
+        The distractor's geom and mocap index (None without ``distractor``).
     """
 
-    def __init__(self, camera: CameraSpec = CAMERA) -> None:
-        self.model = build_model(camera).__copy__()
+    def __init__(self, camera: CameraSpec = CAMERA, distractor: bool = False) -> None:
+        self.model = build_model(camera, distractor).__copy__()
         self.data = mujoco.MjData(self.model)
         m = self.model
         self.joint_qpos = np.array([m.jnt_qposadr[m.joint(n).id] for n in JOINT_NAMES])
@@ -300,6 +322,10 @@ class Scene:
         self.right_finger_geoms = self._collision_geoms("panda0_rightfinger")
         self.hand_geoms = self._collision_geoms("panda0_link7") + self._collision_geoms("panda0_link6")
         self.block_size = float(2 * m.geom_size[self.block_geom, 0])
+        self.light = m.light("key").id
+        self.camera_pose = (m.cam_pos[self.camera].copy(), m.cam_quat[self.camera].copy())
+        self.distractor_geom = m.geom("distractor").id if distractor else None
+        self.distractor_mocap = m.body_mocapid[m.body("distractor").id] if distractor else None
 
     def _collision_geoms(self, body: str) -> list[int]:
         """Ids of a body's contact-relevant geoms (meshes drawn and primitive shapes)."""

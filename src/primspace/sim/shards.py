@@ -19,6 +19,7 @@ from typing import Any
 
 from primspace.sim.config import PARAM_NAMES, PRESETS, GenerationConfig
 from primspace.sim.primitives import PRIMITIVES
+from primspace.sim.variation import SCENE_NAMES
 from primspace.utils.errors import DataError, UserError
 
 __all__ = [
@@ -143,6 +144,7 @@ def file_settings(config: GenerationConfig, seed: int, n_samples: int) -> dict[s
         "param_names": list(PARAM_NAMES),
         "dt": config.dt,
         "source": _source(config, seed),
+        **({"scene_names": list(SCENE_NAMES)} if config.scene_variation != "none" else {}),
     }
 
 
