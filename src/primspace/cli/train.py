@@ -261,6 +261,7 @@ def train_command(
         "--code-smoothness",
         help="With --code-window: weight of the total variation of consecutive codes (piecewise-constant codes).",
     ),
+    keypoints: int = typer.Option(0, "--keypoints", help="K > 0: draw frames through K keypoints (docs/model.md)."),
     layers: str = typer.Option(_csv(_MC.layer_sizes), "--layers", help="Units per MTRNN layer, fastest first."),
     taus: str = typer.Option(_csv(_MC.taus), "--taus", help="Time constant per layer, fastest first."),
     image_channels: str = typer.Option(
@@ -302,7 +303,7 @@ def train_command(
     log_to = _log_to(log_to, (file, indices, weights_from))
     mc = replace(
         _MC,
-        **{k: given[k] for k in ("latent_dim", "code_window")},
+        **{k: given[k] for k in ("latent_dim", "code_window", "keypoints")},
         layer_sizes=int_list(layers, "--layers"),
         taus=float_list(taus, "--taus"),
         image_channels=int_list(image_channels, "--image-channels"),

@@ -50,6 +50,11 @@ class ModelConfig:
         (:class:`~primspace.model.precision.ModalityPrecision`), the weights of the loss
         ``TrainConfig.loss_reduction="precision"``; a fit sets it from its train config.
         False (default): no such parameters, the state of a run fitted without them.
+    keypoints : int
+        K > 0: attention in the image path (:mod:`primspace.model.keypoints`). The decoder
+        also predicts K keypoints ``(x, y)`` per step, draws its frames through their
+        heatmaps, and holds an encoder of real frames to K keypoints, the targets of the
+        predicted ones; needs an image head. 0 (default): no keypoints.
     """
 
     latent_dim: int = 20
@@ -64,6 +69,7 @@ class ModelConfig:
     length: int = 0
     code_window: int | None = None
     learned_precision: bool = False
+    keypoints: int = 0
 
     def __post_init__(self) -> None:
         self.layer_sizes = tuple(int(s) for s in self.layer_sizes)
@@ -114,8 +120,14 @@ class ModelConfig:
             raise UserError(f"code window (code_window, --code-window) must be at least 1 step, got {self.code_window}")
         if not isinstance(self.learned_precision, bool):
             raise UserError(f"learned_precision must be true or false, got {self.learned_precision!r}")
+        if not isinstance(self.keypoints, int) or isinstance(self.keypoints, bool) or self.keypoints < 0:
+            raise UserError(f"keypoints (--keypoints) must be a whole number >= 0, got {self.keypoints!r}")
         if self.image_size is not None:
             check_image_size(self.image_size, self.image_channels)
+        elif self.keypoints:
+            raise UserError(
+                "keypoints (--keypoints) are read from frames: the model needs an image head (not --no-images)"
+            )
         return self
 
     # ------------------------------------------------------------------------- json
@@ -139,11 +151,11 @@ class ModelConfig:
     def fitted_to(self, dataset, *, images: bool | None = None) -> ModelConfig:
         """A copy with ``n_joints``, ``length`` (and ``image_size``) taken from ``dataset``.
 
-        ``images=None`` keeps this config's choice (image head or not); ``True`` / ``False``
+        ``images=None`` keeps this config's choice (image head or not; keypoints need one); ``True`` / ``False``
         force it. Raises :class:`UserError` if images are asked for and the data has none,
         or if a set ``image_size`` disagrees with the data.
         """
-        want_images = self.image_size is not None if images is None else images
+        want_images = (self.image_size is not None or self.keypoints > 0) if images is None else images
         d = self.to_dict()
         d["n_joints"] = int(dataset.n_joints)
         d["length"] = int(dataset.length)

@@ -40,6 +40,16 @@ Choices the paper leaves open (documented in ``docs/model.md``):
 With ``ModelConfig.learned_precision`` the decoder also holds the loss's learned
 log-variance of each modality (:class:`~primspace.model.precision.ModalityPrecision`),
 trained and saved with θ and returned with every output (``DecoderOutput.log_variances``).
+
+With ``ModelConfig.keypoints = K`` (attention in the image path,
+:mod:`primspace.model.keypoints`) a linear head of ``d_t^(1)`` also predicts K keypoints
+``(x, y)`` per step (tanh, in [-1, 1]), and the image head draws each frame through them:
+their Gaussian heatmaps enter every deconvolution as K more input channels, at its
+resolution. The decoder also holds the encoder of real frames to K keypoints; given the
+frames being drawn (``seen``), it returns their keypoints (the loss's targets for the
+predicted ones) and draws through ``predicted + seen - seen.detach()``: the predicted
+values, and the drawing's gradient reaches the encoder too (straight through), so the
+encoder's keypoints are trained to carry what the frame needs.
 """
 
 from __future__ import annotations
@@ -52,7 +62,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from primspace.model.config import ModelConfig, check_image_size
-from primspace.model.precision import ModalityPrecision
+from primspace.model.keypoints import KeypointEncoder, heatmaps
+from primspace.model.precision import KEYPOINT_MODALITIES, MODALITIES, ModalityPrecision
 
 __all__ = ["ModelConfig", "MTRNNDecoder", "MTRNNLayer", "ImageDecoder", "DecoderOutput", "code_interpolation"]
 
@@ -197,34 +208,48 @@ class ImageDecoder(nn.Module):
         Multiples of ``2 ** len(channels)``.
     channels : tuple of int
         Input channels of each deconvolution (the last one outputs 3).
+    keypoints : int
+        K > 0: :meth:`forward` takes K keypoints per frame and every deconvolution also
+        reads their heatmaps (:func:`~primspace.model.keypoints.heatmaps`) at its input's
+        resolution, K more channels.
     """
 
     #: Compute the deconvolutions in NHWC (False under ``torch.func.vmap``, which cannot
     #: query that layout: :mod:`primspace.train.packed`).
     channels_last = True
 
-    def __init__(self, in_features: int, image_size: tuple[int, int], channels: tuple[int, ...]) -> None:
+    def __init__(
+        self, in_features: int, image_size: tuple[int, int], channels: tuple[int, ...], keypoints: int = 0
+    ) -> None:
         super().__init__()
         check_image_size(image_size, channels)
         self.image_size = tuple(image_size)
         self.channels = tuple(channels)
+        self.keypoints = int(keypoints)
         factor = 2 ** len(channels)
         self.base = (image_size[0] // factor, image_size[1] // factor)
         self.fc = nn.Linear(in_features, channels[0] * self.base[0] * self.base[1])
         outs = list(channels[1:]) + [3]
         self.deconvs = nn.ModuleList(
-            nn.ConvTranspose2d(c_in, c_out, kernel_size=4, stride=2, padding=1) for c_in, c_out in zip(channels, outs)
+            nn.ConvTranspose2d(c_in + self.keypoints, c_out, kernel_size=4, stride=2, padding=1)
+            for c_in, c_out in zip(channels, outs)
         )
         # NHWC is 1.6-2x faster for these layers on the CPU (oneDNN) and suits cuDNN too.
         self.deconvs.to(memory_format=torch.channels_last)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(N, in_features)`` -> ``(N, H, W, 3)`` in [0, 1]."""
+    def forward(self, x: torch.Tensor, points: torch.Tensor | None = None) -> torch.Tensor:
+        """``(N, in_features)`` -> ``(N, H, W, 3)`` in [0, 1]; ``points`` (N, K, 2): the
+        keypoints each frame is drawn through (needed when the head has keypoints)."""
         y = F.relu(self.fc(x)).view(-1, self.channels[0], *self.base)
         if self.channels_last:
             y = y.contiguous(memory_format=torch.channels_last)
         last = len(self.deconvs) - 1
         for i, deconv in enumerate(self.deconvs):
+            if self.keypoints:
+                maps = heatmaps(points.float(), y.shape[2], y.shape[3]).to(y.dtype)
+                y = torch.cat([y, maps], dim=1)
+                if self.channels_last:
+                    y = y.contiguous(memory_format=torch.channels_last)
             y = deconv(y)
             if i < last:
                 y = F.relu(y)
@@ -238,7 +263,7 @@ class ImageDecoder(nn.Module):
             h, w = 2 * h, 2 * w
             # each output pixel of a stride-2, kernel-4 deconvolution receives 2x2 taps per input channel
             total += h * w * deconv.out_channels * deconv.in_channels * 4
-        return total
+        return total  # the heatmaps (elementwise) are not counted
 
 
 class DecoderOutput(NamedTuple):
@@ -247,7 +272,9 @@ class DecoderOutput(NamedTuple):
     motor: torch.Tensor  # (B, T, J), scaled joint values
     images: torch.Tensor | None  # (B, T, H, W, 3) in [0, 1], or None
     fast_states: torch.Tensor  # (B, T, k_1), d_1..d_T of the fastest layer
-    log_variances: torch.Tensor | None = None  # (2,) s of motor and vision (ModelConfig.learned_precision)
+    log_variances: torch.Tensor | None = None  # (M,) s of each modality (ModelConfig.learned_precision)
+    keypoints: torch.Tensor | None = None  # (B, T, K, 2) predicted (x, y) in [-1, 1] (ModelConfig.keypoints)
+    seen_keypoints: torch.Tensor | None = None  # (B, F, K, 2) the encoder's, of the frames given as ``seen``
 
 
 # ---------------------------------------------------------------------------- decoder
@@ -309,10 +336,15 @@ class MTRNNDecoder(nn.Module):
             nn.Linear(sizes[0], config.motor_hidden), nn.Tanh(), nn.Linear(config.motor_hidden, config.n_joints)
         )
         self.image_head = (
-            ImageDecoder(sizes[0], config.image_size, config.image_channels) if config.has_images else None
+            ImageDecoder(sizes[0], config.image_size, config.image_channels, config.keypoints)
+            if config.has_images
+            else None
         )
         # last: the other parameters keep their order and their seeded values
-        self.precision = ModalityPrecision() if config.learned_precision else None
+        modalities = KEYPOINT_MODALITIES if config.keypoints else MODALITIES
+        self.precision = ModalityPrecision(modalities) if config.learned_precision else None
+        self.keypoint_head = nn.Linear(sizes[0], 2 * config.keypoints) if config.keypoints else None
+        self.keypoint_encoder = KeypointEncoder(config.keypoints) if config.keypoints else None
         if config.code_window is not None:  # derived from the config: not saved with the weights
             self.register_buffer(
                 "interpolation", code_interpolation(config.length, config.code_window), persistent=False
@@ -341,7 +373,12 @@ class MTRNNDecoder(nn.Module):
         return u
 
     def forward(
-        self, z: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None
+        self,
+        z: torch.Tensor,
+        *,
+        images: bool = True,
+        frame_steps: torch.Tensor | None = None,
+        seen: torch.Tensor | None = None,
     ) -> DecoderOutput:
         """Decode codes ``z`` (B, q) into motor (and image) sequences.
 
@@ -355,26 +392,48 @@ class MTRNNDecoder(nn.Module):
             given): ``images`` is then ``(B, K, H, W, 3)``. The image head dominates the
             cost, so a few steps cost a fraction of all T (the vision loss on K drawn
             frames, :class:`~primspace.train.TrainConfig` ``vision_frames``).
+        seen : Tensor (B, T or K, H, W, 3), optional
+            With keypoints: the real frames of the steps drawn; their keypoints are
+            returned (``seen_keypoints``) and the frames are drawn straight through them
+            (module docstring). Ignored without keypoints.
         """
-        return self.decode(self.dynamics(z), images=images, frame_steps=frame_steps)
+        return self.decode(self.dynamics(z), images=images, frame_steps=frame_steps, seen=seen)
 
     def decode(
-        self, fast: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None
+        self,
+        fast: torch.Tensor,
+        *,
+        images: bool = True,
+        frame_steps: torch.Tensor | None = None,
+        seen: torch.Tensor | None = None,
     ) -> DecoderOutput:
         """The heads on the fastest layer's states ``fast`` (B, T, k_1) (:meth:`dynamics`);
-        ``images`` and ``frame_steps`` as in :meth:`forward`."""
+        ``images``, ``frame_steps`` and ``seen`` as in :meth:`forward`."""
         b, t, k = fast.shape
         flat = fast.reshape(b * t, k)
         motor = self.motor_head(flat).view(b, t, -1)
+        points = seen_points = None
+        if self.keypoint_head is not None:
+            points = torch.tanh(self.keypoint_head(flat)).view(b, t, self.config.keypoints, 2)
         frames = None
         if images and self.image_head is not None:
             h, w = self.config.image_size
-            if frame_steps is None:
-                frames = self.image_head(flat).view(b, t, h, w, 3)
-            else:
+            rows = None
+            if frame_steps is not None:
                 rows = (frame_steps + torch.arange(b, device=flat.device).unsqueeze(1) * t).reshape(-1)
-                frames = self.image_head(flat.index_select(0, rows)).view(b, frame_steps.shape[1], h, w, 3)
-        return DecoderOutput(motor, frames, fast, None if self.precision is None else self.precision())
+                flat = flat.index_select(0, rows)
+            draw = None
+            if points is not None:
+                draw = points.view(b * t, -1, 2)
+                draw = draw if rows is None else draw.index_select(0, rows)
+                if seen is not None:
+                    seen_points = self.keypoint_encoder(seen)
+                    flat_seen = seen_points.reshape(draw.shape)
+                    draw = draw + (flat_seen - flat_seen.detach())
+            n_frames = t if frame_steps is None else frame_steps.shape[1]
+            frames = self.image_head(flat, draw).view(b, n_frames, h, w, 3)
+        log_variances = None if self.precision is None else self.precision()
+        return DecoderOutput(motor, frames, fast, log_variances, points, seen_points)
 
     # ------------------------------------------------------------------ accounting
     def macs_per_sample(self, *, images: bool = True) -> int:
@@ -401,4 +460,6 @@ class MTRNNDecoder(nn.Module):
         per_step += sizes[0] * cfg.motor_hidden + cfg.motor_hidden * cfg.n_joints
         if images and self.image_head is not None:
             per_step += self.image_head.macs_per_frame()
+        if self.keypoint_head is not None:
+            per_step += sizes[0] * 2 * cfg.keypoints
         return macs + cfg.length * per_step

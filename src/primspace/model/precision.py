@@ -27,34 +27,43 @@ import math
 import torch
 from torch import nn
 
-__all__ = ["ModalityPrecision", "MODALITIES"]
+__all__ = ["ModalityPrecision", "MODALITIES", "KEYPOINT_MODALITIES"]
 
 #: The modalities in the order of ``ModalityPrecision.raw``.
 MODALITIES = ("motor", "vision")
+#: The same with the keypoints of the frames (``ModelConfig.keypoints > 0``,
+#: :mod:`primspace.model.keypoints`): a third modality with its own precision.
+KEYPOINT_MODALITIES = MODALITIES + ("keypoints",)
 
 
 class ModalityPrecision(nn.Module):
     """One learned log-variance ``s_m`` per modality (module docstring).
 
+    Parameters
+    ----------
+    modalities : tuple of str
+        The modalities weighed, :data:`MODALITIES` (default) or :data:`KEYPOINT_MODALITIES`.
+
     Attributes
     ----------
-    raw : Parameter (2,)
-        ``s / RATE`` of motor and vision, in :data:`MODALITIES`' order.
+    raw : Parameter (M,)
+        ``s / RATE`` of each modality, in ``modalities``' order.
     """
 
     #: ``s = RATE · raw`` (module docstring).
     RATE = 10.0
 
-    def __init__(self) -> None:
+    def __init__(self, modalities: tuple[str, ...] = MODALITIES) -> None:
         super().__init__()
-        self.raw = nn.Parameter(torch.zeros(len(MODALITIES)))
+        self.modalities = tuple(modalities)
+        self.raw = nn.Parameter(torch.zeros(len(self.modalities)))
 
     def forward(self) -> torch.Tensor:
-        """``s`` (2,): the log-variances of motor and vision (float32)."""
+        """``s`` (M,): the log-variances of the modalities (float32)."""
         return self.raw.float() * self.RATE
 
     def summary(self) -> dict:
         """``{modality: {"log_variance": s_m, "weight": e^{-s_m}}}`` as plain floats."""
         with torch.no_grad():
             s = self.forward().double().cpu().tolist()
-        return {m: {"log_variance": v, "weight": math.exp(-v)} for m, v in zip(MODALITIES, s)}
+        return {m: {"log_variance": v, "weight": math.exp(-v)} for m, v in zip(self.modalities, s)}

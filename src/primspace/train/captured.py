@@ -72,8 +72,8 @@ class CompiledDecoder:
         self.model, self.config = model, model.config
         self.dynamics = torch.compile(model.dynamics, backend=COMPILE_BACKEND)
 
-    def __call__(self, z: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None):
-        return self.model.decode(self.dynamics(z), images=images, frame_steps=frame_steps)
+    def __call__(self, z: torch.Tensor, *, images: bool = True, frame_steps: torch.Tensor | None = None, seen=None):
+        return self.model.decode(self.dynamics(z), images=images, frame_steps=frame_steps, seen=seen)
 
 
 def padded_rows(rows: torch.Tensor, n: int, size: int) -> torch.Tensor:

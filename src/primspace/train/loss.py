@@ -193,45 +193,73 @@ def batch_loss(
     summed = tc.loss_reduction == "sum"
     weighed = tc.loss_reduction == "precision"
     use_images = tensors.use_images
+    config = getattr(model, "module", model).config  # DDP holds the decoder as .module
     mask, motor_mask = _rows(tensors.mask, idx), _rows(tensors.motor_steps(), idx)
+    seen = None
+    if use_images:
+        seen = batch_frames(tensors.images, idx, steps) if frames is None else frames
+    # with keypoints the decoder reads the real frames it draws (their keypoints: the targets)
+    extra = {"seen": seen} if use_images and config.keypoints else {}
     with autocast:
-        out = model(z, images=use_images, frame_steps=steps if use_images else None)
+        out = model(z, images=use_images, frame_steps=steps if use_images else None, **extra)
     if summed:
         motor_term, motor = _sse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask, weights=weights)
     else:
         motor = motor_term = _mse(out.motor.float(), tensors.motor.index_select(0, idx), motor_mask, weights)
+    keypoint_term = None
     if use_images:
         frame_mask = _rows(tensors.frame_steps(), idx)
         if steps is not None and frame_mask is not None:
             frame_mask = frame_mask.gather(1, steps)
-        target = batch_frames(tensors.images, idx, steps) if frames is None else frames
-        target = target.to(torch.float32).div_(255.0)
+        target = seen.to(torch.float32).div_(255.0)
+        scale = 1.0 if steps is None else tensors.motor.shape[1] / steps.shape[1]
         if summed:
-            scale = 1.0 if steps is None else tensors.motor.shape[1] / steps.shape[1]
             vision_term, vision = _sse(out.images.float(), target, frame_mask, scale, weights)
         else:
             vision = vision_term = _mse(out.images.float(), target, frame_mask, weights)
+        if extra:
+            keypoint_term = _keypoint_term(out, steps, frame_mask, weights, scale if summed else None)
     else:
         vision_term = None
         vision = torch.zeros((), device=motor.device)
     if weighed:
-        loss = precision_loss(out.log_variances, motor_term, vision_term, tc)
+        loss = precision_loss(out.log_variances, motor_term, vision_term, tc, keypoint_term)
     else:
         loss = tc.motor_weight * motor_term
         if vision_term is not None:
             loss = loss + tc.vision_weight * vision_term
-    config = getattr(model, "module", model).config  # DDP holds the decoder as .module
+        if keypoint_term is not None:
+            loss = loss + tc.vision_weight * keypoint_term
     if tc.code_smoothness > 0 and config.code_window is not None:
         loss = loss + tc.code_smoothness * code_variation(z, config, mask, weights)
     return loss, torch.stack([loss.detach(), motor.detach(), vision.detach()])
 
 
+def _keypoint_term(out, steps, frame_mask, weights, scale: float | None) -> torch.Tensor:
+    """The error of the predicted keypoints at the drawn steps against the encoder's keypoints
+    of the real frames (a fixed target: the encoder learns from the drawing alone,
+    :mod:`primspace.model.decoder`); its mean per coordinate, or with ``scale`` the sum of
+    each sample's squared errors times ``scale`` (as the frames' under ``"sum"``)."""
+    pred = out.keypoints.float()
+    if steps is not None:
+        pred = pred.gather(1, steps[:, :, None, None].expand(-1, -1, *pred.shape[2:]))
+    target = out.seen_keypoints.detach().float()
+    if scale is None:
+        return _mse(pred, target, frame_mask, weights)
+    return _sse(pred, target, frame_mask, scale, weights)[0]
+
+
 def precision_loss(
-    log_variances: torch.Tensor | None, motor: torch.Tensor, vision: torch.Tensor | None, tc: TrainConfig
+    log_variances: torch.Tensor | None,
+    motor: torch.Tensor,
+    vision: torch.Tensor | None,
+    tc: TrainConfig,
+    keypoints: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """``Σ_m ½ (e^{-s_m} · w_m · MSE_m + s_m)`` over the modalities trained (vision: when
-    ``vision`` is given) whose weight ``w_m`` is not 0 (a term at weight 0 would only drive
-    its ``s_m`` down without end); ``log_variances``: ``s`` (2,) of motor and vision, the
+    ``vision`` is given; the keypoints, weighed by ``w_v``: when ``keypoints`` is given)
+    whose weight ``w_m`` is not 0 (a term at weight 0 would only drive its ``s_m`` down
+    without end); ``log_variances``: ``s`` of motor, vision (and keypoints), the
     decoder's (:class:`~primspace.model.precision.ModalityPrecision`)."""
     if log_variances is None:
         raise UserError(
@@ -239,7 +267,7 @@ def precision_loss(
             "(a run fitted with loss_reduction 'precision')"
         )
     s = log_variances.float()
-    terms = [(0, tc.motor_weight, motor), (1, tc.vision_weight, vision)]
+    terms = [(0, tc.motor_weight, motor), (1, tc.vision_weight, vision), (2, tc.vision_weight, keypoints)]
     parts = [0.5 * (torch.exp(-s[m]) * (w * mse) + s[m]) for m, w, mse in terms if mse is not None and w != 0]
     return torch.stack(parts).sum()
 
