@@ -71,6 +71,14 @@ def test_variation_off_is_the_standard_scene(small_sets):
     assert not np.array_equal(np.asarray(varied.images), np.asarray(plain.images))
 
 
+def test_a_sample_alone_is_the_same_as_among_others(small_sets):
+    """A sample's scene and frames do not depend on the samples made before it in the process."""
+    _, varied = small_sets
+    alone = generate.generate_shard(dataclasses.replace(SMALL, scene_variation="varied"), 3, [2])
+    np.testing.assert_array_equal(alone["scene"][0], varied.scene[2])
+    np.testing.assert_array_equal(alone["images"][0], varied.images[2])
+
+
 def test_draws_repeat_per_seed_and_differ_between_samples():
     a, b = draw_scene(VARIED, 0, 0), draw_scene(VARIED, 0, 1)
     np.testing.assert_array_equal(a, draw_scene(VARIED, 0, 0))
