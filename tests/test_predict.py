@@ -8,7 +8,7 @@ import pytest
 
 from conftest import assert_user_error
 from primspace.data import MotionDataset
-from primspace.predict import MIXTURE, predict
+from primspace.predict import AUTO, MIXTURE, predict
 from primspace.predict.candidates import NOISE_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import unobserved_mse
 from primspace.train import TrainConfig, fit
@@ -241,7 +241,7 @@ def test_the_estimator_predicts_in_physical_units(train_set, eval_set):
     ).fit(train_set)
     motor, frames = model.predict(eval_set, observe=0.5)
     assert motor.shape == eval_set.motor.shape and frames is None
-    assert model.prediction_.init == MIXTURE and np.isfinite(model.prediction_.errors["motor_mse"]).all()
+    assert model.prediction_.init == AUTO and np.isfinite(model.prediction_.errors["motor_mse"]).all()
     np.testing.assert_allclose(motor[:, :1], eval_set.motor[:, :1], atol=np.ptp(eval_set.motor))  # physical scale
 
 
@@ -421,20 +421,19 @@ def test_predict_online_with_the_mixture_keeps_the_prediction_after_the_observed
 
 
 def test_the_best_predictor_is_the_default_of_python_the_estimator_and_the_command_line():
-    """Issue 37: the mixture with the continuity correction (the best we have measured,
-    docs/predict.md) is what `predict`, `AutoDecoder.predict` and `primspace predict` do when
-    nothing is named."""
+    """The predictor chosen by held-out evidence (auto, with the continuity correction; docs/predict.md)
+    is what `predict`, `AutoDecoder.predict` and `primspace predict` do when nothing is named."""
     import inspect
 
     from primspace import AutoDecoder
     from primspace.cli.predict import predict_command
     from primspace.predict import DEFAULT_PREDICTOR, PredictRequest
 
-    assert DEFAULT_PREDICTOR == MIXTURE
+    assert DEFAULT_PREDICTOR == AUTO
     python = PredictRequest()  # predict's keywords are a request's fields
     estimator = inspect.signature(AutoDecoder.predict).parameters
     cli = inspect.signature(predict_command).parameters
-    assert python.init == estimator["init"].default == MIXTURE
+    assert python.init == estimator["init"].default == AUTO
     assert python.continuity is estimator["continuity"].default is True
     assert cli["init"].default.default is None and cli["continuity"].default.default is True  # None: DEFAULT_PREDICTOR
 

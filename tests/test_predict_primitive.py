@@ -63,8 +63,8 @@ def _predict(files, **kw):
 
 @pytest.mark.slow
 def test_the_primitive_asked_changes_the_prediction(files):
-    push = _predict(files, primitive="push")
-    lift = _predict(files, primitive="lift")
+    push = _predict(files, primitive="push", init=PRIOR)
+    lift = _predict(files, primitive="lift", init=PRIOR)
     assert push.init == lift.init == PRIOR
     assert push.details["primitive"] == "push" and lift.details["primitive"] == "lift"
     assert "posterior" not in push.details  # asked, not inferred
@@ -93,7 +93,7 @@ def test_bad_requests_name_the_primitives_or_the_predictor(files):
     with pytest.raises(UserError, match="primitive 5 is out of range"):
         _predict(files, primitive=5)
     for init in ("zero", "nearest"):
-        with pytest.raises(UserError, match=f"only the prior predictor .*init='{init}'"):
+        with pytest.raises(UserError, match=f"take a primitive: init='{init}' does not"):
             _predict(files, primitive="push", init=init)
     with pytest.raises(UserError, match="primitives must be one of labels, clusters"):
         _predict(files, primitives="shapes")
@@ -104,13 +104,13 @@ def test_the_estimator_passes_the_primitive_through(files):
 
     model = AutoDecoder.load(files / "run")
     data = MotionDataset.load(files / "data.h5")
-    motor, frames = model.predict(data, observe=0.25, primitive="lift", prior_samples=SAMPLES)
+    motor, frames = model.predict(data, observe=0.25, primitive="lift", prior_samples=SAMPLES, init=PRIOR)
     assert model.prediction_.init == PRIOR and model.prediction_.details["primitive"] == "lift"
     assert motor.shape == data.motor.shape and frames is None
 
 
 def test_online_the_prior_is_filtered_a_step_at_a_time_as_the_primitive_asked(files):
-    p = _predict(files, primitive="push", online=1)
+    p = _predict(files, primitive="push", online=1, init=PRIOR)
     assert p.init == PRIOR and p.details["primitive"] == "push" and p.details["online"]["latency_ms_mean"] > 0
     assert p.predictor is None and "posterior" not in p.details and np.isfinite(p.errors["motor_mse"]).all()
 
@@ -160,14 +160,14 @@ def _cli(run_cli, files, out, *flags):
 
 @pytest.mark.slow
 def test_the_command_predicts_every_motion_as_the_primitive_asked(run_cli, files, tmp_path):
-    res = _cli(run_cli, files, tmp_path / "push", "--primitive", "push")
+    res = _cli(run_cli, files, tmp_path / "push", "--primitive", "push", "--init", "prior")
     assert res.code == 0, res.err
     assert "every motion as primitive push" in res.out
     result = json.loads((tmp_path / "push" / "result.json").read_text())
     assert result["init"] == PRIOR and result["primitive"] == "push" and result["command"]["primitive"] == "push"
     assert result["prior"]["primitives"]["names"] == NAMES and "posterior" not in result
     assert not (tmp_path / "push" / "posterior.png").exists()
-    assert _cli(run_cli, files, tmp_path / "lift", "--primitive", "2").code == 0  # an id
+    assert _cli(run_cli, files, tmp_path / "lift", "--primitive", "2", "--init", "prior").code == 0  # an id
     push = MotionDataset.load(tmp_path / "push" / "predicted.h5").motor
     lift = MotionDataset.load(tmp_path / "lift" / "predicted.h5").motor
     assert np.abs(push - lift).max() > 1e-3
@@ -191,7 +191,7 @@ def test_the_command_without_a_primitive_writes_the_posterior_and_its_figure(run
 
 @pytest.mark.slow
 def test_the_command_takes_clusters_of_the_codes(run_cli, files, tmp_path):
-    res = _cli(run_cli, files, tmp_path / "k", "--primitives", "clusters", "--clusters", "2")
+    res = _cli(run_cli, files, tmp_path / "k", "--primitives", "clusters", "--clusters", "2", "--init", "prior")
     assert res.code == 0, res.err
     result = json.loads((tmp_path / "k" / "result.json").read_text())
     assert result["prior"]["primitives"]["source"] == "clusters" and len(result["primitives"]) == 2
@@ -203,11 +203,8 @@ def test_the_command_takes_clusters_of_the_codes(run_cli, files, tmp_path):
     [
         (["--primitive", "jump"], ["unknown primitive 'jump'", "0 (reach), 1 (push), 2 (lift)"]),
         (["--primitive", "9"], ["primitive 9 is out of range", "2 (lift)"]),
-        (
-            ["--primitive", "push", "--init", "mixture"],
-            ["only the prior predictor takes --primitive", "--init mixture"],
-        ),
-        (["--primitives", "clusters", "--init", "zero"], ["only the prior predictor takes --primitives"]),
+        (["--primitives", "clusters", "--init", "mixture"], ["--init mixture takes no --primitives"]),
+        (["--primitives", "clusters", "--init", "zero"], ["--init zero takes no --primitives"]),
         (["--primitives", "shapes"], ["--primitives 'shapes'", "labels, clusters"]),
         (["--primitives", "labels", "--clusters", "2"], ["--clusters counts clusters"]),
         (["--primitive", "push", "--prior-samples", "1"], ["--prior-samples 1"]),

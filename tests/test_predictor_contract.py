@@ -36,6 +36,7 @@ def _prior(run):
 
 #: Small settings of every registered predictor: ``name -> run -> keywords``.
 SETTINGS = {
+    "auto": lambda run: dict(condition=False, prior_samples=100, reuse=False),
     "mixture": lambda run: dict(condition=False),
     "gradient": lambda run: dict(start="projection", epochs=2, iterations=1, progress=False),
     "prior": lambda run: dict(n_samples=100, **FIXED),
@@ -48,7 +49,7 @@ SETTINGS = {
     "promp_tuned": lambda run: dict(per_label=False, n_basis=5, n_iter=20),
 }
 #: The online predictors whose prediction after step t is the offline one of that prefix.
-ONLINE_IS_OFFLINE = ("mixture", "prior", "encoder")
+ONLINE_IS_OFFLINE = ("auto", "mixture", "prior", "encoder")
 
 
 @pytest.fixture(scope="module")

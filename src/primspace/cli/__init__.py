@@ -12,6 +12,7 @@ from primspace.cli import segment  # noqa: F401
 from primspace.cli import train  # noqa: F401
 from primspace.cli import animate  # noqa: F401
 from primspace.cli import predict  # noqa: F401
+from primspace.cli import fit_predictor  # noqa: F401
 from primspace.cli import act  # noqa: F401
 from primspace.cli import experiments  # noqa: F401
 from primspace.cli import diagnose  # noqa: F401

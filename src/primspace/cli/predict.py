@@ -116,10 +116,14 @@ def predict_command(
     init: str | None = typer.Option(
         None,
         "--init",
-        help="The predictor: mixture (the default and the best: the "
-        "posterior over the fitted codes, no gradient), prior (a prior in code space per "
-        "primitive: given --primitive, or weighted by the posterior over primitives), or a start "
-        "of gradient inference: zero, random, projection, pca, calibrated, nearest.",
+        "--predictor",
+        help="The predictor. auto (the default): the one with the lowest K-fold error on the fitted "
+        "demonstrations for this task, chosen once and kept in RUN/selection/ (primspace fit-predictor "
+        "shows the table): without --primitive the mixture or the prior, with it the prior given it or "
+        "the mixture restricted to it. Or name one: mixture (the posterior over the fitted codes, no "
+        "gradient; with --primitive restricted to that label), prior (a prior in code space per "
+        "primitive: given --primitive, or weighted by the posterior over primitives), or a start of "
+        "gradient inference: zero, random, projection, pca, calibrated, nearest.",
     ),
     continuity: bool = typer.Option(
         True,
@@ -211,7 +215,7 @@ def predict_command(
         raise UserError("--latent-lr goes with gradient inference, not with --scene (the scene policy has no codes)")
     prior = _prior_options(scene, init, primitive, source, clusters, prior_samples)
     check_outside_inputs(out, (file, indices, run, fitted))
-    _check_ignored(iterations, online, fitted, init, scene, bool(prior) and not scene)
+    _check_ignored(iterations, online, fitted, init, scene)
     kind = OutputKind("primspace predict", PREDICT_FILES, frozenset({"observe", "mean", "writer"}))
     overrides = {k: v for k, v in (("latent_lr", latent_lr), ("seed", seed)) if v is not None}
     configure_process(TrainConfig(threads=threads).validate())
@@ -240,13 +244,17 @@ def predict_command(
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
         if prediction.details.get("posterior") is not None:
             _write_posterior(tmp, prediction, dataset)
+    reused = (prediction.details.get("selection") or {}).get("reused")
+    if reused:
+        chosen = prediction.details["selection"]["chosen"]
+        typer.echo(f"reused the predictor chosen earlier for this run, data and task: {chosen} ({reused})")
     typer.echo(_summary_line(out, result, prediction, online, judged, dataset.has_images))
 
 
 def _predict(run, dataset, scene: bool, prior: dict, motor, frames, init, continuity: bool, online, common):
     """The prediction (scene mode or from the observed beginning) and what result.json records of the command;
     ``prior``: the prior's options (:func:`_prior_options`), empty for another predictor."""
-    from primspace.predict import DEFAULT_PREDICTOR, PRIOR, predict
+    from primspace.predict import DEFAULT_PREDICTOR, predict
 
     if scene:
         from primspace.act.scene_policy import SCENE_POLICY, predict_from_scene
@@ -263,7 +271,7 @@ def _predict(run, dataset, scene: bool, prior: dict, motor, frames, init, contin
         )
         source = prediction.details["policy"]["source"]
         return prediction, {"scene": True, "mode": SCENE_POLICY, **prior, "primitives": source, "epochs": None}
-    init = PRIOR if prior else init or DEFAULT_PREDICTOR
+    init = init or DEFAULT_PREDICTOR
     prediction = predict(
         run,
         dataset,
@@ -336,29 +344,26 @@ def parse_primitives(
 
 
 def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_samples) -> dict:
-    """The keywords of :func:`primspace.predict.predict` for the prior (empty: another predictor):
-    the prior when ``--init prior`` or when a primitive is asked for and ``--init`` is not given;
-    one line when ``--init`` names another predictor (only the prior takes a primitive)."""
-    from primspace.predict import PRIOR
+    """The keywords of :func:`primspace.predict.predict` for the primitive: all of them for auto (no
+    ``--init``) and the prior, ``--primitive`` alone for the mixture (restricted to that label); one line
+    when ``--init`` names a predictor that does not read one given (empty: none given to read)."""
+    from primspace.predict import AUTO, MIXTURE, PRIOR
     from primspace.predict.prior import MAX_PRIOR_SAMPLES
 
     if scene:
         if prior_samples is not None:
             raise UserError("--prior-samples goes with the prior predictor (--init prior), not with --scene")
         return {"primitive": primitive, "primitives": source, "n_clusters": clusters}
-    asked = [
-        name
-        for name, given in (
-            ("--primitive", primitive is not None),
-            ("--primitives", source != "labels"),
-            ("--prior-samples", prior_samples is not None),
-        )
-        if given
-    ]
-    if init != PRIOR and not (init is None and asked):
+    given = (("--primitive", primitive), ("--primitives", None if source == "labels" else source))
+    given += (("--prior-samples", prior_samples),)
+    asked = [name for name, value in given if value is not None]
+    if init == MIXTURE and asked in ([], ["--primitive"]):
+        return {} if primitive is None else {"primitive": primitive}
+    if init not in (None, AUTO, PRIOR):
         if asked:
             raise UserError(
-                f"only the prior predictor takes {', '.join(asked)}: give --init prior (or no --init), not --init {init}"
+                f"--init {init} takes no {', '.join(asked)}: the prior (--init prior) and auto (no --init) take "
+                "them, the mixture takes --primitive alone"
             )
         return {}
     if prior_samples is not None and not 2 <= prior_samples <= MAX_PRIOR_SAMPLES:
@@ -368,26 +373,26 @@ def _prior_options(scene: bool, init, primitive, source: str, clusters, prior_sa
     return {"primitive": primitive, "primitives": source, "n_clusters": clusters, "prior_samples": prior_samples}
 
 
-def _check_ignored(iterations, online: bool, fitted, init, scene: bool, prior: bool = False) -> None:
-    """One line for an option that would be ignored (rather than ignoring it without a word);
-    ``prior``: the prior predicts (``--init prior``, or a prior option without ``--init``)."""
+def _check_ignored(iterations, online: bool, fitted, init, scene: bool) -> None:
+    """One line for an option that would be ignored (rather than ignoring it without a word)."""
     from primspace.model.latent import INFER_STARTS
-    from primspace.predict import DEFAULT_PREDICTOR, PRIOR
+    from primspace.predict import AUTO, DEFAULT_PREDICTOR, MIXTURE, PRIOR
     from primspace.predict.registry import GRADIENT, spec_for
     from primspace.train.starts import STARTS_FROM_FITTED
 
     if iterations is not None and not online:
         raise UserError("--iterations goes with --online (the iterations per arriving step)")
-    start = PRIOR if prior else init or DEFAULT_PREDICTOR
+    start = init or DEFAULT_PREDICTOR
     if iterations is not None and spec_for(start).name != GRADIENT:
         raise UserError(
             f"--iterations is read by gradient inference (--init {', '.join(INFER_STARTS)}); --init {start} "
             "predicts each arriving step without iterations: drop --iterations"
         )
-    readers = STARTS_FROM_FITTED + (DEFAULT_PREDICTOR, PRIOR)
+    readers = STARTS_FROM_FITTED + (AUTO, MIXTURE, PRIOR)
     if fitted is not None and not scene and init is not None and start not in readers:
         raise UserError(
-            f"--fitted-data is read by mixture, nearest and calibrated, and by prior; --init {start} does not read it"
+            f"--fitted-data is read by auto, mixture, nearest and calibrated, and by prior; --init {start} does not "
+            "read it"
         )
 
 
@@ -414,7 +419,8 @@ def _write_posterior(tmp: Path, prediction, dataset) -> None:
     from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fraction
 
     data = dataset.subset(prediction.indices)
-    curve = posterior_by_fraction(prediction.predictor, data, POSTERIOR_FRACTIONS)
+    predictor = getattr(prediction.predictor, "predictor_", None) or prediction.predictor  # auto: the chosen one
+    curve = posterior_by_fraction(predictor, data, POSTERIOR_FRACTIONS)
     source = prediction.details["prior"]["primitives"]["source"]
     fig = plot_posterior(
         POSTERIOR_FRACTIONS,
@@ -427,6 +433,18 @@ def _write_posterior(tmp: Path, prediction, dataset) -> None:
     save_figure(fig, tmp / "posterior.png", writer=PREDICT_MARK)
 
 
+def _chosen(prediction) -> str:
+    """`` (prior, the lowest 3-fold error: mixture 0.013, prior 0.0012)`` for a predictor chosen by held-out
+    evidence, else nothing."""
+    selection = prediction.details.get("selection")
+    if not selection:
+        return ""
+    errors = ", ".join(f"{name} {'-' if e is None else f'{e:.3g}'}" for name, e in selection["errors"].items())
+    if not selection["folds"]:
+        return f" ({selection['chosen']}, the one candidate of this task)"
+    return f" ({selection['chosen']}, the lowest {selection['folds']}-fold error: {errors})"
+
+
 def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dict | None, frames: bool) -> str:
     """What ``primspace predict`` prints when it is done (``frames``: the data has frames)."""
     from primspace.act.scene_policy import SCENE_POLICY
@@ -434,7 +452,7 @@ def _summary_line(out: Path, result: dict, prediction, online: bool, judged: dic
     means = ", ".join(f"{k} {v:.4g}" for k, v in result["mean"].items() if v is not None)
     means = means or "every valid step was observed, no step left to score"
     seen = observed_text(prediction.observation, frames)
-    line = f"wrote {out}: {result['n']} motions predicted from {seen}, init {prediction.init}: {means}"
+    line = f"wrote {out}: {result['n']} motions predicted from {seen}, init {prediction.init}{_chosen(prediction)}: {means}"
     if prediction.details.get("mode") == SCENE_POLICY:
         d = prediction.details
         line += f"; every motion as primitive {d['primitive']} ({d['name']}) of the {d['policy']['source']}"

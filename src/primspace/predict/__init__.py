@@ -3,8 +3,10 @@
 Every predictor is fitted once on the fitted demonstrations and then predicts whole
 sequences from their observed steps (:mod:`primspace.predict.base`):
 
+* :class:`SelectedPredictor`: the default (``auto``), the candidate below with the lowest K-fold
+  error on the fitted demonstrations for the task asked (:mod:`primspace.predict.selection`);
 * :class:`MixturePredictor`: the posterior over the run's fitted codes, offline and online
-  (no gradient; the default, the best we have measured);
+  (no gradient);
 * :class:`GradientPredictor`: gradient inference of the code from a start, offline and online;
 * :class:`PriorPredictor`: a prior in code space per primitive (a label or a cluster of the fitted
   codes), drawn, decoded and conditioned on the observed steps, given the primitive or weighted by
@@ -20,6 +22,7 @@ the one error); :func:`grid_predictions` runs the experiment's rows on one split
 """
 
 from primspace.predict.api import (
+    AUTO,
     DEFAULT_PREDICTOR,
     MIXTURE,
     PREDICT_STARTS,
@@ -42,6 +45,7 @@ from primspace.predict.posterior import POSTERIOR_FRACTIONS, posterior_by_fracti
 from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.registry import REGISTRY, PredictorSpec
+from primspace.predict.selection import SelectedPredictor
 from primspace.predict.stream import OnlineResult
 
 __all__ = [
@@ -61,6 +65,8 @@ __all__ = [
     "run_predictor",
     "grid_predictions",
     "MixturePredictor",
+    "SelectedPredictor",
+    "AUTO",
     "GradientPredictor",
     "CodeMixture",
     "code_mixture",

@@ -9,8 +9,10 @@ from its *observed* entries only (:func:`primspace.train.infer` with ``observe``
 of finding that code is a predictor (:mod:`primspace.predict.base`): :func:`predict` builds
 the one a :class:`~primspace.predict.request.PredictRequest` names
 (:func:`~primspace.predict.registry.make_predictor`), fits it on the run's fitted
-demonstrations and runs it on a data set. The default is the best we have measured, the
-mixture over the fitted codes (:mod:`primspace.predict.mixture`; docs/predict.md).
+demonstrations and runs it on a data set. The default, ``auto``, chooses among the mixture over
+the fitted codes and the prior per primitive (given the primitive: the prior given it and the
+mixture restricted to it) by their K-fold error on the fitted demonstrations for the task asked
+(:mod:`primspace.predict.selection`; docs/predict.md, *How the predictor is chosen*).
 
 The measure of a prediction is its error on the steps that were **not** observed:
 
@@ -48,6 +50,7 @@ from primspace.predict.registry import (
 )
 from primspace.predict.request import PredictRequest
 from primspace.predict.result import Prediction
+from primspace.predict.selection import AUTO
 from primspace.train.api import as_run, reconstruct
 from primspace.train.checks import select
 from primspace.train.observe import Observation
@@ -64,6 +67,7 @@ __all__ = [
     "predictor_for",
     "run_predictor",
     "DEFAULT_PREDICT_EPOCHS",
+    "AUTO",
     "MIXTURE",
     "PRIOR",
     "PREDICT_STARTS",
@@ -87,7 +91,8 @@ def predict(
         The settings (:class:`~primspace.predict.request.PredictRequest` lists them: ``observe``,
         ``observe_frames``, ``init``, ``epochs``, ``indices``, ``fitted_data``, ``frames``,
         ``continuity``, ``condition``, ``online``, ``progress``, ``primitive``, ``primitives``,
-        ``n_clusters``, ``prior_samples`` and train-config overrides).
+        ``n_clusters``, ``prior_samples``, ``reuse`` and train-config overrides). ``init`` defaults to
+        ``auto``: the predictor chosen by held-out evidence, recorded in ``details["selection"]``.
     **settings
         The same settings as keywords (without ``request``).
 

@@ -31,6 +31,7 @@ import numpy as np
 from primspace.predict.base import Forecast, Predictor, observation_rule, observed_mask
 from primspace.predict.candidates import CONDITION_GRID, CodeMixture, continuity_correction
 from primspace.predict.metrics import check_lengths, check_motor, valid_mask
+from primspace.predict.primitives import primitives_from_labels
 from primspace.predict.stream import Stream
 from primspace.train.api import reconstruct
 from primspace.train.observe import NOTHING, Observation
@@ -64,6 +65,12 @@ class MixturePredictor(Predictor):
         Given the primitive: only the candidates built from fitted codes of the sample's own
         label (``labels`` of :meth:`fit` and :meth:`predict`), their posterior mean with the
         noise the label-free posterior mean chose (``condition`` must be False).
+    primitive : str or int, optional
+        The primitive of every motion, a label of the fitted data (its name, or its place among
+        the labels present as for the prior: ``0..P-1``): the mixture restricted to it, as
+        ``per_label`` with that label for every motion (``condition`` must be False).
+    label_names : list of str, optional
+        Names of the fitted data's labels (set by :func:`~primspace.predict.registry.fit_predictor`).
     progress : bool, optional
         Show the decoding and the leave-one-out choices (a spinner in a terminal, a line per
         stage in a log; default: as :func:`primspace.utils.progress.stage`).
@@ -79,6 +86,8 @@ class MixturePredictor(Predictor):
         candidates: CodeMixture | None = None,
         per_label: bool = False,
         progress: bool | None = False,
+        primitive=None,
+        label_names=None,
     ):
         self.run = run
         self.condition = condition
@@ -86,11 +95,13 @@ class MixturePredictor(Predictor):
         self.candidates = candidates
         self.per_label = per_label
         self.progress = progress
+        self.primitive = primitive
+        self.label_names = label_names
 
     @property
     def needs_labels(self) -> bool:
-        """Given the primitive: the samples' labels are read."""
-        return bool(self.per_label)
+        """Given each motion's primitive by its label: the samples' labels are read."""
+        return bool(self.per_label) and self.primitive is None
 
     def fit(self, motor, labels=None, lengths=None, frames=None) -> MixturePredictor:
         """Decode the candidates (unless given) and keep the fitted demonstrations ``motor``
@@ -110,10 +121,15 @@ class MixturePredictor(Predictor):
             with stage(f"mixture: decoding the candidates of {len(motor)} fitted codes", enabled=self.progress):
                 self.mixture_ = code_mixture(self.run_)
         self.noises_: dict = {}  # σ² per prefix length, online
-        if self.per_label:
+        self.primitive_label_ = self.primitive_name_ = None
+        if self.per_label or self.primitive is not None:
             if labels is None or self.condition:
                 raise UserError("a mixture given the primitive needs the fitted labels and condition=False")
             self.source_labels_ = np.asarray(labels)[self.mixture_.sources]  # (c, 2)
+            if self.primitive is not None:
+                found = primitives_from_labels(labels, self.label_names)
+                k = found.resolve(self.primitive)
+                self.primitive_label_, self.primitive_name_ = int(found.labels[k]), found.names[k]
         return self
 
     def choice(self, rule: Observation) -> dict:
@@ -144,7 +160,9 @@ class MixturePredictor(Predictor):
         mask = observed_mask(observed, lengths, motor.shape[:2])
         choice = self.choice(rule)
         seen = np.where(mask[..., None], motor, 0.0)
-        if self.per_label:
+        if self.primitive_label_ is not None:
+            labels = np.full(len(motor), self.primitive_label_)
+        if self.per_label or self.primitive_label_ is not None:
             scaled, codes = self._given_labels(seen, mask, labels, choice["noise"])
         else:
             scaled, codes = self.mixture_.predict(seen, mask, noise=choice["noise"], condition=choice["condition"])
@@ -152,6 +170,8 @@ class MixturePredictor(Predictor):
             valid = valid_mask(check_lengths(lengths, *motor.shape[:2]), motor.shape[1])
             scaled = continuity_correction(scaled, seen, mask, valid)
         details = {"mixture": {"candidates": int(len(self.mixture_.candidates)), **choice}}
+        if self.primitive_name_ is not None:
+            details["primitive"] = self.primitive_name_
         return Forecast(scaled, codes.astype(np.float32), details)
 
     def _given_labels(self, seen: np.ndarray, mask: np.ndarray, labels, noise: float) -> tuple:

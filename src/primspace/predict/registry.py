@@ -27,6 +27,7 @@ from primspace.predict.primitives import PRIMITIVE_SOURCES
 from primspace.predict.prior import PRIOR, PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.request import PredictRequest
+from primspace.predict.selection import AUTO, SelectedPredictor
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import fitted_samples
@@ -51,9 +52,10 @@ __all__ = [
 GRADIENT = "gradient"
 #: The registry's name of the MAP code under the prior.
 PRIOR_MAP = "prior_map"
-#: The predictor of :func:`~primspace.predict.predict` and ``primspace predict`` when none is named: the best
-#: we have measured (docs/predict.md: below every gradient start on the demo, LASA and real recordings).
-DEFAULT_PREDICTOR = MIXTURE
+#: The predictor of :func:`~primspace.predict.predict` and ``primspace predict`` when none is named: the
+#: candidate with the lowest K-fold error on the fitted demonstrations for the task asked
+#: (:class:`~primspace.predict.selection.SelectedPredictor`; docs/predict.md, *How the predictor is chosen*).
+DEFAULT_PREDICTOR = AUTO
 
 
 @dataclass(frozen=True)
@@ -84,7 +86,26 @@ class PredictorSpec:
 
 
 def _mixture(run, request: PredictRequest) -> Predictor:
+    if request.primitive is not None:  # restricted to the primitive's label: no ensemble conditioning
+        return MixturePredictor(
+            run, condition=False, continuity=request.continuity, primitive=request.primitive, progress=request.progress
+        )
     return MixturePredictor(run, condition=request.condition, continuity=request.continuity, progress=request.progress)
+
+
+def _auto(run, request: PredictRequest) -> Predictor:
+    return SelectedPredictor(
+        run,
+        primitive=request.primitive,
+        primitives=request.primitives,
+        n_clusters=request.n_clusters,
+        prior_samples=request.prior_samples,
+        condition=request.condition,
+        continuity=request.continuity,
+        random_state=request.overrides.get("seed"),
+        reuse=request.reuse,
+        progress=request.progress,
+    )
 
 
 def _prior(run, request: PredictRequest) -> Predictor:
@@ -131,6 +152,7 @@ def _peer(cls):
 REGISTRY: dict[str, PredictorSpec] = {
     spec.name: spec
     for spec in (
+        PredictorSpec(AUTO, SelectedPredictor, True, True, True, _auto),
         PredictorSpec(MIXTURE, MixturePredictor, True, True, True, _mixture),
         PredictorSpec(GRADIENT, GradientPredictor, True, True, True, _gradient),
         PredictorSpec(PRIOR, PriorPredictor, True, True, True, _prior),
@@ -146,7 +168,7 @@ REGISTRY: dict[str, PredictorSpec] = {
 
 
 #: What :func:`~primspace.predict.predict` accepts as ``init``: the gradient starts, then the registered
-#: predictors the command offers (the mixture and the prior).
+#: predictors the command offers (auto, the mixture and the prior).
 PREDICT_STARTS = INFER_STARTS + tuple(name for name, spec in REGISTRY.items() if spec.command and name != GRADIENT)
 
 
@@ -177,20 +199,23 @@ def make_predictor(
 
 
 def predictor_for(init, *, primitive=None, primitives: str = "labels", n_clusters: int | None = None):
-    """The predictor to build: ``init``, or ``prior`` when a primitive is asked for (``primitive``, or
-    ``primitives`` other than ``labels``, or ``n_clusters``) and ``init`` is left at its default
-    (None or :data:`DEFAULT_PREDICTOR`); one UserError when ``init`` names another predictor:
-    only the prior takes a primitive."""
+    """The predictor to build: ``init``, or ``auto`` when a primitive is asked for (``primitive``, or
+    ``primitives`` other than ``labels``, or ``n_clusters``) and ``init`` is None; one UserError when
+    ``init`` names a predictor that takes no primitive: auto and the prior take one, the mixture
+    ``primitive`` alone (restricted to that label of the fitted data)."""
     if primitives not in PRIMITIVE_SOURCES:
         raise UserError(f"primitives must be one of {', '.join(PRIMITIVE_SOURCES)}, got {primitives!r}")
     asked = [name for name, value in (("primitive", primitive), ("n_clusters", n_clusters)) if value is not None]
     asked += ["primitives"] if primitives != "labels" else []
     if not asked:
         return init
-    if init in (None, DEFAULT_PREDICTOR, PRIOR):
-        return PRIOR
+    if init in (None, AUTO):
+        return AUTO
+    if init == PRIOR or (init == MIXTURE and asked == ["primitive"]):
+        return init
     raise UserError(
-        f"only the prior predictor (init='prior') takes a primitive: init={init!r} does not (given {', '.join(asked)})"
+        f"only auto, the prior (init='prior') and, given a primitive of the labels alone, the mixture take a "
+        f"primitive: init={init!r} does not (given {', '.join(asked)})"
     )
 
 

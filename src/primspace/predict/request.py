@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from primspace.data import MotionDataset
 from primspace.predict.gradient import DEFAULT_PREDICT_EPOCHS
-from primspace.predict.mixture import MIXTURE
+from primspace.predict.selection import AUTO
 from primspace.utils.errors import UserError
 
 __all__ = ["PredictRequest"]
@@ -28,10 +28,12 @@ class PredictRequest:
         each sample's valid steps, a number of steps, ``"none"``; for frames also
         ``"first"``. ``observe_frames=None`` follows ``observe``.
     init : str or None
-        The predictor (:func:`~primspace.predict.registry.make_predictor`): ``mixture`` (default, the
-        best we have: no gradient steps, the posterior over the fitted codes' mixture or its ensemble
-        conditioned on the observed entries, whichever the leave-one-out prediction of the fitted
-        demonstrations prefers), or a start of gradient inference (``zero``, ``random``,
+        The predictor (:func:`~primspace.predict.registry.make_predictor`): ``auto`` (default: the
+        candidate with the lowest K-fold error on the fitted demonstrations for the task asked,
+        :class:`~primspace.predict.selection.SelectedPredictor`), ``mixture`` (no gradient steps, the
+        posterior over the fitted codes' mixture or its ensemble conditioned on the observed entries,
+        whichever the leave-one-out prediction of the fitted demonstrations prefers; given a
+        ``primitive``, restricted to that label), or a start of gradient inference (``zero``, ``random``,
         ``projection``, ``pca``, ``calibrated``, ``nearest``) followed by ``epochs`` of inference on
         the observed entries, or ``prior`` (:class:`~primspace.predict.prior.PriorPredictor`: a prior
         in code space per primitive, conditioned on the observed entries; without ``primitive``,
@@ -60,9 +62,9 @@ class PredictRequest:
     progress : bool, optional
     primitive : str or int, optional
         The primitive of every motion, a name (a label name of the fitted data, ``"push"``) or an
-        id (``Prediction.details["prior"]["primitives"]`` lists them): the prior predictor, whatever
-        ``init`` unless it names another predictor (then one UserError: only the prior takes a
-        primitive). None: the prior weighs its primitives by their posterior.
+        id (``Prediction.details["prior"]["primitives"]`` lists them), read by ``auto`` (its candidates
+        given the primitive), the prior and the mixture (restricted to that label); another ``init``
+        is one UserError. None: no primitive given.
     primitives : {"labels", "clusters"}
         The prior's primitives: the fitted data's labels, or clusters of the fitted codes (asks for
         the prior as ``primitive`` does).
@@ -70,6 +72,9 @@ class PredictRequest:
         The number of clusters with ``primitives="clusters"`` (default: the number of labels).
     prior_samples : int, optional
         Codes the prior draws and decodes per primitive (default 2000).
+    reuse : bool
+        ``auto``: keep its choice in the run folder and read it from there on a later call with the
+        same fitted data, task and settings (:mod:`~primspace.predict.selection_cache`).
     overrides : dict
         Train-config overrides of a gradient inference (``latent_lr``, ``batch_size``, ``seed`` ...);
         the prior reads ``seed``.
@@ -77,7 +82,7 @@ class PredictRequest:
 
     observe: object = 0.25
     observe_frames: object = None
-    init: str | None = MIXTURE
+    init: str | None = AUTO
     epochs: int = DEFAULT_PREDICT_EPOCHS
     indices: object = None
     fitted_data: MotionDataset | None = None
@@ -90,6 +95,7 @@ class PredictRequest:
     primitives: str = "labels"
     n_clusters: int | None = None
     prior_samples: int | None = None
+    reuse: bool = True
     overrides: dict = field(default_factory=dict)
 
     @classmethod

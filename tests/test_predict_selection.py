@@ -1,0 +1,186 @@
+"""The predictor chosen by held-out evidence (``auto``, :mod:`primspace.predict.selection`): the lowest
+K-fold error wins, the choice is recorded in ``result.json``, it is the default of ``predict`` and of
+``primspace predict``, and it is kept in the run folder and read back on a later call with the same key."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from conftest import assert_user_error
+from primspace.data import MotionDataset
+from primspace.predict import AUTO, DEFAULT_PREDICTOR, MIXTURE, PRIOR, PredictRequest, SelectedPredictor, predict
+from primspace.predict.peers import MeanMotionPeer
+from primspace.predict.selection import candidates_for
+from primspace.predict.selection_cache import SELECTION_MARK
+from primspace.train import TrainConfig, fit
+from primspace.train.observe import Observation
+from primspace.utils.errors import UserError
+from test_train import SMALL, primitives
+
+NAMES = ["reach", "push", "lift"]
+#: Draws per primitive of the prior, and of each fold of its own K-fold choice: small and fast.
+SAMPLES, CV_SAMPLES = 50, 20
+
+
+@pytest.fixture(scope="module", autouse=True)
+def fewer_fold_draws():
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("primspace.predict.prior.CV_SAMPLES", CV_SAMPLES)
+        yield
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A short run fitted on named primitives (a folder on disk: the choice is kept there), new motions."""
+    root = tmp_path_factory.mktemp("selection")
+    dataclasses.replace(primitives(4, seed=0, T=16), label_names=NAMES).save(root / "train.h5")
+    fit(
+        MotionDataset.load(root / "train.h5"),
+        root / "run",
+        model_config=SMALL,
+        train_config=TrainConfig(epochs=5, batch_size=12, threads=1),
+        init="projection",
+        progress=False,
+    )
+    dataclasses.replace(primitives(2, seed=100, T=16), label_names=NAMES).save(root / "data.h5")
+    return root
+
+
+def _predict(files, **kw):
+    data = MotionDataset.load(files / "data.h5")
+    return predict(files / "run", data, **{"observe": 0.5, "frames": False, "prior_samples": SAMPLES, **kw})
+
+
+class _Zero(MeanMotionPeer):
+    """A candidate that predicts zeros where nothing was observed (far from the fitted motions)."""
+
+    def predict(self, motor, observed, labels=None, lengths=None, frames=None):
+        mask = np.asarray(observed)[..., None] if not isinstance(observed, Observation) else None
+        if mask is None:
+            mask = observed.masks(np.full(len(motor), motor.shape[1]), motor.shape[1])[0][..., None]
+        return np.where(mask, motor, 0.0)
+
+
+@pytest.fixture
+def peers(files, monkeypatch):
+    """The run, fitted motions all alike, and the selection's candidates replaced by two peers: the mean
+    motion (it predicts the held-out motions exactly) as the prior, zeros as the mixture."""
+    from primspace.train import load_run
+
+    run = load_run(files / "run")
+    one = np.linspace(-0.5, 0.5, 16)[:, None] * np.ones((1, run.model_config.n_joints))
+    motor = np.repeat(one[None], len(run.latents), axis=0)
+    built = {MIXTURE: lambda: _Zero(per_label=False), PRIOR: lambda: MeanMotionPeer(per_label=False)}
+    monkeypatch.setattr(SelectedPredictor, "build", lambda self, name, run, scoring=False: built[name]())
+    return run, motor, np.arange(len(run.latents)) % 3
+
+
+def test_the_candidate_with_the_lowest_kfold_error_is_chosen(peers):
+    run, motor, labels = peers
+    selection = SelectedPredictor(run, reuse=False).fit(motor, labels).select(Observation.build(0.25))
+    assert selection["chosen"] == PRIOR and selection["folds"] == 3
+    assert selection["errors"][PRIOR] == pytest.approx(0.0, abs=1e-12)
+    # every fitted demonstration is held out once: the K-fold error of zeros is their error on every one
+    observed = Observation.build(0.25).masks(np.full(len(motor), 16), 16)[0]
+    assert selection["errors"][MIXTURE] == pytest.approx(float((motor[~observed] ** 2).mean()))
+    assert selection["errors"][MIXTURE] > 0.01
+
+
+def test_a_stale_or_foreign_file_is_never_read(peers):
+    run, motor, labels = peers
+    rule = Observation.build(0.2)
+
+    def select():
+        return SelectedPredictor(run).fit(motor, labels).select(rule)
+
+    path = select()["kept"]
+    record = json.loads(open(path).read())
+    assert record["writer"] == SELECTION_MARK and select()["reused"] == path
+    with open(path, "w") as f:  # a stale key: ignored, scored again and written again
+        json.dump({**record, "key": "0" * 64}, f)
+    again = select()
+    assert again["reused"] is None and again["kept"] == path and json.loads(open(path).read())["key"] == record["key"]
+    with open(path, "w") as f:  # a file the command did not write: neither read nor replaced
+        f.write('{"note": "mine"}')
+    third = select()
+    assert third["reused"] is None and third["kept"] is None and json.loads(open(path).read()) == {"note": "mine"}
+
+
+def test_the_candidates_of_each_task():
+    assert candidates_for(False, True) == (MIXTURE, PRIOR)
+    assert candidates_for(True, True) == (MIXTURE, PRIOR)  # the mixture restricted to the label, the prior given it
+    assert candidates_for(False, False) == (MIXTURE,)  # no labels, no clusters asked: the prior has no primitives
+    assert candidates_for(True, False, "clusters") == (PRIOR,)
+    with pytest.raises(UserError, match="candidates must be some of"):
+        candidates_for(False, True, asked=("promp",))
+
+
+def test_auto_is_the_default_and_its_choice_is_recorded(files):
+    assert DEFAULT_PREDICTOR == AUTO and PredictRequest().init == AUTO
+    p = _predict(files)
+    selection = p.details["selection"]
+    assert p.init == AUTO and selection["folds"] == 3 and set(selection["errors"]) == {MIXTURE, PRIOR}
+    assert selection["chosen"] == min(selection["errors"], key=selection["errors"].get)
+    assert selection["kept"] is not None and selection["reused"] is None
+    kept = json.loads(open(selection["kept"]).read())
+    assert kept["writer"] == SELECTION_MARK and kept["selection"]["chosen"] == selection["chosen"]
+
+
+def test_a_second_call_reads_the_choice_and_fits_no_candidate_by_kfold(files, monkeypatch):
+    first = _predict(files, primitive="push")
+    assert first.details["selection"]["reused"] is None
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("scored again")
+
+    monkeypatch.setattr(SelectedPredictor, "score", refuse)
+    second = _predict(files, primitive="push")
+    assert second.details["selection"]["reused"] == first.details["selection"]["kept"]
+    assert second.details["selection"]["chosen"] == first.details["selection"]["chosen"]
+    np.testing.assert_array_equal(second.motor, first.motor)  # the kept settings: the same numbers
+    with pytest.raises(AssertionError, match="scored again"):  # another task: another key, scored
+        _predict(files, primitive="lift")
+
+
+@pytest.mark.slow
+def test_the_command_chooses_by_default_records_and_reuses(files, run_cli, tmp_path):
+    base = ("predict", files / "run", files / "data.h5", "--observe", "0.4", "--primitive", "push", "--no-judge")
+    res = run_cli(*base, "--prior-samples", SAMPLES, "--out", tmp_path / "a")
+    assert res.code == 0, res.err
+    result = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert result["init"] == AUTO and result["command"]["init"] == AUTO
+    assert set(result["selection"]["errors"]) == {MIXTURE, PRIOR} and result["selection"]["folds"] == 3
+    assert f"init auto ({result['selection']['chosen']}, the lowest 3-fold error" in res.out
+    res = run_cli(*base, "--prior-samples", SAMPLES, "--out", tmp_path / "b")
+    assert res.code == 0, res.err
+    assert res.out.startswith("reused the predictor chosen earlier") and len(res.out.strip().splitlines()) == 2
+    res = run_cli(*base, "--predictor", MIXTURE, "--out", tmp_path / "c")  # the alias overrides
+    assert res.code == 0 and json.loads((tmp_path / "c" / "result.json").read_text())["init"] == MIXTURE
+
+
+def test_fit_predictor_prints_the_table_and_keeps_the_choice(files, run_cli):
+    res = run_cli("fit-predictor", files / "run", "--observe", "0.3", "--primitive", "lift", "--prior-samples", SAMPLES)
+    assert res.code == 0, res.err
+    lines = res.out.splitlines()
+    assert lines[0].split() == ["candidate", "3-fold", "MSE"] and {lines[1].split()[0], lines[2].split()[0]} == {
+        MIXTURE,
+        PRIOR,
+    }
+    assert sum("<- chosen" in line for line in lines) == 1 and "kept in" in lines[3]
+    res = run_cli("fit-predictor", files / "run", "--observe", "0.3", "--primitive", "lift", "--prior-samples", SAMPLES)
+    assert "reused the choice kept earlier" in res.out
+
+
+@pytest.mark.parametrize(
+    "flags, fragment",
+    [
+        (["--init", "bogus"], "unknown start 'bogus'"),
+        (["--predictor", "zero", "--primitive", "push"], "--init zero takes no --primitive"),
+        (["--primitive", "jump"], "unknown primitive 'jump'"),
+    ],
+)
+def test_a_bad_predictor_or_primitive_is_one_line(files, run_cli, tmp_path, flags, fragment):
+    assert_user_error(run_cli("predict", files / "run", files / "data.h5", "--out", tmp_path / "o", *flags), fragment)
+    assert not (tmp_path / "o").exists()
