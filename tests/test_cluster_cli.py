@@ -61,7 +61,13 @@ def test_latents_with_labels(run_cli, latents, tmp_path):
     assert "accuracy 1.0000" in res.out
     result = json.loads((out / "result.json").read_text())
     assert result["scores"]["accuracy"] == 1.0 and result["n_samples"] == 90
-    assert result["tau_option"] == {"r2_target": 0.99} and result["r2"] == pytest.approx(0.99)
+    # the default tau choice: held-out selection, recorded with every candidate's score
+    assert result["tau_option"] == {"r2_target": "select"} and "auto" not in result
+    chosen = result["selection"]["r2_target"]
+    assert result["r2"] == pytest.approx(chosen) and chosen in [
+        c["r2_target"] for c in result["selection"]["candidates"]
+    ]
+    assert "tau chosen by held-out stability: R^2 target" in res.out
     with open(out / "labels.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 90 and set(rows[0]) == {"sample", "predicted", "true"}

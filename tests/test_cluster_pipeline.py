@@ -55,7 +55,8 @@ def test_a_sweep_computes_one_svd(svd_calls):
     rows = sweep(X, 3, labels_true=y, random_state=0)
     assert len(rows) == len(R2_GRID) and len(svd_calls) == 1
     svd_calls.clear()
-    result = cluster_points(X, LowRankSubspaceClustering(3, random_state=0), labels_true=y, sweep_param="r2_target")
+    fixed = LowRankSubspaceClustering(3, r2_target=0.99, random_state=0)
+    result = cluster_points(X, fixed, labels_true=y, sweep_param="r2_target")
     assert len(result.sweep) == len(R2_GRID) and len(svd_calls) == 1  # the fit and the sweep share it
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 
@@ -49,14 +50,16 @@ def cluster_command(
     r2: str | None = typer.Option(
         None,
         "--r2",
-        metavar="TARGET|auto",
-        help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1) (default 0.99); "
-        "'auto': the target of the R^2 grid that --auto-criterion prefers, without labels.",
+        metavar="TARGET|auto|select",
+        help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1); "
+        "'auto': the target of the R^2 grid that --auto-criterion prefers, without labels; "
+        "'select' (default): 0.99, 0.7 and the 'auto' target compared by their stability across "
+        "independent halves of the points, without labels.",
     ),
     auto_criterion: ClusterAutoCriterion = typer.Option(
         ClusterAutoCriterion.relative_eigengap,
         "--auto-criterion",
-        help="With --r2 auto: eigengap of the normalised affinity at k relative to 1 - lambda_{k+1} (default), "
+        help="With --r2 auto or select: eigengap of the normalised affinity at k relative to 1 - lambda_{k+1} (default), "
         "the plain eigengap, or label stability across subsamples.",
     ),
     linear: bool = typer.Option(False, "--linear", help="Linear subspaces (no ones row) instead of affine."),
@@ -108,19 +111,47 @@ def cluster_command(
             "random_state": library_seed(seed),
         }
         result = _cluster(src, points, k, options, do_sweep, grid)
+        note = _codes_note(src, points, k, options, result)
         record = {"input": str(src), "points": points.description, **result.to_dict()}
+        if note is not None:
+            record["note"] = note
         _write_outputs(tmp, src, result, record, points.samples)
     if as_json:
         echo_json(record)
         return
     _print_summary(out, result)
+    if note is not None:
+        typer.echo(note, err=True)
+
+
+#: Codes of at most this many samples are compared with their raw trajectories.
+RAW_COMPARISON_MAX_SAMPLES = 5000
+
+
+def _codes_note(src: Path, points, k: int, options: dict, result) -> str | None:
+    """For a run's codes: why they may cluster below the raw trajectories of the same samples
+    (clustered with the same settings when the codes are scored), in one line, or None."""
+    from primspace.cluster.advice import codes_note
+
+    if points.samples is None:  # not a run's codes
+        return None
+    codes, raw = _accuracy(result), None
+    if points.raw is not None and codes is not None and points.X.shape[0] <= RAW_COMPARISON_MAX_SAMPLES:
+        raw = _accuracy(_cluster(src, replace(points, X=points.raw), k, options, False, None))
+    return codes_note(
+        points.X.shape[0], points.X.shape[1], k, affine=options["affine"], codes_accuracy=codes, raw_accuracy=raw
+    )
+
+
+def _accuracy(result) -> float | None:
+    return None if result.scores is None else result.scores["accuracy"]
 
 
 def _points(src: Path, labels: Path | None, allow_unfinished: bool = False):
     """The points: a data file's trajectories, an ``.npy`` of codes, or a run's codes (a run
     directory, or the ``latents.npy`` in one) numbered by its samples' indices in the data
     file and labelled from it (``--labels``: one label per code, in the run's order)."""
-    from primspace.cluster.inputs import ClusterPoints, load_points, read_labels
+    from primspace.cluster.inputs import ClusterPoints, load_points, read_labels, trajectory_matrix
 
     maybe_run = src.is_dir() or src.name == "latents.npy"  # cheap: only then read what a run is
     if maybe_run:
@@ -136,14 +167,15 @@ def _points(src: Path, labels: Path | None, allow_unfinished: bool = False):
     trained = load_run(run_dir)
     check_finished(trained, allow_unfinished)
     X = trained.latents.astype("float64")
-    true, names, whence = None, None, ""
+    true, names, whence, raw = None, None, "", None
     if labels is not None:
         true = read_labels(labels, len(X))
-    elif trained.data_path is not None and Path(trained.data_path).is_file():
+    if trained.data_path is not None and Path(trained.data_path).is_file():
         fitted = load_fitted_data(trained)  # checked: the run's own samples, in its order
-        if fitted.labels is not None:
+        raw = trajectory_matrix(fitted.motor)
+        if fitted.labels is not None and labels is None:
             true, names, whence = fitted.labels.astype("int64"), list(fitted.label_names), f", labels of {fitted.path}"
-    else:
+    elif labels is None:
         typer.echo(
             f"note: run {run_dir} has no data file to read labels from ({trained.data_path or 'none recorded'}): "
             "clustered without scores (give --labels)",
@@ -151,7 +183,7 @@ def _points(src: Path, labels: Path | None, allow_unfinished: bool = False):
         )
     description = f"codes of run {run_dir}: {X.shape[0]} x {X.shape[1]}, numbered by the data file's index{whence}"
     return ClusterPoints(
-        X=X, labels=true, label_names=names, path=src, description=description, samples=trained.indices
+        X=X, labels=true, label_names=names, path=src, description=description, samples=trained.indices, raw=raw
     )
 
 
@@ -207,6 +239,8 @@ def _print_summary(out: Path, result) -> None:
         f"tau {result.tau:.4g} (relative {result.tau_relative:.4g}), R^2 {result.r2:.4f}, rank {result.rank}, "
         f"spectral {result.spectral_method}, {result.seconds:.2f} s"
     )
+    if result.selection is not None:
+        typer.echo(_format_selection(result.selection))
     if result.auto is not None:
         auto = result.auto
         scores = ", ".join(
@@ -246,20 +280,33 @@ def _check_cluster_options(k, tau, tau_relative, r2, ones_weight, n_init, k_flag
     for name, value in (("--tau", tau), ("--tau-relative", tau_relative), ("--ones-weight", ones_weight)):
         if value is not None and not (value > 0 and value != float("inf")):
             raise UserError(f"{name} must be a positive number, got {value}")
-    if r2 is not None and r2 != "auto" and not 0 < r2 < 1:
+    if r2 is not None and r2 not in ("auto", "select") and not 0 < r2 < 1:
         raise UserError(f"--r2 must lie in (0, 1), got {r2}")
     if n_init < 1:
         raise UserError(f"--n-init must be at least 1, got {n_init}")
 
 
 def _parse_r2(text: str | None) -> float | str | None:
-    """``--r2``: None, ``"auto"`` or a number (its range is checked with the other options)."""
-    if text is None or text.strip().lower() == "auto":
-        return None if text is None else "auto"
+    """``--r2``: None, ``"auto"``, ``"select"`` or a number (its range is checked with the other options)."""
+    if text is None or text.strip().lower() in ("auto", "select"):
+        return None if text is None else text.strip().lower()
     try:
         return float(text)
     except ValueError:
-        raise UserError(f"--r2 must be a number in (0, 1) or 'auto', got {text!r}") from None
+        raise UserError(f"--r2 must be a number in (0, 1), 'auto' or 'select', got {text!r}") from None
+
+
+def _format_selection(selection: dict) -> str:
+    """One line: the chosen target, where it came from, and every candidate's held-out score."""
+    candidates = ", ".join(
+        f"{c['r2_target']:g} [{'+'.join(c['sources'])}]: " + ("-" if c["score"] is None else f"{c['score']:.3f}")
+        for c in selection["candidates"]
+    )
+    why = f"; {selection['note']}" if selection["note"] else ""
+    return (
+        f"tau chosen by held-out stability: R^2 target {selection['r2_target']:g} "
+        f"({'+'.join(selection['chosen'])}; {candidates}{why})"
+    )
 
 
 def _parse_float_list(text: str, option: str) -> list[float]:

@@ -11,6 +11,9 @@ Modules
 :mod:`~primspace.cluster.auto`
     Choosing tau without labels (``r2_target="auto"``): the relative eigengap, the eigengap
     or the label stability of each R^2 target of the grid, on one SVD.
+:mod:`~primspace.cluster.select`
+    Choosing tau by held-out evidence (``r2_target="select"``, the default): the fixed
+    targets and the label-free choice compared by their stability across independent halves.
 :mod:`~primspace.cluster.sweep`
     R^2, rank and scores over a tau grid: clones of the estimator sharing one SVD; the one
     R^2 grid, :data:`R2_GRID`.
@@ -24,7 +27,7 @@ Modules
 """
 
 from primspace.cluster.auto import AUTO_CRITERIA, AutoTauChoice, choose_tau
-from primspace.cluster.estimator import DEFAULT_R2_TARGET, LowRankSubspaceClustering
+from primspace.cluster.estimator import DEFAULT_R2_TARGET, DEFAULT_TAU_CHOICE, LowRankSubspaceClustering
 from primspace.cluster.lrsc import (
     SelfRepresentationSVD,
     r2_from_singular_values,
@@ -39,6 +42,7 @@ from primspace.cluster.pipeline import (
     clustering_figure,
     sweep_figure,
 )
+from primspace.cluster.select import SELECT_FIXED_TARGETS, TauSelection, select_r2_target
 from primspace.cluster.spectral import (
     NormalizedAffinityOperator,
     affinity_from_factor,
@@ -51,6 +55,10 @@ from primspace.cluster.sweep import DEFAULT_R2_GRID, R2_GRID, sweep, tau_sweep
 __all__ = [
     "LowRankSubspaceClustering",
     "DEFAULT_R2_TARGET",
+    "DEFAULT_TAU_CHOICE",
+    "SELECT_FIXED_TARGETS",
+    "TauSelection",
+    "select_r2_target",
     "AUTO_CRITERIA",
     "AutoTauChoice",
     "choose_tau",

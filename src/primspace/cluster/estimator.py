@@ -23,6 +23,7 @@ from threadpoolctl import threadpool_limits
 
 from primspace.cluster.auto import AUTO_CRITERIA, DEFAULT_AUTO_CRITERION, choose_tau
 from primspace.cluster.lrsc import SelfRepresentationSVD, self_representation_svd
+from primspace.cluster.select import SELECT, select_r2_target
 from primspace.cluster.spectral import (
     choose_spectral_method,
     njw_labels,
@@ -31,11 +32,16 @@ from primspace.cluster.spectral import (
 )
 from primspace.utils.errors import UserError
 
-__all__ = ["LowRankSubspaceClustering", "DEFAULT_R2_TARGET"]
+__all__ = ["LowRankSubspaceClustering", "DEFAULT_R2_TARGET", "DEFAULT_TAU_CHOICE"]
 
-#: R^2 target used when none of tau, tau_relative, r2_target is given. On LASA (26 shapes)
-#: any target in [0.97, 0.999] clusters with accuracy >= 0.95; 0.9999 over-fits the noise.
+#: The fixed R^2 target: the first candidate of the held-out selection (and its tie winner).
+#: On LASA (26 shapes) any target in [0.97, 0.999] clusters with accuracy >= 0.95; 0.9999
+#: over-fits the noise.
 DEFAULT_R2_TARGET = 0.99
+
+#: How tau is chosen when none of tau, tau_relative, r2_target is given: by held-out
+#: evidence among the fixed targets and the label-free choice (:mod:`primspace.cluster.select`).
+DEFAULT_TAU_CHOICE = SELECT
 
 
 class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
@@ -63,15 +69,18 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         of ``Z~``). ``P`` depends on ``tau sigma^2`` only, so a component is kept iff
         ``sigma_k / sigma_1 > 1 / sqrt(tau_relative)``. In the affine case scaling the data by
         c keeps the result only if ``ones_weight`` is scaled by c too.
-    r2_target : float or "auto", optional
+    r2_target : float, "auto" or "select", optional
         Choose tau as the smallest one whose R^2 of ``Z ~ Z Q*`` reaches this value, in (0, 1)
         (how the paper chose tau). R^2 = 1 - ||Z - Z Q*||_F^2 / ||Z - mean||_F^2 over the data
         rows (the ones row does not count); see :mod:`primspace.cluster.lrsc`. ``"auto"``:
         choose the target of :data:`~primspace.cluster.auto.AUTO_R2_GRID` that scores best by
-        ``auto_criterion``, without labels (:mod:`primspace.cluster.auto`). Give at most
-        one of tau, tau_relative, r2_target; with none, ``r2_target = 0.99``.
+        ``auto_criterion``, without labels (:mod:`primspace.cluster.auto`). ``"select"``:
+        compare the fixed targets (0.99, 0.7) and the ``"auto"`` choice by their held-out
+        stability and keep the best, without labels (:mod:`primspace.cluster.select`). Give at
+        most one of tau, tau_relative, r2_target; with none, ``r2_target = "select"``.
     auto_criterion : {"relative_eigengap", "eigengap", "stability"}, default "relative_eigengap"
-        The label-free criterion of ``r2_target="auto"`` (ignored otherwise): the eigengap at
+        The label-free criterion of ``r2_target="auto"`` and of the ``"auto"`` candidate of
+        ``"select"`` (ignored otherwise): the eigengap at
         k of the normalised affinity relative to ``1 - lambda_{k+1}``, the plain eigengap
         ``lambda_k - lambda_{k+1}``, or the stability of the labels across subsamples
         (:mod:`primspace.cluster.auto`).
@@ -115,10 +124,14 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
     spectral_method_ : str
         "dense", "gram" or "lobpcg" (the last two implicit: see :mod:`primspace.cluster.spectral`).
     auto_choice_ : AutoTauChoice or None
-        With ``r2_target="auto"``: every candidate's R^2 target, tau, R^2, rank and score,
-        and the one chosen (:class:`~primspace.cluster.auto.AutoTauChoice`); else None.
+        With ``r2_target="auto"`` or ``"select"``: every grid target's tau, R^2, rank and
+        label-free score, and the one the criterion chose
+        (:class:`~primspace.cluster.auto.AutoTauChoice`); else None.
     auto_scores_ : ndarray of shape (n_candidates,) or None
         ``auto_choice_.scores``: the criterion's score per candidate (NaN: ``Q* = 0``).
+    selection_ : TauSelection or None
+        With ``r2_target="select"``: the candidates, their held-out scores and the one chosen
+        (:class:`~primspace.cluster.select.TauSelection`); else None.
     n_features_in_ : int
 
     Examples
@@ -145,7 +158,7 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         "affine": ["boolean"],
         "tau": [Interval(Real, 0, None, closed="neither"), None],
         "tau_relative": [Interval(Real, 0, None, closed="neither"), None],
-        "r2_target": [Interval(Real, 0, 1, closed="neither"), StrOptions({"auto"}), None],
+        "r2_target": [Interval(Real, 0, 1, closed="neither"), StrOptions({"auto", "select"}), None],
         "auto_criterion": [StrOptions(set(AUTO_CRITERIA))],
         "affinity": [StrOptions({"squared", "abs"})],
         "ones_weight": [Interval(Real, 0, None, closed="neither")],
@@ -217,21 +230,11 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
                 svd = self_representation_svd(X, affine=self.affine, ones_weight=self.ones_weight)
             else:
                 self._check_svd(svd, X.shape[0])
+            tau, choice, selection = self._choose_tau(X, svd, tau_option)
             del X
-            choice = None
-            if tau_option[1] == AUTO:
-                choice = choose_tau(
-                    svd,
-                    self.n_clusters,
-                    criterion=self.auto_criterion,
-                    affinity=self.affinity,
-                    spectral=self.spectral,
-                    n_init=self.n_init,
-                    random_state=self.random_state,
-                )
             result = cluster_at_tau(
                 svd,
-                resolve_tau(svd, *tau_option) if choice is None else choice.tau,
+                tau,
                 n_clusters=self.n_clusters,
                 affinity=self.affinity,
                 spectral=self.spectral,
@@ -250,7 +253,42 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         self.spectral_method_ = result.method
         self.auto_choice_ = choice
         self.auto_scores_ = None if choice is None else choice.scores
+        self.selection_ = selection
         return self
+
+    def _choose_tau(self, X, svd, tau_option):
+        """``(tau, auto choice or None, selection or None)`` for the fit's tau option."""
+        if tau_option[1] not in (AUTO, SELECT):
+            return resolve_tau(svd, *tau_option), None, None
+        choice = choose_tau(
+            svd,
+            self.n_clusters,
+            criterion=self.auto_criterion,
+            affinity=self.affinity,
+            spectral=self.spectral,
+            n_init=self.n_init,
+            random_state=self.random_state,
+        )
+        if tau_option[1] == AUTO:
+            return choice.tau, choice, None
+        selection = select_r2_target(
+            X, self.n_clusters, choice.to_dict(), self._labels_alone, random_state=self.random_state
+        )
+        return svd.tau_for_r2(selection.r2_target), choice, selection
+
+    def _labels_alone(self, X, r2_target: float) -> np.ndarray:
+        """The labels of a fit of these points alone at ``r2_target`` (held-out selection)."""
+        check_scale(X, X.shape[1] + 1 if self.affine else X.shape[1])
+        svd = self_representation_svd(X, affine=self.affine, ones_weight=self.ones_weight)
+        return cluster_at_tau(
+            svd,
+            svd.tau_for_r2(r2_target),
+            n_clusters=self.n_clusters,
+            affinity=self.affinity,
+            spectral=self.spectral,
+            n_init=self.n_init,
+            random_state=self.random_state,
+        ).labels
 
     def decompose(self, X) -> SelfRepresentationSVD:
         """The SVD of ``Z~`` that :meth:`fit` would compute for ``X``, to share between fits.
@@ -361,18 +399,18 @@ AUTO = "auto"
 
 
 def tau_option_from(tau, tau_relative, r2_target) -> tuple[str, float | str]:
-    """The one tau option given, as ``(kind, value)``; ``("r2_target", 0.99)`` if none,
+    """The one tau option given, as ``(kind, value)``; ``("r2_target", "select")`` if none,
     ``("r2_target", "auto")`` for the label-free choice."""
     given = [
         (k, v) for k, v in (("tau", tau), ("tau_relative", tau_relative), ("r2_target", r2_target)) if v is not None
     ]
     if len(given) > 1:
         raise UserError(f"give at most one of tau, tau_relative, r2_target; got {', '.join(k for k, _ in given)}")
-    kind, value = given[0] if given else ("r2_target", DEFAULT_R2_TARGET)
+    kind, value = given[0] if given else ("r2_target", DEFAULT_TAU_CHOICE)
     if kind == "r2_target" and isinstance(value, str):
-        if value != AUTO:
-            raise UserError(f"r2_target must be a number in (0, 1) or {AUTO!r}, got {value!r}")
-        return kind, AUTO
+        if value not in (AUTO, SELECT):
+            raise UserError(f"r2_target must be a number in (0, 1), {AUTO!r} or {SELECT!r}, got {value!r}")
+        return kind, value
     if kind == "r2_target":
         if not 0 < value < 1:
             raise UserError(f"r2_target must lie in (0, 1), got {value}")

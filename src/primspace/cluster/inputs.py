@@ -46,6 +46,9 @@ class ClusterPoints:
         The number of each point's sample: its index in the data file (a run's codes: the
         run's samples, :mod:`primspace.data.schema` *Sample numbers*); None: the row
         (a data file's trajectories, or codes that belong to no run).
+    raw : ndarray of shape (N, T * J) or None
+        For a run's codes whose data file is readable: the raw trajectories of the same
+        samples (:func:`trajectory_matrix`), to compare the codes' clustering with.
     """
 
     X: np.ndarray
@@ -54,6 +57,7 @@ class ClusterPoints:
     path: Path
     description: str
     samples: np.ndarray | None = None
+    raw: np.ndarray | None = None
 
 
 def trajectory_matrix(motor) -> np.ndarray:

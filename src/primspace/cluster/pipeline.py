@@ -64,8 +64,8 @@ class ClusteringResult:
     ones_weight : float
     tau_option : dict
         The tau option the fit was given, ``{"tau" | "tau_relative" | "r2_target": value}``
-        (``{"r2_target": 0.99}`` when none was; ``{"r2_target": "auto"}`` for the label-free
-        choice).
+        (``{"r2_target": "select"}`` when none was: the held-out selection;
+        ``{"r2_target": "auto"}`` for the label-free choice).
     tau, tau_relative, r2 : float
         As the estimator's ``tau_``, ``tau_relative_``, ``r2_``.
     rank : int
@@ -94,6 +94,11 @@ class ClusteringResult:
         With ``r2_target="auto"``: ``criterion``, the chosen ``r2_target``, the candidate
         ``grid`` and the criterion's ``scores`` (:meth:`AutoTauChoice.to_dict
         <primspace.cluster.auto.AutoTauChoice.to_dict>`); else None.
+    selection : dict or None
+        With ``r2_target="select"``: the candidates, their held-out scores and the chosen
+        ``r2_target`` (:meth:`TauSelection.to_dict
+        <primspace.cluster.select.TauSelection.to_dict>`, the label-free record in its
+        ``auto``); else None.
     """
 
     n_samples: int
@@ -121,6 +126,7 @@ class ClusteringResult:
     figure_indices: np.ndarray = field(repr=False)
     figure_factor: np.ndarray = field(repr=False)
     auto: dict | None = None
+    selection: dict | None = None
 
     def to_dict(self, *, include_arrays: bool = False) -> dict:
         """JSON-ready summary (numpy converted, NaN as None).
@@ -130,7 +136,8 @@ class ClusteringResult:
         ``rank``, ``spectral_method``, ``eigenvalues``, ``singular_values`` (the first
         :data:`SINGULAR_VALUES_SHOWN`), ``n_init``, ``seed``, ``seconds`` (rounded to ms),
         ``scores``, ``sweep`` (rows without labels), and ``auto`` after ``tau_option`` when
-        tau was chosen without labels; with ``include_arrays`` also
+        tau was chosen without labels (``selection`` there instead when chosen by held-out
+        evidence); with ``include_arrays`` also
         ``label_names`` and :meth:`arrays` as lists, enough for :meth:`from_dict`.
         """
         out = {
@@ -142,6 +149,7 @@ class ClusteringResult:
             "ones_weight": self.ones_weight,
             "tau_option": self.tau_option,
             **({} if self.auto is None else {"auto": self.auto}),
+            **({} if self.selection is None else {"selection": self.selection}),
             "tau": self.tau,
             "tau_relative": self.tau_relative,
             "r2": self.r2,
@@ -165,11 +173,13 @@ class ClusteringResult:
     def summary(self) -> dict:
         """``tau``, ``r2``, ``rank``, ``accuracy``, ``nmi``, ``ari``: one row of a results table
         (the scores None without true labels); ``auto_criterion`` too when tau was chosen
-        without labels."""
+        without labels, ``selected_r2_target`` when by held-out evidence."""
         scores = self.scores or {}
         row = {"tau": self.tau, "r2": self.r2, "rank": self.rank} | {
             k: scores.get(k) for k in ("accuracy", "nmi", "ari")
         }
+        if self.selection is not None:
+            return row | {"selected_r2_target": self.selection["r2_target"]}
         return row if self.auto is None else row | {"auto_criterion": self.auto["criterion"]}
 
     def arrays(self) -> dict:
@@ -282,7 +292,8 @@ def _result(model, shape, seconds, labels_true, label_names, rows) -> Clustering
         label_names=None if label_names is None else list(label_names),
         figure_indices=shown,
         figure_factor=model.representation_factor_[shown],
-        auto=None if model.auto_choice_ is None else model.auto_choice_.to_dict(),
+        auto=None if model.auto_choice_ is None or model.selection_ is not None else model.auto_choice_.to_dict(),
+        selection=None if model.selection_ is None else model.selection_.to_dict(),
     )
 
 

@@ -143,7 +143,7 @@ def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, random_
     """Cluster ``codes`` (N, K·q) with :class:`~primspace.cluster.LowRankSubspaceClustering`
     (affine): the cluster of each code (N,) int64, numbered by first member; per cluster, the
     majority label of its members and that label's name (None without labels), which only name it."""
-    from primspace.cluster.estimator import LowRankSubspaceClustering
+    from primspace.cluster.estimator import DEFAULT_R2_TARGET, LowRankSubspaceClustering
 
     codes = np.asarray(codes, dtype=np.float64)
     if (
@@ -155,7 +155,7 @@ def cluster_codes(codes, n_clusters: int, labels=None, label_names=None, random_
             f"the number of clusters must be a whole number in 1..{len(codes)} (the fitted codes), got {n_clusters!r}"
         )
     seed = None if random_state is None else library_seed(random_state, "random_state")  # sklearn takes 0..2**32-1
-    model = LowRankSubspaceClustering(int(n_clusters), affine=True, random_state=seed)
+    model = LowRankSubspaceClustering(int(n_clusters), affine=True, r2_target=DEFAULT_R2_TARGET, random_state=seed)
     raw = model.fit(codes).labels_
     order = list(dict.fromkeys(raw.tolist()))  # by first member
     order += [c for c in range(int(n_clusters)) if c not in order]
