@@ -58,7 +58,7 @@ def test_select_beats_the_fixed_target_where_it_fails_and_records_every_candidat
     sel = model.selection_
     assert sel.r2_targets[: len(SELECT_FIXED_TARGETS)] == SELECT_FIXED_TARGETS
     assert sel.sources[0] == ("default",) and "auto" in sum(sel.sources, ())
-    assert np.all(np.isfinite(sel.scores)) and sel.index == int(np.argmax(sel.scores))
+    assert sel.index == int(np.nanargmax(sel.scores)) and all(r >= 4 for r in sel.ranks)
     assert sel.auto["r2_target"] == model.auto_choice_.r2_target
     # the fit at the chosen target is exactly the fit at that fixed target
     same = LowRankSubspaceClustering(4, r2_target=sel.r2_target, random_state=0).fit(X)
@@ -82,6 +82,22 @@ def test_too_few_points_keep_the_fixed_default_and_say_why():
     assert "too few" in sel.note and sel.to_dict()["candidates"][0]["score"] is None
     one = select_r2_target(X, 3, {"r2_target": 0.99}, lambda part, t: np.zeros(len(part), int), fixed=(0.99,))
     assert one.note == "one candidate" and one.sources == (("default", "auto"),)
+
+
+def test_a_candidate_whose_rank_is_below_k_is_not_scored_while_another_is_eligible():
+    X, _ = planted(0.05, k=3, n_per=10)
+    calls = []
+
+    def labels(part, target):
+        calls.append(target)
+        return np.arange(len(part)) % 3
+
+    ranks = {0.99: 5, 0.7: 2, 0.9999: 9}
+    sel = select_r2_target(X, 3, {"r2_target": 0.9999}, labels, rank_of=ranks.get, repeats=1)
+    assert 0.7 not in calls and np.isnan(sel.scores[1]) and sel.ranks == (5, 2, 9)
+    assert sel.to_dict()["candidates"][1] == {"r2_target": 0.7, "sources": ["fixed"], "rank": 2, "score": None}
+    low = select_r2_target(X, 3, {"r2_target": 0.9999}, labels, rank_of=lambda t: 1, repeats=1)
+    assert np.all(np.isfinite(low.scores))  # none eligible: all scored
 
 
 def test_heldout_stability_rewards_agreement_and_discounts_degenerate_partitions():

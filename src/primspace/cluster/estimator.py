@@ -272,7 +272,12 @@ class LowRankSubspaceClustering(ClusterMixin, BaseEstimator):
         if tau_option[1] == AUTO:
             return choice.tau, choice, None
         selection = select_r2_target(
-            X, self.n_clusters, choice.to_dict(), self._labels_alone, random_state=self.random_state
+            X,
+            self.n_clusters,
+            choice.to_dict(),
+            self._labels_alone,
+            rank_of=lambda target: svd.rank(svd.tau_for_r2(target)),
+            random_state=self.random_state,
         )
         return svd.tau_for_r2(selection.r2_target), choice, selection
 
