@@ -184,3 +184,24 @@ def test_fit_predictor_prints_the_table_and_keeps_the_choice(files, run_cli):
 def test_a_bad_predictor_or_primitive_is_one_line(files, run_cli, tmp_path, flags, fragment):
     assert_user_error(run_cli("predict", files / "run", files / "data.h5", "--out", tmp_path / "o", *flags), fragment)
     assert not (tmp_path / "o").exists()
+
+
+def test_the_priors_decoded_draws_are_kept_and_read_back(files, tmp_path):
+    from primspace.predict.selection_cache import decoded_draws
+    from primspace.train import load_run
+
+    run, codes, calls = load_run(files / "run"), np.random.default_rng(0).normal(size=(5, 18)).astype(np.float32), []
+
+    def decode(values):
+        calls.append(len(values))
+        return np.asarray(values, dtype=np.float32)[:, :4] * 2.0
+
+    first = decoded_draws(tmp_path, run, codes, decode)
+    again = decoded_draws(tmp_path, run, codes, decode)
+    assert calls == [5] and np.array_equal(first, again)  # read back, not decoded again
+    decoded_draws(tmp_path, run, codes[:3], decode)  # other codes: another key
+    assert calls == [5, 3]
+    (kept,) = [p for p in tmp_path.glob("draws-*.npz") if np.load(p)["decoded"].shape[0] == 5]
+    kept.write_bytes(b"not ours")  # a file the command did not write: neither read nor replaced
+    decoded_draws(tmp_path, run, codes, decode)
+    assert calls == [5, 3, 5] and kept.read_bytes() == b"not ours"

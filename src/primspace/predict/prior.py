@@ -57,6 +57,7 @@ from primspace.predict.primitives import (
     top1_accuracy,
 )
 from primspace.predict.prior_stream import PriorStream
+from primspace.predict.selection_cache import decoded_draws
 from primspace.train.api import reconstruct
 from primspace.train.observe import NOTHING, Observation
 from primspace.utils.errors import UserError
@@ -111,6 +112,10 @@ class PriorPredictor(Predictor):
     random_state : int, optional
         Seed of the draws and folds (default: the run's seed).
     progress : bool, optional
+    draws_dir : path-like, optional
+        A folder to keep the decoded draws of :meth:`fit` in and read them back from (the same codes and
+        decoder weights: the same numbers; :func:`~primspace.predict.selection_cache.decoded_draws`);
+        None: decoded every time.
     """
 
     name = PRIOR
@@ -131,6 +136,7 @@ class PriorPredictor(Predictor):
         continuity: bool = True,
         random_state: int | None = None,
         progress: bool | None = False,
+        draws_dir=None,
     ):
         self.run = run
         self.primitive = primitive
@@ -146,6 +152,7 @@ class PriorPredictor(Predictor):
         self.continuity = continuity
         self.random_state = random_state
         self.progress = progress
+        self.draws_dir = draws_dir
 
     @property
     def needs_labels(self) -> bool:
@@ -177,7 +184,7 @@ class PriorPredictor(Predictor):
             enabled=self.progress,
         ):
             # each primitive's prior in code space (GaussianCode), and its draws decoded
-            self.gaussians_, self.ensembles_ = self._ensembles(groups, int(self.n_samples), [self.seed_, 39])
+            self.gaussians_, self.ensembles_ = self._ensembles(groups, int(self.n_samples), [self.seed_, 39], True)
         members = [self.primitives_.members(k) for k in range(self.primitives_.count)]
         self.pairs_ = self._pairs(members)  # the fitted demonstrations with their codes, per primitive
         self.blends_: dict = {}
@@ -225,15 +232,22 @@ class PriorPredictor(Predictor):
             k = len(np.unique(labels[labels >= 0]))
         return primitives_from_clusters(codes, k, labels, self.label_names, random_state=self.seed_)
 
-    def _ensembles(self, groups: list, n: int, seed) -> tuple[list, list[DecodedGaussian]]:
-        """Each primitive's prior fitted on ``groups`` and its ``n`` draws decoded (codes appended)."""
+    def _ensembles(self, groups: list, n: int, seed, keep: bool = False) -> tuple[list, list[DecodedGaussian]]:
+        """Each primitive's prior fitted on ``groups`` and its ``n`` draws decoded (codes appended; ``keep``:
+        the decoded draws kept in :attr:`draws_dir` when it is set)."""
         rng = np.random.default_rng(seed)
         pooled = [g for g in groups if len(g) > 1]
         var = float(np.mean([g.var(axis=0, ddof=1).mean() for g in pooled])) if pooled else 1.0
         family = self.prior_choice_["family"]
         gaussians = [fit_gaussian(g, family, var) for g in groups]
         draws = [g.sample(n, rng) for g in gaussians]
-        decoded = reconstruct(self.run_, np.concatenate(draws).astype(np.float32), images=False, batch_size=1024)[0]
+        codes = np.concatenate(draws).astype(np.float32)
+
+        def decode(codes):
+            return reconstruct(self.run_, codes, images=False, batch_size=1024)[0]
+
+        kept = keep and self.draws_dir is not None
+        decoded = decoded_draws(self.draws_dir, self.run_, codes, decode) if kept else decode(codes)
         scaled = self.run_.scaler.transform(decoded).reshape(len(decoded), -1)
         motion = scaled.shape[1]
         return gaussians, [

@@ -23,13 +23,15 @@ one protocol for every candidate:
 
 The choice is made once per observation rule and kept: in the predictor, and in the run
 folder (:mod:`primspace.predict.selection_cache`, keyed by the fitted data, the task, the
-settings and the code version) with the chosen predictor's own settings, so a later call with
-the same key fits the chosen predictor with those settings and skips every K-fold search.
+settings and the code version) with the chosen predictor's own settings (and the prior's decoded
+draws), so a later call with the same key fits the chosen predictor with those settings, decodes
+nothing the first call decoded, and skips every K-fold search.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
@@ -40,7 +42,7 @@ from primspace.predict.metrics import check_labels, check_lengths, check_motor, 
 from primspace.predict.mixture import MIXTURE, MixturePredictor
 from primspace.predict.primitives import primitives_from_labels
 from primspace.predict.prior import PRIOR, PriorPredictor
-from primspace.predict.selection_cache import choice_key, choice_path, load_choice, save_choice
+from primspace.predict.selection_cache import SELECTION_DIR, choice_key, choice_path, load_choice, save_choice
 from primspace.train.observe import NOTHING, Observation
 from primspace.utils.errors import UserError
 from primspace.utils.progress import stage
@@ -307,6 +309,9 @@ class SelectedPredictor(Predictor):
         predictor = self.build(name, self.run_)
         if name == PRIOR and settings:
             predictor.set_params(**{k: settings[k] for k in ("family", "noise", "temperature", "blend")})
+        run_dir = getattr(self.run_, "run_dir", None)
+        if "draws_dir" in predictor.get_params() and self.reuse and run_dir is not None:  # kept with the choice
+            predictor.set_params(draws_dir=Path(run_dir) / SELECTION_DIR)
         predictor.fit(*self.fitted_)
         if name == MIXTURE and settings:
             predictor.mixture_.choices[(rule.key, bool(predictor.condition))] = dict(settings["choice"])

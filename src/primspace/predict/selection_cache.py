@@ -12,6 +12,10 @@ The file is written atomically (a temporary file, then a rename) and says who wr
 replaced, and one whose recorded key differs from the key asked (a stale file) is ignored and
 written again. A run folder that cannot be written keeps no choice (the prediction is made all
 the same).
+
+The prior's decoded draws (most of what fitting the chosen prior costs) are kept beside the choices
+(:func:`decoded_draws`): ``RUN/selection/draws-<key>.npz``, keyed by the codes drawn and the decoder's
+weights, read back as they were written (the same numbers), under the same rules.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from primspace.utils.errors import UserError
-from primspace.utils.files import atomic_write_json
+from primspace.utils.files import atomic_path, atomic_write_json
 from primspace.utils.outputs import file_writer
 
 __all__ = [
@@ -101,3 +105,41 @@ def save_choice(path: Path, key: str, record: dict) -> bool:
     except (OSError, UserError):
         return False
     return True
+
+
+def _decoder_digest(run) -> str:
+    """A hash of the run's decoder weights."""
+    state = run.model.state_dict()
+    return _digest(*(state[name].detach().cpu().numpy() for name in sorted(state)))
+
+
+def _read_draws(path: Path, key: str) -> tuple[bool, np.ndarray | None]:
+    """(whether ``path`` is a file of kept draws or absent, its decoded motions for ``key`` or None)."""
+    if not path.exists():
+        return True, None
+    try:
+        with np.load(path, allow_pickle=False) as kept:
+            if str(kept["writer"]) != SELECTION_MARK:
+                return False, None
+            return True, (kept["decoded"] if str(kept["key"]) == key else None)
+    except (OSError, ValueError, KeyError):
+        return False, None
+
+
+def decoded_draws(folder, run, codes: np.ndarray, decode) -> np.ndarray:
+    """``decode(codes)`` (the prior's draws through ``run``'s decoder), kept in ``folder``: read back when
+    a file there holds the draws of the same ``codes`` and decoder weights, else decoded and written
+    (atomically; never over a file it did not write, and not at all where ``folder`` cannot be written)."""
+    key = hashlib.sha256(f"{_digest(codes)}|{_decoder_digest(run)}".encode()).hexdigest()
+    path = Path(folder) / f"draws-{key[:20]}.npz"
+    ours, decoded = _read_draws(path, key)
+    if decoded is not None:
+        return decoded
+    decoded = decode(codes)
+    if ours:
+        try:
+            with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                np.savez(f, writer=np.array(SELECTION_MARK), key=np.array(key), decoded=decoded)
+        except (OSError, UserError):
+            pass
+    return decoded
