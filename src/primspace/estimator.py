@@ -191,15 +191,16 @@ class AutoDecoder(BaseEstimator):
     ):
         """The rest of each motion of ``X`` from its observed beginning (docs/predict.md).
 
-        The code is found from the observed entries only (``init``: ``"mixture"``, the
-        posterior mean over the fitted codes, or a start followed by ``epochs`` of
+        The code is found from the observed entries only (``init``: ``"auto"``, the default, the
+        predictor with the lowest K-fold error on the fitted demonstrations; ``"mixture"``, the
+        posterior mean over the fitted codes; ``"prior"``; or a start followed by ``epochs`` of
         gradient inference, :func:`primspace.predict.predict`); the decoder's whole
         sequence is the prediction. ``continuity``: the residual at the last observed step
         decays to zero at the end. ``fitted_data``: the data set the model was fitted on
         (default: the one given to :meth:`fit`, else the run's data file). ``primitive``
         (a name such as ``"push"`` or an id), ``primitives`` (``"labels"`` or ``"clusters"``) and
-        ``n_clusters``: the prior predictor (``init="prior"``), told the primitive of every motion
-        or, without one, weighing its primitives by their posterior
+        ``n_clusters``: the task of auto and the prior predictor (``init="prior"``), told the primitive
+        of every motion or, without one, weighing its primitives by their posterior
         (:func:`primspace.predict.predict`; ``prediction_.details`` holds it).
 
         Returns
