@@ -205,3 +205,31 @@ def test_the_priors_decoded_draws_are_kept_and_read_back(files, tmp_path):
     kept.write_bytes(b"not ours")  # a file the command did not write: neither read nor replaced
     decoded_draws(tmp_path, run, codes, decode)
     assert calls == [5, 3, 5] and kept.read_bytes() == b"not ours"
+
+
+@pytest.mark.parametrize("candidate, given", [(MIXTURE, False), (MIXTURE, True), (PRIOR, False)])
+def test_a_kept_choice_predicts_the_same_numbers_without_searching(files, candidate, given, monkeypatch):
+    """Each candidate refitted with its kept settings (and the prior with its kept draws) predicts as fitted afresh."""
+    from primspace.predict import fit_predictor
+    from primspace.train import load_run
+
+    run, data = load_run(files / "run"), MotionDataset.load(files / "data.h5")
+    scaled, rule = run.scaler.transform(data.motor), Observation.build(0.35)
+
+    def forecast():
+        chosen = SelectedPredictor(run, candidates=(candidate,), prior_samples=SAMPLES, given=given)
+        return fit_predictor(chosen, run).forecast(scaled, rule, data.labels, data.valid_lengths)
+
+    first = forecast()
+    assert first.details["selection"]["reused"] is None and first.details["selection"]["folds"] == 0
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("searched again")
+
+    monkeypatch.setattr("primspace.predict.prior.PriorPredictor._cross_validate", refuse)
+    monkeypatch.setattr("primspace.predict.candidates.CodeMixture.choose_noise", refuse)
+    if candidate == PRIOR:
+        monkeypatch.setattr("primspace.predict.prior.reconstruct", refuse)  # its draws are read back
+    second = forecast()
+    assert second.details["selection"]["reused"] == first.details["selection"]["kept"]
+    np.testing.assert_array_equal(second.motor, first.motor)
