@@ -85,7 +85,7 @@ class Camera:
 
 
 def replay_frames(
-    joints, params, primitive, height: int = 48, width: int = 64, scene: Scene | None = None
+    joints, params, primitive, height: int = 48, width: int = 64, scene: Scene | None = None, scene_values=None
 ) -> np.ndarray:
     """The camera's view of a joint trajectory replayed in the simulator, e.g. a
     generated motion: what :func:`primspace.sim.generate.simulate_sample` renders.
@@ -105,6 +105,10 @@ def replay_frames(
         Frame size in pixels.
     scene : Scene, optional
         A scene to reuse (building one takes ~0.7 s); a new one by default.
+    scene_values : array-like, shape (S,), optional
+        A sample's recorded scene (its row of a data file's ``scene`` array,
+        :mod:`primspace.sim.variation`), set in the scene first, so a varied sample replays
+        in its own scene; ``scene``, if given, must then be built with ``distractor=True``.
 
     Returns
     -------
@@ -113,7 +117,11 @@ def replay_frames(
     from primspace.sim.primitives import get_primitive
     from primspace.sim.rollout import replay
 
-    scene = Scene() if scene is None else scene
+    scene = Scene(distractor=scene_values is not None) if scene is None else scene
+    if scene_values is not None:
+        from primspace.sim.variation import apply_scene
+
+        apply_scene(scene, scene_values)
     joints = np.asarray(joints, dtype=float)
     x, y, size = (float(v) for v in np.asarray(params, dtype=float).reshape(3))
     prim = get_primitive(primitive)
