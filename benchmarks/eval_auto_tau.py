@@ -48,6 +48,7 @@ Run (about 3 minutes on one core)::
 
     python benchmarks/eval_auto_tau.py
     python benchmarks/eval_auto_tau.py --datasets lasa,basicmotions,watch --json auto.json
+    python benchmarks/eval_auto_tau.py --table-from benchmarks/results/eval-auto-tau-select.json
     python benchmarks/eval_auto_tau.py --datasets sim,codes --sim OUT/data.h5 --experiment OUT \
         --code-runs projection:40 --code-seeds 0,1,2 --h5 basicmotions-csv=bm.h5
 """
@@ -278,7 +279,11 @@ def main(argv=None) -> None:
     parser.add_argument("--lasa-length", type=int, default=50)
     parser.add_argument("--watch-length", type=int, default=50)
     parser.add_argument("--json", default=None, help="also write the results (with every sweep row) here")
+    parser.add_argument("--table-from", default=None, help="print the table of stored --json results; compute nothing")
     args = parser.parse_args(argv)
+    if args.table_from:
+        print(format_table(json.loads(Path(args.table_from).read_text(encoding="utf-8"))))
+        return
     results = {}
     with threadpool_limits(limits=1):
         for name, (X, y) in load([s.strip() for s in args.datasets.split(",") if s.strip()], args).items():

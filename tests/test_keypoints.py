@@ -16,7 +16,8 @@ from primspace.model.config import ModelConfig
 from primspace.model.decoder import MTRNNDecoder
 from primspace.model.keypoints import KeypointEncoder, heatmaps, pixel_grid, spatial_softmax
 from primspace.model.precision import KEYPOINT_MODALITIES
-from primspace.train import TrainConfig, fit, infer, load_run
+from primspace.plots import plot_reconstruction
+from primspace.train import TrainConfig, decode_keypoints, fit, infer, load_run
 from primspace.train.loss import DataTensors, batch_loss
 from primspace.train.packed import fit_packed
 from primspace.utils.errors import UserError
@@ -198,11 +199,33 @@ def test_packed_and_captured_steps_carry_the_keypoints(loss_image_set):
         assert np.abs(a.latents - p.latents).max() < 1e-5
 
 
+# ----------------------------------------------------------------- the keypoints as data
+
+
+def test_decoded_keypoints_and_their_dots(loss_image_set):
+    run = fit(loss_image_set, model_config=KP_MODEL, train_config=replace(SHORT, epochs=1), progress=False)
+    points = decode_keypoints(run, batch_size=4)
+    assert points.shape == (6, 6, 3, 2) and points.dtype == np.float32
+    with torch.no_grad():
+        expected = run.model(torch.from_numpy(run.latents), images=False).keypoints.numpy()
+    assert np.allclose(points, expected, atol=1e-6)
+    plain = fit(loss_image_set, model_config=IMAGE_MODEL, train_config=replace(SHORT, epochs=1), progress=False)
+    assert decode_keypoints(plain) is None
+    frames = np.asarray(loss_image_set.images[0])
+    motor = np.asarray(loss_image_set.motor[0])
+    drawn = plot_reconstruction(motor, motor, images=frames, generated_images=frames, generated_keypoints=points[0])
+    dots = [c for ax in drawn.axes for c in ax.collections]
+    assert len(dots) == 6 and all(len(c.get_offsets()) == 3 for c in dots)  # 6 frames shown, 3 dots each
+    assert not [c for ax in plot_reconstruction(motor, motor, images=frames).axes for c in ax.collections]
+
+
 def test_cli_keypoints(run_cli, loss_image_set, tmp_path):
     data = tmp_path / "d.h5"
     loss_image_set.save(data)
     res = run_cli("train", data, "--out", tmp_path / "kp", "--keypoints", "2", "--image-channels", "8,4", *SMALL_ARGS)
     assert res.code == 0, res.err
     assert load_run(tmp_path / "kp").model_config.keypoints == 2
+    res = run_cli("reconstruct", tmp_path / "kp", "--sample", "0", "--out", tmp_path / "kp.png")
+    assert res.code == 0 and (tmp_path / "kp.png").stat().st_size > 0, res.err
     res = run_cli("train", data, "--out", tmp_path / "no", "--keypoints", "2", "--no-images", *SMALL_ARGS)
     assert res.code == 2 and "image head" in res.err and "Traceback" not in res.err

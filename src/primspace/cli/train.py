@@ -418,12 +418,13 @@ def reconstruct_command(
     import numpy as np
 
     from primspace.plots import plot_reconstruction, reconstruction_title, save_figure
-    from primspace.train import reconstruct
+    from primspace.train import decode_keypoints, reconstruct
 
     configure_threads(threads, device)
     out, trained, ds, row = run_sample(run, sample, out, data, frames, overwrite, writer=_RECONSTRUCT_MARK)
     check_finished(trained, allow_unfinished)
     motor, generated = reconstruct(trained, trained.latents[row : row + 1], device=device)  # here, not in plots
+    points = decode_keypoints(trained, trained.latents[row : row + 1], device=device)  # None: no keypoints
     truth = ds.subset([int(sample)])
     images = None if truth.images is None else np.asarray(truth.images)[0]
     primitive = None if truth.labels is None or truth.labels[0] < 0 else truth.label_names[truth.labels[0]]
@@ -432,6 +433,7 @@ def reconstruct_command(
         motor[0],
         images=images,
         generated_images=None if generated is None else generated[0],
+        generated_keypoints=None if points is None else points[0],
         joint_names=truth.joint_names,
         dt=truth.dt,
         n_frames=frames,

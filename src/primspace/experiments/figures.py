@@ -59,6 +59,7 @@ def draw_latent(out_dir: str | Path) -> list[Path]:
             arrays[prefix + "generated_motor"],
             images=arrays.get(prefix + "images"),
             generated_images=arrays.get(prefix + "generated_images"),
+            generated_keypoints=arrays.get(prefix + "generated_keypoints"),
             joint_names=r["joint_names"],
             dt=r["dt"],
             title=plots.reconstruction_title(r["sample"], r["primitive"], r["kind"], r["init"], r["latent_dim"]),

@@ -35,6 +35,7 @@ def plot_motion_sample(
     title: str = "",
     segments: Sequence[tuple[int, int, str]] | None = None,
     observed: np.ndarray | None = None,
+    generated_keypoints: np.ndarray | None = None,
 ) -> Figure:
     """One demonstration: a strip of camera frames above its joint curves.
 
@@ -61,6 +62,9 @@ def plot_motion_sample(
         drawn as coloured bands behind the curves, named above the first panel.
     observed : ndarray (T,) bool, optional
         The observed steps of a prediction: shaded grey, the rest is predicted.
+    generated_keypoints : ndarray (T, K, 2), optional
+        The keypoints the generated frames were drawn through (``x, y`` in [-1, 1],
+        :func:`primspace.train.decode_keypoints`): dots on the generated strip.
     """
     motor = np.asarray(motor)
     t_len, n_joints = motor.shape
@@ -73,7 +77,10 @@ def plot_motion_sample(
     grid = fig.add_gridspec(
         len(strips) + n_rows_j, max(n_frames, 1), height_ratios=[1.2] * len(strips) + [1.6] * n_rows_j
     )
-    _frame_strips(fig, grid, strips, np.linspace(0, t_len - 1, n_frames).round().astype(int))
+    dots = [None] * len(strips)
+    if generated_images is not None and generated_keypoints is not None:
+        dots[-1] = np.asarray(generated_keypoints)
+    _frame_strips(fig, grid, strips, np.linspace(0, t_len - 1, n_frames).round().astype(int), dots)
     sub = grid[len(strips) :, :].subgridspec(n_rows_j, n_cols, hspace=0.6, wspace=0.25)
     axes = _joint_curves(fig, sub, motor, generated_motor, names, n_cols, n_rows_j, dt)
     _step_bands(axes, segments, observed, dt if dt else 1.0)
@@ -82,13 +89,18 @@ def plot_motion_sample(
     return fig
 
 
-def _frame_strips(fig: Figure, grid, strips: list, frame_idx: np.ndarray) -> None:
-    """One row of frames per strip (recorded, then generated), times above the first."""
+def _frame_strips(fig: Figure, grid, strips: list, frame_idx: np.ndarray, dots: list) -> None:
+    """One row of frames per strip (recorded, then generated), times above the first;
+    ``dots[row]`` (T, K, 2) or None: keypoints drawn on that strip's frames."""
     strip_labels = ["recorded", "generated"] if len(strips) == 2 else [None]
-    for row, (strip, label) in enumerate(zip(strips, strip_labels)):
+    for row, (strip, label, points) in enumerate(zip(strips, strip_labels, dots)):
         for col, t in enumerate(frame_idx):
             ax = fig.add_subplot(grid[row, col])
             ax.imshow(np.asarray(strip[t]))
+            if points is not None:
+                h, w = np.asarray(strip[t]).shape[:2]  # [-1, 1] to pixel centres
+                x, y = (points[t, :, 0] + 1) / 2 * w - 0.5, (points[t, :, 1] + 1) / 2 * h - 0.5
+                ax.scatter(x, y, s=9, c="yellow", edgecolors="black", linewidths=0.5)
             ax.set_xticks([])
             ax.set_yticks([])
             if row == 0:
@@ -217,6 +229,7 @@ def plot_reconstruction(
     dt: float | None = None,
     n_frames: int = 8,
     title: str = "",
+    generated_keypoints: np.ndarray | None = None,
 ) -> Figure:
     """Generated against ground-truth joints and frames for one sample (paper Appendix B).
 
@@ -236,6 +249,8 @@ def plot_reconstruction(
         Frames shown per strip.
     title : str
         E.g. :func:`reconstruction_title`.
+    generated_keypoints : ndarray (T, K, 2), optional
+        Keypoints of a model that draws through them: dots on the generated frames.
     """
     return plot_motion_sample(
         motor,
@@ -246,6 +261,7 @@ def plot_reconstruction(
         n_frames=n_frames,
         dt=dt,
         title=title,
+        generated_keypoints=generated_keypoints,
     )
 
 

@@ -38,7 +38,7 @@ The package, one concept per module:
 - :mod:`~primspace.train.streaming`: frames read from the data file batch by batch;
 - :mod:`~primspace.train.distributed`: one model trained by several processes (torchrun);
 - :mod:`~primspace.train.api`: :func:`fit`, :func:`infer`, :func:`reconstruct`,
-  :func:`evaluate`, which accept each other's runs and work in memory unless given a
+  :func:`decode_keypoints`, :func:`evaluate`, which accept each other's runs and work in memory unless given a
   directory;
 
 A run directory holds the configs, ``metrics.jsonl`` (epoch 0 = the codes as initialised,
@@ -62,6 +62,7 @@ _HOME = {
     "fit": "api",
     "infer": "api",
     "reconstruct": "api",
+    "decode_keypoints": "api",
     "evaluate": "api",
     "as_run": "sessions",
     "uses_images": "sessions",
@@ -89,7 +90,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # for type checkers and IDEs
     from primspace.data.indices import read_indices  # noqa: F401
-    from primspace.train.api import evaluate, fit, infer, reconstruct  # noqa: F401
+    from primspace.train.api import decode_keypoints, evaluate, fit, infer, reconstruct  # noqa: F401
     from primspace.train.config import (  # noqa: F401
         TrainConfig,
         TrainingDivergedError,

@@ -43,6 +43,7 @@ __all__ = [
     "fit",
     "infer",
     "reconstruct",
+    "decode_keypoints",
     "evaluate",
     "uses_images",
     "as_run",
@@ -245,12 +246,7 @@ def reconstruct(
     frames : ndarray (n, T, H, W, 3) uint8 or None
     """
     run = as_run(run)
-    z_all = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
-    q = run.model_config.code_size
-    if z_all.ndim != 2 or z_all.shape[1] != q:
-        raise UserError(f"latents must have shape (n, {q}), got {z_all.shape}")
-    if not np.isfinite(z_all).all():
-        raise UserError("latents contain NaN or inf")
+    z_all = _codes(run, latents)
     dev = resolve_device(device)
     motors, frames = [], []
     with _eval_model(run.model, dev) as model:
@@ -263,6 +259,42 @@ def reconstruct(
                 frames.append(out.images.float().mul(255).round_().clamp_(0, 255).to(torch.uint8).cpu().numpy())
     motor = run.scaler.inverse_transform(np.concatenate(motors, 0)).astype(np.float32)
     return motor, (np.concatenate(frames, 0) if want_images else None)
+
+
+def _codes(run: TrainedRun, latents: np.ndarray | None) -> np.ndarray:
+    """The codes to decode: ``latents`` checked (shape, finite), or the run's own."""
+    z_all = run.latents if latents is None else np.asarray(latents, dtype=np.float32)
+    q = run.model_config.code_size
+    if z_all.ndim != 2 or z_all.shape[1] != q:
+        raise UserError(f"latents must have shape (n, {q}), got {z_all.shape}")
+    if not np.isfinite(z_all).all():
+        raise UserError("latents contain NaN or inf")
+    return z_all
+
+
+@torch.no_grad()
+def decode_keypoints(
+    run: TrainedRun | str | os.PathLike,
+    latents: np.ndarray | None = None,
+    *,
+    batch_size: int = 64,
+    device: str = "cpu",
+) -> np.ndarray | None:
+    """The keypoints the decoder predicts for codes (``ModelConfig.keypoints``): the points
+    its frames are drawn through, ``(n, T, K, 2)`` float32 ``(x, y)`` in [-1, 1] (``x`` from
+    the left edge, ``y`` from the top), or None for a model without keypoints. ``latents``,
+    ``batch_size`` and ``device`` as in :func:`reconstruct`."""
+    run = as_run(run)
+    z_all = _codes(run, latents)
+    if not run.model_config.keypoints:
+        return None
+    dev = resolve_device(device)
+    points = []
+    with _eval_model(run.model, dev) as model:
+        for start in range(0, len(z_all), batch_size):
+            z = torch.from_numpy(np.ascontiguousarray(z_all[start : start + batch_size])).to(dev)
+            points.append(model(z, images=False).keypoints.float().cpu().numpy())
+    return np.concatenate(points, 0).astype(np.float32)
 
 
 @torch.no_grad()
