@@ -19,7 +19,8 @@ one protocol for every candidate:
    demonstrations. A candidate's own choices (the mixture's noise, the prior's noise,
    temperature and blend) are made inside each fold on that fold's training demonstrations.
 3. **The lowest error wins**; it is fitted on every fitted demonstration and predicts.
-   ``details["selection"]`` records ``chosen``, every candidate's ``errors`` and ``folds``.
+   ``details["selection"]`` records ``chosen``, every candidate's ``errors`` and ``folds`` (those that
+   held a demonstration out: fewer than asked when every label has fewer members, e.g. 2 with two each).
 
 The choice is made once per observation rule and kept: in the predictor, and in the run
 folder (:mod:`primspace.predict.selection_cache`, keyed by the fitted data, the task, the
@@ -300,7 +301,9 @@ class SelectedPredictor(Predictor):
         finite = {name: e for name, e in errors.items() if np.isfinite(e)}
         chosen = min(finite, key=finite.get) if finite else self.candidates_[0]
         clean = {name: (float(e) if np.isfinite(e) else None) for name, e in errors.items()}
-        return {"chosen": chosen, "errors": clean, "folds": int(self.folds) if finite else 0}
+        fold_of = self.fold_of()
+        used = int(np.unique(fold_of[fold_of >= 0]).size)  # fewer than asked when every label has fewer members
+        return {"chosen": chosen, "errors": clean, "folds": used if finite else 0}
 
     def _refit(self, name: str, rule: Observation, settings: dict) -> Predictor:
         """Candidate ``name`` fitted on every fitted demonstration, with its kept ``settings``."""
