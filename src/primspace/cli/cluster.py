@@ -50,7 +50,7 @@ def cluster_command(
     r2: str | None = typer.Option(
         None,
         "--r2",
-        metavar="TARGET|auto|select",
+        metavar="TARGET",
         help="Smallest tau whose R^2 of Z ~ Z Q* reaches this target in (0, 1); "
         "'auto': the target of the R^2 grid that --auto-criterion prefers, without labels; "
         "'select' (default): 0.99, 0.7 and the 'auto' target compared by their stability across "
