@@ -233,3 +233,22 @@ def test_a_kept_choice_predicts_the_same_numbers_without_searching(files, candid
     second = forecast()
     assert second.details["selection"]["reused"] == first.details["selection"]["kept"]
     np.testing.assert_array_equal(second.motor, first.motor)
+
+
+@pytest.mark.slow
+def test_the_grid_runs_auto_for_both_tasks(files):
+    """The start ``auto`` in the prediction grid: a row without the primitive and one given it."""
+    from primspace.predict.grid import AUTO_ROWS, GIVEN_ROWS, grid_predictions
+    from primspace.train import load_run
+    from test_predict_pinned import CHEAP_PEERS, CHEAP_PRIORS
+
+    run = load_run(files / "run")
+    train, test = MotionDataset.load(files / "train.h5"), MotionDataset.load(files / "data.h5")
+    cheap = {**CHEAP_PRIORS, "prior": {"n_samples": SAMPLES}}
+    kept = sorted((files / "run").rglob("*"))
+    table = grid_predictions(
+        run, train, test, (0.3,), starts=(AUTO,), epochs=1, prior_settings=cheap, peer_settings=CHEAP_PEERS
+    )
+    assert set(AUTO_ROWS) <= set(table) and "auto (labels)" in GIVEN_ROWS and AUTO not in GIVEN_ROWS
+    assert all(np.isfinite(table[row]["0.3"]) for row in AUTO_ROWS)
+    assert sorted((files / "run").rglob("*")) == kept  # the grid keeps nothing in the run folder

@@ -29,6 +29,7 @@ from primspace.predict.posterior import top1_accuracy
 from primspace.predict.prior import PriorPredictor
 from primspace.predict.prior_map import PriorMapPredictor
 from primspace.predict.registry import fit_predictor, make_predictor, run_predictor
+from primspace.predict.selection import AUTO, SelectedPredictor
 from primspace.train.observe import Observation
 from primspace.train.run import TrainedRun
 from primspace.train.starts import fitted_samples
@@ -49,6 +50,7 @@ __all__ = [
     "TUNED_PEERS",
     "PEER_SETTINGS",
     "posterior_accuracy",
+    "AUTO_ROWS",
 ]
 
 #: The Gaussian peers' rows, their settings chosen on the fitted demonstrations: (row, class, given the labels).
@@ -89,9 +91,13 @@ PRIOR_ROWS = (
     "encoder (labels)",
     "encoder (posterior)",
 )
+#: The rows of the start ``auto`` (the default of ``predict``, chosen by held-out evidence): without the
+#: primitive, and given the test motion's primitive (with labels only); nothing kept in the run folder.
+AUTO_ROWS = (AUTO, "auto (labels)")
 #: The rows given the test motion's primitive (the task with the primitive given; the others are label-free
 #: at test time).
 GIVEN_ROWS = (
+    "auto (labels)",
     "prior (labels)",
     "prior MAP (labels)",
     "encoder (labels)",
@@ -167,7 +173,8 @@ def grid_predictors(
     peer_settings: dict | None = None,
 ) -> dict[str, Predictor]:
     """Every row, fitted once on ``run``'s fitted demonstrations (read from ``fitted_data``, the
-    data set it was fitted on): ``starts`` (gradient starts and ``mixture``: all its rows), then the
+    data set it was fitted on): ``starts`` (gradient starts, ``mixture``: all its rows, and ``auto``:
+    :data:`AUTO_ROWS`, its draws per primitive ``prior_settings["prior"]["n_samples"]``), then the
     peers, then (with labels) the priors' rows; ``prior_settings``: keywords of the priors' rows'
     constructors by kind, ``{"prior": {...}, "map": {...}, "encoder": {...}}`` (:data:`PRIOR_SETTINGS`;
     default: the predictors' own, as the experiment runs them; tests pass smaller ones); ``peer_settings``
@@ -177,6 +184,12 @@ def grid_predictors(
     rows: dict[str, Predictor] = {}
     candidates = code_mixture(run) if MIXTURE in starts else None
     for start in starts:
+        if start == AUTO:
+            samples = _check_prior_settings(prior_settings)["prior"].get("n_samples")
+            for name, given in zip(AUTO_ROWS, (False, True)):
+                if not given or fitted.labels is not None:
+                    rows[name] = SelectedPredictor(run, given=given, prior_samples=samples, reuse=False)
+            continue
         if start != MIXTURE:
             rows[start] = make_predictor(run, start, epochs=epochs, continuity=True, progress=False)
             continue
