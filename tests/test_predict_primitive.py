@@ -165,6 +165,7 @@ def test_the_command_predicts_every_motion_as_the_primitive_asked(run_cli, files
     assert "every motion as primitive push" in res.out
     result = json.loads((tmp_path / "push" / "result.json").read_text())
     assert result["init"] == PRIOR and result["primitive"] == "push" and result["command"]["primitive"] == "push"
+    assert result["epochs"] == 0 and result["command"]["epochs"] is None  # says what ran, not --epochs' default
     assert result["prior"]["primitives"]["names"] == NAMES and "posterior" not in result
     assert not (tmp_path / "push" / "posterior.png").exists()
     assert _cli(run_cli, files, tmp_path / "lift", "--primitive", "2", "--init", "prior").code == 0  # an id

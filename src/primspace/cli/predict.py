@@ -238,7 +238,8 @@ def predict_command(
             (5 if iterations is None else iterations) if online else None,
             common,
         )
-        command = {"run": str(run), "data": str(file), "epochs": epochs, **command}
+        # --epochs as read: None where no epoch ran (the mixture and the prior do not read it)
+        command = {"run": str(run), "data": str(file), "epochs": epochs if prediction.epochs else None, **command}
         predicted = prediction.to_dataset(dataset)
         judged = None if no_judge else _judged(predicted)
         result = _write_outputs(tmp, prediction, predicted, dataset, judged, command)
