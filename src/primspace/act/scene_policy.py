@@ -27,11 +27,11 @@ every later step of :attr:`steps` a second Gaussian process per primitive predic
 features the camera will see at that step from the belief (the arm comes into view, the
 fingers cover the block, a push moves it), fitted on the demonstrations' frames; its
 leave-one-out residual spread on them (root mean square per feature, exact for a Gaussian
-process, floored at :data:`SURPRISE_FLOOR`) is the scale of a surprise. At a planning step
+process, floored at :attr:`floor`) is the scale of a surprise. At a planning step
 the error between the features seen and those predicted is the surprise; when one feature's
 error exceeds :attr:`threshold` times its scale the belief is corrected by the error
 (:meth:`correct`) and the motion is planned again from it; otherwise the plan stands. A frame
-in which less than :data:`VISIBLE` of the believed block's colour mass is seen (the fingers
+in which less than :attr:`visible` of the believed block's colour mass is seen (the fingers
 cover it) is not compared: the centroid of a covered block is not where the block is.
 
 A new plan's steps after the last executed one are moved to continue from it: the residual
@@ -46,11 +46,10 @@ the fitted labels or, without labels, clusters of the run's fitted codes (``prim
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from primspace.act.frame_features import ColourBlob, frame_features
+from primspace.act.gp_map import GaussianMap, gaussian_process
 from primspace.act.planner import DEFAULT_EVERY
 from primspace.act.planners import PolicyPlanner
 from primspace.data import MotionDataset
@@ -92,42 +91,6 @@ VISIBLE = 0.6
 SURPRISE_FLOOR = 0.25
 
 
-def _gaussian_process(seed: int):
-    from sklearn.gaussian_process import GaussianProcessRegressor
-    from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
-
-    def make(n_features: int):
-        kernel = ConstantKernel(1.0) * RBF(length_scale=np.ones(n_features)) + WhiteKernel(1e-2)
-        return GaussianProcessRegressor(kernel, n_restarts_optimizer=2, random_state=seed)
-
-    return make
-
-
-class _Map:
-    """One Gaussian process from standardised features to standardised targets."""
-
-    def __init__(self, x: np.ndarray, y: np.ndarray, make):
-        self.x_mean, self.x_std = x.mean(axis=0), x.std(axis=0) + 1e-9
-        self.y_mean, self.y_std = y.mean(axis=0), y.std(axis=0) + 1e-6
-        self.gp = make(x.shape[1])
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # bounds reached by the optimiser: the fit is still used
-            self.gp.fit((x - self.x_mean) / self.x_std, (y - self.y_mean) / self.y_std)
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        return self.gp.predict((np.atleast_2d(x) - self.x_mean) / self.x_std) * self.y_std + self.y_mean
-
-    def held_out_residuals(self) -> np.ndarray:
-        """(n, d) leave-one-out residuals of the fitted targets, original units: for a Gaussian
-        process with kernel matrix ``K`` (noise included), ``[K⁻¹y]_i / [K⁻¹]_ii`` (exact, no refit)."""
-        from scipy.linalg import solve_triangular
-
-        inverse_l = solve_triangular(self.gp.L_, np.eye(len(self.gp.L_)), lower=True)
-        diagonal = (inverse_l**2).sum(axis=0)  # diag of K⁻¹ = L⁻ᵀ L⁻¹
-        alpha = self.gp.alpha_.reshape(len(diagonal), -1)
-        return alpha / diagonal[:, None] * self.y_std
-
-
 class ScenePolicy(Predictor):
     """A motion from a camera frame and the primitive; corrected by what it did not predict
     (module docstring).
@@ -147,6 +110,11 @@ class ScenePolicy(Predictor):
         A surprise larger than this many scales corrects the belief.
     horizon : int
         Steps over which a new plan joins the executed motion.
+    visible : float
+        The share of the believed block's colour mass a frame must show to be compared (below:
+        hidden, not compared).
+    floor : float
+        The smallest scale of a feature's surprise.
     primitive : str or int, optional
         The primitive of every motion; None: each motion's label (``labels`` of :meth:`predict`).
     label_names : list of str, optional
@@ -177,6 +145,8 @@ class ScenePolicy(Predictor):
         random_state=0,
         primitives="labels",
         n_clusters=None,
+        visible: float = VISIBLE,
+        floor: float = SURPRISE_FLOOR,
     ):
         self.run = run
         self.features = features
@@ -189,6 +159,8 @@ class ScenePolicy(Predictor):
         self.random_state = random_state
         self.primitives = primitives
         self.n_clusters = n_clusters
+        self.visible = visible
+        self.floor = floor
 
     # -- fit ------------------------------------------------------------------------------
     def fit(self, motor, labels=None, lengths=None, frames=None) -> ScenePolicy:
@@ -207,20 +179,20 @@ class ScenePolicy(Predictor):
         self.extractor_ = frame_features(self.features).fit(frames[:, 0])
         first = self.extractor_.transform(frames[:, 0])
         targets = self._targets(motor)
-        make = _gaussian_process(library_seed(self.random_state, "random_state"))
-        self.maps_, self.expected_, self.scales_ = {}, {}, {}
+        make = gaussian_process(library_seed(self.random_state, "random_state"))
+        self.maps_, self.expected_, self.spreads_ = {}, {}, {}
         for k in range(self.primitives_.count):
             rows = self.primitives_.members(k)
             if len(rows) < 2:
                 raise UserError(f"primitive {self.primitives_.names[k]} has {len(rows)} demonstration: at least 2")
-            self.maps_[k] = _Map(first[rows], targets[rows], make)
+            self.maps_[k] = GaussianMap(first[rows], targets[rows], make)
         for t in self.steps_[1:]:
             seen = self.extractor_.transform(frames[:, t])
             for k in range(self.primitives_.count):
                 rows = self.primitives_.members(k)
-                self.expected_[t, k] = _Map(first[rows], seen[rows], make)
+                self.expected_[t, k] = GaussianMap(first[rows], seen[rows], make)
                 residual = self.expected_[t, k].held_out_residuals()
-                self.scales_[t, k] = np.maximum(np.sqrt((residual**2).mean(axis=0)), SURPRISE_FLOOR)
+                self.spreads_[t, k] = np.sqrt((residual**2).mean(axis=0))
         self.shape_ = motor.shape[1:]
         return self
 
@@ -264,6 +236,10 @@ class ScenePolicy(Predictor):
             raise UserError(f"threshold must be a number > 0, got {self.threshold!r}")
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) or self.horizon < 1:
             raise UserError(f"horizon must be a whole number of steps >= 1, got {self.horizon!r}")
+        for name, low in (("visible", 0.0), ("floor", 0.0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not value >= low:
+                raise UserError(f"{name} must be a number >= {low:g}, got {value!r}")
 
     @staticmethod
     def _frames(frames, m: int, length: int) -> np.ndarray:
@@ -319,14 +295,18 @@ class ScenePolicy(Predictor):
         key = (int(step), int(primitive))
         if key not in self.expected_:
             return np.zeros_like(np.asarray(seen, dtype=np.float64))
-        return (np.asarray(seen) - self.expected_[key](belief)[0]) / self.scales_[key]
+        return (np.asarray(seen) - self.expected_[key](belief)[0]) / self.scale(step, primitive)
+
+    def scale(self, step: int, primitive: int) -> np.ndarray:
+        """The scale (d,) of a surprise at ``step``: the leave-one-out spread floored at :attr:`floor`."""
+        return np.maximum(self.spreads_[int(step), int(primitive)], float(self.floor))
 
     def hidden(self, belief: np.ndarray, seen: np.ndarray) -> bool:
         """Whether the block is mostly hidden in ``seen``: with the colour features, its mass below
-        :data:`VISIBLE` of the belief's (a centroid of a covered block is not where the block is)."""
+        :attr:`visible` of the belief's (a centroid of a covered block is not where the block is)."""
         if not isinstance(self.extractor_, ColourBlob):
             return False
-        return float(seen[0]) < VISIBLE * float(np.asarray(belief)[0])
+        return float(seen[0]) < float(self.visible) * float(np.asarray(belief)[0])
 
     def correct(self, primitive: int, step: int, belief: np.ndarray, seen: np.ndarray) -> np.ndarray | None:
         """The corrected belief (d,) when the surprise of ``seen`` at ``step`` exceeds the threshold and
@@ -336,7 +316,7 @@ class ScenePolicy(Predictor):
         error = self.surprise(primitive, step, belief, seen)
         if np.abs(error).max() <= float(self.threshold):
             return None
-        return np.asarray(belief, dtype=np.float64) + error * self.scales_[int(step), int(primitive)]
+        return np.asarray(belief, dtype=np.float64) + error * self.scale(step, primitive)
 
     def replan(self, primitive: int, belief: np.ndarray, executed: np.ndarray) -> np.ndarray:
         """One motion (T, J) scaled planned from ``belief`` and continued from ``executed`` (s+1, J) scaled."""
@@ -378,6 +358,8 @@ class ScenePolicy(Predictor):
             "steps": list(self.steps_),
             "threshold": float(self.threshold),
             "horizon": int(self.horizon),
+            "visible": float(self.visible),
+            "floor": float(self.floor),
             "primitives": self.primitives_.summary(),
             "source": self.primitives_.source,
         }
