@@ -73,7 +73,7 @@ def test_no_help_text_is_folded_mid_word(run_cli, monkeypatch):
 def test_a_choice_shows_its_name_and_its_help_lists_the_choices(run_cli, monkeypatch):
     text = " ".join(_BORDER.sub(" ", _help(run_cli, monkeypatch, ("train",), 200)).split())
     assert "<zero|random" not in text
-    assert "INIT" in text and "One of: zero, random, projection, pca, calibrated." in text
+    assert "INIT" in text and "One of: zero, random, projection, pca, calibrated, projection-vision." in text
 
 
 @pytest.mark.parametrize("path", [(), ("train",), ("predict",), ("demo",)])

@@ -33,6 +33,7 @@ class LatentInit(str, Enum):
     projection = "projection"
     pca = "pca"
     calibrated = "calibrated"
+    projection_vision = "projection-vision"
 
 
 class LossReduction(str, Enum):
@@ -214,7 +215,10 @@ def _launch(tc: TrainConfig, call) -> None:
         typer.echo(_run_summary(run))
 
 
-_TRAIN_INIT_HELP = "How the latent codes start (calibrated: only with --weights-from a projection or pca run)."
+_TRAIN_INIT_HELP = (
+    "How the latent codes start (calibrated: only with --weights-from a projection or pca run; "
+    "projection-vision: the motor and the keypoints of the frames, data with frames)."
+)
 #: The help of train's options that are plain TrainConfig fields.
 _HELP = {
     "seed": "Seeds the weights, the projection P, random codes and the batch order (same seed, same machine: same "

@@ -62,8 +62,9 @@ CALIBRATED = "calibrated"
 #: The initialisers whose codes depend on the data, so a map from them to fitted codes means something.
 CALIBRATABLE = ("projection", "pca")
 
-#: Every way codes can start: the initialisers, then the calibrated start.
-START_METHODS = INIT_METHODS + (CALIBRATED,)
+#: Every way codes can start: the initialisers, the calibrated and the vision (train/vision_start.py) starts.
+VISION_PROJECTION = "projection-vision"
+START_METHODS = INIT_METHODS + (CALIBRATED, VISION_PROJECTION)
 
 #: A start for inference only: the fitted code of the fitted demonstration whose (observed)
 #: motor is nearest (:mod:`primspace.train.observe`); meaningful only with a fitted parent run.

@@ -22,6 +22,7 @@ import torch
 from primspace.data import JointScaler
 from primspace.model.calibration import CodeCalibration
 from primspace.model.latent import LatentInitializer
+from primspace.train.vision_start import initializer_from_state
 from primspace.utils.errors import UserError
 
 __all__ = [
@@ -107,7 +108,7 @@ def unpack_checkpoint(state: dict, where: str | Path = "checkpoint") -> Checkpoi
             latents=state["latents"],
             initial_codes=state["initial_codes"],
             scaler=JointScaler.from_dict(state["scaler"]),
-            initializer=LatentInitializer.from_state_dict(state["initializer"]),
+            initializer=initializer_from_state(state["initializer"]),
             rng=state["rng"],
             config=state["config"],
             calibration=None

@@ -154,10 +154,10 @@ def fit_session(*args, **kwargs) -> tuple[Session, dict | None]:
         scaler = parent.scaler if parent is not None else scaler or JointScaler().fit(data.motor)
         model = _new_model(mc, seeds["model"], None if parent is None else parent.model.state_dict())
         scaled = scaler.transform(data.motor)
-        initializer = run_initializer(init, parent, mc, scaled, seeds)
+        initializer = run_initializer(init, parent, mc, scaled, seeds, data)
         model.to(device)
         theta_opt = theta_optimizer(model, tc)
-        codes = initial_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents)
+        codes = initial_codes(init, parent, initializer, scaled, seeds["codes_fit"], initial_latents, data)
         table = LatentTable(torch.from_numpy(codes.astype(np.float32)).to(device), tc.latent_lr, optimizer=tc.optimizer)
     session = Session(
         store=store,

@@ -15,6 +15,9 @@ each new sample's code from what was observed of it (:mod:`primspace.train.obser
   (:func:`observed_calibration`);
 * ``nearest``: the fitted code of the fitted demonstration whose motor is nearest over the
   new sample's observed steps (Euclidean, scaled units; :func:`nearest_codes`);
+* ``projection-vision``: the run's motor projection plus the projection of the samples' keypoint
+  trajectories through its frozen keypoint encoder (:mod:`primspace.train.vision_start`);
+  only from a run fitted with it;
 * ``calibrated`` with no joints observed (``observe="none"``) and frames observed: a random
   projection of the observed frames minus the run's mean frame, mapped to the fitted codes
   by a calibration fitted the same way (:mod:`primspace.train.frames_start`).
@@ -34,10 +37,11 @@ import numpy as np
 from primspace.data import MotionDataset
 from primspace.model.calibration import CodeCalibration
 from primspace.model.config import ModelConfig
-from primspace.model.latent import CALIBRATABLE, CALIBRATED, NEAREST, LatentInitializer
+from primspace.model.latent import CALIBRATABLE, CALIBRATED, NEAREST, VISION_PROJECTION, LatentInitializer
 from primspace.train.frames_start import check_frames_start, frames_start, frames_start_codes
 from primspace.train.observe import NOTHING, Observation, observation_masks
 from primspace.train.rundata import load_fitted_data
+from primspace.train.vision_start import VISION_KEYPOINTS, VisionProjection
 from primspace.utils.errors import UserError
 
 __all__ = [
@@ -45,6 +49,7 @@ __all__ = [
     "derived_seeds",
     "run_initializer",
     "initial_codes",
+    "start_codes",
     "inference_start",
     "fitted_start",
     "observed_calibration",
@@ -96,12 +101,29 @@ def derived_seeds(seed: int) -> dict:
     return {name: int(v) for name, v in zip(names, values)}
 
 
-def run_initializer(init: str, parent, mc: ModelConfig, scaled: np.ndarray, seeds: dict) -> LatentInitializer:
+def run_initializer(
+    init: str, parent, mc: ModelConfig, scaled: np.ndarray, seeds: dict, data: MotionDataset | None = None
+) -> LatentInitializer | VisionProjection:
     """The parent's initialiser for the same init (its ``P``); otherwise one fitted here
-    (one code per window of ``mc.code_window`` steps when set)."""
+    (one code per window of ``mc.code_window`` steps when set; ``projection-vision`` also
+    fits its keypoint encoder on ``data``'s frames, K = ``mc.keypoints`` or
+    :data:`~primspace.train.vision_start.VISION_KEYPOINTS`)."""
     if parent is not None and init in (parent.init, CALIBRATED, NEAREST):
         return parent.initializer
+    if init == VISION_PROJECTION:
+        images, lengths = (None, None) if data is None else (data.images, data.valid_lengths)
+        k = mc.keypoints or VISION_KEYPOINTS
+        vision = VisionProjection(mc.latent_dim, k, random_state=seeds["projection"], window=mc.code_window)
+        return vision.fit(scaled, images, lengths)
     return LatentInitializer(init, mc.latent_dim, random_state=seeds["projection"], window=mc.code_window).fit(scaled)
+
+
+def start_codes(initializer, scaled: np.ndarray, data: MotionDataset | None, **kwargs) -> np.ndarray:
+    """``initializer.transform(scaled, **kwargs)``, with ``data``'s frames for ``projection-vision``."""
+    if isinstance(initializer, VisionProjection):
+        images, lengths = (None, None) if data is None else (data.images, data.valid_lengths)
+        return initializer.transform(scaled, images=images, lengths=lengths, **kwargs)
+    return initializer.transform(scaled, **kwargs)
 
 
 def initial_codes(
@@ -111,10 +133,12 @@ def initial_codes(
     scaled: np.ndarray,
     seed: int,
     initial_latents: np.ndarray | None = None,
+    data: MotionDataset | None = None,
 ) -> np.ndarray:
     """The starting codes (float64) without an observation rule: the initialiser's, mapped by the
-    parent's calibration for ``calibrated``; rows of ``initial_latents`` without NaN replace them."""
-    codes = initializer.transform(scaled, random_state=seed)
+    parent's calibration for ``calibrated``; rows of ``initial_latents`` without NaN replace them;
+    ``data``: the samples (their frames, for ``projection-vision``)."""
+    codes = start_codes(initializer, scaled, data, random_state=seed)
     codes = (parent.calibration.transform(codes) if init == CALIBRATED else codes).astype(np.float64)
     return _given(codes, initial_latents)
 
@@ -144,6 +168,11 @@ def inference_start(
     NaN replace the start's (when every row is given, the start is not computed).
     """
     seeds = derived_seeds(seed)
+    if init == VISION_PROJECTION and parent.init != VISION_PROJECTION:
+        raise UserError(
+            f"init 'projection-vision' infers through the keypoint encoder of a run fitted with it; "
+            f"this run was fitted with {parent.init!r}: start by {parent.init!r} or 'nearest'"
+        )
     observed = None
     if observation is not None or init == NEAREST:
         observed = observation_masks(observation, data)[0]
@@ -152,7 +181,8 @@ def inference_start(
     if initial_latents is not None and not np.isnan(initial_latents).any():  # every row given
         return initializer, np.asarray(initial_latents, dtype=np.float64).copy()
     if observed is None:
-        return initializer, initial_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents)
+        codes = initial_codes(init, parent, initializer, scaled, seeds["codes_infer"], initial_latents, data)
+        return initializer, codes
     codes = _observed_start(
         parent, init, initializer, data, scaled, observed, observation, fitted_data, seeds["codes_infer"]
     )
@@ -169,7 +199,7 @@ def _observed_start(parent, init, initializer, data, scaled, observed, observati
         )
     if init in STARTS_FROM_FITTED:  # calibrated (from the joints, or from the frames alone) and nearest
         return fitted_start(parent, init, _fitted(parent, fitted_data), data, scaled, observed, observation)
-    return initializer.transform(scaled, random_state=seed, observed=observed).astype(np.float64)
+    return start_codes(initializer, scaled, data, random_state=seed, observed=observed).astype(np.float64)
 
 
 def _fitted(parent, fitted_data: MotionDataset | None) -> FittedDemonstrations:
