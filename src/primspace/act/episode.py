@@ -21,7 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Episode", "BlockMove", "run_episode"]
+__all__ = ["Episode", "BlockMove", "MOVE_AT", "drawn_move", "run_episode"]
+
+#: When the closed loop's block is moved, as fractions of the motion, declared before any run: 20 %
+#: (before any primitive's judged phase begins) and 30 % (where the circles' judged phase begins).
+MOVE_AT = (0.2, 0.3)
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,16 @@ class Episode:
             },
             "move": None if self.move is None else self.move.to_dict(),
         }
+
+
+def drawn_move(at: float, rng: np.random.Generator, x: float, y: float, size: float, length: int) -> BlockMove:
+    """A seeded 2-4 cm move of the block at ``(x, y)`` (edge ``size``) before step ``round(at (length - 1))``
+    (:class:`~primspace.sim.execute.Perturbation`), drawn from ``rng``."""
+    from primspace.sim.execute import Perturbation
+
+    perturbation = Perturbation(at=float(at))
+    _, dx, dy = perturbation.draw(rng, x, y, size)
+    return BlockMove(perturbation.step_index(length), dx, dy)
 
 
 def run_episode(

@@ -131,15 +131,16 @@ def _preset_of(preset: str | None, preset_names: str | None) -> str | None:
     return names.get(preset or experiment_presets.DEFAULT_PRESET, preset)
 
 
-def _run_steps(exp, name: str, steps: tuple[str, ...], table: str | None) -> None:
-    """Run each step (``module:function`` of :mod:`primspace.experiments`) on ``exp``, then
-    print ``table`` of the first step's results."""
+def _run_steps(exp, name: str, steps: tuple[str, ...], table: str | None, options: dict | None = None) -> None:
+    """Run each step (``module:function`` of :mod:`primspace.experiments`) on ``exp`` (with the
+    keyword ``options``), then print ``table`` of the first step's results."""
     import importlib
 
     results = []
     for step in _judgeable_steps(exp, name, steps):
         module, function = step.split(":")
-        results.append(getattr(importlib.import_module(f"primspace.experiments.{module}"), function)(exp))
+        run = getattr(importlib.import_module(f"primspace.experiments.{module}"), function)
+        results.append(run(exp, **(options or {})))
     if table is not None:  # "function" of results.tables, or "module:function" of another module of results
         module, _, function = table.rpartition(":")
         tables = importlib.import_module(f"primspace.results.{module or 'tables'}")
@@ -159,6 +160,21 @@ _PACK_HELP = (
     "Train up to N runs of the intra-primitive grid at once on one device, packed (primspace.train.packed; "
     "within float tolerance of each run alone, not bit-identical). Default 1: each run alone."
 )
+
+
+_MOVE_AT_HELP = "experiment act: when the block is moved, fractions of the motion (default 0.2,0.3)."
+
+
+def _act_options(name: str, move_at: str | None) -> dict:
+    """The keyword options of ``experiment act`` (``--move-at``, checked before any work); one
+    UserError when another experiment is given one."""
+    if move_at is None:
+        return {}
+    if name != "act":
+        raise UserError(f"--move-at is an option of experiment act, not of experiment {name}")
+    from primspace.experiments.act import check_move_at
+
+    return {"move_at": check_move_at(move_at)}
 
 
 #: How a grid's runs step (the preset's TrainConfig): the options of every experiment command.
@@ -224,7 +240,9 @@ def _experiment_command(
         report: bool = typer.Option(True, "--report/--no-report", help="Write OUT/report.html at the end."),
         device: str | None = device_option(None, _RUN_DEVICE_HELP),
         threads: int | None = threads_option(None, _RUN_THREADS_HELP),
+        move_at: str | None = typer.Option(None, "--move-at", help=_MOVE_AT_HELP),
     ) -> None:
+        options = _act_options(name, move_at)
         stepping = (optimizer, lr, latent_lr, step)
         overrides = _overrides(
             name, latent_dims, inits, seeds, epochs, images, vision_frames, loss_reduction, device, threads, stepping
@@ -232,7 +250,7 @@ def _experiment_command(
         exp = _experiment(
             _preset_of(preset, preset_names), data, out, backend, address, workers, seed, overrides, pack=pack
         )
-        _run_steps(exp, name, steps, table)
+        _run_steps(exp, name, steps, table, options)
         _finish(exp, report or name == "all")
 
     command.__doc__ = doc

@@ -23,13 +23,18 @@ is scored by the MSE of the steps after the first (scaled units) and by the simu
 * ``reproduction (whole motion)``: the run's codes inferred from the whole motion, decoded
   (the ceiling of anything decoded by this run).
 
-**Closed loop** (:mod:`primspace.act`): the block is moved by a seeded 2-4 cm at 30 % of the
-motion (:class:`~primspace.sim.execute.Perturbation`; one draw per sample and seed, the same
-for every row) and each planner executes in MuJoCo: ``closed loop`` (the scene policy asked
-every :data:`ACT_EVERY` steps with the current frame), ``open loop`` (its first plan replayed),
-``ProMP re-conditioned`` (a ProMP of the primitive conditioned on every executed step, every
-:data:`ACT_EVERY` steps; it does not see), and ``closed loop (no move)``: the closed loop
-without the perturbation.
+**Closed loop** (:mod:`primspace.act`): the block is moved by a seeded 2-4 cm at each fraction of
+the motion of ``move_at`` (:data:`~primspace.act.episode.MOVE_AT`: 20 % and 30 %, declared before
+the runs; one draw per sample and seed, the same for every row and fraction) and each planner
+executes in MuJoCo: ``closed loop`` (the scene policy asked every ``every`` steps with the current
+frame), ``open loop`` (its first plan replayed), ``ProMP re-conditioned`` (a ProMP of the
+primitive conditioned on every executed step; it does not see), ``contextual ProMP re-planned
+(sees)`` (:class:`~primspace.act.planners.SeeingProMPPlanner`: the contextual ProMP on the
+block features, re-planned from each due frame and conditioned on the executed joints), one row
+each per fraction (``closed loop, moved at 20 %``), and ``closed loop (no move)``. The closed
+loop's settings (threshold, horizon, ``every``, the surprise's floor, ``visible``) are chosen on
+the fitted demonstrations only (:class:`~primspace.act.tuning.LoopTuner`, recorded under
+``loop_tuning``); the two ProMP planners look as often as the closed loop.
 
 **What the model contributes.** Every row's entries carry ``model_share``, the share of its motion
 that comes through the run's decoder (:func:`primspace.predict.registry.model_share`): 1 for the
@@ -41,7 +46,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from primspace.act.planners import DEFAULT_EVERY, PLANNERS
+from primspace.act.episode import MOVE_AT
+from primspace.act.planner import check_every
+from primspace.act.planners import DEFAULT_EVERY, PLANNERS, SEEING_PROMP
 from primspace.data import MotionDataset
 from primspace.experiments.intra import run_intra
 from primspace.experiments.prediction import PREDICT_MAX_SAMPLES, judgeable, predicted_subset, projection_seeds
@@ -60,6 +67,8 @@ __all__ = [
     "SCENE_ROWS",
     "KERNEL_RIDGE",
     "LOOP_ROWS",
+    "MOVE_AT",
+    "loop_rows",
     "run_act",
     "run_act_point",
     "act_summary",
@@ -70,7 +79,7 @@ __all__ = [
 #: Steps between two looks in closed loop (:data:`primspace.act.planners.DEFAULT_EVERY`).
 ACT_EVERY = DEFAULT_EVERY
 #: Bumped when a grid point's content changes: points of another version are not reused.
-ACT_VERSION = 4
+ACT_VERSION = 5
 POLICY, POLICY_CODE = "scene policy", "scene policy (code)"
 KERNEL_RIDGE = "kernel ridge (blob, K-fold)"
 PROMP_PIXELS, PROMP_BLOB = "contextual ProMP (pixels)", "contextual ProMP (blob)"
@@ -79,8 +88,22 @@ NEAREST, MEAN_MOTION, REPRODUCTION = "nearest first frame", "mean motion (labels
 SCENE_ROWS = (POLICY, POLICY_CODE, KERNEL_RIDGE, PROMP_PIXELS, PROMP_BLOB, NEAREST, MEAN_MOTION, REPRODUCTION)
 CLOSED, OPEN, PROMP_LOOP = PLANNERS
 CLOSED_STILL = f"{CLOSED} (no move)"
-#: The closed-loop rows (the first three with the block moved), in order.
-LOOP_ROWS = (CLOSED, OPEN, PROMP_LOOP, CLOSED_STILL)
+#: The planners whose rows are repeated for each fraction of the move.
+MOVED_PLANNERS = (CLOSED, OPEN, PROMP_LOOP, SEEING_PROMP)
+
+
+def moved_row(planner: str, at: float) -> str:
+    """The row of ``planner`` with the block moved at fraction ``at``: ``"closed loop, moved at 20 %"``."""
+    return f"{planner}, moved at {100 * float(at):g} %"
+
+
+def loop_rows(move_at=MOVE_AT) -> tuple[str, ...]:
+    """The closed-loop rows, in order: every moved planner per fraction, then the closed loop without a move."""
+    return tuple(moved_row(p, a) for a in move_at for p in MOVED_PLANNERS) + (CLOSED_STILL,)
+
+
+#: The closed-loop rows at the declared fractions (:data:`MOVE_AT`).
+LOOP_ROWS = loop_rows(MOVE_AT)
 
 _NO_FRAMES = "experiment act reads camera frames: its data has none (simulate with images)"
 
@@ -144,43 +167,82 @@ def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | N
     return out
 
 
-def _loop_rows(fit, test: MotionDataset, every: int, seed: int, policy, promp) -> tuple[dict, dict]:
+def _loop_rows(fit, test: MotionDataset, settings: dict, seed: int, planners, move_at) -> tuple[dict, dict]:
     """{row: success (n,) bool} of the closed-loop rows, and the latencies (ms) of the closed loop's
-    plans; ``policy`` and ``promp`` fitted by :func:`primspace.act.command.fit_planners`."""
+    plans; ``planners``: the tuned policy, the ProMP peer and the contextual ProMP peer, fitted."""
     from primspace.act import PolicyPlanner, ProMPPlanner, run_episode
-    from primspace.act.episode import BlockMove
-    from primspace.sim.execute import Executor, Perturbation
+    from primspace.act.episode import drawn_move
+    from primspace.act.planners import SeeingProMPPlanner
+    from primspace.sim.execute import Executor
     from primspace.sim.scene import Scene
 
-    scaler, length = fit.scaler, test.motor.shape[1]
-    perturbation, scene = Perturbation(), Scene()
-    success = {row: np.zeros(len(test), bool) for row in LOOP_ROWS}
+    policy, promp, seeing = planners
+    scaler, length, every = fit.scaler, test.motor.shape[1], int(settings["every"])
+    scene = Scene()
+    success = {row: np.zeros(len(test), bool) for row in loop_rows(move_at)}
     latencies = []
     for i in range(len(test)):
-        label, (x, y, size) = int(test.labels[i]), test.params[i]
-        rng = np.random.default_rng([int(seed), 40, i])
-        _, dx, dy = perturbation.draw(rng, x, y, size)
-        move = BlockMove(perturbation.step_index(length), dx, dy)
+        label, (x, y, size) = int(test.labels[i]), test.params[i, :3]
         k = int(policy.primitives_.for_labels(np.array([label]))[0])
-        planners = {
-            CLOSED: (PolicyPlanner(policy, k, every), move),
-            OPEN: (PolicyPlanner(policy, k, None), move),
-            PROMP_LOOP: (ProMPPlanner(promp, label, length, every), move),
-            CLOSED_STILL: (PolicyPlanner(policy, k, every), None),
-        }
-        for row, (planner, moved) in planners.items():
+        runs = {CLOSED_STILL: (PolicyPlanner(policy, k, every), None)}
+        for at in move_at:  # the same draw at every fraction: only its step differs
+            move = drawn_move(at, np.random.default_rng([int(seed), 40, i]), x, y, size, length)
+            runs |= {
+                moved_row(CLOSED, at): (PolicyPlanner(policy, k, every), move),
+                moved_row(OPEN, at): (PolicyPlanner(policy, k, None), move),
+                moved_row(PROMP_LOOP, at): (ProMPPlanner(promp, label, length, every), move),
+                moved_row(SEEING_PROMP, at): (SeeingProMPPlanner(seeing, label, length, every, policy.visible), move),
+            }
+        for row, (planner, moved) in runs.items():
             with Executor(label, x, y, size, length, scene=scene) as executor:
                 episode = run_episode(planner, executor, test.motor[i, 0], scaler, length, moved)
             success[row][i] = episode.success
-            if row == CLOSED:
+            if isinstance(planner, PolicyPlanner) and planner.every is not None:
                 latencies.extend(episode.latencies_ms)
     lat = np.asarray(latencies)
     return success, {"median": float(np.median(lat)), "p95": float(np.percentile(lat, 95)), "max": float(lat.max())}
 
 
-def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: int, max_samples: int | None) -> dict:
+def tuned_planners(fit, fitted: MotionDataset, every: int | None, seed: int):
+    """The closed loop's policy with its settings chosen on ``fitted`` alone (``every`` None:
+    :class:`~primspace.act.tuning.LoopTuner`; a number: the grid's centre with that ``every``, no
+    tuning), the ProMP peer and the contextual ProMP peer on the block features, and the tuning's
+    record (None without tuning)."""
+    from primspace.act.scene_peers import ContextualProMPPeer
+    from primspace.act.scene_policy import ScenePolicy
+    from primspace.act.tuning import LOOP_CENTRE, LoopTuner, configured
+    from primspace.predict.peers import ProMPPeer
+
+    def fit_policy(motor, labels, frames, steps):
+        policy = ScenePolicy(steps=steps, label_names=fitted.label_names, random_state=seed)
+        return policy.fit(motor, labels, None, frames)
+
+    record = None
+    if every is None:
+        record = LoopTuner(seed=seed).tune(fitted, fit.scaler, fit_policy, indices=fit.indices)
+        settings = record.chosen
+    else:
+        settings = dict(LOOP_CENTRE, every=int(every))
+    motor, length = fit.scaler.transform(fitted.motor).astype(np.float64), fitted.motor.shape[1]
+    policy = fit_policy(motor, fitted.labels, fitted.images, tuple(range(0, length - 1, int(settings["every"]))))
+    policy = configured(policy, settings)
+    promp = ProMPPeer().fit(motor, fitted.labels, fitted.lengths)
+    seeing = ContextualProMPPeer(features="blob").fit(motor, fitted.labels, fitted.lengths, fitted.images)
+    return (policy, promp, seeing), settings, record
+
+
+def run_act_point(
+    run_dir,
+    data_path: str,
+    fit_dir: str,
+    infer_dir: str,
+    every: int | None,
+    max_samples: int | None,
+    move_at=MOVE_AT,
+) -> dict:
     """One seed (the grid point's directory ``run_dir`` unused): the scene-only rows and the
-    closed-loop rows on the run's evaluation samples."""
+    closed-loop rows on the run's evaluation samples; ``every`` None: the closed loop's settings
+    tuned on the fitted demonstrations (:func:`tuned_planners`)."""
     from primspace.predict.metrics import unobserved_mse
     from primspace.sim.success import evaluate_dataset
     from primspace.train import TrainConfig, configure_process, load_run
@@ -193,7 +255,7 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
     fitted, test = data.subset(fit.indices).load_images(), data.subset(test_idx).load_images()
     from primspace.act.command import fit_planners
 
-    policy, promp = fit_planners(fit, fitted, int(every))  # once: the scene-only row and the loops
+    policy, _ = fit_planners(fit, fitted, DEFAULT_EVERY)  # the scene-only row: the first frame's map
     rows, shares, chosen = _scene_rows(fit, fitted, test, test_idx, infer_dir, policy)
     truth, first = fit.scaler.transform(test.motor), _first_step(len(test), test.motor.shape[1])
     plain = test.without_images()
@@ -202,18 +264,20 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
         success = np.array([r.success for r in evaluate_dataset(plain, motor)], dtype=float)
         mse = unobserved_mse(fit.scaler.transform(motor), truth, first, test.lengths)
         scene[name] = _per_primitive(test, success, mse, shares[name])
-    loop, latency = _loop_rows(fit, test, int(every), seed, policy, promp)
-    loop_share = {row: 0.0 if row == PROMP_LOOP else policy.model_share() for row in loop}  # ProMP reads no run
-    rescued = ~loop[OPEN]  # the episodes the open loop's replay fails under the move
+    planners, settings, tuning = tuned_planners(fit, fitted, every, seed)
+    move_at = tuple(float(a) for a in move_at)
+    loop, latency = _loop_rows(fit, test, settings, seed, planners, move_at)
+    loop_share = {
+        row: planners[0].model_share() if row.startswith(CLOSED) or row.startswith(OPEN) else 0.0 for row in loop
+    }
     return {
         "scene": scene,
         "loop": {row: _per_primitive(test, ok.astype(float), None, loop_share[row]) for row, ok in loop.items()},
-        "where_open_fails": {
-            row: _per_primitive(test.subset(np.flatnonzero(rescued)), ok[rescued].astype(float), None, loop_share[row])
-            for row, ok in loop.items()
-            if row != OPEN and rescued.any()
-        },
+        "where_open_fails": _where_open_fails(test, loop, loop_share, move_at),
         "kernel_ridge_settings": chosen,
+        "loop_settings": dict(settings),
+        "loop_tuning": None if tuning is None else tuning.to_dict(),
+        "move_at": list(move_at),
         "per_sample": {row: ok.astype(int).tolist() for row, ok in loop.items()},
         "test_indices": [int(i) for i in test_idx],
         "latency_ms": latency,
@@ -221,6 +285,21 @@ def run_act_point(run_dir, data_path: str, fit_dir: str, infer_dir: str, every: 
         "n_test": int(len(test_idx)),
         "has_image_head": bool(fit.model_config.has_images),
     }
+
+
+def _where_open_fails(test: MotionDataset, loop: dict, share: dict, move_at) -> dict:
+    """Per fraction, the moved rows on the episodes whose open loop's replay fails under that move."""
+    out = {}
+    for at in move_at:
+        rescued = ~loop[moved_row(OPEN, at)]
+        if not rescued.any():
+            continue
+        kept = test.subset(np.flatnonzero(rescued))
+        for planner in MOVED_PLANNERS:
+            row = moved_row(planner, at)
+            if planner != OPEN:
+                out[row] = _per_primitive(kept, loop[row][rescued].astype(float), None, share[row])
+    return out
 
 
 def _check_fitted_per_primitive(exp: ExperimentDir, data) -> None:
@@ -240,8 +319,12 @@ def _check_fitted_per_primitive(exp: ExperimentDir, data) -> None:
                 )
 
 
-def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
+def run_act(exp: ExperimentDir, every: int | None = None, move_at=MOVE_AT) -> dict:
     """The act grid over the intra runs' seeds at the focus q (runs intra first if needed).
+
+    ``every`` None (the default): the closed loop's settings are tuned per seed on its fitted
+    demonstrations (:func:`tuned_planners`); a number: the grid's centre with that ``every``.
+    ``move_at``: the fractions of the motion at which the block is moved (:data:`MOVE_AT`).
 
     Raises
     ------
@@ -254,6 +337,10 @@ def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
     if not judgeable(data):
         raise UserError("experiment act executes motions in the simulator: its data must be simulated")
     _check_fitted_per_primitive(exp, data)
+    move_at = check_move_at(move_at)
+    every = None if every is None else check_every(every)
+    how = "tuned" if every is None else f"k{every}"
+    moves = "-".join(f"{100 * a:g}" for a in move_at)
     intra = exp.read_results("intra") or run_intra(exp)
     q, _, _ = focus_runs(exp, intra)
     seeds = projection_seeds(intra, q)
@@ -261,13 +348,14 @@ def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
         raise UserError(f"experiment act uses the intra projection runs at q = {q}, and there are none")
     points = [
         GridPoint(
-            f"act{ACT_VERSION}/projection-q{q}-s{s}-k{int(every)}",
+            f"act{ACT_VERSION}/projection-q{q}-s{s}-{how}-m{moves}",
             (
                 str(exp.data_path),
                 str(phase_dir(exp.path, "projection", q, s, "fit")),
                 str(phase_dir(exp.path, "projection", q, s, "infer")),
-                int(every),
+                every,
                 PREDICT_MAX_SAMPLES,
+                move_at,
             ),
         )
         for s in seeds
@@ -277,18 +365,34 @@ def run_act(exp: ExperimentDir, every: int = ACT_EVERY) -> dict:
     by_seed = {str(s): grid.results[p.key] for s, p in zip(seeds, points) if p.key in grid.results}
     results = {
         "latent_dim": q,
-        "every": int(every),
-        "perturbation": {"at": 0.3, "distance_m": [0.02, 0.04]},
+        "every": "tuned" if every is None else int(every),
+        "move_at": list(move_at),
+        "perturbation": {"at": list(move_at), "distance_m": [0.02, 0.04]},
         "scene_rows": list(SCENE_ROWS),
-        "loop_rows": list(LOOP_ROWS),
+        "loop_rows": list(loop_rows(move_at)),
         "by_seed": by_seed,
         "failures": grid.failures,
         "table": act_summary(by_seed),
     }
     if by_seed:
-        _animate(exp, q, seeds[0], int(every))
+        first = by_seed.get(str(seeds[0])) or next(iter(by_seed.values()))
+        _animate(exp, q, seeds[0], int(first.get("loop_settings", {}).get("every", ACT_EVERY)))
     exp.write_results("act", results)
     return results
+
+
+def check_move_at(move_at) -> tuple[float, ...]:
+    """``move_at`` (a sequence or ``"0.2,0.3"``) as distinct fractions in (0, 1), in order; one UserError otherwise."""
+    if isinstance(move_at, str):
+        parts = [p.strip() for p in move_at.split(",") if p.strip()]
+        try:
+            move_at = [float(p) for p in parts]
+        except ValueError:
+            raise UserError(f"--move-at {move_at!r}: give fractions of the motion, e.g. 0.2,0.3") from None
+    values = tuple(float(a) for a in move_at)
+    if not values or len(set(values)) != len(values) or not all(0.0 < a < 1.0 for a in values):
+        raise UserError(f"--move-at must be distinct fractions of the motion between 0 and 1, got {list(values)}")
+    return values
 
 
 def _animate(exp: ExperimentDir, q: int, seed: int, every: int) -> None:

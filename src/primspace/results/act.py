@@ -46,6 +46,14 @@ def _wide(part: dict, rows: list, metric: str) -> tuple[list[str], list[list]]:
     return ["method"] + names + ["model share"], [row + [share] for row, share in zip(out, shares)]
 
 
+def _moved_title(results: dict) -> str:
+    """The closed-loop tables' title: the fractions of the move where the results record them (act version 5)."""
+    move_at = results.get("move_at")
+    if not move_at:
+        return "Block moved at 30 %"
+    return "Block moved at " + " and ".join(f"{100 * float(a):g} %" for a in move_at)
+
+
 def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
     """The act experiment's tables as ``(title, columns, rows)``: scene-only success, scene-only
     MSE after the first step, closed-loop success, and (where recorded) closed-loop success on the
@@ -60,11 +68,11 @@ def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
             f"Scene only: MSE of the steps after the first, scaled ({seeds} seeds)",
             *_wide(table["scene"], scene_rows, "mse"),
         ),
-        (f"Block moved at 30 %: success ({seeds} seeds)", *_wide(table["loop"], loop_rows, "success")),
+        (f"{_moved_title(results)}: success ({seeds} seeds)", *_wide(table["loop"], loop_rows, "success")),
     ] + (
         [
             (
-                f"Block moved at 30 %, the episodes whose open-loop replay fails: success ({seeds} seeds)",
+                f"{_moved_title(results)}, the episodes whose open-loop replay fails: success ({seeds} seeds)",
                 *_wide(table["where_open_fails"], loop_rows, "success"),
             )
         ]
@@ -79,7 +87,10 @@ def act_table(results: dict) -> tuple[list[str], list[list]]:
     table = results["table"]
     rows = [
         [f"{label}: {r}", cell_text(table[part][r][ALL].get("success"), digits=2), share_text(table[part][r])]
-        for part, label in (("scene", "scene only"), ("loop", "moved at 30 %"))
+        for part, label in (
+            ("scene", "scene only"),
+            ("loop", "closed loop" if "move_at" in results else "moved at 30 %"),
+        )
         for r in table[part]
     ]
     if not any(row[2] for row in rows):

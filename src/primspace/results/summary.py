@@ -196,8 +196,8 @@ def _scene(p: dict) -> dict:
 def _act(a: dict) -> dict:
     """The act results kept: the settings, the table over seeds, the rows' order, and per seed
     its sizes, its plan latency and each row's entry over all primitives (not per primitive)."""
-    keep = ("latent_dim", "every", "perturbation", "scene_rows", "loop_rows", "table", "failures")
-    small = ("latency_ms", "n_fitted", "n_test", "has_image_head")
+    keep = ("latent_dim", "every", "move_at", "perturbation", "scene_rows", "loop_rows", "table", "failures")
+    small = ("latency_ms", "n_fitted", "n_test", "has_image_head", "loop_settings", "loop_tuning")
     return {k: a.get(k) for k in keep} | {
         "by_seed": {
             seed: {k: r.get(k) for k in small}
