@@ -213,3 +213,30 @@ def test_move_at_is_an_option_of_experiment_act_checked_before_any_work(run_cli,
         run_cli("experiment", "intra", "--move-at", "0.2", "--out", tmp_path / "b"), "--move-at", "experiment act"
     )
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_the_tables_name_both_fractions_and_the_tuned_interval():
+    from primspace.experiments.act import act_summary, loop_rows
+    from primspace.results.act import act_tables, every_text, move_text
+
+    entry = {"all": {"n": 2, "success": 0.5, "model_share": 0.0}}
+    by_seed = {
+        str(s): {
+            "loop": {row: entry for row in loop_rows()},
+            "latency_ms": {"median": 1.0},
+            "loop_settings": {"every": e},
+        }
+        for s, e in ((0, 3), (1, 5))
+    }
+    results = {
+        "table": act_summary(by_seed),
+        "loop_rows": list(loop_rows()),
+        "by_seed": by_seed,
+        "every": "tuned",
+        "move_at": [0.2, 0.3],
+        "perturbation": {"at": [0.2, 0.3], "distance_m": [0.02, 0.04]},
+    }
+    titles = [title for title, _, _ in act_tables(results)]
+    assert "Block moved at 20 % and 30 %: success (2 seeds)" in titles
+    assert move_text(results) == "20 % and 30 %" and "every 3, 5 steps" in every_text(results)
+    assert move_text({"perturbation": {"at": 0.3}}) == "30 %" and every_text({"every": 3}) == "every 3 steps"

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from primspace.report.page import HtmlReport
-from primspace.results.act import act_latency_text, act_tables
+from primspace.results.act import act_latency_text, act_tables, every_text, move_text
 from primspace.results.layout import figures_dir
 from primspace.results.readers import read_results
 
@@ -23,8 +23,8 @@ ACT_SECTION = "Acting from the scene and in closed loop"
 def _what(results: dict) -> str:
     """The paragraph saying what each table is."""
     move = results.get("perturbation") or {}
-    at, (lo, hi) = move.get("at", 0.3), move.get("distance_m", [0.02, 0.04])
-    every = results.get("every", "?")
+    lo, hi = move.get("distance_m", [0.02, 0.04])
+    every = every_text(results)
     return (
         "See the block, do the primitive, and keep doing it when the block moves (docs/act.md). Each evaluation "
         f"sample of the intra projection runs at q = {results.get('latent_dim', '?')} (θ frozen) is a scene: its block, "
@@ -37,11 +37,11 @@ def _what(results: dict) -> str:
         "primitive's ProMP weights; blob: the same from our features); the demonstration with the nearest first "
         "frame, replayed; the mean motion of the primitive; and the reproduction from the whole motion (the run's "
         "inferred codes decoded: the ceiling of anything this run decodes). "
-        f"Closed loop: the block is moved by a seeded {100 * lo:g}-{100 * hi:g} cm at {100 * at:g} % of the motion "
+        f"Closed loop: the block is moved by a seeded {100 * lo:g}-{100 * hi:g} cm at {move_text(results)} of the motion "
         "(one draw per sample and seed, the same for every row) and each planner executes step by step in MuJoCo: "
-        f"the closed loop (the scene policy asked again every {every} steps with the current frame, its belief "
+        f"the closed loop (the scene policy asked again {every} with the current frame, its belief "
         "corrected when the frame surprises it), the open loop (its first plan replayed), ProMP re-conditioned on "
-        f"the executed joints every {every} steps (it does not see), and the closed loop without the move. "
+        f"the executed joints {every} (it does not see), and the closed loop without the move. "
         "Mean ± sample std (ddof 1) over seeds."
     )
 

@@ -59,7 +59,7 @@ from primspace.report.summary_tables import (
     render_summary,
     table,
 )
-from primspace.results.act import act_latency_text, act_tables
+from primspace.results.act import act_latency_text, act_tables, every_text, move_text
 from primspace.results.claims import check_claims
 from primspace.results.summary import read_summary
 from primspace.results.tables import projection_lead
@@ -201,14 +201,14 @@ def render_act(summary: dict) -> str:
     act = summary["results"]["act"]
     seeds = act.get("seeds") or sorted(int(s) for s in act.get("by_seed", {}))
     move = act.get("perturbation") or {}
-    (lo, hi), at = move.get("distance_m", [0.02, 0.04]), move.get("at", 0.3)
+    lo, hi = move.get("distance_m", [0.02, 0.04])
     n_test = sorted({r.get("n_test") for r in act.get("by_seed", {}).values() if r.get("n_test") is not None})
     lines = [f"#### {summary['name']}", "", "```", portable_command(summary["command"].strip()), "```", ""]
     lines.append(
         f"q = {act['latent_dim']}, seeds {', '.join(map(str, seeds))}"
         + (f" ({' or '.join(map(str, n_test))} scenes each)" if n_test else "")
-        + f"; the block moved {100 * lo:g}-{100 * hi:g} cm at {100 * at:g} % of the motion, the closed loop "
-        f"re-asked every {act['every']} steps; mean ± sample std (ddof 1) over seeds."
+        + f"; the block moved {100 * lo:g}-{100 * hi:g} cm at {move_text(act)} of the motion, the closed loop "
+        f"re-asked {every_text(act)}; mean ± sample std (ddof 1) over seeds."
     )
     for title, columns, rows in act_tables(act):
         lines += ["", f"**{title}**", "", table(columns, [[str(c) for c in row] for row in rows])]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from primspace.results.tables import cell_text
 
-__all__ = ["ALL", "NO_MODEL", "act_tables", "act_table", "act_latency_text", "share_text"]
+__all__ = ["ALL", "NO_MODEL", "act_tables", "act_table", "act_latency_text", "share_text", "move_text", "every_text"]
 
 #: The column (and ``by_seed`` entry) of every primitive together.
 ALL = "all"
@@ -46,12 +46,27 @@ def _wide(part: dict, rows: list, metric: str) -> tuple[list[str], list[list]]:
     return ["method"] + names + ["model share"], [row + [share] for row, share in zip(out, shares)]
 
 
+def move_text(results: dict) -> str:
+    """When the block is moved: ``"20 % and 30 %"`` (the recorded fractions), ``"30 %"`` before act version 5."""
+    at = (results.get("perturbation") or {}).get("at", 0.3)
+    return " and ".join(f"{100 * float(a):g} %" for a in (at if isinstance(at, list) else [at]))
+
+
+def every_text(results: dict) -> str:
+    """How often the closed loop looks: ``"every 3 steps"``, or, tuned, the interval each seed's fitted
+    demonstrations chose."""
+    every = results.get("every", "?")
+    if every != "tuned":
+        return f"every {every} steps"
+    chosen = [(r.get("loop_settings") or {}).get("every") for r in results.get("by_seed", {}).values()]
+    return (
+        "at the interval chosen on each seed's fitted demonstrations (every " + ", ".join(map(str, chosen)) + " steps)"
+    )
+
+
 def _moved_title(results: dict) -> str:
     """The closed-loop tables' title: the fractions of the move where the results record them (act version 5)."""
-    move_at = results.get("move_at")
-    if not move_at:
-        return "Block moved at 30 %"
-    return "Block moved at " + " and ".join(f"{100 * float(a):g} %" for a in move_at)
+    return f"Block moved at {move_text(results)}"
 
 
 def act_tables(results: dict) -> list[tuple[str, list[str], list[list]]]:
