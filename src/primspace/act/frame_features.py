@@ -7,15 +7,18 @@ frames ``(n, H, W, 3)`` into feature rows ``(n, d)`` float64, scikit-learn style
 
 * :class:`PixelPCA`: the principal components of the flattened pixels (scaled to [0, 1]);
 * :class:`ColourBlob`: the mass and centroid of the pixels of one colour (by default the block's);
-* :class:`PixelVector`: the flattened pixels themselves, scaled to [0, 1].
+* :class:`PixelVector`: the flattened pixels themselves, scaled to [0, 1];
+* :class:`LearnedKeypoints`: K keypoints ``(x, y)`` of a small CNN with a spatial softmax,
+  fitted as a spatial autoencoder on the given frames only (no colour, label or object given).
 
 Why a colour blob: the block is 2-4 pixels wide in a 48x64 frame, and its position and size are
 all that a motion given only the scene depends on (the arm starts at the same home pose and the
 table is the same in every scene). The principal components of the pixels spend their variance
 on the arm and the table's shading, and a block of a few pixels moves little of it; three
-numbers (mass, column, row) say where the block is directly.
+numbers (mass, column, row) say where the block is directly. It is told the block's colour, so
+it is the ablation of :class:`LearnedKeypoints`, which is told nothing but the frames.
 
-:func:`frame_features` resolves a name (``"pca"``, ``"blob"``, ``"pixels"``) or an object with
+:func:`frame_features` resolves a name (``"pca"``, ``"blob"``, ``"pixels"``, ``"learned"``) or an object with
 ``fit`` and ``transform`` to a transformer.
 """
 
@@ -29,13 +32,22 @@ from sklearn.decomposition import PCA
 
 from primspace.utils.errors import UserError
 
-__all__ = ["BLOCK_COLOUR", "PixelPCA", "ColourBlob", "PixelVector", "FEATURE_NAMES", "frame_features", "check_frames"]
+__all__ = [
+    "BLOCK_COLOUR",
+    "PixelPCA",
+    "ColourBlob",
+    "PixelVector",
+    "LearnedKeypoints",
+    "FEATURE_NAMES",
+    "frame_features",
+    "check_frames",
+]
 
 #: The block's colour, rgba 0.85 0.05 0.05 in 0-255.
 BLOCK_COLOUR = (217, 13, 13)
 
 #: The names :func:`frame_features` resolves.
-FEATURE_NAMES = ("pca", "blob", "pixels")
+FEATURE_NAMES = ("pca", "blob", "pixels", "learned")
 
 
 def check_frames(frames, name: str = "frames") -> np.ndarray:
@@ -213,16 +225,86 @@ class ColourBlob(_FrameTransformer):
         return np.column_stack([mass, centroid])
 
 
-def frame_features(features):
+def _whole(value, name: str, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise UserError(f"{name} must be a whole number >= {low}, got {value!r}")
+    return int(value)
+
+
+class LearnedKeypoints(_FrameTransformer):
+    """K keypoints ``(x, y)`` per frame, learned from the fitted frames alone.
+
+    The encoder is the model's :class:`~primspace.model.keypoints.KeypointEncoder` (a small
+    CNN and a spatial softmax), fitted as a deep spatial autoencoder (Finn et al. 2016) on the
+    frames given to :meth:`fit` and nothing else: frames -> keypoints -> Gaussian heatmaps ->
+    the frame in grey at half size (:func:`~primspace.train.vision_start.fit_keypoint_encoder`).
+    What is the same in every frame is drawn by the decoder's learned background; what differs
+    between the frames (in a scene's first frame: the object's place and size) has to pass
+    through the keypoints. No colour, label or object is given.
+
+    Parameters
+    ----------
+    keypoints : int
+        K (>= 1); the features are ``(x_1, y_1, ..., x_K, y_K)``, each in ``[-1, 1]``
+        (``x`` from the left edge to the right, ``y`` from the top row to the bottom).
+    steps : int
+        Adam steps of the autoencoder (batches of 64 frames; whole epochs, at least one).
+    random_state : int
+        Seed of the weights and of the frames drawn: same seed, same features (one machine).
+
+    Attributes
+    ----------
+    encoder_ : primspace.model.keypoints.KeypointEncoder
+        The fitted encoder, frozen.
+    """
+
+    def __init__(self, keypoints: int = 4, steps: int = 600, random_state: int = 0) -> None:
+        _whole(keypoints, "keypoints", 1)
+        _whole(steps, "steps", 1)
+        _whole(random_state, "random_state", 0)
+        self.keypoints, self.steps, self.random_state = keypoints, steps, random_state
+
+    def fit(self, frames, y=None) -> LearnedKeypoints:
+        """Fit the encoder on ``frames`` ``(n, H, W, 3)`` uint8 (n >= 2); returns self."""
+        from primspace.train.vision_start import BATCH_FRAMES, FRAMES_PER_EPOCH, fit_keypoint_encoder
+
+        frames = check_frames(frames)
+        if len(frames) < 2:
+            raise UserError("LearnedKeypoints needs at least 2 frames to fit")
+        per_epoch = -(-min(len(frames), FRAMES_PER_EPOCH) // BATCH_FRAMES)
+        epochs = max(1, -(-int(self.steps) // per_epoch))
+        lengths = np.ones(len(frames), dtype=np.int64)
+        self.encoder_ = fit_keypoint_encoder(
+            frames[:, None], lengths, int(self.keypoints), int(self.random_state), epochs
+        )
+        self._remember(frames)
+        return self
+
+    def transform(self, frames) -> np.ndarray:
+        """The keypoints of each frame, ``(n, 2K)`` float64."""
+        import torch
+
+        frames = self._checked(frames)
+        out = []
+        with torch.no_grad():
+            for start in range(0, len(frames), 256):
+                block = torch.from_numpy(np.ascontiguousarray(frames[start : start + 256]))
+                out.append(self.encoder_(block).reshape(len(block), -1).double().numpy())
+        return np.concatenate(out)
+
+
+def frame_features(features, random_state: int | None = None):
     """The transformer of frames named by ``features``.
 
     Parameters
     ----------
     features : str or object
-        ``"pca"`` (:class:`PixelPCA`), ``"blob"`` (:class:`ColourBlob` of the block) or
-        ``"pixels"`` (:class:`PixelVector`), or an object with ``fit(frames)`` and
+        ``"pca"`` (:class:`PixelPCA`), ``"blob"`` (:class:`ColourBlob` of the block),
+        ``"pixels"`` (:class:`PixelVector`) or ``"learned"`` (:class:`LearnedKeypoints`), or an object with ``fit(frames)`` and
         ``transform(frames)``: a copy of it is returned (scikit-learn's ``clone`` when it has
         ``get_params``), so fitting it leaves the caller's object as it was.
+    random_state : int, optional
+        The seed of ``"learned"`` (default 0); the other names draw nothing that it would seed.
 
     Returns
     -------
@@ -230,9 +312,11 @@ def frame_features(features):
         An unfitted transformer of frames ``(n, H, W, 3)`` uint8 into rows ``(n, d)``.
     """
     if isinstance(features, str):
-        makers = {"pca": PixelPCA, "blob": ColourBlob, "pixels": PixelVector}
+        makers = {"pca": PixelPCA, "blob": ColourBlob, "pixels": PixelVector, "learned": LearnedKeypoints}
         if features not in makers:
             raise UserError(f"unknown frame features {features!r}: use one of {', '.join(FEATURE_NAMES)}")
+        if features == "learned" and random_state is not None:
+            return LearnedKeypoints(random_state=random_state)
         return makers[features]()
     if not (callable(getattr(features, "fit", None)) and callable(getattr(features, "transform", None))):
         raise UserError(

@@ -176,10 +176,11 @@ class ScenePolicy(Predictor):
         self.primitives_ = self._grouping(labels, m)
         self.primitive_ = None if self.primitive is None else self.primitives_.resolve(self.primitive)
         self.steps_ = sorted({int(t) for t in np.atleast_1d(self.steps)})
-        self.extractor_ = frame_features(self.features).fit(frames[:, 0])
+        seed = library_seed(self.random_state, "random_state")
+        self.extractor_ = frame_features(self.features, random_state=seed).fit(frames[:, 0])
         first = self.extractor_.transform(frames[:, 0])
         targets = self._targets(motor)
-        make = gaussian_process(library_seed(self.random_state, "random_state"))
+        make = gaussian_process(seed)
         self.maps_, self.expected_, self.spreads_ = {}, {}, {}
         for k in range(self.primitives_.count):
             rows = self.primitives_.members(k)
