@@ -17,6 +17,7 @@ __all__ = ["save_figure", "INIT_COLORS", "init_color", "label_colors"]
 INIT_COLORS = {
     "zero": "tab:blue",
     "random": "tab:red",
+    "projection-vision": "tab:olive",  # before "projection": labels are matched by their start
     "projection": "tab:green",
     "pca": "tab:purple",
     "calibrated": "tab:orange",
