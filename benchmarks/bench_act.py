@@ -11,7 +11,9 @@ thread as :mod:`primspace.sim` sets it), in one process, for a trained run and i
    time each part of a look, ``--calls`` times each after ``--warmup`` untimed calls, with
    ``time.perf_counter``:
 
-   a. the frame's features (``policy.see``, the block's colour moments);
+   a. the frame's features (``policy.see``: with ``--features blob``, the default, the
+      block's colour moments; with ``--features learned``, the keypoints of the encoder
+      fitted on the demonstrations' first frames, :class:`~primspace.act.frame_features.LearnedKeypoints`);
    b. the surprise check at step ``every`` with no surprise (``policy.correct`` given the
       features it predicts: it keeps the plan);
    c. a re-plan in motion space (``policy.replan``: the Gaussian process to the whole
@@ -30,7 +32,7 @@ depend on what else the machine runs: the load average is printed.
 Usage::
 
     python benchmarks/bench_act.py --run RUN_DIR --data DATA.h5 [--primitive push] [--every 6]
-        [--calls 200] [--json PATH]
+        [--features blob|learned|pca] [--calls 200] [--json PATH]
 """
 
 from __future__ import annotations
@@ -103,12 +105,32 @@ def _row(name: str, spent: np.ndarray) -> dict:
     }
 
 
+def _planners(run, fitted, every: int, features: str):
+    """``primspace act``'s planners (:func:`~primspace.act.command.fit_planners`); with other
+    ``features`` than the blob, the same scene policy reading those."""
+    from primspace.act.command import fit_planners
+    from primspace.act.scene_policy import ScenePolicy
+    from primspace.predict.peers import ProMPPeer
+
+    if features == "blob":
+        return fit_planners(run, fitted, every)
+    motor = run.scaler.transform(fitted.motor)
+    policy = ScenePolicy(
+        steps=tuple(range(0, motor.shape[1] - 1, every)),
+        features=features,
+        label_names=fitted.label_names,
+        random_state=int(run.train_config.seed),
+    ).fit(motor, fitted.labels, fitted.lengths, fitted.images)
+    return policy, ProMPPeer().fit(motor, fitted.labels, fitted.lengths)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run", type=Path, required=True, help="a trained run directory (its fit)")
     parser.add_argument("--data", type=Path, required=True, help="the data file it was fitted on, with frames")
     parser.add_argument("--primitive", default="push", help="the scene's primitive (name or label)")
     parser.add_argument("--every", type=int, default=6, help="re-plan interval of the closed loop (act's default)")
+    parser.add_argument("--features", default="blob", help="what the policies read of a frame (blob, learned, pca)")
     parser.add_argument("--calls", type=int, default=200, help="timed calls per part (>= 200 for the p95)")
     parser.add_argument("--warmup", type=int, default=5, help="untimed calls before each part")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
@@ -116,7 +138,6 @@ def main() -> None:
     torch.set_num_threads(1)
     threadpool_limits(1)
 
-    from primspace.act.command import fit_planners
     from primspace.act.planners import ProMPPlanner
     from primspace.act.scene_policy import ScenePolicy
     from primspace.data import MotionDataset
@@ -136,12 +157,19 @@ def main() -> None:
     q = int(run.model_config.code_size)
 
     t0 = time.perf_counter()
-    policy, promp = fit_planners(run, fitted, args.every)
+    try:
+        policy, promp = _planners(run, fitted, args.every, args.features)
+    except UserError as exc:
+        sys.exit(f"bench_act: {exc}")
     fit_s = time.perf_counter() - t0
     scaled = run.scaler.transform(fitted.motor)
     t0 = time.perf_counter()
     code_policy = ScenePolicy(
-        run, space="code", label_names=fitted.label_names, random_state=int(run.train_config.seed)
+        run,
+        features=args.features,
+        space="code",
+        label_names=fitted.label_names,
+        random_state=int(run.train_config.seed),
     ).fit(scaled, fitted.labels, fitted.lengths, fitted.images)
     code_fit_s = time.perf_counter() - t0
 
@@ -161,7 +189,7 @@ def main() -> None:
     load = os.getloadavg()[0]
     print(
         f"run {args.run}: q = {q}, T = {length}, J = {joints}, {m} fitted demonstrations with frames "
-        f"{fitted.image_size}; planners fitted in {fit_s:.1f} s (closed loop, every {args.every}) "
+        f"{fitted.image_size}; features {args.features}; planners fitted in {fit_s:.1f} s (closed loop, every {args.every}) "
         f"+ {code_fit_s:.1f} s (code space)"
     )
     print(
@@ -205,6 +233,7 @@ def main() -> None:
                 "threads": 1,
                 "load_average": load,
                 "every": args.every,
+                "features": args.features,
                 "prefix": PREFIX,
                 "scene": {"sample": i, "primitive": policy.primitives_.names[k], "block": list(params)},
                 "calls": args.calls,

@@ -38,10 +38,10 @@ def test_a_keypoint_tracks_the_square_on_new_frames():
     model = LearnedKeypoints(keypoints=2, steps=20).fit(frames)
     new, u, v = squares(32, seed=1)
     points = model.transform(new)
-    assert points.shape == (32, 4) and points.dtype == np.float64
-    assert np.all(np.abs(points) <= 1)
-    assert best_correlation(points[:, 0::2], u) > 0.9  # x follows the column
-    assert best_correlation(points[:, 1::2], v) > 0.9  # y follows the row
+    assert points.shape == (32, 6) and points.dtype == np.float64  # (x, y) twice, then two presences
+    assert np.all(np.abs(points[:, :4]) <= 1) and np.all(points[:, 4:] >= 0)
+    assert best_correlation(points[:, 0:4:2], u) > 0.9  # x follows the column
+    assert best_correlation(points[:, 1:4:2], v) > 0.9  # y follows the row
 
 
 def test_same_seed_same_features_another_seed_other_features():
@@ -58,7 +58,7 @@ def test_the_name_resolves_with_its_seed_and_any_frame_size_works():
     assert isinstance(frame_features("learned"), LearnedKeypoints)
     assert frame_features("learned", random_state=7).random_state == 7
     odd = np.random.default_rng(0).integers(0, 256, (3, 7, 9, 3), dtype=np.uint8)
-    assert LearnedKeypoints(keypoints=3, steps=2).fit_transform(odd).shape == (3, 6)
+    assert LearnedKeypoints(keypoints=3, steps=2).fit_transform(odd).shape == (3, 9)
 
 
 def motions(cols: np.ndarray, rows: np.ndarray, length: int = 8) -> np.ndarray:
@@ -77,7 +77,7 @@ def test_the_scene_policy_and_the_contextual_promp_read_learned_features():
         motor[fitted], labels[fitted], None, video[fitted]
     )
     assert isinstance(policy.extractor_, LearnedKeypoints) and policy.extractor_.encoder_ is not None
-    assert policy.see(frames[:2]).shape == (2, 8)
+    assert policy.see(frames[:2]).shape == (2, 12)
     assert not policy.hidden(policy.see(frames[:1])[0], policy.see(frames[1:2])[0])  # no colour rule
     forecast = policy.forecast(motor[held], None, labels[held], None, video[held]).motor
     assert forecast.shape == motor[held].shape and np.isfinite(forecast).all()
@@ -94,7 +94,12 @@ def test_the_scene_policy_and_the_contextual_promp_read_learned_features():
 
 @pytest.mark.parametrize(
     "kwargs, fragment",
-    [({"keypoints": 0}, "keypoints"), ({"steps": 1.5}, "steps"), ({"random_state": -1}, "random_state")],
+    [
+        ({"keypoints": 0}, "keypoints"),
+        ({"steps": 1.5}, "steps"),
+        ({"random_state": -1}, "random_state"),
+        ({"sharpness": 0.0}, "sharpness"),
+    ],
 )
 def test_bad_settings_are_one_user_error(kwargs, fragment):
     with pytest.raises(UserError, match=fragment):

@@ -100,8 +100,10 @@ class ScenePolicy(Predictor):
     run : TrainedRun or path-like, optional
         The trained run whose fitted demonstrations (in its order) are fitted; needed for
         ``space="code"`` (its codes and decoder).
-    features : "blob", "pca" or a transformer
-        What is read of a frame (:func:`~primspace.act.frame_features.frame_features`).
+    features : "blob", "learned", "pca" or a transformer
+        What is read of a frame (:func:`~primspace.act.frame_features.frame_features`):
+        ``"learned"``, keypoints of an encoder fitted on the demonstrations' first frames alone
+        (seeded by ``random_state``); ``"blob"``, told the block's colour, is its ablation.
     space : {"motion", "code"}
         What the first frame's map predicts (module docstring).
     steps : sequence of int
@@ -112,7 +114,8 @@ class ScenePolicy(Predictor):
         Steps over which a new plan joins the executed motion.
     visible : float
         The share of the believed block's colour mass a frame must show to be compared (below:
-        hidden, not compared).
+        hidden, not compared). Only with the colour features (``"blob"``): with others
+        (``"learned"`` included) there is no colour mass to read, and every frame is compared.
     floor : float
         The smallest scale of a feature's surprise.
     primitive : str or int, optional
