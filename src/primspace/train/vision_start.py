@@ -10,18 +10,20 @@ training as a *deep spatial autoencoder* (Finn et al. 2016):
 
 * frames -> encoder -> K keypoints ``(x, y)`` in ``[-1, 1]`` -> Gaussian heatmaps
   (:func:`~primspace.model.keypoints.heatmaps`) -> a small convolutional decoder plus a learned
-  background, reconstructing the frame downsampled to half its size in grey; a few epochs of
-  Adam on the valid frames of the fitted demonstrations only, seeded (same seed, same numbers
-  on one machine);
-* the encoder frozen, each sample's keypoint trajectory ``k_{1:T}`` (``T x 2K``, already in
-  ``[-1, 1]`` like the scaled joints; zero after its last valid step) is projected exactly as
-  the motor is (:class:`~primspace.model.latent.LatentInitializer` ``projection``,
+  background (started at the mean frame), reconstructing the frame downsampled to half its size
+  in grey; :data:`VISION_EPOCHS` epochs of Adam on the valid frames of the fitted demonstrations
+  only, seeded (same seed, same numbers on one machine);
+* the encoder frozen, each sample's keypoint trajectory ``k_{1:T}`` (``T x 2K``) is scaled as the
+  joints are, each coordinate's range over the fitted demonstrations' valid steps onto
+  ``[-1, 1]`` (a :class:`~primspace.data.JointScaler`; the keypoints of a scene move over a small
+  part of the image, so their raw range is narrow), zero after the sample's last valid step, and
+  projected exactly as the motor is (:class:`~primspace.model.latent.LatentInitializer` ``projection``,
   ``P_jk ~ N(0, 1/q)``): ``z = P_m m_{1:T} + P_v k_{1:T}``, which is ``P [m; k]`` for the
   concatenated sequence with ``P = [P_m P_v]``. ``P_m`` is the motor-only start's matrix (the
   same seed), so with K = 0 the start is the motor-only projection, and frames that are the same
   in every sample move every code by one vector.
 
-The encoder's weights, ``P_m`` and ``P_v`` are the run's initialiser (:class:`VisionProjection`),
+The encoder's weights, the keypoints' scaler, ``P_m`` and ``P_v`` are the run's initialiser (:class:`VisionProjection`),
 saved in its checkpoint like ``P``: :func:`~primspace.train.infer` reads new samples' frames through
 the same frozen encoder and matrices. Under an observation rule only the observed steps' joints
 and frames count (the rest zero, as the motor projection does).
@@ -34,6 +36,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from primspace.data import JointScaler
 from primspace.model.keypoints import KeypointEncoder, heatmaps
 from primspace.model.latent import VISION_PROJECTION, LatentInitializer
 from primspace.utils.errors import UserError
@@ -45,6 +48,7 @@ __all__ = [
     "SpatialAutoencoder",
     "fit_keypoint_encoder",
     "keypoint_trajectories",
+    "valid_steps",
     "VisionProjection",
     "initializer_from_state",
 ]
@@ -52,10 +56,11 @@ __all__ = [
 #: K of the start's encoder when the model has no keypoints of its own (``ModelConfig.keypoints``).
 VISION_KEYPOINTS = 4
 #: Epochs of the spatial autoencoder.
-VISION_EPOCHS = 3
-#: Frames drawn per epoch (at most; every valid frame when fewer), and per batch.
+VISION_EPOCHS = 10
+#: Frames drawn per epoch (at most; every valid frame when fewer), per batch, and Adam's step size.
 FRAMES_PER_EPOCH = 2048
-BATCH_FRAMES = 64
+BATCH_FRAMES = 32
+LEARNING_RATE = 3e-3
 
 
 class SpatialAutoencoder(nn.Module):
@@ -114,8 +119,10 @@ def fit_keypoint_encoder(
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model = SpatialAutoencoder(keypoints, size)
-    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     target = grey_target(frames, size)
+    with torch.no_grad():
+        model.background.copy_(target.mean(dim=0, keepdim=True))
+    optimizer = torch.optim.Adam(model.parameters(), lr=LEARNING_RATE)
     for _ in range(int(epochs)):
         order = rng.permutation(len(frames))[:FRAMES_PER_EPOCH]
         for start in range(0, len(order), BATCH_FRAMES):
@@ -125,6 +132,11 @@ def fit_keypoint_encoder(
             loss.backward()
             optimizer.step()
     return model.encoder.eval().requires_grad_(False)
+
+
+def valid_steps(lengths, steps: int) -> np.ndarray:
+    """``(n, T)`` bool: the valid steps of samples of ``lengths``."""
+    return np.arange(steps)[None, :] < np.asarray(lengths)[:, None]
 
 
 def keypoint_trajectories(encoder: KeypointEncoder, images, lengths: np.ndarray) -> np.ndarray:
@@ -179,6 +191,7 @@ class VisionProjection:
         self.motor = LatentInitializer("projection", self.latent_dim, self.random_state, window)
         self.vision = LatentInitializer("projection", self.latent_dim, self._seeds()[0], window)
         self.encoder: KeypointEncoder | None = None
+        self.scaler: JointScaler | None = None
 
     def _seeds(self) -> tuple[int, int]:
         """The seeds of ``P_v`` and of the encoder, derived from ``random_state``."""
@@ -186,19 +199,24 @@ class VisionProjection:
         return int(a), int(b)
 
     def fit(self, scaled_motor, images, lengths) -> VisionProjection:
-        """Draw ``P_m``, fit the encoder on the valid frames of ``images``, draw ``P_v``."""
+        """Draw ``P_m``, fit the encoder on the valid frames of ``images`` and the keypoints' scaler
+        on their valid steps, draw ``P_v``."""
         lengths = np.asarray(lengths)
         self.motor.fit(scaled_motor)
         if self.keypoints:
             _check_images(images)
             self.encoder = fit_keypoint_encoder(images, lengths, self.keypoints, self._seeds()[1], self.epochs)
+            raw = keypoint_trajectories(self.encoder, images, lengths)
+            self.scaler = JointScaler().fit(raw[valid_steps(lengths, raw.shape[1])])
             self.vision.fit(np.zeros((1, np.shape(scaled_motor)[1], 2 * self.keypoints)))
         return self
 
     def trajectories(self, images, lengths) -> np.ndarray:
-        """The samples' keypoint trajectories ``(n, T, 2K)`` through the frozen encoder."""
+        """The samples' keypoint trajectories ``(n, T, 2K)`` through the frozen encoder, scaled
+        (zero after each sample's valid steps)."""
         self._check_fitted()
-        return keypoint_trajectories(self.encoder, images, np.asarray(lengths))
+        raw = keypoint_trajectories(self.encoder, images, np.asarray(lengths))
+        return self.scaler.transform(raw) * valid_steps(lengths, raw.shape[1])[..., None]
 
     def transform(
         self, scaled_motor, *, random_state: int | None = None, observed=None, images=None, lengths=None
@@ -236,6 +254,7 @@ class VisionProjection:
             "motor": self.motor.state_dict(),
             "vision": self.vision.state_dict() if self.keypoints else None,
             "encoder": None if self.encoder is None else self.encoder.state_dict(),
+            "scaler": None if self.scaler is None else self.scaler.to_dict(),
         }
 
     @classmethod
@@ -255,6 +274,7 @@ class VisionProjection:
                 out.encoder = KeypointEncoder(out.keypoints)
                 out.encoder.load_state_dict(state["encoder"])
                 out.encoder.eval().requires_grad_(False)
+                out.scaler = JointScaler.from_dict(state["scaler"])
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             raise UserError(f"not a projection-vision state ({str(exc).splitlines()[0]})") from None
         return out
