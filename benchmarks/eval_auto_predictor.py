@@ -11,7 +11,8 @@ lowest ``test``.
 
 Usage::
 
-    python benchmarks/eval_auto_predictor.py EXPERIMENT_DIR [--seeds 0] [--fractions 0.25] [--max-test N] [--json PATH]
+    python benchmarks/eval_auto_predictor.py EXPERIMENT_DIR [--seeds 0] [--fractions 0.25] [--folds 3]
+        [--tasks both|free|given] [--max-test N] [--json PATH]
 """
 
 from __future__ import annotations
@@ -33,18 +34,19 @@ import numpy as np  # noqa: E402
 from primspace.data import MotionDataset  # noqa: E402
 from primspace.predict import SelectedPredictor, fit_predictor  # noqa: E402
 from primspace.predict.metrics import finite_mean, unobserved_mse  # noqa: E402
+from primspace.predict.selection import SELECTION_FOLDS  # noqa: E402
 from primspace.train import load_run  # noqa: E402
 from primspace.train.observe import Observation  # noqa: E402
 from primspace.utils.files import atomic_write_json  # noqa: E402
 
 
-def one_task(run, test: MotionDataset, fraction: float, given: bool) -> dict:
+def one_task(run, test: MotionDataset, fraction: float, given: bool, folds: int = SELECTION_FOLDS) -> dict:
     """The selection of one task and every candidate's error on ``test``."""
     rule = Observation.build(fraction)
     truth = run.scaler.transform(test.motor)
     observed = rule.masks(test.valid_lengths, test.length)[0]
     start = time.perf_counter()
-    auto = fit_predictor(SelectedPredictor(run, given=given, reuse=False), run)
+    auto = fit_predictor(SelectedPredictor(run, given=given, folds=folds, reuse=False), run)
     selection = auto.select(rule)
     seconds = time.perf_counter() - start
     errors = {}
@@ -65,6 +67,8 @@ def main() -> None:
     parser.add_argument(
         "--max-test", type=int, default=None, help="at most this many evaluation samples, evenly spaced"
     )
+    parser.add_argument("--folds", type=int, default=SELECTION_FOLDS)
+    parser.add_argument("--tasks", choices=("both", "free", "given"), default="both")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     out = {}
@@ -80,9 +84,9 @@ def main() -> None:
                 ]
             test = MotionDataset.load(run.data_path).without_images().subset(np.asarray(test_indices))
             for fraction in (float(f) for f in args.fractions.split(",")):
-                for given in (False, True):
+                for given in {"both": (False, True), "free": (False,), "given": (True,)}[args.tasks]:
                     key = f"seed {seed}, {fraction:g}, {'given the primitive' if given else 'no primitive'}"
-                    out[key] = one_task(run, test, fraction, given)
+                    out[key] = one_task(run, test, fraction, given, args.folds)
                     print(key, json.dumps(out[key]), flush=True)
     right = sum(row["right"] for row in out.values())
     print(f"auto chose the candidate with the lowest held-out error in {right} of {len(out)} tasks")
