@@ -176,7 +176,7 @@ def test_the_declared_fractions_reach_the_episodes_of_every_moved_row(sim, monke
     import primspace.act
     from primspace.act.scene_peers import ContextualProMPPeer
     from primspace.act.scene_policy import ScenePolicy
-    from primspace.experiments.act import CLOSED_STILL, _loop_rows, loop_rows
+    from primspace.experiments.act import CLOSED_STILL, loop_rows, loop_successes
     from primspace.predict.peers import ProMPPeer
 
     data, fitted, scaler = sim["data"], sim["fitted"], sim["scaler"]
@@ -197,7 +197,7 @@ def test_the_declared_fractions_reach_the_episodes_of_every_moved_row(sim, monke
     monkeypatch.setattr(primspace.act, "run_episode", recording)
     test = data.subset(sim["held"][:1]).load_images()
     move_at = (0.2, 0.5)
-    success, latency = _loop_rows(
+    success, latency = loop_successes(
         SimpleNamespace(scaler=scaler), test, dict(LOOP_CENTRE, every=5), 0, planners, move_at
     )
     assert set(success) == set(loop_rows(move_at)) and CLOSED_STILL in success

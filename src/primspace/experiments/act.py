@@ -69,6 +69,10 @@ __all__ = [
     "LOOP_ROWS",
     "MOVE_AT",
     "loop_rows",
+    "loop_successes",
+    "per_primitive",
+    "tuned_planners",
+    "check_move_at",
     "run_act",
     "run_act_point",
     "act_summary",
@@ -154,7 +158,7 @@ def _scene_rows(fit, fitted: MotionDataset, test: MotionDataset, test_idx: np.nd
     return out, shares, chosen
 
 
-def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | None, share: float) -> dict:
+def per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | None, share: float) -> dict:
     """{label name or "all": {"n", "success", "mse", "model_share"}} (``share``: the row's model share)."""
     names = np.array([test.label_names[int(label)] for label in test.labels])
     out = {}
@@ -167,7 +171,7 @@ def _per_primitive(test: MotionDataset, success: np.ndarray, mse: np.ndarray | N
     return out
 
 
-def _loop_rows(fit, test: MotionDataset, settings: dict, seed: int, planners, move_at) -> tuple[dict, dict]:
+def loop_successes(fit, test: MotionDataset, settings: dict, seed: int, planners, move_at) -> tuple[dict, dict]:
     """{row: success (n,) bool} of the closed-loop rows, and the latencies (ms) of the closed loop's
     plans; ``planners``: the tuned policy, the ProMP peer and the contextual ProMP peer, fitted."""
     from primspace.act import PolicyPlanner, ProMPPlanner, run_episode
@@ -263,16 +267,16 @@ def run_act_point(
     for name, motor in rows.items():
         success = np.array([r.success for r in evaluate_dataset(plain, motor)], dtype=float)
         mse = unobserved_mse(fit.scaler.transform(motor), truth, first, test.lengths)
-        scene[name] = _per_primitive(test, success, mse, shares[name])
+        scene[name] = per_primitive(test, success, mse, shares[name])
     planners, settings, tuning = tuned_planners(fit, fitted, every, seed)
     move_at = tuple(float(a) for a in move_at)
-    loop, latency = _loop_rows(fit, test, settings, seed, planners, move_at)
+    loop, latency = loop_successes(fit, test, settings, seed, planners, move_at)
     loop_share = {
         row: planners[0].model_share() if row.startswith(CLOSED) or row.startswith(OPEN) else 0.0 for row in loop
     }
     return {
         "scene": scene,
-        "loop": {row: _per_primitive(test, ok.astype(float), None, loop_share[row]) for row, ok in loop.items()},
+        "loop": {row: per_primitive(test, ok.astype(float), None, loop_share[row]) for row, ok in loop.items()},
         "where_open_fails": _where_open_fails(test, loop, loop_share, move_at),
         "kernel_ridge_settings": chosen,
         "loop_settings": dict(settings),
@@ -298,7 +302,7 @@ def _where_open_fails(test: MotionDataset, loop: dict, share: dict, move_at) -> 
         for planner in MOVED_PLANNERS:
             row = moved_row(planner, at)
             if planner != OPEN:
-                out[row] = _per_primitive(kept, loop[row][rescued].astype(float), None, share[row])
+                out[row] = per_primitive(kept, loop[row][rescued].astype(float), None, share[row])
     return out
 
 
