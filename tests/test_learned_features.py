@@ -38,10 +38,10 @@ def test_a_keypoint_tracks_the_square_on_new_frames():
     model = LearnedKeypoints(keypoints=2, steps=20).fit(frames)
     new, u, v = squares(32, seed=1)
     points = model.transform(new)
-    assert points.shape == (32, 6) and points.dtype == np.float64  # (x, y) twice, then two presences
+    assert points.shape == (32, 6) and points.dtype == np.float64  # two x, two y, two presences
     assert np.all(np.abs(points[:, :4]) <= 1) and np.all(points[:, 4:] >= 0)
-    assert best_correlation(points[:, 0:4:2], u) > 0.9  # x follows the column
-    assert best_correlation(points[:, 1:4:2], v) > 0.9  # y follows the row
+    assert best_correlation(points[:, 0:2], u) > 0.9  # x follows the column
+    assert best_correlation(points[:, 2:4], v) > 0.9  # y follows the row
 
 
 def test_same_seed_same_features_another_seed_other_features():
@@ -98,7 +98,7 @@ def test_the_scene_policy_and_the_contextual_promp_read_learned_features():
         ({"keypoints": 0}, "keypoints"),
         ({"steps": 1.5}, "steps"),
         ({"random_state": -1}, "random_state"),
-        ({"sharpness": 0.0}, "sharpness"),
+        ({"threshold": -1.0}, "threshold"),
     ],
 )
 def test_bad_settings_are_one_user_error(kwargs, fragment):

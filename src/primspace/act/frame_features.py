@@ -246,22 +246,22 @@ class LearnedKeypoints(_FrameTransformer):
     A frame is read through the encoder's K feature maps *relative to the fitted frames*: each
     map minus its mean over the fitted frames, in units of its spread over them (``r_k``), so
     that what is the same in every scene (the arm at its home pose, the table) reads as zero.
-    The keypoint ``k`` is the spatial softmax of ``sharpness · |r_k|`` (its expected ``x, y``)
-    and its presence is ``max |r_k|`` (how strongly the frame differs there). On the paper
-    preset's first frames the encoder's own spatial softmax moves by a tenth of a pixel and
-    a linear map from it misses 6 % of the block's column; the relative reading follows the
-    column, the row and the area (docs/act.md).
+    Each map's weights are ``w_k = max(|r_k| - threshold, 0)``: the keypoint ``k`` is their
+    centroid ``(x, y)`` and its presence their sum (how much of the frame differs there, about
+    an object's area); a frame where a map has no weight gets that map's mean centroid over
+    the fitted frames. On the paper preset's first frames the encoder's own spatial softmax
+    moves by a tenth of a pixel; read this way the keypoints follow the block (docs/act.md).
 
     Parameters
     ----------
     keypoints : int
-        K (>= 1); the features are ``(x_1, y_1, ..., x_K, y_K, p_1, ..., p_K)``: the points in
+        K (>= 1); the features are ``(x_1, ..., x_K, y_1, ..., y_K, p_1, ..., p_K)``: the points in
         ``[-1, 1]`` (``x`` from the left edge to the right, ``y`` from the top row to the
         bottom), then the presences (>= 0).
     steps : int
         Adam steps of the autoencoder (batches of 64 frames; whole epochs, at least one).
-    sharpness : float
-        The softmax's inverse temperature on ``|r_k|`` (> 0).
+    threshold : float
+        Spreads of a map below which a cell weighs nothing (>= 0).
     random_state : int
         Seed of the weights and of the frames drawn: same seed, same features (one machine).
 
@@ -271,15 +271,17 @@ class LearnedKeypoints(_FrameTransformer):
         The fitted encoder, frozen.
     mean_maps_, spread_ : torch.Tensor
         The maps' mean ``(K, h, w)`` over the fitted frames and their spread ``(K, 1, 1)``.
+    centroid_ : ndarray, shape (2K,)
+        The mean keypoints of the fitted frames, given to a map without weight.
     """
 
-    def __init__(self, keypoints: int = 4, steps: int = 200, sharpness: float = 3.0, random_state: int = 0) -> None:
+    def __init__(self, keypoints: int = 4, steps: int = 200, threshold: float = 2.0, random_state: int = 0) -> None:
         _whole(keypoints, "keypoints", 1)
         _whole(steps, "steps", 1)
         _whole(random_state, "random_state", 0)
-        if isinstance(sharpness, bool) or not isinstance(sharpness, (int, float, np.number)) or not sharpness > 0:
-            raise UserError(f"sharpness must be a number > 0, got {sharpness!r}")
-        self.keypoints, self.steps, self.sharpness, self.random_state = keypoints, steps, sharpness, random_state
+        if isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.number)) or not threshold >= 0:
+            raise UserError(f"threshold must be a number >= 0, got {threshold!r}")
+        self.keypoints, self.steps, self.threshold, self.random_state = keypoints, steps, threshold, random_state
 
     def fit(self, frames, y=None) -> LearnedKeypoints:
         """Fit the encoder and the maps' mean and spread on ``frames`` ``(n, H, W, 3)`` uint8 (n >= 2); returns self."""
@@ -297,6 +299,9 @@ class LearnedKeypoints(_FrameTransformer):
         maps = self._maps(frames)
         self.mean_maps_ = maps.mean(dim=0)
         self.spread_ = (maps - self.mean_maps_).flatten(2).std(dim=(0, 2)).view(-1, 1, 1).clamp_min(1e-9)
+        points = self._read(maps)[:, : 2 * int(self.keypoints)]
+        seen = np.isfinite(points)
+        self.centroid_ = np.where(seen, points, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
         self._remember(frames)
         return self
 
@@ -313,14 +318,26 @@ class LearnedKeypoints(_FrameTransformer):
                 out.append(self.encoder_.conv2(F.relu(self.encoder_.conv1(x))).double())
         return torch.cat(out)
 
+    def _read(self, maps) -> np.ndarray:
+        """``(n, 3K)``: each map's weighted centroid (NaN where it has no weight) and its weight."""
+        import torch
+
+        from primspace.model.keypoints import pixel_grid
+
+        weights = torch.relu(((maps - self.mean_maps_) / self.spread_).abs() - float(self.threshold))
+        xs, ys = pixel_grid(maps.shape[2], maps.shape[3], dtype=torch.float64)
+        mass = weights.sum(dim=(2, 3))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = ((weights.sum(dim=2) * xs).sum(dim=2) / mass).numpy()
+            y = ((weights.sum(dim=3) * ys).sum(dim=2) / mass).numpy()
+        return np.column_stack([x, y, mass.numpy()])
+
     def transform(self, frames) -> np.ndarray:
         """The keypoints and presences of each frame, ``(n, 3K)`` float64 (class docstring)."""
-        from primspace.model.keypoints import spatial_softmax
-
-        relative = ((self._maps(self._checked(frames)) - self.mean_maps_) / self.spread_).abs()
-        points = spatial_softmax(float(self.sharpness) * relative).double().reshape(len(relative), -1)
-        presence = relative.flatten(2).max(dim=2).values
-        return np.column_stack([points.numpy(), presence.numpy()])
+        out = self._read(self._maps(self._checked(frames)))
+        points = out[:, : 2 * int(self.keypoints)]
+        out[:, : 2 * int(self.keypoints)] = np.where(np.isfinite(points), points, self.centroid_[None, :])
+        return out
 
 
 def frame_features(features, random_state: int | None = None):

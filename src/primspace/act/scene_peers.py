@@ -113,7 +113,8 @@ class ContextualProMPPeer(ScenePeer):
         Basis functions (weights) per joint (>= 2).
     features : str or object
         The first frame's features: ``"pca"`` (principal components of the pixels), ``"blob"``
-        (the red block's mass and centroid), ``"pixels"``, or a transformer
+        (the red block's mass and centroid), ``"learned"`` (keypoints of an encoder fitted on the
+        demonstrations' first frames alone), ``"pixels"``, or a transformer
         (:func:`~primspace.act.frame_features.frame_features`).
     alpha : "auto" or float
         The ridge penalty (> 0), or ``"auto"``: chosen per group by leave-one-out among
