@@ -275,7 +275,7 @@ class LearnedKeypoints(_FrameTransformer):
         The mean keypoints of the fitted frames, given to a map without weight.
     """
 
-    def __init__(self, keypoints: int = 4, steps: int = 200, threshold: float = 2.0, random_state: int = 0) -> None:
+    def __init__(self, keypoints: int = 8, steps: int = 200, threshold: float = 1.0, random_state: int = 0) -> None:
         _whole(keypoints, "keypoints", 1)
         _whole(steps, "steps", 1)
         _whole(random_state, "random_state", 0)
