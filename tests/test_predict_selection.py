@@ -12,7 +12,7 @@ from conftest import assert_user_error
 from primspace.data import MotionDataset
 from primspace.predict import AUTO, DEFAULT_PREDICTOR, MIXTURE, PRIOR, PredictRequest, SelectedPredictor, predict
 from primspace.predict.peers import MeanMotionPeer
-from primspace.predict.selection import candidates_for
+from primspace.predict.selection import DEFAULT_CANDIDATES, PROMP_TUNED, RAW_GAUSSIAN, candidates_for
 from primspace.predict.selection_cache import SELECTION_MARK
 from primspace.train import TrainConfig, fit
 from primspace.train.observe import Observation
@@ -22,12 +22,16 @@ from test_train import SMALL, primitives
 NAMES = ["reach", "push", "lift"]
 #: Draws per primitive of the prior, and of each fold of its own K-fold choice: small and fast.
 SAMPLES, CV_SAMPLES = 50, 20
+#: The tuned ProMP's basis counts tried (its default grid goes past the 16 steps of these motions: slow EM).
+BASIS = (6, 10)
 
 
 @pytest.fixture(scope="module", autouse=True)
 def fewer_fold_draws():
+    """Fewer draws in the prior's own K-fold and fewer basis counts in the tuned ProMP's."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr("primspace.predict.prior.CV_SAMPLES", CV_SAMPLES)
+        mp.setattr("primspace.predict.gaussian_peers.BASIS_GRID", BASIS)
         yield
 
 
@@ -79,7 +83,8 @@ def peers(files, monkeypatch):
 
 def test_the_candidate_with_the_lowest_kfold_error_is_chosen(peers):
     run, motor, labels = peers
-    selection = SelectedPredictor(run, reuse=False).fit(motor, labels).select(Observation.build(0.25))
+    chosen = SelectedPredictor(run, candidates=(MIXTURE, PRIOR), reuse=False)
+    selection = chosen.fit(motor, labels).select(Observation.build(0.25))
     assert selection["chosen"] == PRIOR and selection["folds"] == 3
     assert selection["errors"][PRIOR] == pytest.approx(0.0, abs=1e-12)
     # every fitted demonstration is held out once: the K-fold error of zeros is their error on every one
@@ -93,7 +98,7 @@ def test_a_stale_or_foreign_file_is_never_read(peers):
     rule = Observation.build(0.2)
 
     def select():
-        return SelectedPredictor(run).fit(motor, labels).select(rule)
+        return SelectedPredictor(run, candidates=(MIXTURE, PRIOR)).fit(motor, labels).select(rule)
 
     path = select()["kept"]
     record = json.loads(open(path).read())
@@ -109,10 +114,13 @@ def test_a_stale_or_foreign_file_is_never_read(peers):
 
 
 def test_the_candidates_of_each_task():
-    assert candidates_for(False, True) == (MIXTURE, PRIOR)
-    assert candidates_for(True, True) == (MIXTURE, PRIOR)  # the mixture restricted to the label, the prior given it
-    assert candidates_for(False, False) == (MIXTURE,)  # no labels, no clusters asked: the prior has no primitives
-    assert candidates_for(True, False, "clusters") == (PRIOR,)
+    peers = (RAW_GAUSSIAN, PROMP_TUNED)
+    assert DEFAULT_CANDIDATES == (MIXTURE, PRIOR, *peers)
+    assert candidates_for(False, True) == (MIXTURE, PRIOR, *peers)
+    assert candidates_for(True, True) == (MIXTURE, PRIOR, *peers)  # restricted to the label, the prior given it
+    assert candidates_for(False, False) == (MIXTURE, *peers)  # no labels, no clusters asked: the prior has none
+    assert candidates_for(True, False, "clusters") == (PRIOR,)  # the peers' primitives are the labels
+    assert candidates_for(True, True, asked=(PRIOR,)) == (PRIOR,)
     with pytest.raises(UserError, match="candidates must be some of"):
         candidates_for(False, True, asked=("promp",))
 
@@ -121,7 +129,7 @@ def test_auto_is_the_default_and_its_choice_is_recorded(files):
     assert DEFAULT_PREDICTOR == AUTO and PredictRequest().init == AUTO
     p = _predict(files)
     selection = p.details["selection"]
-    assert p.init == AUTO and selection["folds"] == 3 and set(selection["errors"]) == {MIXTURE, PRIOR}
+    assert p.init == AUTO and selection["folds"] == 3 and tuple(selection["errors"]) == DEFAULT_CANDIDATES
     assert selection["chosen"] == min(selection["errors"], key=selection["errors"].get)
     assert selection["kept"] is not None and selection["reused"] is None
     kept = json.loads(open(selection["kept"]).read())
@@ -151,7 +159,7 @@ def test_the_command_chooses_by_default_records_and_reuses(files, run_cli, tmp_p
     assert res.code == 0, res.err
     result = json.loads((tmp_path / "a" / "result.json").read_text())
     assert result["init"] == AUTO and result["command"]["init"] == AUTO
-    assert set(result["selection"]["errors"]) == {MIXTURE, PRIOR} and result["selection"]["folds"] == 3
+    assert tuple(result["selection"]["errors"]) == DEFAULT_CANDIDATES and result["selection"]["folds"] == 3
     assert f"init auto ({result['selection']['chosen']}, the lowest 3-fold error" in res.out
     res = run_cli(*base, "--prior-samples", SAMPLES, "--out", tmp_path / "b")
     assert res.code == 0, res.err
@@ -164,11 +172,10 @@ def test_fit_predictor_prints_the_table_and_keeps_the_choice(files, run_cli):
     res = run_cli("fit-predictor", files / "run", "--observe", "0.3", "--primitive", "lift", "--prior-samples", SAMPLES)
     assert res.code == 0, res.err
     lines = res.out.splitlines()
-    assert lines[0].split() == ["candidate", "3-fold", "MSE"] and {lines[1].split()[0], lines[2].split()[0]} == {
-        MIXTURE,
-        PRIOR,
-    }
-    assert sum("<- chosen" in line for line in lines) == 1 and "kept in" in lines[3]
+    n = len(DEFAULT_CANDIDATES)
+    assert lines[0].split() == ["candidate", "3-fold", "MSE"]
+    assert tuple(line.split()[0] for line in lines[1 : n + 1]) == DEFAULT_CANDIDATES
+    assert sum("<- chosen" in line for line in lines) == 1 and "kept in" in lines[n + 1]
     res = run_cli("fit-predictor", files / "run", "--observe", "0.3", "--primitive", "lift", "--prior-samples", SAMPLES)
     assert "reused the choice kept earlier" in res.out
 
@@ -207,7 +214,9 @@ def test_the_priors_decoded_draws_are_kept_and_read_back(files, tmp_path):
     assert calls == [5, 3, 5] and kept.read_bytes() == b"not ours"
 
 
-@pytest.mark.parametrize("candidate, given", [(MIXTURE, False), (MIXTURE, True), (PRIOR, False)])
+@pytest.mark.parametrize(
+    "candidate, given", [(MIXTURE, False), (MIXTURE, True), (PRIOR, False), (PROMP_TUNED, True), (RAW_GAUSSIAN, False)]
+)
 def test_a_kept_choice_predicts_the_same_numbers_without_searching(files, candidate, given, monkeypatch):
     """Each candidate refitted with its kept settings (and the prior with its kept draws) predicts as fitted afresh."""
     from primspace.predict import fit_predictor
@@ -228,6 +237,7 @@ def test_a_kept_choice_predicts_the_same_numbers_without_searching(files, candid
 
     monkeypatch.setattr("primspace.predict.prior.PriorPredictor._cross_validate", refuse)
     monkeypatch.setattr("primspace.predict.candidates.CodeMixture.choose_noise", refuse)
+    monkeypatch.setattr("primspace.predict.gaussian_peers.unobserved_mse", refuse)  # the peers' K-fold choice
     if candidate == PRIOR:
         monkeypatch.setattr("primspace.predict.prior.reconstruct", refuse)  # its draws are read back
     second = forecast()
@@ -252,3 +262,23 @@ def test_the_grid_runs_auto_for_both_tasks(files):
     assert set(AUTO_ROWS) <= set(table) and "auto (labels)" in GIVEN_ROWS and AUTO not in GIVEN_ROWS
     assert all(np.isfinite(table[row]["0.3"]) for row in AUTO_ROWS)
     assert sorted((files / "run").rglob("*")) == kept  # the grid keeps nothing in the run folder
+
+
+def test_a_peer_with_the_lowest_kfold_error_is_chosen(files):
+    """Smooth motions of two shapes, which a Gaussian over trajectories predicts from a prefix almost
+    exactly, on a run whose short-trained decoder cannot: a peer wins, and the record lists every candidate."""
+    from primspace.train import load_run
+
+    run = load_run(files / "run")
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 16)[None, :, None]
+    weights, joints = rng.normal(size=(len(run.latents), 2, 1)), np.linspace(-1.0, 1.0, run.model_config.n_joints)
+    motor = 0.3 * joints * (weights[:, :1] * np.sin(np.pi * t) + weights[:, 1:] * t**2)  # a family of two numbers
+    predictor = SelectedPredictor(run, prior_samples=SAMPLES, reuse=False).fit(motor, np.arange(len(motor)) % 3)
+    selection = predictor.select(Observation.build(0.5))
+    errors = selection["errors"]
+    assert tuple(errors) == DEFAULT_CANDIDATES and all(np.isfinite(e) for e in errors.values())
+    assert selection["chosen"] in (RAW_GAUSSIAN, PROMP_TUNED) and errors[selection["chosen"]] == min(errors.values())
+    assert errors[selection["chosen"]] < 0.1 * min(errors[MIXTURE], errors[PRIOR])
+    forecast = predictor.forecast(motor[:3], Observation.build(0.5))
+    assert forecast.details["model_share"] == 0.0 and forecast.details["selection"]["chosen"] == selection["chosen"]

@@ -188,7 +188,9 @@ def grid_predictors(
             samples = _check_prior_settings(prior_settings)["prior"].get("n_samples")
             for name, given in zip(AUTO_ROWS, (False, True)):
                 if not given or fitted.labels is not None:
-                    rows[name] = SelectedPredictor(run, given=given, prior_samples=samples, reuse=False)
+                    rows[name] = SelectedPredictor(
+                        run, given=given, prior_samples=samples, peer_settings=peer_settings, reuse=False
+                    )
             continue
         if start != MIXTURE:
             rows[start] = make_predictor(run, start, epochs=epochs, continuity=True, progress=False)

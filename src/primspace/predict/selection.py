@@ -6,9 +6,12 @@ without labels on the paper preset, the mixture restricted to the primitive give
 one protocol for every candidate:
 
 1. **Candidates** (:func:`candidates_for`): without a primitive, the mixture over the fitted
-   codes and the prior weighted by its posterior over primitives; given the primitive (one for
-   every motion, or each motion's label), the prior given it and the mixture restricted to it.
-   The encoder joins where asked (``candidates=``; it trains a network per fold).
+   codes, the prior weighted by its posterior over primitives, and the two tuned Gaussian peers
+   (:class:`~primspace.predict.gaussian_peers.RawGaussianPeer`,
+   :class:`~primspace.predict.gaussian_peers.TunedProMPPeer`: they read only the fitted
+   demonstrations, never the run's decoder) one for all; given the primitive (one for every
+   motion, or each motion's label), the prior given it, the mixture restricted to it and the
+   peers fitted per label. The encoder joins where asked (``candidates=``; it trains a network per fold).
 2. **K-fold prediction of the fitted demonstrations** (:data:`SELECTION_FOLDS` folds,
    :func:`~primspace.predict.code_prior.fold_split`, within each label when the fitted data has
    labels): each fold is held out, each candidate fitted on the rest (their codes only: the
@@ -17,7 +20,8 @@ one protocol for every candidate:
    when the task gives the primitive); a candidate's error is the mean unobserved MSE
    (:func:`~primspace.predict.metrics.unobserved_mse`, scaled units) over the held-out
    demonstrations. A candidate's own choices (the mixture's noise, the prior's noise,
-   temperature and blend) are made inside each fold on that fold's training demonstrations.
+   temperature and blend, the peers' settings by their own K-fold) are made inside each fold on
+   that fold's training demonstrations.
 3. **The lowest error wins**; it is fitted on every fitted demonstration and predicts.
    ``details["selection"]`` records ``chosen``, every candidate's ``errors`` and ``folds`` (those that
    held a demonstration out: fewer than asked when every label has fewer members, e.g. 2 with two each).
@@ -27,6 +31,9 @@ folder (:mod:`primspace.predict.selection_cache`, keyed by the fitted data, the 
 settings and the code version) with the chosen predictor's own settings (and the prior's decoded
 draws), so a later call with the same key fits the chosen predictor with those settings, decodes
 nothing the first call decoded, and skips every K-fold search.
+
+Online prediction (:meth:`SelectedPredictor.stream`) chooses among the candidates that predict
+online: the peers do not.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ import numpy as np
 from primspace.predict.base import Forecast, Predictor, observation_rule
 from primspace.predict.code_prior import fold_split
 from primspace.predict.encoder import ENCODER, EncoderPredictor
+from primspace.predict.gaussian_peers import RawGaussianPeer, TunedProMPPeer
 from primspace.predict.metrics import check_labels, check_lengths, check_motor, unobserved_mse
 from primspace.predict.mixture import MIXTURE, MixturePredictor
 from primspace.predict.primitives import primitives_from_labels
@@ -48,29 +56,48 @@ from primspace.train.observe import NOTHING, Observation
 from primspace.utils.errors import UserError
 from primspace.utils.progress import stage
 
-__all__ = ["SelectedPredictor", "AUTO", "SELECTION_FOLDS", "CANDIDATES", "candidates_for"]
+__all__ = [
+    "SelectedPredictor",
+    "AUTO",
+    "SELECTION_FOLDS",
+    "CANDIDATES",
+    "DEFAULT_CANDIDATES",
+    "RAW_GAUSSIAN",
+    "PROMP_TUNED",
+    "candidates_for",
+]
 
 #: The registry's name of the predictor chosen by held-out evidence.
 AUTO = "auto"
 #: Folds of the K-fold prediction that scores the candidates: three, so that a choice costs about
 #: three fits of each candidate on two thirds of the fitted demonstrations (docs/predict.md).
 SELECTION_FOLDS = 3
+#: The registry's names of the tuned Gaussian peers (candidates that never read the run's decoder).
+RAW_GAUSSIAN, PROMP_TUNED = RawGaussianPeer.name, TunedProMPPeer.name
+#: The classes of the peer candidates, by name.
+PEERS = {RAW_GAUSSIAN: RawGaussianPeer, PROMP_TUNED: TunedProMPPeer}
 #: Every candidate the selection knows.
-CANDIDATES = (MIXTURE, PRIOR, ENCODER)
+CANDIDATES = (MIXTURE, PRIOR, RAW_GAUSSIAN, PROMP_TUNED, ENCODER)
+#: The candidates when none are asked: all but the encoder (it trains a network per fold).
+DEFAULT_CANDIDATES = (MIXTURE, PRIOR, RAW_GAUSSIAN, PROMP_TUNED)
 
 
 def candidates_for(told: bool, labelled: bool, primitives: str = "labels", asked=None) -> tuple[str, ...]:
     """The candidates of a task: ``told`` (the primitive given) or not, on fitted data that is
     ``labelled`` or not, with the prior's ``primitives`` (labels or clusters); ``asked``: the
-    candidates wanted (default: mixture and prior), those that do not apply left out."""
-    asked = (MIXTURE, PRIOR) if asked is None else tuple(asked)
+    candidates wanted (default: :data:`DEFAULT_CANDIDATES`), those that do not apply left out: the
+    peers and the mixture given the primitive need the fitted data's labels as the primitives."""
+    asked = DEFAULT_CANDIDATES if asked is None else tuple(asked)
     unknown = [name for name in asked if name not in CANDIDATES]
     if unknown or not asked:
         raise UserError(f"candidates must be some of {', '.join(CANDIDATES)}, got {list(asked)!r}")
     prior = labelled or primitives == "clusters"
+    by_label = not told or (labelled and primitives == "labels")
     applies = {
-        MIXTURE: not told or (labelled and primitives == "labels"),
+        MIXTURE: by_label,
         PRIOR: prior,
+        RAW_GAUSSIAN: by_label,
+        PROMP_TUNED: by_label,
         ENCODER: prior and (not told or primitives == "labels"),
     }
     chosen = tuple(name for name in asked if applies[name])
@@ -95,11 +122,14 @@ class SelectedPredictor(Predictor):
     label_names : list of str, optional
         Names of the fitted data's labels (set by :func:`~primspace.predict.registry.fit_predictor`).
     candidates : tuple of str, optional
-        Those to choose among (default: mixture and prior; :func:`candidates_for`).
+        Those to choose among (default: mixture, prior and the two tuned Gaussian peers; :func:`candidates_for`).
     folds : int
         Folds of the K-fold prediction (at least 2).
     prior_samples : int, optional
         Draws per primitive of the prior (default: the prior's).
+    peer_settings : dict, optional
+        Keywords of the peer candidates by name (e.g. ``{"promp_tuned": {"n_basis": 8}}``; default:
+        their own, as the prediction grid runs them).
     condition : bool
         The mixture without a primitive may take its ensemble conditioning.
     continuity : bool
@@ -123,6 +153,7 @@ class SelectedPredictor(Predictor):
         candidates=None,
         folds: int = SELECTION_FOLDS,
         prior_samples: int | None = None,
+        peer_settings: dict | None = None,
         condition: bool = True,
         continuity: bool = True,
         random_state: int | None = None,
@@ -138,6 +169,7 @@ class SelectedPredictor(Predictor):
         self.candidates = candidates
         self.folds = folds
         self.prior_samples = prior_samples
+        self.peer_settings = peer_settings
         self.condition = condition
         self.continuity = continuity
         self.random_state = random_state
@@ -166,12 +198,16 @@ class SelectedPredictor(Predictor):
         fitted_labels = self.fitted_[1]
         labelled = fitted_labels is not None and bool((fitted_labels >= 0).any())
         self.candidates_ = candidates_for(self.told, labelled, self.primitives, self.candidates)
+        unknown = sorted(set(self.peer_settings or {}) - set(PEERS))
+        if unknown:
+            raise UserError(f"peer_settings takes {', '.join(PEERS)}, got {', '.join(map(repr, unknown))}")
         if self.primitive is not None and self.primitives == "labels":  # a name the run lacks: one line, at once
             primitives_from_labels(fitted_labels, self.label_names).resolve(self.primitive)
         self.seed_ = int(run.train_config.seed) if self.random_state is None else int(self.random_state)
         self.selections_: dict = {}
         self.chosen_: dict = {}
         self.predictor_: Predictor | None = None
+        self.online_selection_: dict | None = None  # the choice among the online candidates (``stream``)
         return self
 
     # -- the candidates ----------------------------------------------------------------------
@@ -180,6 +216,9 @@ class SelectedPredictor(Predictor):
         each held-out demonstration's own label when the task gives the primitive)."""
         one = None if scoring else self.primitive
         by_label = self.told and one is None
+        if name in PEERS:  # one per label when told (the primitive's label for every motion, or each one's)
+            own = dict((self.peer_settings or {}).get(name, {}))
+            return PEERS[name](**{"per_label": self.told, "random_state": self.seed_, **own})
         common = dict(continuity=self.continuity, progress=False)
         if name == MIXTURE:
             condition = self.condition and not self.told
@@ -198,8 +237,8 @@ class SelectedPredictor(Predictor):
 
     def _labels_for(self, name: str, labels, n: int):
         """The labels a candidate reads for ``n`` motions: the primitive's label for every motion
-        (the encoder, given one primitive for all), else ``labels``."""
-        if name == ENCODER and self.primitive is not None:
+        (the encoder and the peers, given one primitive for all), else ``labels``."""
+        if name in (ENCODER, *PEERS) and self.primitive is not None:
             found = primitives_from_labels(self.fitted_[1], self.label_names)
             return np.full(n, int(found.labels[found.resolve(self.primitive)]))
         return labels
@@ -252,7 +291,7 @@ class SelectedPredictor(Predictor):
 
     def settings(self) -> dict:
         """The settings a choice depends on, as recorded and keyed."""
-        names = ("folds", "prior_samples", "condition", "continuity")
+        names = ("folds", "prior_samples", "peer_settings", "condition", "continuity")
         return {"candidates": list(self.candidates_), "seed": self.seed_, **{n: getattr(self, n) for n in names}}
 
     # -- the choice ------------------------------------------------------------------------------
@@ -312,6 +351,8 @@ class SelectedPredictor(Predictor):
         predictor = self.build(name, self.run_)
         if name == PRIOR and settings:
             predictor.set_params(**{k: settings[k] for k in ("family", "noise", "temperature", "blend")})
+        if name in PEERS and settings:
+            predictor.set_params(**settings["setting"])
         run_dir = getattr(self.run_, "run_dir", None)
         if "draws_dir" in predictor.get_params() and self.reuse and run_dir is not None:  # kept with the choice
             predictor.set_params(draws_dir=Path(run_dir) / SELECTION_DIR)
@@ -338,8 +379,18 @@ class SelectedPredictor(Predictor):
         return forecast
 
     def stream(self, truth, lengths, labels, frames, steps, keep, data=None):
-        """The chosen predictor's stream, chosen for a prefix of ``keep`` steps."""
-        predictor = self.chosen(Observation.build(int(keep)))
+        """The chosen predictor's stream, chosen for a prefix of ``keep`` steps among the candidates that
+        predict online (the peers do not)."""
+        online = [name for name in self.candidates_ if name not in PEERS]
+        if not online:
+            raise UserError(f"none of the candidates {', '.join(self.candidates_)} predicts online")
+        selector = self
+        if len(online) < len(self.candidates_):
+            params = {**self.get_params(deep=False), "candidates": tuple(online)}
+            selector = SelectedPredictor(**params).fit(*self.fitted_)
+        rule = Observation.build(int(keep))
+        predictor = selector.chosen(rule)
+        self.online_selection_ = selector.selections_[rule.key]
         self.predictor_ = predictor
         asked = self._labels_for(predictor.name, labels, len(truth))
         return predictor.stream(truth, lengths, asked, frames, steps, keep, data=data)
@@ -351,7 +402,9 @@ class SelectedPredictor(Predictor):
         """The chosen predictor's record, with ``selection``."""
         selection = details.get("selection")
         out = self.predictor_.describe({k: v for k, v in details.items() if k != "selection"}, labels)
-        if selection is None and len(self.selections_) == 1:
+        if selection is None and self.online_selection_ is not None:
+            selection = self.online_selection_
+        elif selection is None and len(self.selections_) == 1:
             selection = next(iter(self.selections_.values()))
         return {**out, "selection": selection}
 
@@ -364,7 +417,7 @@ def _rows(values, rows):
 def frozen_settings(predictor: Predictor, rule: Observation) -> dict:
     """What the fitted ``predictor`` chose for ``rule`` that a refit with the same data would choose
     again (kept with the choice, read by the refit instead of searching): the mixture's noise
-    choice; the prior's family, noise, temperature and blend; nothing for the encoder."""
+    choice; the prior's family, noise, temperature and blend; a peer's setting; nothing for the encoder."""
     if predictor.name == MIXTURE:
         return {"choice": predictor.choice(rule)}
     if predictor.name == PRIOR:
@@ -378,4 +431,6 @@ def frozen_settings(predictor: Predictor, rule: Observation) -> dict:
             "temperature": float(choice["temperature"]),
             "blend": float(blend),
         }
+    if predictor.name in PEERS:
+        return {"setting": dict(predictor.choice(rule))}
     return {}

@@ -46,7 +46,7 @@ SELECTION_MARK = "primspace fit-predictor"
 SELECTION_DIR = "selection"
 #: The version of the selection protocol and of the candidates' numbers: part of every key, raised when
 #: a change of the code would change a choice or a candidate's prediction.
-SELECTION_VERSION = 1
+SELECTION_VERSION = 2
 
 
 def _digest(*arrays) -> str:
