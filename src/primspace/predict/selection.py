@@ -402,6 +402,9 @@ class SelectedPredictor(Predictor):
         """The chosen predictor's record, with ``selection``."""
         selection = details.get("selection")
         out = self.predictor_.describe({k: v for k, v in details.items() if k != "selection"}, labels)
+        if self.primitive is not None and self.predictor_.name in PEERS:  # as the mixture and the prior record it
+            found = primitives_from_labels(self.fitted_[1], self.label_names)
+            out = {**out, "primitive": found.names[found.resolve(self.primitive)]}
         if selection is None and self.online_selection_ is not None:
             selection = self.online_selection_
         elif selection is None and len(self.selections_) == 1:
