@@ -148,6 +148,9 @@ class Field:
         An attribute that a file merged by ``DatasetWriter.copy_from`` must share with
         the target: compared when its owner is required or none (first), or held by the
         target file and named there (then).
+    with_owner_only : bool
+        A names attribute written only into files that hold its owner (the attributes that
+        files have always carried are written into every file, empty where the array is absent).
     writer_option : str, optional
         The :class:`~primspace.data.DatasetWriter` argument saying whether the file
         holds this optional array: ``block_dims`` of the array (``image_size``) or a
@@ -188,6 +191,7 @@ class Field:
     lazy: bool = False
     owner: str | None = None
     matched: bool = False
+    with_owner_only: bool = False
     writer_option: str | None = None
     block_dims: tuple[str, ...] = ()
     summary_key: str | None = None
@@ -391,6 +395,7 @@ FIELDS: tuple[Field, ...] = (
         "S names of the scene values",
         owner="scene",
         matched=True,
+        with_owner_only=True,
         codec="strings",
         default=None,
         normalize=partial(default_names, prefix="s", array="scene", ndim=2),

@@ -207,7 +207,8 @@ class DatasetWriter:
         try:
             f = stack.enter_context(h5py.File(tmp, "w"))
             for attr in ATTRIBUTES:
-                f.attrs[attr.name] = self._attribute_value(attr)
+                if not attr.with_owner_only or self._holds(field(attr.owner)):
+                    f.attrs[attr.name] = self._attribute_value(attr)
             if self.writer is not None:
                 f.attrs[WRITER_ATTRIBUTE] = self.writer
             dims = self._dims()
