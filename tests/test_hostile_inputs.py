@@ -161,7 +161,7 @@ def test_predict_options_are_never_ignored_without_a_word(run_cli, data_file, tm
     )
     assert_user_error(
         run_cli(*predict, "--init", "zero", "--fitted-data", data_file, "--out", tmp_path / "c"),
-        "--fitted-data is read by mixture, nearest and calibrated",
+        "--fitted-data is read by auto, mixture, nearest and calibrated",
     )
     assert not any((tmp_path / name).exists() for name in "abc")
     whole = run_cli(*predict, "--observe", "1.0", "--no-judge", "--out", tmp_path / "d")

@@ -1,10 +1,13 @@
-"""Every ``primspace import`` line of README's own-data section runs as written (issue 26).
+"""Every ``primspace import`` line of README's own-data section, and of docs/data.md's list of
+importers (which README links), runs as written (issue 26).
 
-The inputs the lines name (``demos/``, ``demos.npz``, ``lab/``, ``lift.hdf5``, ``pick/``)
+The inputs the lines name (``demos/``, ``demos.npz``, ``lab/``, ``lift.hdf5``, ``so100_pick/``)
 are written here in their formats: a CSV folder, an npz archive, an EIPL-style folder of
 padded ``.npy`` arrays, a robomimic file with ``mask/train`` and demo-level ``actions``,
 and a LeRobot v3.0 data set of 21 episodes in two data files and two videos. Each line is
-run verbatim in that folder, and what it wrote is checked against what the line says.
+run verbatim in that folder, and what it wrote is checked against what the line says. The
+``.ts`` line of docs/data.md reads the UEA archive's files (tests/test_import_ts.py covers
+that importer), so it is the one line left out.
 """
 
 from __future__ import annotations
@@ -20,16 +23,24 @@ from test_data_import_frames import frames_of, joints_of
 from test_import_lerobot import write_v3
 from test_import_robomimic_splits import _write as write_robomimic_with_masks
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README, DATA_DOC = ROOT / "README.md", ROOT / "docs" / "data.md"
 TRAIN = ["demo_10", "demo_2", "demo_0", "demo_5"]  # mask/train, listed out of order
 
 
-def readme_imports() -> list[list[str]]:
-    """The arguments of each ``primspace import`` line of the own-data section's first block."""
-    section = README.read_text(encoding="utf-8").split("## Using it on your own demonstrations", 1)[1]
-    block = re.search(r"```\n(.*?)```", section, flags=re.S).group(1).replace("\\\n", " ")
+def import_lines(text: str) -> list[list[str]]:
+    """The arguments of each ``primspace import`` line of the first code block of ``text``."""
+    block = re.search(r"```\n(.*?)```", text, flags=re.S).group(1).replace("\\\n", " ")
     lines = [line.split("#", 1)[0].strip() for line in block.splitlines()]
     return [shlex.split(line)[1:] for line in lines if line.startswith("primspace import")]
+
+
+def readme_imports() -> list[list[str]]:
+    """README's own-data section's import lines, then docs/data.md's (its block after "Each format
+    is one module"), the ``.ts`` line left out."""
+    readme = README.read_text(encoding="utf-8").split("## Using it on your own demonstrations", 1)[1]
+    data_doc = DATA_DOC.read_text(encoding="utf-8").split("Each format is one module", 1)[1]
+    return import_lines(readme) + [args for args in import_lines(data_doc) if "ts" not in args]
 
 
 def _inputs(root: Path) -> None:
@@ -46,7 +57,7 @@ def _inputs(root: Path) -> None:
     write_robomimic_with_masks(root / "lift.hdf5", masks={"train": TRAIN, "valid": ["demo_1"]})
     n = 21
     write_v3(
-        root / "pick",
+        root / "so100_pick",
         lengths=(5,) * n,
         tasks=("push", "lift", "place") * 7,
         data_files=tuple((0, int(e >= 11)) for e in range(n)),
@@ -60,7 +71,7 @@ def test_every_readme_import_line_runs_as_written(run_cli, tmp_path, monkeypatch
     _inputs(tmp_path)
     lines = readme_imports()
     sources = [args[1] for args in lines]
-    assert sources == ["demos/", "demos.npz", "lab/", "lift.hdf5", "lift.hdf5", "pick/"]
+    assert sources == ["demos/", "demos/", "demos.npz", "lab/", "lift.hdf5", "lift.hdf5", "so100_pick/"]
     written = []
     for args in lines:
         out = args[args.index("--out") + 1]
@@ -71,7 +82,7 @@ def test_every_readme_import_line_runs_as_written(run_cli, tmp_path, monkeypatch
         ds = MotionDataset.load(out)
         assert ds.length == 61 and ds.source_ids is not None
         written.append(ds)
-    lab, train, pick = written[2], written[4], written[5]
+    lab, train, pick = written[3], written[5], written[6]
     assert len(lab) == 3 and lab.has_images
     np.testing.assert_allclose(lab.motor[0, -1], joints_of(9, 4, 0.0)[-1], rtol=1e-6)  # padding trimmed
     assert [s.rsplit("/", 1)[1] for s in train.source_ids] == ["demo_0", "demo_2", "demo_5", "demo_10"]
