@@ -194,7 +194,15 @@ def test_ctrl_c_on_the_command_line_checkpoints_and_resume_says_so(run_cli, data
     flags = ["--layers", "8,4", "--latent-dim", "2", "--batch-size", "3", "--threads", "1"]
     args = [sys.executable, "-m", "primspace", "train", str(data), "--out", str(out), "--epochs", "100000", *flags]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    proc = subprocess.Popen(args + ["--checkpoint-seconds", "100000"], stderr=subprocess.PIPE, text=True, env=env)
+    # SIGINT as a terminal delivers it: a test process that ignores SIGINT (as some test runners' workers,
+    # or a library they loaded, do) would pass the ignore on to the command, which then never sees Ctrl-C
+    proc = subprocess.Popen(
+        args + ["--checkpoint-seconds", "100000"],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         metrics = out / "metrics.jsonl"
         for _ in range(6000):  # until 3 epochs are logged (or the process ended)
