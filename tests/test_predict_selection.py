@@ -282,3 +282,13 @@ def test_a_peer_with_the_lowest_kfold_error_is_chosen(files):
     assert errors[selection["chosen"]] < 0.1 * min(errors[MIXTURE], errors[PRIOR])
     forecast = predictor.forecast(motor[:3], Observation.build(0.5))
     assert forecast.details["model_share"] == 0.0 and forecast.details["selection"]["chosen"] == selection["chosen"]
+
+
+def test_the_candidates_table_aligns_every_name():
+    from primspace.cli.fit_predictor import selection_table
+
+    errors = {"mixture": 0.01, "prior": 0.02, "raw_gaussian": 0.005, "promp_tuned": None}
+    lines = selection_table({"folds": 3, "errors": errors, "chosen": "raw_gaussian"}).splitlines()
+    ends = {len(line.replace("   <- chosen", "")) for line in lines}
+    assert len(ends) == 1, lines  # the error column ends at one place, whatever the names' lengths
+    assert lines[3].startswith("raw_gaussian ") and lines[3].endswith("<- chosen")

@@ -84,9 +84,10 @@ def fit_predictor_command(
 def selection_table(selection: dict) -> str:
     """The candidates' K-fold errors as a table, the chosen one marked."""
     folds = selection["folds"]
-    head = f"{'candidate':<10} {f'{folds}-fold MSE' if folds else 'not scored':>14}"
+    width = max([len("candidate"), *map(len, selection["errors"])])
+    head = f"{'candidate':<{width}} {f'{folds}-fold MSE' if folds else 'not scored':>14}"
     rows = [head]
     for name, error in selection["errors"].items():
         value = "-" if error is None else f"{error:.4g}"
-        rows.append(f"{name:<10} {value:>14}" + ("   <- chosen" if name == selection["chosen"] else ""))
+        rows.append(f"{name:<{width}} {value:>14}" + ("   <- chosen" if name == selection["chosen"] else ""))
     return "\n".join(rows)
