@@ -152,30 +152,34 @@ def validate_labels(ds) -> None:
         )
 
 
-def validate_params(ds) -> None:
-    p, n, pr = ds.path, ds.motor.shape[0], ds.params
-    if pr.ndim != 2 or pr.shape[0] != n:
-        raise DataError(f"must have shape ({n}, P), got {pr.shape}", path=p, field="params")
-    check_finite(pr, "params", p)
+def _per_sample_matrix(array: str, symbol: str):
+    """The check of an optional ``(N, symbol)`` array of finite values (``params``, ``scene``)."""
+
+    def validate(ds) -> None:
+        p, n, values = ds.path, ds.motor.shape[0], getattr(ds, array)
+        if values.ndim != 2 or values.shape[0] != n:
+            raise DataError(f"must have shape ({n}, {symbol}), got {values.shape}", path=p, field=array)
+        check_finite(values, array, p)
+
+    return validate
 
 
-def validate_param_names(ds) -> None:
-    n_params = ds.params.shape[1]
-    if len(ds.param_names) != n_params:
-        raise DataError(f"{len(ds.param_names)} names for P={n_params} params", path=ds.path, field="param_names")
+def _column_names(array: str, names: str, symbol: str, what: str):
+    """The check that ``names`` names each column of ``array`` (``what``: the columns, in the message)."""
+
+    def validate(ds) -> None:
+        n = getattr(ds, array).shape[1]
+        given = len(getattr(ds, names))
+        if given != n:
+            raise DataError(f"{given} names for {symbol}={n} {what}", path=ds.path, field=names)
+
+    return validate
 
 
-def validate_scene(ds) -> None:
-    p, n, sc = ds.path, ds.motor.shape[0], ds.scene
-    if sc.ndim != 2 or sc.shape[0] != n:
-        raise DataError(f"must have shape ({n}, S), got {sc.shape}", path=p, field="scene")
-    check_finite(sc, "scene", p)
-
-
-def validate_scene_names(ds) -> None:
-    n = ds.scene.shape[1]
-    if len(ds.scene_names) != n:
-        raise DataError(f"{len(ds.scene_names)} names for S={n} scene values", path=ds.path, field="scene_names")
+validate_params = _per_sample_matrix("params", "P")
+validate_param_names = _column_names("params", "param_names", "P", "params")
+validate_scene = _per_sample_matrix("scene", "S")
+validate_scene_names = _column_names("scene", "scene_names", "S", "scene values")
 
 
 def validate_dt(ds) -> None:
